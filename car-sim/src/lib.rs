@@ -1,0 +1,1 @@
+//! A simulated car / HIL board that speaks the car protocol.

@@ -1,0 +1,1 @@
+//! The drivecheck orchestrator: command-line front end, campaigns, streaming, oracle, recording.

@@ -1,0 +1,5 @@
+//! The `drivecheck` command.
+
+fn main() {
+    println!("drivecheck");
+}
