@@ -1,0 +1,1 @@
+//! The car's wire protocol, its transports and an async client.
