@@ -1,4 +1,206 @@
 //! Scenario files: the test area, routes, anchors, environment, vehicle and campaign settings.
+//!
+//! A scenario is everything drivecheck needs to know about a place before a car drives there:
+//! the fence and cutouts, the hand-drawn start and recovery routes, the UWB anchors, what the
+//! simulator should model around the area, and the generator's and campaign's settings. This crate
+//! reads scenarios from TOML (the format of `docs/scenario-format.md`) or from the reference
+//! control station's route XML, validates them with errors that name the file, the field and its
+//! index, writes canonical TOML, hashes it, and bundles the four real test areas.
+//!
+//! ```
+//! let loaded = scenarios::bundled::load("courtyard").unwrap();
+//! let scenario = &loaded.scenario;
+//! assert_eq!(scenario.name, "courtyard");
+//! assert!(scenario.area.contains_point(scenario.start_route.positions()[0]));
+//! for warning in &loaded.warnings {
+//!     eprintln!("warning: {warning}");
+//! }
+//! // Canonical TOML loads back to the same scenario.
+//! let again = scenarios::from_toml_str(&scenarios::to_toml(scenario), "copy.toml").unwrap();
+//! assert_eq!(again.scenario, *scenario);
+//! ```
+//!
+//! It is not for generating trajectories (that is `trajgen`, whose geometry it re-exports) nor for
+//! running campaigns; it does no I/O beyond [`load`] reading the one file it is given.
 
+pub mod bundled;
+pub mod error;
+pub mod model;
+pub mod settings;
+
+mod raw;
+mod validate;
+mod write;
+mod xml;
+
+use std::path::Path;
+
+pub use error::{Location, Place, Problem, ScenarioError, Warning, WarningKind};
+pub use model::{Anchor, EnuOrigin, Environment, Obstacle, Route, RoutePoint, Scenario, Wall};
+pub use settings::{
+    AnchorRangeFault, CampaignSettings, CommandWeights, FaultSettings, GeneratorSettings, Interval,
+    RangeFaultKind, Vehicle, WheelSlipFault, YawFault,
+};
 /// The area geometry of [`trajgen`], re-exported for crates that see scenarios but not the generator.
 pub use trajgen::geometry;
+pub use trajgen::{Area, Constraints, Point, Polygon};
+pub use validate::{MAX_ANCHORS, MAX_SPEED_KMH};
+pub use write::to_toml;
+
+/// A validated scenario with its warnings and where it came from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Loaded {
+    /// The scenario.
+    pub scenario: Scenario,
+    /// Soft problems a person should look at; the scenario is usable.
+    pub warnings: Vec<Warning>,
+    /// The file path or source name it was loaded from.
+    pub source: String,
+}
+
+/// The two file formats a scenario can be read from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Format {
+    /// The scenario format of this crate.
+    Toml,
+    /// The reference control station's route XML.
+    Xml,
+}
+
+impl Format {
+    /// The format of a file: by extension (`.toml`, `.xml`), else by content (XML starts with `<`).
+    pub fn detect(path: &Path, text: &str) -> Self {
+        match path.extension().and_then(|e| e.to_str()) {
+            Some(e) if e.eq_ignore_ascii_case("xml") => Self::Xml,
+            Some(e) if e.eq_ignore_ascii_case("toml") => Self::Toml,
+            _ if text
+                .trim_start_matches('\u{feff}')
+                .trim_start()
+                .starts_with('<') =>
+            {
+                Self::Xml
+            }
+            _ => Self::Toml,
+        }
+    }
+}
+
+/// Reads, parses and validates the scenario at `path` (TOML or reference XML, see
+/// [`Format::detect`]). An XML scenario is named after the file stem.
+pub fn load(path: impl AsRef<Path>) -> Result<Loaded, ScenarioError> {
+    let path = path.as_ref();
+    let source_name = path.display().to_string();
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| ScenarioError::in_source(&source_name, None, Problem::Read(e)))?;
+    match Format::detect(path, &text) {
+        Format::Toml => from_toml_str(&text, &source_name),
+        Format::Xml => {
+            let name = path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            from_xml_str(&text, &source_name, &name)
+        }
+    }
+}
+
+/// Parses and validates a TOML scenario; `source_name` names it in errors (and, when the file has
+/// no `name`, gives the name: its file stem).
+pub fn from_toml_str(text: &str, source_name: &str) -> Result<Loaded, ScenarioError> {
+    let raw = raw::parse_toml(text, source_name)?;
+    finish(raw, source_name)
+}
+
+/// Parses and validates a scenario in the reference route XML, naming it `name`.
+pub fn from_xml_str(text: &str, source_name: &str, name: &str) -> Result<Loaded, ScenarioError> {
+    let raw = xml::parse_xml(text, source_name, name)?;
+    finish(raw, source_name)
+}
+
+fn finish(raw: raw::RawScenario, source_name: &str) -> Result<Loaded, ScenarioError> {
+    let scenario = raw::build(raw, source_name)?;
+    let warnings = scenario.validate(source_name)?;
+    Ok(Loaded {
+        scenario,
+        warnings,
+        source: source_name.to_owned(),
+    })
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+
+    /// A 10 m square with a start route along y = 2 and a recovery route coming down x = 2.
+    pub(crate) const SQUARE: &str = r#"
+fence = [{ x = 0.0, y = 0.0 }, { x = 10.0, y = 0.0 }, { x = 10.0, y = 10.0 }, { x = 0.0, y = 10.0 }]
+start_route = [
+    { x = 2.0, y = 2.0, speed = 1.0 },
+    { x = 3.5, y = 2.0, speed = 1.0 },
+    { x = 5.0, y = 2.0, speed = 1.0 },
+]
+recovery_route = [
+    { x = 2.0, y = 6.0, speed = 1.0 },
+    { x = 2.0, y = 4.5, speed = 1.0 },
+    { x = 2.0, y = 3.2, speed = 1.0 },
+]
+"#;
+
+    #[test]
+    fn format_is_detected_by_extension_then_content() {
+        let p = Path::new;
+        assert_eq!(Format::detect(p("a.XML"), "name = 1"), Format::Xml);
+        assert_eq!(Format::detect(p("a.toml"), "<routes/>"), Format::Toml);
+        assert_eq!(
+            Format::detect(p("area"), "\n  <?xml?><routes/>"),
+            Format::Xml
+        );
+        assert_eq!(Format::detect(p("area"), "name = \"x\""), Format::Toml);
+    }
+
+    #[test]
+    fn a_scenario_without_a_name_is_named_after_its_file() {
+        let loaded = from_toml_str(SQUARE, "some/dir/yard.toml").unwrap();
+        assert_eq!(loaded.scenario.name, "yard");
+        assert_eq!(loaded.source, "some/dir/yard.toml");
+        assert_eq!(loaded.scenario.generator, GeneratorSettings::default());
+        assert_eq!(loaded.scenario.campaign, CampaignSettings::default());
+    }
+
+    #[test]
+    fn the_square_warns_about_anchors_and_the_right_angle_onto_the_start_route() {
+        let loaded = from_toml_str(SQUARE, "square.toml").unwrap();
+        let lines: Vec<String> = loaded.warnings.iter().map(ToString::to_string).collect();
+        assert_eq!(
+            lines,
+            [
+                "square.toml: anchors: no anchors: UWB positioning cannot be tested in this area",
+                "square.toml: start_route[0]: the route turns 90.0° here, more than the \
+                 generator's 30.0° (hand-drawn; kept as drawn)",
+            ]
+        );
+    }
+
+    #[test]
+    fn a_missing_file_is_a_read_error_naming_it() {
+        let error = load("/nonexistent/area.toml").unwrap_err();
+        assert!(matches!(error.problem, Problem::Read(_)));
+        assert!(
+            error
+                .to_string()
+                .starts_with("/nonexistent/area.toml: cannot read the file")
+        );
+    }
+
+    #[test]
+    fn constraints_follow_the_generator_settings() {
+        let text = format!("{SQUARE}\n[generator]\nmax_turn_deg = 45.0\nclearance_m = 0.25\n");
+        let scenario = from_toml_str(&text, "s.toml").unwrap().scenario;
+        let c = scenario.constraints();
+        assert!((c.max_turn - std::f64::consts::FRAC_PI_4).abs() < 1e-12);
+        assert_eq!(
+            (c.min_segment, c.max_segment, c.clearance),
+            (0.6, 2.0, 0.25)
+        );
+    }
+}

@@ -1,0 +1,270 @@
+//! Vehicle, generator and campaign settings: every field has the method's default.
+
+use serde::Deserialize;
+use trajgen::Constraints;
+
+/// An inclusive range `min..=max`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Interval<T> {
+    /// Smallest value.
+    pub min: T,
+    /// Largest value.
+    pub max: T,
+}
+
+impl<T> Interval<T> {
+    /// The range `min..=max`.
+    pub const fn new(min: T, max: T) -> Self {
+        Self { min, max }
+    }
+}
+
+/// The car's geometry (defaults: `firmware-behaviour` §2 of the reference firmware).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Vehicle {
+    /// Distance between the axles, metres (0.475).
+    pub wheelbase_m: f64,
+    /// Largest steering angle of the front wheels, radians (0.42041, i.e. 24.09°; minimum turning
+    /// radius 1.062 m).
+    pub max_steering_angle_rad: f64,
+    /// Width of the car, metres (0.5, an estimate for the 1:6 model car; not a firmware parameter).
+    pub width_m: f64,
+}
+
+impl Default for Vehicle {
+    fn default() -> Self {
+        Self {
+            wheelbase_m: 0.475,
+            max_steering_angle_rad: 0.42041,
+            width_m: 0.5,
+        }
+    }
+}
+
+impl Vehicle {
+    /// The smallest turning radius, `wheelbase / tan(max steering angle)`, metres.
+    pub fn min_turning_radius_m(&self) -> f64 {
+        self.wheelbase_m / self.max_steering_angle_rad.tan()
+    }
+}
+
+/// The trajectory generator's constants (method §3).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GeneratorSettings {
+    /// Shortest segment, metres (0.6).
+    pub segment_min_m: f64,
+    /// Longest segment, metres (2.0).
+    pub segment_max_m: f64,
+    /// Largest heading change between consecutive segments, degrees; turns must be strictly
+    /// smaller (30).
+    pub max_turn_deg: f64,
+    /// Points generated beyond each extension to prove a drivable continuation exists (20).
+    pub ahead_margin: usize,
+    /// The ahead margin used when planning return routes (15).
+    pub recovery_ahead_margin: usize,
+    /// Sampled candidates per point before an attempt is abandoned (50).
+    pub inner_tries: usize,
+    /// Attempts per extension before generation fails (5000).
+    pub outer_tries: usize,
+    /// Distance every generated segment keeps from every edge, metres (0: none).
+    pub clearance_m: f64,
+}
+
+impl Default for GeneratorSettings {
+    fn default() -> Self {
+        Self {
+            segment_min_m: 0.6,
+            segment_max_m: 2.0,
+            max_turn_deg: 30.0,
+            ahead_margin: 20,
+            recovery_ahead_margin: 15,
+            inner_tries: 50,
+            outer_tries: 5000,
+            clearance_m: 0.0,
+        }
+    }
+}
+
+impl GeneratorSettings {
+    /// The constraints of [`trajgen`] these settings describe.
+    pub fn constraints(&self) -> Constraints {
+        Constraints {
+            min_segment: self.segment_min_m,
+            max_segment: self.segment_max_m,
+            max_turn: self.max_turn_deg.to_radians(),
+            clearance: self.clearance_m,
+        }
+    }
+
+    /// How far the recovery route's last point may be from the start route's first point:
+    /// 1.5 × [`Self::segment_max_m`].
+    pub fn recovery_join_max_m(&self) -> f64 {
+        RECOVERY_JOIN_FACTOR * self.segment_max_m
+    }
+}
+
+/// The recovery route must end within this many longest segments of the start route's first point.
+pub const RECOVERY_JOIN_FACTOR: f64 = 1.5;
+
+/// Defaults for campaigns run in a scenario (method §6).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CampaignSettings {
+    /// Tests per campaign (10).
+    pub tests: usize,
+    /// Commands per test, growing over the campaign (5–20).
+    pub test_size: Interval<usize>,
+    /// Points per RunSegments extension (4–7).
+    pub points_per_segment: Interval<usize>,
+    /// Speed of an extension, km/h (3–12).
+    pub speed_kmh: Interval<f64>,
+    /// The oracle: largest allowed UWB deviation from RTK, metres (1.0).
+    pub oracle_threshold_m: f64,
+    /// How often each command is chosen.
+    pub weights: CommandWeights,
+    /// Parameter ranges of the injected faults.
+    pub faults: FaultSettings,
+}
+
+impl Default for CampaignSettings {
+    fn default() -> Self {
+        Self {
+            tests: 10,
+            test_size: Interval::new(5, 20),
+            points_per_segment: Interval::new(4, 7),
+            speed_kmh: Interval::new(3.0, 12.0),
+            oracle_threshold_m: 1.0,
+            weights: CommandWeights::default(),
+            faults: FaultSettings::default(),
+        }
+    }
+}
+
+/// Relative weights of the commands in a test (0 disables a fault command).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CommandWeights {
+    /// RunSegments (4); must be positive.
+    pub run_segments: u32,
+    /// AddFault on one anchor's range (2).
+    pub anchor_range_fault: u32,
+    /// AddFault wheel slip (1).
+    pub wheel_slip_fault: u32,
+    /// AddFault yaw (1).
+    pub yaw_fault: u32,
+}
+
+impl Default for CommandWeights {
+    fn default() -> Self {
+        Self {
+            run_segments: 4,
+            anchor_range_fault: 2,
+            wheel_slip_fault: 1,
+            yaw_fault: 1,
+        }
+    }
+}
+
+/// Parameter ranges of the three fault commands. Start and duration count probe iterations.
+#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct FaultSettings {
+    /// Reflection / NLOS on one anchor's range (probe `uwb_range_<id>`).
+    pub anchor_range: AnchorRangeFault,
+    /// Odometry over-reading (probe `uwb_travel_dist`).
+    pub wheel_slip: WheelSlipFault,
+    /// Heading error (probe `uwb_yaw`).
+    pub yaw: YawFault,
+}
+
+/// The firmware's fault types a range fault may use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RangeFaultKind {
+    /// Adds the parameter to the range, metres.
+    Offset,
+    /// Multiplies the range by the parameter.
+    Amplification,
+}
+
+impl RangeFaultKind {
+    /// The name used in scenario files.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Offset => "offset",
+            Self::Amplification => "amplification",
+        }
+    }
+}
+
+/// Ranges of the anchor range fault.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AnchorRangeFault {
+    /// Fault types to choose from (offset, amplification).
+    pub kinds: Vec<RangeFaultKind>,
+    /// The fault's parameter (0–5).
+    pub param: Interval<f64>,
+    /// Probe iteration at which the fault starts (0–100).
+    pub start: Interval<u32>,
+    /// Probe iterations it lasts (1–8).
+    pub duration: Interval<u32>,
+}
+
+impl Default for AnchorRangeFault {
+    fn default() -> Self {
+        Self {
+            kinds: vec![RangeFaultKind::Offset, RangeFaultKind::Amplification],
+            param: Interval::new(0.0, 5.0),
+            start: Interval::new(0, 100),
+            duration: Interval::new(1, 8),
+        }
+    }
+}
+
+/// Ranges of the wheel slip fault (an amplification of the travelled distance).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct WheelSlipFault {
+    /// Amplification factor (1.0–5.0).
+    pub amplification: Interval<f64>,
+    /// Probe iteration at which the fault starts (0–100).
+    pub start: Interval<u32>,
+    /// Probe iterations it lasts (1–10).
+    pub duration: Interval<u32>,
+}
+
+impl Default for WheelSlipFault {
+    fn default() -> Self {
+        Self {
+            amplification: Interval::new(1.0, 5.0),
+            start: Interval::new(0, 100),
+            duration: Interval::new(1, 10),
+        }
+    }
+}
+
+/// Ranges of the yaw fault (an offset on the heading).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct YawFault {
+    /// Offset, degrees (−20..20).
+    pub offset_deg: Interval<f64>,
+    /// Probe iteration at which the fault starts (0–100).
+    pub start: Interval<u32>,
+    /// Probe iterations it lasts (1–10).
+    pub duration: Interval<u32>,
+}
+
+impl Default for YawFault {
+    fn default() -> Self {
+        Self {
+            offset_deg: Interval::new(-20.0, 20.0),
+            start: Interval::new(0, 100),
+            duration: Interval::new(1, 10),
+        }
+    }
+}

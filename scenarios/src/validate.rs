@@ -1,0 +1,599 @@
+//! The checks a typed scenario must pass (errors) and the soft problems it may have (warnings).
+//!
+//! Hard rules: settings in range; each route has at least 2 points, positive speeds, every point
+//! and segment inside the area; the recovery route ends within 1.5 × `segment_max_m` of the start
+//! route's first point and the step between them stays inside the area; at most 20 anchors with
+//! unique ids; named obstacles and walls of non-zero length.
+//!
+//! Soft rules (warnings): no anchors; hand-drawn routes (recovery route, the join, start route)
+//! whose turns or segment lengths are outside the generator's limits, or that come closer to an
+//! edge than the generator's clearance.
+
+use trajgen::geometry::turn_angle;
+use trajgen::{Area, Point};
+
+use crate::error::{Problem, ScenarioError, Warning, WarningKind};
+use crate::model::{Route, RoutePoint, Scenario};
+use crate::settings::{CampaignSettings, GeneratorSettings, Interval, Vehicle};
+
+/// The firmware keeps at most this many anchors.
+pub const MAX_ANCHORS: usize = 20;
+
+/// The autopilot's top speed in the reference firmware, km/h (8.333 m/s).
+pub const MAX_SPEED_KMH: f64 = 30.0;
+
+/// A failed check: the field path and the problem.
+type Check = Result<(), (String, Problem)>;
+
+/// Checks `scenario` and returns its warnings, or the first error found.
+pub(crate) fn validate(
+    scenario: &Scenario,
+    source_name: &str,
+) -> Result<Vec<Warning>, ScenarioError> {
+    check(scenario)
+        .map_err(|(field, problem)| ScenarioError::in_field(source_name, field, problem))?;
+    Ok(warnings(scenario, source_name))
+}
+
+fn check(s: &Scenario) -> Check {
+    if s.name.trim().is_empty() {
+        return Err(("name".into(), Problem::Empty));
+    }
+    if let Some(origin) = &s.origin {
+        within(origin.lat, -90.0, 90.0, "origin.lat")?;
+        within(origin.lon, -180.0, 180.0, "origin.lon")?;
+        finite(origin.height, "origin.height")?;
+    }
+    check_vehicle(&s.vehicle)?;
+    check_generator(&s.generator)?;
+    check_campaign(&s.campaign)?;
+    check_route(&s.area, &s.start_route, "start_route")?;
+    check_route(&s.area, &s.recovery_route, "recovery_route")?;
+    check_join(s)?;
+    check_anchors(s)?;
+    check_environment(s)
+}
+
+fn finite(value: f64, field: &str) -> Check {
+    if value.is_finite() {
+        Ok(())
+    } else {
+        Err((field.into(), Problem::NotFinite))
+    }
+}
+
+fn positive(value: f64, field: &str) -> Check {
+    finite(value, field)?;
+    if value > 0.0 {
+        Ok(())
+    } else {
+        Err((field.into(), Problem::NotPositive(value)))
+    }
+}
+
+fn non_negative(value: f64, field: &str) -> Check {
+    finite(value, field)?;
+    if value >= 0.0 {
+        Ok(())
+    } else {
+        Err((field.into(), Problem::Negative(value)))
+    }
+}
+
+fn within(value: f64, low: f64, high: f64, field: &str) -> Check {
+    finite(value, field)?;
+    if (low..=high).contains(&value) {
+        Ok(())
+    } else {
+        Err((field.into(), Problem::OutOfRange { value, low, high }))
+    }
+}
+
+fn at_least_one(value: usize, field: &str) -> Check {
+    if value >= 1 {
+        Ok(())
+    } else {
+        Err((field.into(), Problem::NotPositive(0.0)))
+    }
+}
+
+/// An interval of finite numbers with `min <= max`.
+fn ordered(interval: Interval<f64>, field: &str) -> Check {
+    finite(interval.min, &format!("{field}.min"))?;
+    finite(interval.max, &format!("{field}.max"))?;
+    if interval.min <= interval.max {
+        Ok(())
+    } else {
+        Err((
+            field.into(),
+            Problem::MinAboveMax {
+                min: interval.min,
+                max: interval.max,
+            },
+        ))
+    }
+}
+
+fn as_f64<T: Into<f64> + Copy>(interval: Interval<T>) -> Interval<f64> {
+    Interval::new(interval.min.into(), interval.max.into())
+}
+
+/// A count interval with `1 <= min <= max`.
+fn counts(interval: Interval<usize>, field: &str) -> Check {
+    at_least_one(interval.min, &format!("{field}.min"))?;
+    ordered(
+        Interval::new(interval.min as f64, interval.max as f64),
+        field,
+    )
+}
+
+fn check_vehicle(v: &Vehicle) -> Check {
+    positive(v.wheelbase_m, "vehicle.wheelbase_m")?;
+    positive(v.max_steering_angle_rad, "vehicle.max_steering_angle_rad")?;
+    within(
+        v.max_steering_angle_rad,
+        0.0,
+        std::f64::consts::FRAC_PI_2,
+        "vehicle.max_steering_angle_rad",
+    )?;
+    positive(v.width_m, "vehicle.width_m")
+}
+
+fn check_generator(g: &GeneratorSettings) -> Check {
+    positive(g.segment_min_m, "generator.segment_min_m")?;
+    positive(g.segment_max_m, "generator.segment_max_m")?;
+    if g.segment_min_m > g.segment_max_m {
+        return Err((
+            "generator.segment_min_m".into(),
+            Problem::MinAboveMax {
+                min: g.segment_min_m,
+                max: g.segment_max_m,
+            },
+        ));
+    }
+    positive(g.max_turn_deg, "generator.max_turn_deg")?;
+    within(g.max_turn_deg, 0.0, 180.0, "generator.max_turn_deg")?;
+    at_least_one(g.ahead_margin, "generator.ahead_margin")?;
+    at_least_one(g.recovery_ahead_margin, "generator.recovery_ahead_margin")?;
+    at_least_one(g.inner_tries, "generator.inner_tries")?;
+    at_least_one(g.outer_tries, "generator.outer_tries")?;
+    non_negative(g.clearance_m, "generator.clearance_m")
+}
+
+fn check_campaign(c: &CampaignSettings) -> Check {
+    at_least_one(c.tests, "campaign.tests")?;
+    counts(c.test_size, "campaign.test_size")?;
+    counts(c.points_per_segment, "campaign.points_per_segment")?;
+    ordered(c.speed_kmh, "campaign.speed_kmh")?;
+    positive(c.speed_kmh.min, "campaign.speed_kmh.min")?;
+    within(
+        c.speed_kmh.max,
+        0.0,
+        MAX_SPEED_KMH,
+        "campaign.speed_kmh.max",
+    )?;
+    positive(c.oracle_threshold_m, "campaign.oracle_threshold_m")?;
+    if c.weights.run_segments == 0 {
+        return Err((
+            "campaign.weights.run_segments".into(),
+            Problem::NotPositive(0.0),
+        ));
+    }
+    check_faults(c)
+}
+
+fn check_faults(c: &CampaignSettings) -> Check {
+    let range = &c.faults.anchor_range;
+    let field = "campaign.faults.anchor_range";
+    if range.kinds.is_empty() {
+        return Err((format!("{field}.kinds"), Problem::Empty));
+    }
+    for (i, kind) in range.kinds.iter().enumerate() {
+        if range.kinds[..i].contains(kind) {
+            return Err((
+                format!("{field}.kinds[{i}]"),
+                Problem::DuplicateKind(kind.as_str()),
+            ));
+        }
+    }
+    ordered(range.param, &format!("{field}.param"))?;
+    probe_window(range.start, range.duration, field)?;
+    let slip = &c.faults.wheel_slip;
+    let field = "campaign.faults.wheel_slip";
+    ordered(slip.amplification, &format!("{field}.amplification"))?;
+    probe_window(slip.start, slip.duration, field)?;
+    let yaw = &c.faults.yaw;
+    let field = "campaign.faults.yaw";
+    ordered(yaw.offset_deg, &format!("{field}.offset_deg"))?;
+    within(
+        yaw.offset_deg.min,
+        -180.0,
+        180.0,
+        &format!("{field}.offset_deg.min"),
+    )?;
+    within(
+        yaw.offset_deg.max,
+        -180.0,
+        180.0,
+        &format!("{field}.offset_deg.max"),
+    )?;
+    probe_window(yaw.start, yaw.duration, field)
+}
+
+/// Start and duration intervals of a fault, in probe iterations: ordered, duration at least 1.
+fn probe_window(start: Interval<u32>, duration: Interval<u32>, field: &str) -> Check {
+    ordered(as_f64(start), &format!("{field}.start"))?;
+    if duration.min == 0 {
+        return Err((format!("{field}.duration.min"), Problem::NotPositive(0.0)));
+    }
+    ordered(as_f64(duration), &format!("{field}.duration"))
+}
+
+fn check_route(area: &Area, route: &Route, field: &str) -> Check {
+    if route.points.len() < 2 {
+        return Err((
+            field.into(),
+            Problem::RouteTooShort {
+                found: route.points.len(),
+            },
+        ));
+    }
+    for (i, p) in route.points.iter().enumerate() {
+        positive(p.speed, &format!("{field}[{i}].speed"))?;
+        if !area.contains_point(p.position()) {
+            return Err((
+                format!("{field}[{i}]"),
+                Problem::PointOutsideArea { x: p.x, y: p.y },
+            ));
+        }
+    }
+    let points = route.positions();
+    for (segment, w) in points.windows(2).enumerate() {
+        if w[0] == w[1] {
+            return Err((
+                format!("{field}[{segment}]"),
+                Problem::ZeroLengthSegment { segment },
+            ));
+        }
+        if area.segment_meets_boundary(w[0], w[1]) {
+            return Err((
+                format!("{field}[{segment}]"),
+                Problem::SegmentLeavesArea { segment },
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The recovery route must end near the start route's first point, by a step inside the area.
+fn check_join(s: &Scenario) -> Check {
+    let (Some(end), Some(start)) = (s.recovery_route.last(), s.start_route.first()) else {
+        return Ok(());
+    };
+    let (end, start) = (end.position(), start.position());
+    let gap = end.dist(start);
+    let limit = s.generator.recovery_join_max_m();
+    if gap > limit {
+        return Err((
+            "recovery_route".into(),
+            Problem::RecoveryDoesNotReachStart { gap, limit },
+        ));
+    }
+    if gap > 0.0 && s.area.segment_meets_boundary(end, start) {
+        return Err(("recovery_route".into(), Problem::JoinLeavesArea));
+    }
+    Ok(())
+}
+
+fn check_anchors(s: &Scenario) -> Check {
+    if s.anchors.len() > MAX_ANCHORS {
+        return Err(("anchors".into(), Problem::TooManyAnchors(s.anchors.len())));
+    }
+    for (i, anchor) in s.anchors.iter().enumerate() {
+        finite(anchor.x, &format!("anchors[{i}].x"))?;
+        finite(anchor.y, &format!("anchors[{i}].y"))?;
+        finite(anchor.height, &format!("anchors[{i}].height"))?;
+        if let Some(first) = s.anchors[..i].iter().position(|a| a.id == anchor.id) {
+            return Err((
+                format!("anchors[{i}].id"),
+                Problem::DuplicateAnchorId {
+                    id: anchor.id,
+                    first,
+                },
+            ));
+        }
+    }
+    Ok(())
+}
+
+fn check_environment(s: &Scenario) -> Check {
+    for (i, obstacle) in s.environment.obstacles.iter().enumerate() {
+        if obstacle.name.trim().is_empty() {
+            return Err((format!("environment.obstacles[{i}].name"), Problem::Empty));
+        }
+    }
+    for (i, wall) in s.environment.walls.iter().enumerate() {
+        if wall.name.trim().is_empty() {
+            return Err((format!("environment.walls[{i}].name"), Problem::Empty));
+        }
+        for (end, p) in [("a", wall.a), ("b", wall.b)] {
+            finite(p.x, &format!("environment.walls[{i}].{end}.x"))?;
+            finite(p.y, &format!("environment.walls[{i}].{end}.y"))?;
+        }
+        if wall.a == wall.b {
+            return Err((
+                format!("environment.walls[{i}]"),
+                Problem::WallWithoutLength,
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// One vertex of the hand-drawn approach (recovery route, then start route).
+#[derive(Debug, Clone, Copy)]
+struct Vertex {
+    position: Point,
+    /// `true` on the start route, `false` on the recovery route.
+    on_start: bool,
+    /// Index within its route.
+    index: usize,
+}
+
+impl Vertex {
+    fn field(&self) -> String {
+        let route = if self.on_start {
+            "start_route"
+        } else {
+            "recovery_route"
+        };
+        format!("{route}[{}]", self.index)
+    }
+}
+
+/// The recovery route followed by the start route, as the car drives them, and the index of the
+/// join segment (from the recovery route's last point to the start route's first) if there is one:
+/// a recovery route that ends exactly on the start route's first point does not repeat it.
+fn approach(s: &Scenario) -> (Vec<Vertex>, Option<usize>) {
+    let vertex = |on_start: bool| {
+        move |(index, p): (usize, &RoutePoint)| Vertex {
+            position: p.position(),
+            on_start,
+            index,
+        }
+    };
+    let mut chain: Vec<Vertex> = s
+        .recovery_route
+        .points
+        .iter()
+        .enumerate()
+        .map(vertex(false))
+        .collect();
+    let mut start = s.start_route.points.iter().enumerate().map(vertex(true));
+    let mut join = None;
+    if let Some(first) = start.next() {
+        if chain
+            .last()
+            .is_some_and(|last| last.position == first.position)
+        {
+            chain.pop();
+        } else if !chain.is_empty() {
+            join = Some(chain.len() - 1);
+        }
+        chain.push(first);
+    }
+    chain.extend(start);
+    (chain, join)
+}
+
+/// The soft problems of a valid scenario, in order: anchors, then along the approach.
+pub(crate) fn warnings(s: &Scenario, source_name: &str) -> Vec<Warning> {
+    let mut found: Vec<(String, WarningKind)> = Vec::new();
+    if s.anchors.is_empty() {
+        found.push(("anchors".into(), WarningKind::NoAnchors));
+    }
+    let (chain, join) = approach(s);
+    for k in 0..chain.len() {
+        if k > 0 && k + 1 < chain.len() {
+            found.extend(turn_warning(&s.generator, &chain[k - 1..=k + 1]));
+        }
+        if k + 1 < chain.len() {
+            found.extend(segment_warnings(s, chain[k], chain[k + 1], join == Some(k)));
+        }
+    }
+    found
+        .into_iter()
+        .map(|(field, kind)| Warning {
+            source_name: source_name.to_owned(),
+            field,
+            kind,
+        })
+        .collect()
+}
+
+fn turn_warning(g: &GeneratorSettings, three: &[Vertex]) -> Option<(String, WarningKind)> {
+    let before = (three[1].position - three[0].position).heading();
+    let after = (three[2].position - three[1].position).heading();
+    let turn_deg = turn_angle(before, after).abs().to_degrees();
+    (turn_deg >= g.max_turn_deg).then(|| {
+        (
+            three[1].field(),
+            WarningKind::SharpTurn {
+                turn_deg,
+                max_deg: g.max_turn_deg,
+            },
+        )
+    })
+}
+
+fn segment_warnings(
+    s: &Scenario,
+    from: Vertex,
+    to: Vertex,
+    is_join: bool,
+) -> Vec<(String, WarningKind)> {
+    let g = &s.generator;
+    let mut found = Vec::new();
+    let length = from.position.dist(to.position);
+    let (min, max) = (g.segment_min_m, g.segment_max_m);
+    if !(min..=max).contains(&length) {
+        let kind = if is_join {
+            WarningKind::JoinLength { length, min, max }
+        } else {
+            WarningKind::SegmentLength {
+                segment: from.index,
+                length,
+                min,
+                max,
+            }
+        };
+        found.push((from.field(), kind));
+    }
+    if g.clearance_m > 0.0 {
+        let distance = s.area.segment_boundary_distance(from.position, to.position);
+        if distance < g.clearance_m {
+            let kind = WarningKind::NearEdge {
+                distance,
+                clearance: g.clearance_m,
+            };
+            found.push((from.field(), kind));
+        }
+    }
+    found
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::tests::SQUARE;
+    use crate::{Problem, WarningKind, from_toml_str};
+
+    fn kinds(text: &str) -> Vec<(String, WarningKind)> {
+        let loaded = from_toml_str(text, "s.toml").unwrap();
+        loaded
+            .warnings
+            .into_iter()
+            .map(|w| (w.field, w.kind))
+            .collect()
+    }
+
+    #[test]
+    fn a_clearance_warns_about_hand_drawn_segments_near_an_edge() {
+        let text = format!("{SQUARE}\n[generator]\nclearance_m = 2.5\n");
+        let near: Vec<String> = kinds(&text)
+            .into_iter()
+            .filter(|(_, k)| matches!(k, WarningKind::NearEdge { .. }))
+            .map(|(field, _)| field)
+            .collect();
+        // Every segment runs 2 m from the fence: the recovery route, the join, the start route.
+        assert_eq!(
+            near,
+            [
+                "recovery_route[0]",
+                "recovery_route[1]",
+                "recovery_route[2]",
+                "start_route[0]",
+                "start_route[1]"
+            ]
+        );
+    }
+
+    #[test]
+    fn a_recovery_route_ending_on_the_start_route_has_no_join() {
+        let text = SQUARE.replace(
+            "{ x = 2.0, y = 3.2, speed = 1.0 }",
+            "{ x = 2.0, y = 2.0, speed = 1.0 }",
+        );
+        let found = kinds(&text);
+        assert!(
+            !found
+                .iter()
+                .any(|(_, k)| matches!(k, WarningKind::JoinLength { .. })),
+            "{found:?}"
+        );
+        assert!(found.iter().any(|(f, k)| f == "recovery_route[1]"
+            && matches!(k, WarningKind::SegmentLength { segment: 1, .. })));
+        // The right-angle turn is now at the shared point, reported on the start route.
+        assert!(
+            found
+                .iter()
+                .any(|(f, k)| f == "start_route[0]" && matches!(k, WarningKind::SharpTurn { .. }))
+        );
+    }
+
+    #[test]
+    fn a_join_through_a_cutout_is_refused() {
+        let text = format!(
+            "{SQUARE}\ncutouts = [[{{ x = 1.5, y = 2.5 }}, {{ x = 2.5, y = 2.5 }}, {{ x = 2.5, y = 2.8 }}]]\n"
+        );
+        // The cutout sits between the recovery route's end (2, 3.2) and the start (2, 2).
+        let error = from_toml_str(&text, "s.toml").unwrap_err();
+        assert!(matches!(error.problem, Problem::JoinLeavesArea), "{error}");
+    }
+
+    #[test]
+    fn a_hand_built_scenario_is_checked_like_a_loaded_one() {
+        let mut scenario = from_toml_str(SQUARE, "s.toml").unwrap().scenario;
+        scenario.anchors.push(crate::Anchor {
+            id: 3,
+            x: f64::NAN,
+            y: 0.0,
+            height: 1.0,
+        });
+        let error = scenario.validate("built").unwrap_err();
+        assert_eq!(
+            error.to_string(),
+            "built: anchors[0].x: not a finite number"
+        );
+        scenario.anchors.clear();
+        scenario.start_route.points[1].x = f64::INFINITY;
+        let error = scenario.validate("built").unwrap_err();
+        assert_eq!(error.field(), Some("start_route[1]"));
+    }
+
+    #[test]
+    fn origin_and_settings_are_range_checked() {
+        let cases = [
+            (
+                "[origin]\nlat = 91.0\nlon = 0.0\nheight = 0.0",
+                "origin.lat: 91 is outside -90..=90",
+            ),
+            (
+                "[vehicle]\nwidth_m = -0.5",
+                "vehicle.width_m: must be greater than 0, found -0.5",
+            ),
+            (
+                "[generator]\nclearance_m = -1.0",
+                "generator.clearance_m: must not be negative, found -1",
+            ),
+            (
+                "[generator]\nmax_turn_deg = inf",
+                "generator.max_turn_deg: not a finite number",
+            ),
+            (
+                "[campaign]\nspeed_kmh = { min = 3.0, max = 40.0 }",
+                "campaign.speed_kmh.max: 40 is outside 0..=30",
+            ),
+            (
+                "[campaign]\ntest_size = { min = 0, max = 3 }",
+                "campaign.test_size.min: must be greater than 0, found 0",
+            ),
+            (
+                "[campaign.faults.yaw]\nduration = { min = 0, max = 3 }",
+                "campaign.faults.yaw.duration.min: must be greater than 0, found 0",
+            ),
+            (
+                "[campaign.faults.anchor_range]\nkinds = []",
+                "campaign.faults.anchor_range.kinds: must not be empty",
+            ),
+            (
+                "[[environment.obstacles]]\nname = \" \"\npolygon = [{ x = 0.0, y = -1.0 }, { x = 1.0, y = -1.0 }, { x = 1.0, y = -2.0 }]",
+                "environment.obstacles[0].name: must not be empty",
+            ),
+        ];
+        for (section, expected) in cases {
+            let text = format!("{SQUARE}\n{section}\n");
+            let error = from_toml_str(&text, "s.toml").unwrap_err();
+            assert_eq!(error.to_string(), format!("s.toml: {expected}"));
+        }
+    }
+}

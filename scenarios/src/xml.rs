@@ -1,0 +1,340 @@
+//! Import of the reference control station's route XML.
+//!
+//! `<routes>` holds an optional `<anchors>` list (`<anchor><x/><y/><height/><id/></anchor>`) and
+//! `<route>` elements (`<id/>` then `<point><x/><y/><speed/><time/></point>`). A route's role is
+//! its id: 0 start route, 1 recovery route, 2 fence, 3 ignored (a drawn trace), 4–7 cutouts in id
+//! order. `time` is dropped (unused in speed mode). Errors name the scenario field the XML element
+//! becomes (`fence[5].x` for route 2's sixth point).
+
+use quick_xml::Reader;
+use quick_xml::events::Event;
+use serde::Deserialize;
+
+use crate::error::{Location, Problem, ScenarioError};
+use crate::raw::{RawAnchor, RawPoint, RawRoutePoint, RawScenario};
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct XmlRoutes {
+    #[serde(default)]
+    anchors: Option<XmlAnchors>,
+    #[serde(default, rename = "route")]
+    routes: Vec<XmlRoute>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct XmlAnchors {
+    #[serde(default, rename = "anchor")]
+    anchors: Vec<XmlAnchor>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct XmlAnchor {
+    x: String,
+    y: String,
+    height: String,
+    id: String,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct XmlRoute {
+    id: String,
+    #[serde(default, rename = "point")]
+    points: Vec<XmlPoint>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct XmlPoint {
+    x: String,
+    y: String,
+    speed: String,
+    /// Milliseconds; unused in speed mode, so dropped.
+    #[serde(default, rename = "time")]
+    _time: Option<String>,
+}
+
+/// The role of a route id of the reference format.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Role {
+    Start,
+    Recovery,
+    Fence,
+    Ignored,
+    Cutout(usize),
+}
+
+fn role(id: u8) -> Option<Role> {
+    match id {
+        0 => Some(Role::Start),
+        1 => Some(Role::Recovery),
+        2 => Some(Role::Fence),
+        3 => Some(Role::Ignored),
+        4..=7 => Some(Role::Cutout(usize::from(id - 4))),
+        _ => None,
+    }
+}
+
+/// Parses reference XML into the file form of a scenario named `name`.
+pub(crate) fn parse_xml(
+    text: &str,
+    source_name: &str,
+    name: &str,
+) -> Result<RawScenario, ScenarioError> {
+    check_well_formed(text, source_name)?;
+    let routes: XmlRoutes = quick_xml::de::from_str(text).map_err(|e| {
+        ScenarioError::in_source(source_name, None, Problem::XmlSyntax(e.to_string()))
+    })?;
+    let err = |field: String, problem| ScenarioError::in_field(source_name, field, problem);
+    let anchors = routes
+        .anchors
+        .map(|a| anchors(&a.anchors))
+        .transpose()
+        .map_err(|(f, p)| err(f, p))?
+        .unwrap_or_default();
+    let by_role = assign_roles(&routes.routes).map_err(|(f, p)| err(f, p))?;
+    let mut scenario = RawScenario {
+        name: Some(name.to_owned()),
+        description: None,
+        origin: None,
+        fence: Vec::new(),
+        cutouts: Vec::new(),
+        start_route: Vec::new(),
+        recovery_route: Vec::new(),
+        anchors,
+        environment: Default::default(),
+        vehicle: Default::default(),
+        generator: Default::default(),
+        campaign: Default::default(),
+    };
+    for (id, role, needed) in [
+        (0, "start route", Role::Start),
+        (1, "recovery route", Role::Recovery),
+        (2, "fence", Role::Fence),
+    ] {
+        if !by_role.iter().any(|(r, _)| *r == needed) {
+            return Err(ScenarioError::in_source(
+                source_name,
+                None,
+                Problem::MissingRoute { id, role },
+            ));
+        }
+    }
+    for (role, route) in by_role {
+        fill(&mut scenario, role, route).map_err(|(f, p)| err(f, p))?;
+    }
+    Ok(scenario)
+}
+
+/// Reads every event once so that syntax errors carry a line and column, and checks the root.
+fn check_well_formed(text: &str, source_name: &str) -> Result<(), ScenarioError> {
+    let mut reader = Reader::from_str(text);
+    let mut root_seen = false;
+    loop {
+        let event = reader.read_event().map_err(|e| {
+            let offset = usize::try_from(reader.error_position()).unwrap_or(usize::MAX);
+            let location = Some(Location::of_offset(text, offset));
+            ScenarioError::in_source(source_name, location, Problem::XmlSyntax(e.to_string()))
+        })?;
+        match event {
+            Event::Start(start) | Event::Empty(start) if !root_seen => {
+                root_seen = true;
+                if start.name().0 != "routes" {
+                    let offset = usize::try_from(reader.buffer_position()).unwrap_or(usize::MAX);
+                    let found = start.name().0.to_owned();
+                    return Err(ScenarioError::in_source(
+                        source_name,
+                        Some(Location::of_offset(text, offset)),
+                        Problem::XmlSyntax(format!(
+                            "the root element is <{found}>, expected <routes>"
+                        )),
+                    ));
+                }
+            }
+            Event::Eof => break,
+            _ => {}
+        }
+    }
+    if root_seen {
+        Ok(())
+    } else {
+        Err(ScenarioError::in_source(
+            source_name,
+            None,
+            Problem::XmlSyntax("no <routes> element".into()),
+        ))
+    }
+}
+
+type FieldProblem = (String, Problem);
+
+fn number(text: &str, field: impl FnOnce() -> String) -> Result<f64, FieldProblem> {
+    text.trim()
+        .parse()
+        .map_err(|_| (field(), Problem::NotANumber(text.trim().to_owned())))
+}
+
+fn anchors(list: &[XmlAnchor]) -> Result<Vec<RawAnchor>, FieldProblem> {
+    list.iter()
+        .enumerate()
+        .map(|(i, a)| {
+            let at = |name: &str| format!("anchors[{i}].{name}");
+            let id =
+                a.id.trim()
+                    .parse()
+                    .map_err(|_| (at("id"), Problem::NotANumber(a.id.trim().to_owned())))?;
+            Ok(RawAnchor {
+                id,
+                x: number(&a.x, || at("x"))?,
+                y: number(&a.y, || at("y"))?,
+                height: number(&a.height, || at("height"))?,
+            })
+        })
+        .collect()
+}
+
+/// Each route with its role, cutouts in id order; ignored routes dropped.
+fn assign_roles(routes: &[XmlRoute]) -> Result<Vec<(Role, &XmlRoute)>, FieldProblem> {
+    let mut seen: Vec<u8> = Vec::new();
+    let mut assigned = Vec::new();
+    for (i, route) in routes.iter().enumerate() {
+        let text = route.id.trim();
+        let field = || format!("route[{i}].id");
+        let id: u8 = text
+            .parse()
+            .map_err(|_| (field(), Problem::UnknownRouteId(text.to_owned())))?;
+        let role = role(id).ok_or_else(|| (field(), Problem::UnknownRouteId(text.to_owned())))?;
+        if seen.contains(&id) {
+            return Err((field(), Problem::DuplicateRouteId(id)));
+        }
+        seen.push(id);
+        if role != Role::Ignored {
+            assigned.push((role, route));
+        }
+    }
+    assigned.sort_by_key(|(role, _)| match role {
+        Role::Cutout(k) => *k,
+        _ => 0,
+    });
+    Ok(assigned)
+}
+
+fn fill(scenario: &mut RawScenario, role: Role, route: &XmlRoute) -> Result<(), FieldProblem> {
+    match role {
+        Role::Start => scenario.start_route = route_points(route, "start_route")?,
+        Role::Recovery => scenario.recovery_route = route_points(route, "recovery_route")?,
+        Role::Fence => scenario.fence = polygon(route, "fence")?,
+        Role::Cutout(_) => {
+            let field = format!("cutouts[{}]", scenario.cutouts.len());
+            scenario.cutouts.push(polygon(route, &field)?);
+        }
+        Role::Ignored => {}
+    }
+    Ok(())
+}
+
+fn route_points(route: &XmlRoute, field: &str) -> Result<Vec<RawRoutePoint>, FieldProblem> {
+    route
+        .points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let at = |name: &str| format!("{field}[{i}].{name}");
+            Ok(RawRoutePoint {
+                x: number(&p.x, || at("x"))?,
+                y: number(&p.y, || at("y"))?,
+                speed: number(&p.speed, || at("speed"))?,
+            })
+        })
+        .collect()
+}
+
+fn polygon(route: &XmlRoute, field: &str) -> Result<Vec<RawPoint>, FieldProblem> {
+    route
+        .points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let at = |name: &str| format!("{field}[{i}].{name}");
+            Ok(RawPoint {
+                x: number(&p.x, || at("x"))?,
+                y: number(&p.y, || at("y"))?,
+            })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::{Problem, from_xml_str};
+
+    fn route(id: &str, points: &[(f64, f64)]) -> String {
+        let points: String = points
+            .iter()
+            .map(|(x, y)| {
+                format!("<point><x>{x}</x><y>{y}</y><speed>0.5</speed><time>7</time></point>")
+            })
+            .collect();
+        format!("<route><id>{id}</id>{points}</route>")
+    }
+
+    fn square(extra: &str) -> String {
+        format!(
+            "<routes><anchors><anchor><x>-1</x><y>-1</y><height>1</height><id>7</id></anchor>\
+             </anchors>{}{}{}{extra}</routes>",
+            route("2", &[(0., 0.), (10., 0.), (10., 10.), (0., 10.)]),
+            route("0", &[(2., 2.), (3.5, 2.), (5., 2.)]),
+            route("1", &[(2., 6.), (2., 4.5), (2., 3.2)]),
+        )
+    }
+
+    #[test]
+    fn roles_come_from_route_ids_and_cutouts_keep_id_order() {
+        let extra = route("7", &[(7., 7.), (8., 7.), (8., 8.)])
+            + &route("3", &[(50., 50.), (60., 60.)])
+            + &route("4", &[(6., 4.), (7., 4.), (7., 5.)]);
+        let loaded = from_xml_str(&square(&extra), "s.xml", "square").unwrap();
+        let s = loaded.scenario;
+        assert_eq!(s.name, "square");
+        assert_eq!(s.area.fence().vertices().len(), 4);
+        assert_eq!(s.area.cutouts().len(), 2, "route 3 is ignored");
+        assert_eq!(s.area.cutouts()[0].vertices()[0].x, 6.0, "route 4 first");
+        assert_eq!(s.start_route.points[1].x, 3.5);
+        assert_eq!(s.recovery_route.points[0].speed, 0.5);
+        assert_eq!((s.anchors[0].id, s.anchors[0].x), (7, -1.0));
+    }
+
+    #[test]
+    fn a_repeated_route_id_is_refused() {
+        let extra = route("0", &[(2., 2.), (3.5, 2.)]);
+        let error = from_xml_str(&square(&extra), "s.xml", "s").unwrap_err();
+        assert!(matches!(error.problem, Problem::DuplicateRouteId(0)));
+        assert_eq!(error.field(), Some("route[3].id"));
+    }
+
+    #[test]
+    fn the_root_must_be_routes_and_unknown_elements_are_refused() {
+        let error = from_xml_str("<areas></areas>", "s.xml", "s").unwrap_err();
+        assert_eq!(
+            error.to_string(),
+            "s.xml:1:8: invalid XML: the root element is <areas>, expected <routes>"
+        );
+        let text = square("<colour>red</colour>");
+        let error = from_xml_str(&text, "s.xml", "s").unwrap_err();
+        assert!(
+            error.to_string().contains("unknown field `colour`"),
+            "{error}"
+        );
+    }
+
+    #[test]
+    fn an_anchor_id_must_fit_a_byte() {
+        let text = square("").replace("<id>7</id></anchor>", "<id>-1</id></anchor>");
+        let error = from_xml_str(&text, "s.xml", "s").unwrap_err();
+        assert!(matches!(error.problem, Problem::AnchorIdOutOfRange(-1)));
+        assert_eq!(error.field(), Some("anchors[0].id"));
+    }
+}
