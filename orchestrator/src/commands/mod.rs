@@ -1,0 +1,24 @@
+//! One module per subcommand; [`run`] dispatches.
+
+mod area;
+mod bench;
+mod route;
+mod scenario;
+
+use std::process::ExitCode;
+
+use anyhow::Result;
+
+use crate::cli::{AreaCommand, BenchCommand, Cli, Command, RouteCommand, ScenarioCommand};
+
+/// Runs a parsed command line and returns the process's exit status.
+pub fn run(cli: Cli) -> Result<ExitCode> {
+    match cli.command {
+        Command::Area(AreaCommand::Validate(args)) => area::validate(&args),
+        Command::Route(RouteCommand::Generate(args)) => route::generate(&args),
+        Command::Scenario(ScenarioCommand::Import(args)) => scenario::import(&args),
+        Command::Scenario(ScenarioCommand::Check(args)) => scenario::check(&args),
+        Command::Scenario(ScenarioCommand::List) => scenario::list(),
+        Command::Bench(BenchCommand::Generator(args)) => bench::generator(&args),
+    }
+}

@@ -1,0 +1,63 @@
+//! `drivecheck scenario import | check | list`.
+
+use std::process::ExitCode;
+
+use anyhow::{Context, Result};
+
+use crate::cli::{CheckArgs, ImportArgs};
+use crate::scenario_arg::{load_scenario, print_warnings};
+
+/// Converts a reference XML file into scenario TOML.
+pub fn import(args: &ImportArgs) -> Result<ExitCode> {
+    let loaded = scenarios::load(&args.xml)?;
+    print_warnings(&loaded);
+    let toml = loaded.scenario.to_toml();
+    match &args.output {
+        Some(path) => {
+            std::fs::write(path, &toml)
+                .with_context(|| format!("cannot write {}", path.display()))?;
+            eprintln!(
+                "wrote {} (scenario {}, {} warning(s))",
+                path.display(),
+                loaded.scenario.name,
+                loaded.warnings.len()
+            );
+        }
+        None => print!("{toml}"),
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Loads and validates a scenario, printing a summary and its warnings.
+pub fn check(args: &CheckArgs) -> Result<ExitCode> {
+    let loaded = load_scenario(&args.scenario)?;
+    print_warnings(&loaded);
+    let s = &loaded.scenario;
+    println!(
+        "{}: valid; fence {} vertices, {} cutout(s), drivable {:.0} m², {} anchor(s), {} warning(s); hash {}",
+        loaded.source,
+        s.area.fence().vertices().len(),
+        s.area.cutouts().len(),
+        s.area.drivable_area(),
+        s.anchors.len(),
+        loaded.warnings.len(),
+        &s.hash()[..12],
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Lists the bundled scenarios with a one-line summary each.
+pub fn list() -> Result<ExitCode> {
+    for name in scenarios::bundled::names() {
+        let loaded = scenarios::bundled::load(name)?;
+        let s = &loaded.scenario;
+        println!(
+            "{name:24} {:>6.0} m²  {} cutout(s)  {} anchor(s)  {}",
+            s.area.drivable_area(),
+            s.area.cutouts().len(),
+            s.anchors.len(),
+            s.description.as_deref().unwrap_or("")
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,213 @@
+//! Pictures of an area as SVG: fence, cutouts, routes, anchors, environment, a trajectory sample,
+//! the coverage heat map and the hot spots of a validation.
+
+use std::fmt::Write;
+
+use scenarios::Scenario;
+use trajgen::{BBox, Point, ValidationReport};
+
+/// Width of the drawing, pixels.
+const WIDTH_PX: f64 = 1000.0;
+/// Blank border around the area, metres.
+const BORDER_M: f64 = 2.0;
+
+/// Maps ENU metres to SVG pixels (north up).
+struct Frame {
+    bbox: BBox,
+    scale: f64,
+}
+
+impl Frame {
+    fn new(bbox: BBox) -> Self {
+        let (w, _) = bbox.size();
+        Self {
+            bbox,
+            scale: WIDTH_PX / (w + 2.0 * BORDER_M),
+        }
+    }
+
+    fn x(&self, x: f64) -> f64 {
+        (x - self.bbox.min.x + BORDER_M) * self.scale
+    }
+
+    fn y(&self, y: f64) -> f64 {
+        (self.bbox.max.y - y + BORDER_M) * self.scale
+    }
+
+    fn height_px(&self) -> f64 {
+        (self.bbox.size().1 + 2.0 * BORDER_M) * self.scale
+    }
+
+    fn points(&self, points: &[Point]) -> String {
+        points
+            .iter()
+            .map(|p| format!("{:.1},{:.1}", self.x(p.x), self.y(p.y)))
+            .collect::<Vec<_>>()
+            .join(" ")
+    }
+}
+
+/// The validation picture: the area, the coverage heat map, a sample of the trajectory and the
+/// numbered hot spots.
+pub fn area_picture(scenario: &Scenario, report: &ValidationReport) -> String {
+    let frame = Frame::new(scenario.area.bbox());
+    let mut svg = String::new();
+    let legend_px = 60.0;
+    let _ = writeln!(
+        svg,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w:.0}" height="{h:.0}" viewBox="0 0 {w:.0} {h:.0}" font-family="sans-serif" font-size="13">"#,
+        w = WIDTH_PX,
+        h = frame.height_px() + legend_px
+    );
+    let _ = writeln!(
+        svg,
+        r##"<rect width="100%" height="100%" fill="#ffffff"/>"##
+    );
+    heat_map(&mut svg, &frame, report);
+    area_outline(&mut svg, &frame, scenario);
+    let _ = writeln!(
+        svg,
+        r##"<polyline points="{}" fill="none" stroke="#1f4e9c" stroke-width="0.6" stroke-opacity="0.5"/>"##,
+        frame.points(&report.trajectory_sample)
+    );
+    routes_and_anchors(&mut svg, &frame, scenario);
+    hot_spots(&mut svg, &frame, report);
+    let _ = writeln!(
+        svg,
+        r##"<text x="10" y="{:.0}">{}: {} — {:.2} km, {} failure(s), max outer tries {} of {}, coverage {:.1} %</text>"##,
+        frame.height_px() + 22.0,
+        xml_escape(&scenario.name),
+        report.verdict,
+        report.km,
+        report.failures,
+        report.max_outer_tries,
+        report.outer_tries_limit,
+        report.coverage * 100.0
+    );
+    let _ = writeln!(
+        svg,
+        r##"<text x="10" y="{:.0}" fill="#555">heat: visits per 0.5 m cell (pale = rarely, dark = often, grey = never); blue: trajectory sample; red: hot spots, worst first</text>"##,
+        frame.height_px() + 44.0
+    );
+    svg.push_str("</svg>\n");
+    svg
+}
+
+fn heat_map(svg: &mut String, frame: &Frame, report: &ValidationReport) {
+    let grid = &report.grid;
+    let max_visits = grid.visits.iter().copied().max().unwrap_or(0).max(1);
+    let size = grid.cell_size * frame.scale;
+    for row in 0..grid.rows {
+        for col in 0..grid.cols {
+            let i = row * grid.cols + col;
+            if !grid.drivable[i] {
+                continue;
+            }
+            let centre = grid.cell_centre(col, row);
+            let fill = heat_colour(grid.visits[i], max_visits);
+            let _ = writeln!(
+                svg,
+                r#"<rect x="{:.1}" y="{:.1}" width="{:.2}" height="{:.2}" fill="{fill}"/>"#,
+                frame.x(centre.x) - size / 2.0,
+                frame.y(centre.y) - size / 2.0,
+                size,
+                size
+            );
+        }
+    }
+}
+
+/// Never visited: grey; otherwise from pale yellow to dark orange on a log scale.
+fn heat_colour(visits: u32, max_visits: u32) -> String {
+    if visits == 0 {
+        return "#d9d9d9".to_owned();
+    }
+    let t = (f64::from(visits).ln_1p() / f64::from(max_visits).ln_1p()).clamp(0.0, 1.0);
+    let lerp = |a: f64, b: f64| (a + (b - a) * t).round() as u8;
+    format!(
+        "#{:02x}{:02x}{:02x}",
+        lerp(255.0, 204.0),
+        lerp(247.0, 76.0),
+        lerp(188.0, 2.0)
+    )
+}
+
+fn area_outline(svg: &mut String, frame: &Frame, scenario: &Scenario) {
+    let _ = writeln!(
+        svg,
+        r##"<polygon points="{}" fill="none" stroke="#000" stroke-width="2"/>"##,
+        frame.points(scenario.area.fence().vertices())
+    );
+    for cutout in scenario.area.cutouts() {
+        let _ = writeln!(
+            svg,
+            r##"<polygon points="{}" fill="#555" stroke="#000" stroke-width="1.5"/>"##,
+            frame.points(cutout.vertices())
+        );
+    }
+    for obstacle in &scenario.environment.obstacles {
+        let _ = writeln!(
+            svg,
+            r##"<polygon points="{}" fill="#8b5a2b" fill-opacity="0.8"><title>{}</title></polygon>"##,
+            frame.points(obstacle.polygon.vertices()),
+            xml_escape(&obstacle.name)
+        );
+    }
+    for wall in &scenario.environment.walls {
+        let _ = writeln!(
+            svg,
+            r##"<line x1="{:.1}" y1="{:.1}" x2="{:.1}" y2="{:.1}" stroke="#6a3d9a" stroke-width="4"><title>{}</title></line>"##,
+            frame.x(wall.a.x),
+            frame.y(wall.a.y),
+            frame.x(wall.b.x),
+            frame.y(wall.b.y),
+            xml_escape(&wall.name)
+        );
+    }
+}
+
+fn routes_and_anchors(svg: &mut String, frame: &Frame, scenario: &Scenario) {
+    for (route, colour) in [
+        (&scenario.recovery_route, "#e66101"),
+        (&scenario.start_route, "#1a9641"),
+    ] {
+        let _ = writeln!(
+            svg,
+            r#"<polyline points="{}" fill="none" stroke="{colour}" stroke-width="3"/>"#,
+            frame.points(&route.positions())
+        );
+    }
+    for anchor in &scenario.anchors {
+        let (x, y) = (frame.x(anchor.x), frame.y(anchor.y));
+        let _ = writeln!(
+            svg,
+            r##"<path d="M{:.1},{:.1} l7,12 l-14,0 z" fill="#7b3294"/><text x="{:.1}" y="{:.1}" fill="#7b3294">anchor {}</text>"##,
+            x,
+            y - 8.0,
+            x + 9.0,
+            y + 4.0,
+            anchor.id
+        );
+    }
+}
+
+fn hot_spots(svg: &mut String, frame: &Frame, report: &ValidationReport) {
+    for (rank, spot) in report.hotspots.iter().enumerate() {
+        let (x, y) = (frame.x(spot.x), frame.y(spot.y));
+        let _ = writeln!(
+            svg,
+            r##"<circle cx="{x:.1}" cy="{y:.1}" r="10" fill="none" stroke="#d7191c" stroke-width="2.5"/><text x="{:.1}" y="{:.1}" fill="#d7191c" font-weight="bold">{} ({} tries)</text>"##,
+            x + 12.0,
+            y - 8.0,
+            rank + 1,
+            spot.outer_tries
+        );
+    }
+}
+
+fn xml_escape(text: &str) -> String {
+    text.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}

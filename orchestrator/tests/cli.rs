@@ -1,0 +1,235 @@
+//! The `drivecheck` command line, end to end: exit codes, JSON outputs, files written.
+
+use std::process::{Command, Output};
+
+use scenarios::bundled;
+use trajgen::{Point, check_route};
+
+fn drivecheck(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_drivecheck"))
+        .args(args)
+        .output()
+        .expect("the drivecheck binary runs")
+}
+
+fn json(output: &Output) -> serde_json::Value {
+    serde_json::from_slice(&output.stdout).unwrap_or_else(|e| {
+        panic!(
+            "stdout is not JSON ({e}): {}\nstderr: {}",
+            String::from_utf8_lossy(&output.stdout),
+            String::from_utf8_lossy(&output.stderr)
+        )
+    })
+}
+
+#[test]
+fn area_validate_reports_the_documented_keys_and_exits_zero_when_safe() {
+    let out = drivecheck(&[
+        "area",
+        "validate",
+        "cutouts-four",
+        "--km",
+        "2",
+        "--seed",
+        "3",
+        "--json",
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report = json(&out);
+    for key in [
+        "verdict",
+        "km",
+        "extensions",
+        "failures",
+        "max_outer_tries",
+        "mean_outer_tries",
+        "p99_outer_tries",
+        "wall_s",
+        "coverage",
+        "hotspots",
+    ] {
+        assert!(report.get(key).is_some(), "missing key {key} in {report}");
+    }
+    assert_eq!(report["verdict"], "safe");
+    assert!(report["km"].as_f64().unwrap() >= 2.0);
+    assert_eq!(report["failures"], 0);
+}
+
+#[test]
+fn area_validate_exits_one_when_the_area_is_unsafe() {
+    // With only 2 outer tries allowed, the reference strategy needs more than half the limit
+    // somewhere in the tight parking lot: the verdict must be unsafe, and the exit status 1.
+    let dir = tempfile::tempdir().unwrap();
+    let text = bundled::text("parking-lot-2anchors").unwrap();
+    assert!(text.contains("outer_tries = 5000"));
+    let strict = text.replace("outer_tries = 5000", "outer_tries = 2");
+    let path = dir.path().join("strict.toml");
+    std::fs::write(&path, strict).unwrap();
+    let out = drivecheck(&[
+        "area",
+        "validate",
+        path.to_str().unwrap(),
+        "--km",
+        "1",
+        "--seed",
+        "1",
+        "--json",
+        "--strategy",
+        "reference",
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(json(&out)["verdict"], "unsafe");
+}
+
+#[test]
+fn area_validate_writes_a_picture() {
+    let dir = tempfile::tempdir().unwrap();
+    let svg = dir.path().join("area.svg");
+    let out = drivecheck(&[
+        "area",
+        "validate",
+        "courtyard",
+        "--km",
+        "0.5",
+        "--seed",
+        "1",
+        "--svg",
+        svg.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(0));
+    let picture = std::fs::read_to_string(&svg).unwrap();
+    assert!(picture.starts_with("<svg") && picture.trim_end().ends_with("</svg>"));
+    assert!(picture.contains("<polygon"), "the fence is drawn");
+    assert!(picture.contains("<polyline"), "the trajectory is drawn");
+}
+
+#[test]
+fn a_missing_scenario_is_an_error_with_exit_two() {
+    let out = drivecheck(&["area", "validate", "no-such-area", "--km", "1"]);
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("no-such-area") && stderr.contains("parking-lot-rock"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn route_generate_extends_the_start_route_with_drivable_points() {
+    let out = drivecheck(&[
+        "route",
+        "generate",
+        "parking-lot-rock",
+        "--points",
+        "30",
+        "--seed",
+        "9",
+        "--json",
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let route = json(&out);
+    let read = |key: &str| -> Vec<Point> {
+        route[key]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| Point::new(p[0].as_f64().unwrap(), p[1].as_f64().unwrap()))
+            .collect()
+    };
+    let (start, points) = (read("start_route"), read("points"));
+    assert_eq!(points.len(), 30);
+    assert!(route["stats"].is_object());
+    let scenario = bundled::load("parking-lot-rock").unwrap().scenario;
+    // The generated points continue the start route: check them together with its last segment.
+    let joined: Vec<Point> = start[start.len() - 2..]
+        .iter()
+        .chain(&points)
+        .copied()
+        .collect();
+    let heading = (joined[1] - joined[0]).heading();
+    check_route(
+        &scenario.area,
+        &joined[1..],
+        &scenario.constraints(),
+        Some(heading),
+    )
+    .unwrap();
+}
+
+#[test]
+fn route_generate_is_repeatable_from_its_seed() {
+    let args = [
+        "route",
+        "generate",
+        "courtyard",
+        "--points",
+        "12",
+        "--seed",
+        "42",
+        "--json",
+    ];
+    assert_eq!(drivecheck(&args).stdout, drivecheck(&args).stdout);
+}
+
+#[test]
+fn scenario_import_converts_reference_xml_to_a_loadable_toml() {
+    let dir = tempfile::tempdir().unwrap();
+    let xml = dir.path().join("area.xml");
+    std::fs::write(&xml, XML).unwrap();
+    let toml = dir.path().join("area.toml");
+    let out = drivecheck(&[
+        "scenario",
+        "import",
+        xml.to_str().unwrap(),
+        "-o",
+        toml.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let from_xml = scenarios::load(&xml).unwrap().scenario;
+    let from_toml = scenarios::load(&toml).unwrap().scenario;
+    assert_eq!(from_xml, from_toml);
+    let check = drivecheck(&["scenario", "check", toml.to_str().unwrap()]);
+    assert_eq!(check.status.code(), Some(0));
+}
+
+/// A small area in the reference XML: a 20 m square fence, a start and a recovery route.
+const XML: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
+<routes>
+  <anchors><anchor><x>0</x><y>0</y><height>1</height><id>7</id></anchor></anchors>
+  <route><id>0</id>
+    <point><x>5</x><y>2</y><speed>1</speed><time>0</time></point>
+    <point><x>6.5</x><y>2</y><speed>1</speed><time>0</time></point>
+    <point><x>8</x><y>2</y><speed>1</speed><time>0</time></point>
+  </route>
+  <route><id>1</id>
+    <point><x>2</x><y>2</y><speed>1</speed><time>0</time></point>
+    <point><x>3.5</x><y>2</y><speed>1</speed><time>0</time></point>
+  </route>
+  <route><id>2</id>
+    <point><x>-1</x><y>-1</y><speed>1</speed><time>0</time></point>
+    <point><x>19</x><y>-1</y><speed>1</speed><time>0</time></point>
+    <point><x>19</x><y>19</y><speed>1</speed><time>0</time></point>
+    <point><x>-1</x><y>19</y><speed>1</speed><time>0</time></point>
+  </route>
+</routes>
+"#;
