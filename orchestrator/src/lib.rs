@@ -9,7 +9,6 @@
 
 pub mod cli;
 pub mod commands;
-mod generator_config;
 mod scenario_arg;
 mod seed;
 mod svg;

@@ -1,7 +1,7 @@
 //! Vehicle, generator and campaign settings: every field has the method's default.
 
 use serde::Deserialize;
-use trajgen::Constraints;
+use trajgen::{Constraints, GeneratorConfig, Strategy};
 
 /// An inclusive range `min..=max`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
@@ -89,6 +89,18 @@ impl Default for GeneratorSettings {
 }
 
 impl GeneratorSettings {
+    /// The trajectory generator's configuration for these settings, with the chosen strategy.
+    /// Tries beyond `u32::MAX` are capped there.
+    pub fn generator_config(&self, strategy: Strategy) -> GeneratorConfig {
+        let mut config = GeneratorConfig::default()
+            .with_constraints(self.constraints())
+            .with_ahead_margin(self.ahead_margin)
+            .with_strategy(strategy);
+        config.inner_tries = u32::try_from(self.inner_tries).unwrap_or(u32::MAX);
+        config.outer_tries = u32::try_from(self.outer_tries).unwrap_or(u32::MAX);
+        config
+    }
+
     /// The constraints of [`trajgen`] these settings describe.
     pub fn constraints(&self) -> Constraints {
         Constraints {

@@ -9,7 +9,6 @@ use serde::Serialize;
 use trajgen::{ValidationConfig, ValidationReport, Verdict, validate_area};
 
 use crate::cli::ValidateArgs;
-use crate::generator_config::generator_config;
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::{choose_seed, rng};
 use crate::svg::area_picture;
@@ -60,7 +59,7 @@ pub fn validate(args: &ValidateArgs) -> Result<ExitCode> {
     eprintln!("seed {seed}");
     let mut config = ValidationConfig::default()
         .with_km(args.km)
-        .with_generator(generator_config(&scenario.generator, args.strategy.into()));
+        .with_generator(scenario.generator.generator_config(args.strategy.into()));
     config.extension_points = VALIDATION_EXTENSION_POINTS;
 
     let bar = progress_bar(args.km);

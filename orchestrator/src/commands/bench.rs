@@ -14,7 +14,6 @@ use scenarios::Scenario;
 use trajgen::{Generator, RouteTail, Strategy, ValidationConfig, validate_area};
 
 use crate::cli::BenchGeneratorArgs;
-use crate::generator_config::generator_config;
 use crate::seed::rng;
 
 /// One row of the table.
@@ -50,7 +49,7 @@ pub fn generator(args: &BenchGeneratorArgs) -> Result<ExitCode> {
 }
 
 fn measure(scenario: &Scenario, strategy: Strategy, args: &BenchGeneratorArgs) -> Result<Row> {
-    let config = generator_config(&scenario.generator, strategy);
+    let config = scenario.generator.generator_config(strategy);
     let generator = Generator::new(config)?;
     let sizes = scenario.campaign.points_per_segment;
     let mut rng = rng(args.seed);

@@ -8,7 +8,6 @@ use serde::Serialize;
 use trajgen::{ExtensionStats, Generator, Point, RouteTail};
 
 use crate::cli::GenerateArgs;
-use crate::generator_config::generator_config;
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::{choose_seed, rng};
 
@@ -59,7 +58,7 @@ pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
         speed_mps.is_finite() && speed_mps > 0.0,
         "--speed must be a positive number of m/s, got {speed_mps}"
     );
-    let generator = Generator::new(generator_config(&scenario.generator, args.strategy.into()))?;
+    let generator = Generator::new(scenario.generator.generator_config(args.strategy.into()))?;
     let start_route = scenario.start_route.positions();
     let mut tail = RouteTail::from_points(&start_route)
         .context("the scenario's start route cannot be extended")?;
