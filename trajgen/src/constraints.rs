@@ -266,7 +266,12 @@ mod tests {
             Err(Violation::LeavesArea { index: 0 })
         ));
         assert!(matches!(
-            check_route(&a, &[p(2., 2.), p(3.5, 2.)], &c, Some(std::f64::consts::FRAC_PI_2)),
+            check_route(
+                &a,
+                &[p(2., 2.), p(3.5, 2.)],
+                &c,
+                Some(std::f64::consts::FRAC_PI_2)
+            ),
             Err(Violation::TurnTooSharp { vertex: 0, .. })
         ));
         let clear = Constraints {

@@ -23,15 +23,18 @@
 //!   it follows that circle for one point. The margin is closed as soon as its state is loopable,
 //!   by the circle itself (every margin segment is checked like any other); otherwise the margin
 //!   search continues, steered towards open space (the best of a few candidates by free distance
-//!   along a longer probe ray). A dead end backtracks 1, 2, 4, … points (the step resets when a
-//!   new deepest point is reached) instead of restarting the whole extension.
+//!   along a longer probe ray). When the first candidates are all blocked, a fan of rays across
+//!   the wedge tells whether the point is stuck in a corner (a dead end at once; at the route's
+//!   own end, a failure at once, since no retry can change it). A dead end backtracks 1, 2, 4, …
+//!   points (the step resets when a new deepest point is reached) instead of restarting the whole
+//!   extension.
 //!
-//!   Consequence: from a loopable tail a continuation of any length always exists (the circle)
-//!   and the search finds one without dead ends, so on the real areas every extension needs one outer try. The price: the
-//!   generator does not enter places where the car could not turn around (a dead-end corridor
-//!   narrower than ≈ 2.3 m) when it has a choice; area validation's coverage shows such places.
-//!   In an area without loopable states (a narrow corridor) it falls back to random search with
-//!   backtracking.
+//!   Consequence: from a loopable tail a continuation of any length always exists (the circle) and
+//!   the search finds one without dead ends, so on the real areas every extension needs one outer
+//!   try. The price: the generator does not enter places where the car could not turn around (a
+//!   dead-end corridor narrower than ≈ 2.3 m) when it has a choice; area validation's coverage
+//!   shows such places. In an area without loopable states (a narrow corridor) it falls back to
+//!   random search with backtracking.
 //!
 //! In both strategies an *outer try* is one attempt that ends in a dead end or in success:
 //! `outer_tries == 1` means no dead end was met. The limit `outer_tries` bounds the dead ends.
@@ -265,7 +268,8 @@ pub struct ExtensionStats {
     pub backtracks: u64,
     /// Rays clipped against the area.
     pub rays: u64,
-    /// Reference strategy: dead ends because the sampling box was too small (stuck in a corner).
+    /// Dead ends because the route's end was stuck in a corner: the reference's sampling box was
+    /// too small, or every ray of a fan across the wedge was blocked within `min_segment`.
     pub stuck: u32,
     /// Wedge strategy: points placed on the sharpest circle because no random candidate kept the
     /// car able to circle (including ones later discarded).
@@ -313,7 +317,9 @@ pub enum GenerationError {
         y = at.y
     )]
     GenerationFailed {
-        /// Outer tries used (the limit).
+        /// Outer tries used: the limit, or fewer when the route's own end is stuck in a corner
+        /// (wedge strategy: every ray across the turn wedge blocked within `min_segment`), which
+        /// no retry can change.
         outer_tries: u32,
         /// Candidate points drawn over all attempts.
         inner_tries: u64,
@@ -612,6 +618,7 @@ impl Generator {
             }
             let (p, h) = buffer.head();
             let steer = buffer.len() >= n && self.config.margin_candidates > 1;
+            let stuck_before = stats.stuck;
             if let Some(q) = self.wedge_point(area, p, h, steer, rng, stats) {
                 buffer.push(q);
                 if buffer.len() > reached {
@@ -619,6 +626,12 @@ impl Generator {
                     step = 1;
                 }
                 continue;
+            }
+            // Stuck at the route's own end: retrying cannot change a blocked wedge.
+            if buffer.len() == 0
+                && (stats.stuck > stuck_before || self.wedge_blocked(area, p, h, stats))
+            {
+                return Err(reached);
             }
             if stats.outer_tries >= self.config.outer_tries {
                 return Err(reached);
@@ -630,6 +643,29 @@ impl Generator {
             step = (step * 2).min(total);
         }
         Ok(())
+    }
+
+    /// Whether every ray of a fan across the turn wedge meets the boundary (or comes within the
+    /// clearance of it) before `min_segment`: the route's end is stuck in a corner, like the
+    /// reference's too-small box. Deterministic; counts in [`ExtensionStats::stuck`] when true.
+    fn wedge_blocked(
+        &self,
+        area: &Area,
+        p: Point,
+        heading: f64,
+        stats: &mut ExtensionStats,
+    ) -> bool {
+        let c = &self.config.constraints;
+        let half = c.max_turn * (1.0 - 1e-9);
+        let reach = c.min_segment + c.clearance + 1e-9;
+        let blocked = (0..BLOCKED_FAN).all(|k| {
+            let angle = heading + half * (2.0 * k as f64 / (BLOCKED_FAN - 1) as f64 - 1.0);
+            let far = p + Point::from_heading(angle) * reach;
+            stats.rays += 1;
+            area.clip_ray(p, far) != far
+        });
+        stats.stuck += u32::from(blocked);
+        blocked
     }
 
     /// The sharpest circle the car can drive: (turn per point, segment length, circumradius).
@@ -745,6 +781,13 @@ impl Generator {
             };
             let longest = c.max_segment.min(free);
             if longest < c.min_segment {
+                if tries == BLOCKED_CHECK_AFTER
+                    && fallback.is_none()
+                    && best.is_none()
+                    && self.wedge_blocked(area, p, heading, stats)
+                {
+                    return None;
+                }
                 continue;
             }
             let length = c.min_segment + rng.random::<f64>() * (longest - c.min_segment);
@@ -784,6 +827,13 @@ impl Generator {
         fallback
     }
 }
+
+/// Rays in the fan of [`Generator::wedge_blocked`] (every 7.5° of a ±30° wedge).
+const BLOCKED_FAN: u32 = 9;
+
+/// Wedge strategy: after this many candidates without a valid one, check whether the whole wedge
+/// is blocked before drawing more.
+const BLOCKED_CHECK_AFTER: u32 = 8;
 
 /// Whether no boundary edge comes within `radius` of `centre`.
 fn disc_is_free(area: &Area, centre: Point, radius: f64) -> bool {
@@ -936,6 +986,26 @@ mod tests {
                 ..
             }
         ));
+    }
+
+    #[test]
+    fn a_car_facing_a_wall_is_stuck_at_once_not_after_every_outer_try() {
+        let area = square_with_cutouts().area;
+        // 0.3 m from the east fence, facing it.
+        let err = Generator::default()
+            .extend(&area, &east(19.7, 10.0), 5, &mut rng(1))
+            .unwrap_err();
+        match err {
+            GenerationError::GenerationFailed {
+                outer_tries,
+                reached,
+                stats,
+                ..
+            } => {
+                assert_eq!((outer_tries, reached, stats.stuck), (1, 0, 1));
+            }
+            other => panic!("expected GenerationFailed, got {other:?}"),
+        }
     }
 
     #[test]

@@ -215,7 +215,13 @@ impl BBox {
     pub fn around(points: impl IntoIterator<Item = Point>) -> Option<Self> {
         let mut it = points.into_iter();
         let first = it.next()?;
-        Some(it.fold(BBox { min: first, max: first }, |b, p| b.including(p)))
+        Some(it.fold(
+            BBox {
+                min: first,
+                max: first,
+            },
+            |b, p| b.including(p),
+        ))
     }
 
     /// The smallest box holding this one and `p`.
@@ -604,11 +610,36 @@ mod tests {
     #[test]
     fn crossing_and_touching_segments_intersect() {
         let p = Point::new;
-        assert!(segments_intersect(p(0., 0.), p(2., 2.), p(0., 2.), p(2., 0.)));
-        assert!(segments_intersect(p(0., 0.), p(1., 1.), p(1., 1.), p(2., 0.)));
-        assert!(segments_intersect(p(0., 0.), p(2., 0.), p(1., 0.), p(3., 0.)));
-        assert!(!segments_intersect(p(0., 0.), p(1., 0.), p(2., 0.), p(3., 0.)));
-        assert!(!segments_intersect(p(0., 0.), p(1., 1.), p(0., 1.), p(0.4, 0.6)));
+        assert!(segments_intersect(
+            p(0., 0.),
+            p(2., 2.),
+            p(0., 2.),
+            p(2., 0.)
+        ));
+        assert!(segments_intersect(
+            p(0., 0.),
+            p(1., 1.),
+            p(1., 1.),
+            p(2., 0.)
+        ));
+        assert!(segments_intersect(
+            p(0., 0.),
+            p(2., 0.),
+            p(1., 0.),
+            p(3., 0.)
+        ));
+        assert!(!segments_intersect(
+            p(0., 0.),
+            p(1., 0.),
+            p(2., 0.),
+            p(3., 0.)
+        ));
+        assert!(!segments_intersect(
+            p(0., 0.),
+            p(1., 1.),
+            p(0., 1.),
+            p(0.4, 0.6)
+        ));
     }
 
     #[test]

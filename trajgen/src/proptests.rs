@@ -85,7 +85,7 @@ proptest! {
                 Err(GenerationError::GenerationFailed { outer_tries, .. }) => {
                     prop_assert!(strategy == Strategy::Reference || clearance > 0.0,
                         "{}: wedge strategy failed", fixture.name);
-                    prop_assert_eq!(outer_tries, config.outer_tries);
+                    prop_assert!(outer_tries >= 1 && outer_tries <= config.outer_tries);
                     break;
                 }
                 Err(other) => prop_assert!(false, "unexpected error {other}"),

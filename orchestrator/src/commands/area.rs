@@ -41,9 +41,15 @@ struct ValidationSummary {
 struct HotSpotSummary {
     x: f64,
     y: f64,
+    /// Outer tries of the hardest extension there (the limit for a failure).
     tries: u32,
+    /// Candidate points drawn for that extension: the effort where outer tries stay at 1.
+    inner_tries: u64,
     failures: u32,
 }
+
+/// Below this share of drivable cells visited, the report points out the parts never driven.
+const LOW_COVERAGE: f64 = 0.9;
 
 /// Validates the area and exits 0 when safe, 1 when unsafe.
 pub fn validate(args: &ValidateArgs) -> Result<ExitCode> {
@@ -138,6 +144,7 @@ fn summarise(
                 x: h.x,
                 y: h.y,
                 tries: h.outer_tries,
+                inner_tries: h.inner_tries,
                 failures: h.failures,
             })
             .collect(),
@@ -168,13 +175,19 @@ fn print_summary(s: &ValidationSummary) {
         "  coverage    {:.1} % of the drivable 0.5 m cells",
         s.coverage * 100.0
     );
+    if s.coverage < LOW_COVERAGE {
+        println!(
+            "  note: parts of the area were never driven (grey in --svg); the generator avoids \
+             places too narrow to turn around in"
+        );
+    }
     println!("  wall time   {:.2} s", s.wall_s);
     if !s.hotspots.is_empty() {
         println!("  hot spots (worst first):");
         for h in &s.hotspots {
             println!(
-                "    ({:8.2}, {:8.2})  {:5} outer tries  {} failure(s)",
-                h.x, h.y, h.tries, h.failures
+                "    ({:8.2}, {:8.2})  {:5} outer tries  {:6} inner tries  {} failure(s)",
+                h.x, h.y, h.tries, h.inner_tries, h.failures
             );
         }
     }
