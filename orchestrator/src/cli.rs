@@ -37,6 +37,23 @@ pub enum BenchCommand {
     /// Both generator strategies side by side on every bundled area: time per extension
     /// (p50/p99/max), outer tries, failures, and the wall time of an area validation.
     Generator(BenchGeneratorArgs),
+    /// Both return-route planners side by side on every bundled area, from random poses with
+    /// at least 1 m clearance: success, plan time p50/p99, length and ratio to the lower bound.
+    Recovery(BenchRecoveryArgs),
+}
+
+/// Options of `drivecheck bench recovery`.
+#[derive(Debug, Args)]
+pub struct BenchRecoveryArgs {
+    /// Random poses per area.
+    #[arg(long, default_value_t = 200)]
+    pub poses: usize,
+    /// Least distance of a pose from every edge, metres.
+    #[arg(long, default_value_t = 1.0)]
+    pub clearance: f64,
+    /// Seed of the poses and of the planners.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
 }
 
 /// Options of `drivecheck bench generator`.
@@ -91,6 +108,30 @@ pub enum RouteCommand {
     /// Extend the scenario's start route by N points, in extensions of the scenario's segment
     /// size (4–7 points by default), each proven drivable by the ahead margin.
     Generate(GenerateArgs),
+    /// Plan the return route from a pose to the scenario's recovery route (what the car drives
+    /// between tests), with its length, a lower bound and their ratio.
+    Return(ReturnArgs),
+}
+
+/// Options of `drivecheck route return`.
+#[derive(Debug, Args)]
+pub struct ReturnArgs {
+    /// Scenario: a bundled name, a .toml file or a reference .xml.
+    pub scenario: String,
+    /// The car's pose: east and north in metres, and the heading in degrees counter-clockwise
+    /// from east (the ENU convention: 0 = east, 90 = north).
+    #[arg(long, value_name = "X,Y,HEADING_DEG", allow_hyphen_values = true)]
+    pub from: String,
+    /// Seed of the planner's random choices (printed when not given).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Planner: `dubins` (search over poses with Dubins connections, the default) or
+    /// `reference` (the method's arcs, random extensions and best of 100).
+    #[arg(long, default_value = "dubins")]
+    pub planner: recovery::Planner,
+    /// Print the route as JSON on standard output.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Options of `drivecheck route generate`.

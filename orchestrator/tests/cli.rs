@@ -233,3 +233,56 @@ const XML: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
   </route>
 </routes>
 "#;
+
+#[test]
+fn route_return_joins_the_recovery_route_with_a_drivable_route() {
+    let out = drivecheck(&[
+        "route",
+        "return",
+        "cutouts-four",
+        "--from",
+        "25,-915,90",
+        "--seed",
+        "2",
+        "--json",
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let route = json(&out);
+    for key in ["points", "length_m", "lower_bound_m", "ratio", "plan_ms"] {
+        assert!(route.get(key).is_some(), "missing key {key} in {route}");
+    }
+    assert!(route["ratio"].as_f64().unwrap() >= 1.0);
+    let scenario = bundled::load("cutouts-four").unwrap().scenario;
+    let recovery = scenario.recovery_route.positions();
+    let next = recovery[route["join_segment"].as_u64().unwrap() as usize + 1];
+    let mut points: Vec<Point> = route["points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| Point::new(p[0].as_f64().unwrap(), p[1].as_f64().unwrap()))
+        .collect();
+    assert_eq!(points[0], Point::new(25.0, -915.0));
+    points.push(next);
+    let heading = 90f64.to_radians();
+    check_route(
+        &scenario.area,
+        &points,
+        &scenario.constraints(),
+        Some(heading),
+    )
+    .unwrap();
+}
+
+#[test]
+fn route_return_refuses_a_pose_outside_the_area() {
+    let out = drivecheck(&["route", "return", "courtyard", "--from", "500,500,0"]);
+    assert_eq!(out.status.code(), Some(2));
+    let out = drivecheck(&["route", "return", "courtyard", "--from", "1,2"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("X,Y,HEADING_DEG"));
+}

@@ -35,8 +35,9 @@ pub mod generator;
 pub mod geometry;
 #[cfg(test)]
 mod proptests;
-#[cfg(test)]
-mod test_areas;
+#[cfg(any(test, feature = "test-areas"))]
+#[doc(hidden)]
+pub mod test_areas;
 #[cfg(test)]
 mod test_support;
 pub mod validation;

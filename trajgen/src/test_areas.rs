@@ -1,7 +1,8 @@
-//! The four real test areas of `shared/areas/*.xml` (fence, cutouts, start and recovery routes),
-//! copied as coordinates. Test fixtures only: the product's bundled scenarios live in
-//! `scenarios/areas/*.toml`. This file has no imports so that `examples/measure.rs` can include it
-//! with `#[path]` as well.
+//! The four real test areas of the published experiments (fence, cutouts, start and recovery
+//! routes) as coordinates, for the unit tests of the pure crates, which cannot read scenario files.
+//! Test fixtures only (compiled for tests, or with the `test-areas` feature for other crates'
+//! tests): the product's bundled scenarios live in `scenarios/areas/*.toml`, and a test in the
+//! `tests` crate checks that both agree.
 
 /// One real area as raw coordinates (local ENU metres; polygons open).
 #[derive(Debug, Clone, Copy)]

@@ -106,7 +106,7 @@ fn measure(scenario: &Scenario, strategy: Strategy, args: &BenchGeneratorArgs) -
 }
 
 /// The `q`-quantile of sorted durations (nearest rank).
-fn percentile(sorted: &[Duration], q: f64) -> Duration {
+pub(super) fn percentile(sorted: &[Duration], q: f64) -> Duration {
     if sorted.is_empty() {
         return Duration::ZERO;
     }

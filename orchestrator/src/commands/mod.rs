@@ -2,7 +2,9 @@
 
 mod area;
 mod bench;
+mod bench_recovery;
 mod route;
+mod route_return;
 mod scenario;
 
 use std::process::ExitCode;
@@ -16,9 +18,11 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
     match cli.command {
         Command::Area(AreaCommand::Validate(args)) => area::validate(&args),
         Command::Route(RouteCommand::Generate(args)) => route::generate(&args),
+        Command::Route(RouteCommand::Return(args)) => route_return::plan(&args),
         Command::Scenario(ScenarioCommand::Import(args)) => scenario::import(&args),
         Command::Scenario(ScenarioCommand::Check(args)) => scenario::check(&args),
         Command::Scenario(ScenarioCommand::List) => scenario::list(),
         Command::Bench(BenchCommand::Generator(args)) => bench::generator(&args),
+        Command::Bench(BenchCommand::Recovery(args)) => bench_recovery::run(&args),
     }
 }

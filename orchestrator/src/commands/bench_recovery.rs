@@ -1,0 +1,133 @@
+//! `drivecheck bench recovery`: both return-route planners side by side on every bundled area.
+//!
+//! Poses are drawn uniformly in the fence's bounding box, kept when they are drivable and at least
+//! `--clearance` from every edge, with a uniform heading. For each planner: success rate, plan
+//! time p50/p99/max, mean length before and after shortening, and the mean ratio to the lower
+//! bound. Run it in release mode.
+
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use anyhow::{Result, ensure};
+use rand::RngExt;
+use recovery::{PlanConfig, Planner};
+use scenarios::Scenario;
+use trajgen::{Point, Pose};
+
+use super::bench::percentile;
+use crate::cli::BenchRecoveryArgs;
+use crate::seed::{RunRng, rng};
+
+/// Poses drawn before giving up on finding enough with the clearance asked for.
+const MAX_DRAWS_PER_POSE: usize = 10_000;
+
+/// Runs the benchmark and prints a Markdown table.
+pub fn run(args: &BenchRecoveryArgs) -> Result<ExitCode> {
+    println!(
+        "| area | planner | success | p50 | p99 | max | mean length before → after shortening | mean ratio before → after | mean total ratio |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|");
+    for name in scenarios::bundled::names() {
+        let scenario = scenarios::bundled::load(name)?.scenario;
+        let poses = random_poses(&scenario, args, &mut rng(args.seed))?;
+        for planner in Planner::ALL {
+            print_row(
+                &scenario.name,
+                planner,
+                &measure(&scenario, planner, &poses, args.seed),
+            );
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn random_poses(
+    scenario: &Scenario,
+    args: &BenchRecoveryArgs,
+    rng: &mut RunRng,
+) -> Result<Vec<Pose>> {
+    let bbox = scenario.area.bbox();
+    let mut poses = Vec::with_capacity(args.poses);
+    let mut draws = 0;
+    while poses.len() < args.poses {
+        draws += 1;
+        ensure!(
+            draws <= MAX_DRAWS_PER_POSE * args.poses.max(1),
+            "{}: too few points with {} m clearance",
+            scenario.name,
+            args.clearance
+        );
+        let p = Point::new(
+            rng.random_range(bbox.min.x..=bbox.max.x),
+            rng.random_range(bbox.min.y..=bbox.max.y),
+        );
+        if scenario.area.contains_point(p) && scenario.area.boundary_distance(p) >= args.clearance {
+            let heading = rng.random_range(-std::f64::consts::PI..std::f64::consts::PI);
+            poses.push(Pose::new(p, heading));
+        }
+    }
+    Ok(poses)
+}
+
+/// Figures of one planner over the poses of one area.
+#[derive(Default)]
+struct Figures {
+    tried: usize,
+    planned: usize,
+    times: Vec<Duration>,
+    length_before: f64,
+    length: f64,
+    ratio_before: f64,
+    ratio: f64,
+    total_ratio: f64,
+}
+
+fn measure(scenario: &Scenario, planner: Planner, poses: &[Pose], seed: u64) -> Figures {
+    let config = PlanConfig::default().with_planner(planner);
+    let recovery_route = scenario.recovery_route.positions();
+    let constraints = scenario.constraints();
+    let mut figures = Figures::default();
+    for (i, &pose) in poses.iter().enumerate() {
+        let mut rng = rng(seed.wrapping_add(i as u64));
+        let started = Instant::now();
+        let result = config.plan(
+            &scenario.area,
+            pose,
+            &recovery_route,
+            &constraints,
+            &mut rng,
+        );
+        figures.times.push(started.elapsed());
+        figures.tried += 1;
+        if let Ok(route) = result {
+            figures.planned += 1;
+            figures.length_before += route.quality.length_before_shortening;
+            figures.length += route.quality.length;
+            figures.ratio_before +=
+                route.quality.length_before_shortening / route.quality.lower_bound;
+            figures.ratio += route.quality.ratio;
+            figures.total_ratio += route.quality.total_ratio;
+        }
+    }
+    figures.times.sort_unstable();
+    figures
+}
+
+fn print_row(area: &str, planner: Planner, f: &Figures) {
+    let ms = |d: Duration| format!("{:.2} ms", d.as_secs_f64() * 1e3);
+    let mean = |sum: f64| sum / f.planned.max(1) as f64;
+    println!(
+        "| {area} | {planner} | {}/{} ({:.1} %) | {} | {} | {} | {:.2} → {:.2} m | {:.3} → {:.3} | {:.3} |",
+        f.planned,
+        f.tried,
+        100.0 * f.planned as f64 / f.tried.max(1) as f64,
+        ms(percentile(&f.times, 0.5)),
+        ms(percentile(&f.times, 0.99)),
+        ms(f.times.last().copied().unwrap_or_default()),
+        mean(f.length_before),
+        mean(f.length),
+        mean(f.ratio_before),
+        mean(f.ratio),
+        mean(f.total_ratio),
+    );
+}
