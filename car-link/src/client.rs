@@ -1,0 +1,726 @@
+//! The async client: a [`Car`] handle over any [`Link`].
+//!
+//! On start it performs the version handshake (GET_STATE, then every layout and id from the reported firmware
+//! version), starts a dispatcher that matches replies to requests by (car id, command), and a keepalive that feeds
+//! the car's 2 s communication watchdog. Every timer is tokio's, so the client runs in virtual time too.
+//!
+//! Invariant: a lost link is an error ([`CarError::LinkLost`], [`LinkEvent::Lost`]), never a zero state.
+
+mod session;
+
+use std::io;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use futures::Stream;
+use thiserror::Error;
+use tokio::io::{AsyncRead, AsyncWrite};
+use tokio::sync::broadcast;
+use tokio::time::Instant;
+use tokio_util::sync::CancellationToken;
+
+use crate::address::CarAddress;
+use crate::config::{ConfigError, ConfigField, MainConfig};
+use crate::fault::{self, FaultError, FaultKind, MAX_PROBE_ID, Probe};
+use crate::health::LinkHealth;
+use crate::message::{
+    Anchor, CarState, EncodeError, EnuRef, ID_ALL, ID_CAR_CLIENT, MAX_ROUTE_PART,
+    POINTS_PER_PACKET, Pose, RcControl, RcMode, Reply, Request, RoutePart, RoutePoint, SyncPoint,
+};
+use crate::transport::{Link, PC_BYTE_TIMEOUT};
+use crate::version::{CommandId, FirmwareVersion};
+use session::{RouteMemory, Shared, keep_alive, lock, supervise};
+
+/// Two route packets whose first points are closer than this (in x and y) count as one for the firmware.
+pub const DUPLICATE_POINT_THRESHOLD: f64 = 1e-4;
+/// The firmware's communication watchdog.
+pub const WATCHDOG: Duration = Duration::from_millis(2000);
+
+/// How a [`Car`] talks to the car. Built with [`CarConfig::default`] and changed field by field.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CarConfig {
+    /// The id requests are sent to before the handshake; 255 (broadcast) learns the car's own id from its reply.
+    pub car_id: u8,
+    /// Time allowed for each try of a request (MAVLink mission style: about 250 ms per item).
+    pub request_timeout: Duration,
+    /// Tries of an acked request before giving up (5).
+    pub tries: u32,
+    /// Time allowed for each try of SET_MAIN_CONFIG, which acks after a flash write (500 ms).
+    pub main_config_timeout: Duration,
+    /// How long a terminal command waits for its first PRINTF line (1 s).
+    pub terminal_timeout: Duration,
+    /// After a PRINTF line, how long without another one ends the reply (100 ms).
+    pub terminal_quiet: Duration,
+    /// The keepalive sends GET_STATE whenever nothing that feeds the watchdog was sent for this long (250 ms;
+    /// the protocol asks for at least every 500 ms; longer periods are refused). `None` disables the keepalive
+    /// task.
+    pub keepalive: Option<Duration>,
+    /// TCP connection timeout (2 s).
+    pub connect_timeout: Duration,
+    /// Reconnect after a lost link, when the link came from an address (not from a stream).
+    pub reconnect: bool,
+    /// Abandon a partly received frame after this long without a byte (500 ms, as the reference tools).
+    pub byte_timeout: Duration,
+}
+
+impl Default for CarConfig {
+    fn default() -> Self {
+        CarConfig {
+            car_id: ID_ALL,
+            request_timeout: Duration::from_millis(250),
+            tries: 5,
+            main_config_timeout: Duration::from_millis(500),
+            terminal_timeout: Duration::from_secs(1),
+            terminal_quiet: Duration::from_millis(100),
+            keepalive: Some(Duration::from_millis(250)),
+            connect_timeout: Duration::from_secs(2),
+            reconnect: true,
+            byte_timeout: PC_BYTE_TIMEOUT,
+        }
+    }
+}
+
+/// Something that happened to the link.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum LinkEvent {
+    /// The link went down; requests fail with [`CarError::LinkLost`] until it is back.
+    Lost {
+        /// Why.
+        reason: String,
+    },
+    /// The link is back after a reconnection.
+    Reconnected,
+    /// A try of a request got no reply in time.
+    Timeout {
+        /// The request's command.
+        command: CommandId,
+    },
+}
+
+/// What can go wrong talking to the car.
+#[derive(Debug, Error)]
+pub enum CarError {
+    /// The link could not be opened.
+    #[error("cannot open {address}: {source}")]
+    Connect {
+        /// The address.
+        address: String,
+        /// The cause.
+        source: io::Error,
+    },
+    /// The link is down (or went down while waiting).
+    #[error("the link to the car is lost")]
+    LinkLost,
+    /// Every try timed out.
+    #[error("no reply to {command:?} after {tries} tries of {per_try:?}")]
+    NoReply {
+        /// The command.
+        command: CommandId,
+        /// Tries made.
+        tries: u32,
+        /// Time allowed per try.
+        per_try: Duration,
+    },
+    /// A reply with the right (car, command) but the wrong content.
+    #[error("unexpected reply to {command:?}: {reply}")]
+    UnexpectedReply {
+        /// The command.
+        command: CommandId,
+        /// The reply, as debug text.
+        reply: String,
+    },
+    /// The request cannot be encoded for this firmware.
+    #[error(transparent)]
+    Encode(#[from] EncodeError),
+    /// The version handshake failed.
+    #[error("version handshake failed: {0}")]
+    Handshake(Box<CarError>),
+    /// A packet would start at the same (x, y) as the previous packet, and the firmware would silently drop it.
+    #[error(
+        "route point {index} would start a packet at the same (x, y) as the previous packet: the car drops it"
+    )]
+    DuplicateFirstPoint {
+        /// Index of the point in the list passed in.
+        index: usize,
+    },
+    /// A fault-injection command failed.
+    #[error(transparent)]
+    Fault(#[from] FaultError),
+    /// A main-configuration record problem.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// An argument the car would not answer or would misread.
+    #[error("invalid argument: {0}")]
+    InvalidArgument(String),
+}
+
+/// One GET_STATE answer, stamped with host monotonic time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StateSample {
+    /// The state.
+    pub state: CarState,
+    /// The car id that answered.
+    pub car_id: u8,
+    /// When the request was sent (tokio clock).
+    pub requested_at: Instant,
+    /// When the reply arrived (tokio clock).
+    pub received_at: Instant,
+}
+
+impl StateSample {
+    /// The round trip of this sample.
+    pub fn rtt(&self) -> Duration {
+        self.received_at
+            .saturating_duration_since(self.requested_at)
+    }
+
+    /// The car's clock: ms since UTC midnight, −1 until known.
+    pub fn ms_today(&self) -> i32 {
+        self.state.ms_today
+    }
+}
+
+/// A handle to one car. Cheap to clone; the background tasks (dispatcher, keepalive, reconnection) stop when the
+/// last clone is dropped, and the car's watchdog then brakes it within 2 s.
+#[derive(Debug, Clone)]
+pub struct Car {
+    inner: Arc<Inner>,
+}
+
+#[derive(Debug)]
+struct Inner {
+    shared: Arc<Shared>,
+    cancel: CancellationToken,
+}
+
+impl Drop for Inner {
+    fn drop(&mut self) {
+        self.cancel.cancel();
+    }
+}
+
+impl Car {
+    /// Opens the link an address names and performs the version handshake.
+    ///
+    /// Timeout: the connection attempt is bounded by `connect_timeout`, the handshake by `tries` ×
+    /// `request_timeout`. Cancellation: dropping the future closes the link; nothing keeps running.
+    /// `sim` is refused here: the orchestrator passes the simulator's pipe to [`Car::over_stream`].
+    pub async fn connect(address: &CarAddress, config: CarConfig) -> Result<Car, CarError> {
+        let bridged = matches!(address, CarAddress::Tcp { .. } | CarAddress::Udp { .. });
+        if bridged && config.car_id == ID_CAR_CLIENT {
+            return Err(CarError::InvalidArgument(
+                "car id 254: the bridge never forwards the car's replies to it".into(),
+            ));
+        }
+        let link = Link::open(address, config.connect_timeout)
+            .await
+            .map_err(|source| CarError::Connect {
+                address: address.to_string(),
+                source,
+            })?;
+        let reconnect_to = config.reconnect.then(|| address.clone());
+        Car::start(link, reconnect_to, config).await
+    }
+
+    /// A car behind any framed byte stream (the host end of [`crate::transport::sim_pipe`], a TCP stream, a
+    /// serial port). No reconnection: when the stream ends, the link is lost for good.
+    ///
+    /// Timeout: the handshake is bounded by `tries` × `request_timeout`. Cancellation: dropping the future
+    /// closes the stream.
+    pub async fn over_stream<S>(stream: S, config: CarConfig) -> Result<Car, CarError>
+    where
+        S: AsyncRead + AsyncWrite + Send + 'static,
+    {
+        let link = Link::over_stream(stream, config.byte_timeout);
+        Car::start(link, None, config).await
+    }
+
+    /// A car behind an already open [`Link`]. No reconnection.
+    ///
+    /// Timeout and cancellation: as [`Car::over_stream`].
+    pub async fn over_link(link: Link, config: CarConfig) -> Result<Car, CarError> {
+        Car::start(link, None, config).await
+    }
+
+    async fn start(
+        link: Link,
+        reconnect_to: Option<CarAddress>,
+        config: CarConfig,
+    ) -> Result<Car, CarError> {
+        if config.keepalive.is_some_and(|period| period > WATCHDOG / 4) {
+            return Err(CarError::InvalidArgument(format!(
+                "keepalive period {:?}: the car's watchdog needs GET_STATE at least every 500 ms",
+                config.keepalive.unwrap_or_default()
+            )));
+        }
+        let shared = Arc::new(Shared::new(config));
+        let cancel = CancellationToken::new();
+        let car = Car {
+            inner: Arc::new(Inner {
+                shared: shared.clone(),
+                cancel: cancel.clone(),
+            }),
+        };
+        shared.link_up(link.sender());
+        tokio::spawn(supervise(
+            shared.clone(),
+            link,
+            reconnect_to,
+            cancel.clone(),
+        ));
+        let sample = shared
+            .state(shared.config.tries)
+            .await
+            .map_err(|e| CarError::Handshake(Box::new(e)))?;
+        // The version was taken from the reply by `state`; a broadcast handshake also learns the car's id.
+        {
+            let mut identity = lock(&shared.identity);
+            if identity.car_id == ID_ALL {
+                identity.car_id = sample.car_id;
+            }
+        }
+        tracing::info!(version = %sample.state.version, car = shared.identity().car_id, "connected to the car");
+        if let Some(period) = shared.config.keepalive {
+            tokio::spawn(keep_alive(shared.clone(), period, cancel));
+        }
+        Ok(car)
+    }
+
+    fn shared(&self) -> &Shared {
+        &self.inner.shared
+    }
+
+    /// The firmware version from the handshake.
+    pub fn version(&self) -> FirmwareVersion {
+        self.shared().identity().version
+    }
+
+    /// The car id requests go to (learned from the handshake when configured as 255).
+    pub fn car_id(&self) -> u8 {
+        self.shared().identity().car_id
+    }
+
+    /// The configuration in force.
+    pub fn config(&self) -> &CarConfig {
+        &self.shared().config
+    }
+
+    /// Link health: round trips (p50, p99), timeouts, reconnects, strays and drops.
+    pub fn health(&self) -> LinkHealth {
+        lock(&self.shared().health).snapshot()
+    }
+
+    /// Link events (lost, reconnected, timeouts) from now on.
+    pub fn events(&self) -> broadcast::Receiver<LinkEvent> {
+        self.shared().events.subscribe()
+    }
+
+    /// Every PRINTF line of this car from now on, including asynchronous debug prints.
+    pub fn printf(&self) -> broadcast::Receiver<String> {
+        self.shared().printf.subscribe()
+    }
+
+    /// The latest state received, by any caller or the keepalive; `None` before the first.
+    pub fn latest_state(&self) -> Option<StateSample> {
+        *self.shared().latest.borrow()
+    }
+
+    /// Switches the watchdog keepalive on (the default) or off. Off lets the car's watchdog stop the autopilot
+    /// 2 s after the last command that feeds it.
+    pub fn set_keepalive(&self, on: bool) {
+        self.shared().keepalive_on.store(on, Ordering::SeqCst);
+    }
+
+    /// Reads the car state (GET_STATE).
+    ///
+    /// Timeout: one try of `request_timeout`, then [`CarError::NoReply`]. A lost link gives
+    /// [`CarError::LinkLost`]; never a default state. Cancellation: safe; a late reply is discarded as stray.
+    pub async fn state(&self) -> Result<StateSample, CarError> {
+        self.shared().state(1).await
+    }
+
+    /// A stream of states polled at `period` (GET_STATE each tick; a late tick is delayed, not bunched up).
+    /// Failures are items too (`Err`), so that a lost link is seen as such; the stream itself never ends. It
+    /// holds a clone of the handle, which keeps the link and the keepalive alive while it exists.
+    ///
+    /// Timeout: each item is bounded like [`Car::state`]. Cancellation: dropping the stream stops the polling.
+    pub fn state_stream(
+        &self,
+        period: Duration,
+    ) -> impl Stream<Item = Result<StateSample, CarError>> + Send + 'static {
+        let mut ticker = tokio::time::interval(period);
+        ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        futures::stream::unfold((self.clone(), ticker), |(car, mut ticker)| async move {
+            ticker.tick().await;
+            let item = car.state().await;
+            Some((item, (car, ticker)))
+        })
+    }
+
+    /// Appends route points: packets of 5, each acked, each tried up to `tries` times with `request_timeout`
+    /// per try. A retried packet that the car had already stored is dropped by the car's duplicate rule and
+    /// acked again, so retries never duplicate points. A packet whose first point has the same (x, y) as the
+    /// previous packet's first point would be dropped silently by the car: such an upload is refused with
+    /// [`CarError::DuplicateFirstPoint`] before anything is sent. Uploads from several tasks are serialised.
+    ///
+    /// Timeout: at most `tries` × `request_timeout` per packet. Cancellation: packets already acked stay on
+    /// the car; the route is then incomplete, so clear or replace it.
+    pub async fn add_points(&self, points: &[RoutePoint]) -> Result<(), CarError> {
+        self.send_route(points, false).await
+    }
+
+    /// Replaces the route: one AP_REPLACE_ROUTE of up to 5 points, then AP_ADD_POINTS packets (as the control
+    /// station does). With the autopilot inactive the car clears the route first; while active it cuts the
+    /// route back to the current segment and continues onto the new points.
+    ///
+    /// Timeout and cancellation: as [`Car::add_points`].
+    pub async fn replace_route(&self, points: &[RoutePoint]) -> Result<(), CarError> {
+        if points.is_empty() {
+            return Err(CarError::InvalidArgument(
+                "a replacement route needs at least one point".into(),
+            ));
+        }
+        {
+            let mut route = lock(&self.shared().route);
+            if !route.active {
+                // Inactive: the car clears the route, and with it its duplicate memory, before storing the new one.
+                route.last_first = None;
+            }
+        }
+        self.send_route(points, true).await
+    }
+
+    async fn send_route(&self, points: &[RoutePoint], replace_first: bool) -> Result<(), CarError> {
+        let shared = self.shared();
+        let _one_upload_at_a_time = shared.uploads.lock().await;
+        shared.check_packet_starts(points)?;
+        for (n, packet) in points.chunks(POINTS_PER_PACKET).enumerate() {
+            let request = if replace_first && n == 0 {
+                Request::ReplaceRoute(packet.to_vec())
+            } else {
+                Request::AddPoints(packet.to_vec())
+            };
+            shared
+                .acked(&request, shared.config.request_timeout)
+                .await?;
+            shared.remember_first_point(&packet[0]);
+        }
+        Ok(())
+    }
+
+    /// Empties the route and deactivates the autopilot (AP_CLEAR_POINTS). It does not brake.
+    ///
+    /// Timeout: `tries` × `request_timeout`. Cancellation: the car may or may not have cleared the route.
+    pub async fn clear_route(&self) -> Result<(), CarError> {
+        let shared = self.shared();
+        shared
+            .acked(&Request::ClearPoints, shared.config.request_timeout)
+            .await?;
+        *lock(&shared.route) = RouteMemory::default();
+        Ok(())
+    }
+
+    /// Removes the last stored route point (AP_REMOVE_LAST_POINT).
+    ///
+    /// Timeout: `tries` × `request_timeout`. Cancellation: the point may or may not be removed.
+    pub async fn remove_last_point(&self) -> Result<(), CarError> {
+        let shared = self.shared();
+        shared
+            .acked(&Request::RemoveLastPoint, shared.config.request_timeout)
+            .await
+    }
+
+    /// Activates or deactivates the autopilot (AP_SET_ACTIVE). `reset` (12.3 only) restarts the route from
+    /// `route[0]`; asking for it on older firmware is an error. Deactivation does not brake: use [`Car::brake`].
+    ///
+    /// Timeout: `tries` × `request_timeout`. Cancellation: the car may or may not have switched.
+    pub async fn set_autopilot(&self, active: bool, reset: bool) -> Result<(), CarError> {
+        let shared = self.shared();
+        shared
+            .acked(
+                &Request::SetActive { active, reset },
+                shared.config.request_timeout,
+            )
+            .await?;
+        let mut route = lock(&shared.route);
+        route.active = active;
+        if reset {
+            route.last_first = None;
+        }
+        Ok(())
+    }
+
+    /// Brakes with `current_a` amperes (RC_CONTROL, mode CURRENT_BRAKE, steering 0), which also deactivates the
+    /// autopilot. The reference safe stop is 50 A, then polling until the speed is below 0.1 m/s. RC_CONTROL has
+    /// no reply: success means "sent"; watch the speed in the state.
+    ///
+    /// Timeout: none beyond queueing. Cancellation: the command may or may not be sent.
+    pub async fn brake(&self, current_a: f64) -> Result<(), CarError> {
+        let rc = RcControl {
+            mode: RcMode::CurrentBrake,
+            throttle: current_a.abs(),
+            steering: 0.0,
+        };
+        self.rc_control(rc).await
+    }
+
+    /// Manual control (RC_CONTROL); no reply. It deactivates the autopilot.
+    ///
+    /// Timeout: none beyond queueing. Cancellation: the command may or may not be sent.
+    pub async fn rc_control(&self, rc: RcControl) -> Result<(), CarError> {
+        self.shared().fire(&Request::RcControl(rc)).await
+    }
+
+    /// Sets the fused and UWB pose (SET_POS_ACK, acked).
+    ///
+    /// Timeout: `tries` × `request_timeout`. Cancellation: the pose may or may not be set.
+    pub async fn set_pos(&self, pose: Pose) -> Result<(), CarError> {
+        let shared = self.shared();
+        shared
+            .acked(&Request::SetPosAck(pose), shared.config.request_timeout)
+            .await
+    }
+
+    /// Sets the ENU reference (SET_ENU_REF, acked). Positions already held are not transformed.
+    ///
+    /// Timeout: `tries` × `request_timeout`. Cancellation: the reference may or may not be set.
+    pub async fn set_enu_ref(&self, reference: EnuRef) -> Result<(), CarError> {
+        let shared = self.shared();
+        shared
+            .acked(
+                &Request::SetEnuRef(reference),
+                shared.config.request_timeout,
+            )
+            .await
+    }
+
+    /// Reads the ENU reference (GET_ENU_REF).
+    ///
+    /// Timeout: `tries` × `request_timeout`. Cancellation: safe.
+    pub async fn enu_ref(&self) -> Result<EnuRef, CarError> {
+        let shared = self.shared();
+        match shared
+            .exchange(
+                &Request::GetEnuRef,
+                shared.config.request_timeout,
+                shared.config.tries,
+            )
+            .await?
+            .0
+            .reply
+        {
+            Reply::EnuRef(reference) => Ok(reference),
+            other => Err(CarError::UnexpectedReply {
+                command: CommandId::GetEnuRef,
+                reply: format!("{other:?}"),
+            }),
+        }
+    }
+
+    /// Replaces the car's UWB anchors: CLEAR_UWB_ANCHORS, then ADD_UWB_ANCHOR for each, every one acked.
+    /// At most 20 anchors, ids 0–255 (the firmware ignores more, and cannot range to larger ids).
+    ///
+    /// Timeout: `tries` × `request_timeout` per packet. Cancellation: the car may hold part of the list.
+    pub async fn upload_anchors(&self, anchors: &[Anchor]) -> Result<(), CarError> {
+        if anchors.len() > 20 {
+            return Err(CarError::InvalidArgument(format!(
+                "{} anchors; the car keeps at most 20",
+                anchors.len()
+            )));
+        }
+        if let Some(anchor) = anchors.iter().find(|a| !(0..=255).contains(&a.id)) {
+            return Err(CarError::InvalidArgument(format!(
+                "anchor id {} is outside 0..=255",
+                anchor.id
+            )));
+        }
+        let shared = self.shared();
+        shared
+            .acked(&Request::ClearUwbAnchors, shared.config.request_timeout)
+            .await?;
+        for anchor in anchors {
+            shared
+                .acked(
+                    &Request::AddUwbAnchor(*anchor),
+                    shared.config.request_timeout,
+                )
+                .await?;
+        }
+        Ok(())
+    }
+
+    /// Reads part of the stored route (AP_GET_ROUTE_PART); `num` ≤ 20, since the car does not answer more.
+    ///
+    /// Timeout: `tries` × `request_timeout`. Cancellation: safe.
+    pub async fn route_part(&self, first: i32, num: u8) -> Result<RoutePart, CarError> {
+        if num > MAX_ROUTE_PART {
+            return Err(CarError::InvalidArgument(format!(
+                "{num} points asked; the car answers at most 20"
+            )));
+        }
+        let shared = self.shared();
+        let request = Request::GetRoutePart { first, num };
+        match shared
+            .exchange(&request, shared.config.request_timeout, shared.config.tries)
+            .await?
+            .0
+            .reply
+        {
+            Reply::RoutePart(part) => Ok(part),
+            other => Err(CarError::UnexpectedReply {
+                command: CommandId::ApGetRoutePart,
+                reply: format!("{other:?}"),
+            }),
+        }
+    }
+
+    /// Re-times the route up to a point (AP_SYNC_POINT, acked).
+    ///
+    /// Timeout: `tries` × `request_timeout`. Cancellation: the car may or may not have applied it.
+    pub async fn sync_point(&self, sync: SyncPoint) -> Result<(), CarError> {
+        let shared = self.shared();
+        shared
+            .acked(&Request::SyncPoint(sync), shared.config.request_timeout)
+            .await
+    }
+
+    /// Reads the main configuration (GET_MAIN_CONFIG), for a read-modify-write.
+    ///
+    /// Timeout: `tries` × `request_timeout`. Cancellation: safe.
+    pub async fn main_config(&self) -> Result<MainConfig, CarError> {
+        let shared = self.shared();
+        match shared
+            .exchange(
+                &Request::GetMainConfig,
+                shared.config.request_timeout,
+                shared.config.tries,
+            )
+            .await?
+            .0
+            .reply
+        {
+            Reply::MainConfig { config, .. } => Ok(config),
+            other => Err(CarError::UnexpectedReply {
+                command: CommandId::GetMainConfig,
+                reply: format!("{other:?}"),
+            }),
+        }
+    }
+
+    /// Writes the main configuration (SET_MAIN_CONFIG; the car acks after its flash write).
+    ///
+    /// Timeout: `tries` × `main_config_timeout`. Cancellation: the car may or may not have written it.
+    pub async fn set_main_config(&self, config: &MainConfig) -> Result<(), CarError> {
+        if config.version() != self.version() {
+            return Err(CarError::InvalidArgument(format!(
+                "record laid out for firmware {}, car runs {}",
+                config.version(),
+                self.version()
+            )));
+        }
+        let shared = self.shared();
+        shared
+            .acked(
+                &Request::SetMainConfig(config.clone()),
+                shared.config.main_config_timeout,
+            )
+            .await
+    }
+
+    /// Checklist step 2 of the protocol (§14): reads the main configuration and, if routes repeat (the factory
+    /// default), time mode is on, or (11.0+) the UWB position is reported in place of the fused one, switches
+    /// those off with a read-modify-write. Returns the fields that were changed, with their old values.
+    ///
+    /// Timeout: the read as [`Car::main_config`], the write as [`Car::set_main_config`]. Cancellation: the car
+    /// may or may not have written the new record.
+    pub async fn prepare_for_test_drive(&self) -> Result<Vec<(ConfigField, u8)>, CarError> {
+        let mut config = self.main_config().await?;
+        let deviations = config.test_drive_deviations()?;
+        if !deviations.is_empty() {
+            config.make_test_drive_safe()?;
+            self.set_main_config(&config).await?;
+        }
+        Ok(deviations)
+    }
+
+    /// Runs a terminal command and returns its PRINTF output, concatenated (lines usually end with `\n`).
+    /// The car's PRINTF carries no request id, so an asynchronous debug print arriving meanwhile is included.
+    /// A command with no output (e.g. `set_id_quiet`) returns an empty string.
+    ///
+    /// Timeout: waits up to `terminal_timeout` for the first line, then until `terminal_quiet` passes without
+    /// one. A lost link gives [`CarError::LinkLost`]. Cancellation: safe; the command may already have run.
+    pub async fn terminal(&self, command: &str) -> Result<String, CarError> {
+        Ok(self
+            .shared()
+            .terminal_lines(command, |_| true, |_| false)
+            .await?
+            .concat())
+    }
+
+    /// Adds a fault (`fi_add_fault probe kind param start duration`) and checks the car's reply: an error for
+    /// every refusal ("Too many faults…", "Invalid fault type…", …). `start` counts probe iterations from now;
+    /// `duration` 0 is permanent. Slots are never freed until [`Car::clear_faults`].
+    ///
+    /// Timeout and cancellation: as [`Car::terminal`]; no reply at all is [`FaultError::NoReply`].
+    pub async fn add_fault(
+        &self,
+        probe: &Probe,
+        kind: FaultKind,
+        param: f32,
+        start: i32,
+        duration: i32,
+    ) -> Result<(), CarError> {
+        let id = probe.to_string();
+        if id.len() > MAX_PROBE_ID {
+            return Err(FaultError::ProbeIdTooLong(id).into());
+        }
+        if !param.is_finite() {
+            return Err(CarError::InvalidArgument(format!(
+                "fault parameter {param} is not finite"
+            )));
+        }
+        let command = fault::add_fault_command(probe, kind, param, start, duration);
+        let success = format!("successfully added to probe {probe}.");
+        let lines = self
+            .shared()
+            .terminal_lines(&command, fault::is_fault_reply, |lines| {
+                lines.iter().any(|l| l.contains(&success))
+            })
+            .await?;
+        Ok(fault::parse_add_fault_reply(&lines, probe)?)
+    }
+
+    /// Frees every probe and fault slot and zeroes the counters (`fi_clear_faults`).
+    ///
+    /// Timeout and cancellation: as [`Car::terminal`].
+    pub async fn clear_faults(&self) -> Result<(), CarError> {
+        let lines = self.fault_command(fault::CLEAR_FAULTS_COMMAND).await?;
+        Ok(fault::parse_clear_faults_reply(&lines)?)
+    }
+
+    /// Switches fault injection on or off (`fi_set_enabled`); off freezes the counters.
+    ///
+    /// Timeout and cancellation: as [`Car::terminal`].
+    pub async fn set_fi_enabled(&self, enabled: bool) -> Result<(), CarError> {
+        let lines = self
+            .fault_command(&fault::set_enabled_command(enabled))
+            .await?;
+        Ok(fault::parse_set_enabled_reply(&lines, enabled)?)
+    }
+
+    /// Resets the UWB position to the fused one (`pos_uwb_reset_pos`).
+    ///
+    /// Timeout and cancellation: as [`Car::terminal`].
+    pub async fn reset_uwb_pos(&self) -> Result<(), CarError> {
+        let lines = self.fault_command(fault::RESET_UWB_POS_COMMAND).await?;
+        Ok(fault::parse_reset_uwb_reply(&lines)?)
+    }
+
+    async fn fault_command(&self, command: &str) -> Result<Vec<String>, CarError> {
+        let shared = self.shared();
+        shared
+            .terminal_lines(command, fault::is_fault_reply, |lines| !lines.is_empty())
+            .await
+    }
+}

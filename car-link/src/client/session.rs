@@ -1,0 +1,434 @@
+//! The state behind a [`super::Car`]: the link's sender, the requests waiting for replies, the dispatcher that
+//! matches replies to them by (car id, command), and the background tasks (link supervision with reconnection,
+//! watchdog keepalive).
+
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Duration;
+
+use bytes::Bytes;
+use tokio::sync::{broadcast, mpsc, oneshot, watch};
+use tokio::time::Instant;
+use tokio_util::sync::CancellationToken;
+
+use super::{CarConfig, CarError, LinkEvent, StateSample};
+use crate::address::CarAddress;
+use crate::health::HealthRecorder;
+use crate::message::{Dialect, ID_ALL, POINTS_PER_PACKET, Reply, Request, RoutePoint};
+use crate::transport::{Incoming, Link, PC_BYTE_TIMEOUT};
+use crate::version::{CommandId, FirmwareVersion};
+
+use super::DUPLICATE_POINT_THRESHOLD;
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Identity {
+    pub(super) car_id: u8,
+    pub(super) version: FirmwareVersion,
+}
+
+/// Waiting requests are keyed by (car id or any, wire command id).
+type Key = (Option<u8>, u8);
+
+/// A reply delivered to a waiting request.
+#[derive(Debug)]
+pub(super) struct Answer {
+    pub(super) car: u8,
+    pub(super) reply: Reply,
+    pub(super) received_at: Instant,
+}
+
+#[derive(Debug, Default)]
+pub(super) struct RouteMemory {
+    /// First (x, y) of the previous accepted route packet; the firmware drops a packet starting there.
+    pub(super) last_first: Option<(f64, f64)>,
+    /// Whether the autopilot was last switched on by this client.
+    pub(super) active: bool,
+}
+
+#[derive(Debug)]
+pub(super) struct Shared {
+    pub(super) config: CarConfig,
+    pub(super) identity: Mutex<Identity>,
+    pub(super) outgoing: Mutex<Option<mpsc::Sender<Bytes>>>,
+    pub(super) waiters: Mutex<HashMap<Key, oneshot::Sender<Answer>>>,
+    pub(super) lanes: Mutex<HashMap<u8, Arc<tokio::sync::Mutex<()>>>>,
+    pub(super) printf: broadcast::Sender<String>,
+    pub(super) events: broadcast::Sender<LinkEvent>,
+    pub(super) health: Mutex<HealthRecorder>,
+    pub(super) last_feed: Mutex<Option<Instant>>,
+    pub(super) keepalive_on: AtomicBool,
+    pub(super) losses: AtomicU64,
+    pub(super) route: Mutex<RouteMemory>,
+    /// One route upload at a time, so that packets of two uploads never interleave.
+    pub(super) uploads: tokio::sync::Mutex<()>,
+    pub(super) latest: watch::Sender<Option<StateSample>>,
+}
+
+/// Locks a std mutex, ignoring poisoning (no code here panics while holding one).
+pub(super) fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
+    mutex
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// Removes its waiter when the request finishes or is cancelled.
+struct WaiterGuard<'a> {
+    shared: &'a Shared,
+    key: Key,
+}
+
+impl Drop for WaiterGuard<'_> {
+    fn drop(&mut self) {
+        lock(&self.shared.waiters).remove(&self.key);
+    }
+}
+
+impl Shared {
+    pub(super) fn new(config: CarConfig) -> Shared {
+        Shared {
+            identity: Mutex::new(Identity {
+                car_id: config.car_id,
+                version: FirmwareVersion::default(),
+            }),
+            keepalive_on: AtomicBool::new(config.keepalive.is_some()),
+            config,
+            outgoing: Mutex::new(None),
+            waiters: Mutex::new(HashMap::new()),
+            lanes: Mutex::new(HashMap::new()),
+            printf: broadcast::channel(256).0,
+            events: broadcast::channel(64).0,
+            health: Mutex::new(HealthRecorder::default()),
+            last_feed: Mutex::new(None),
+            losses: AtomicU64::new(0),
+            route: Mutex::new(RouteMemory::default()),
+            uploads: tokio::sync::Mutex::new(()),
+            latest: watch::channel(None).0,
+        }
+    }
+
+    pub(super) fn identity(&self) -> Identity {
+        *lock(&self.identity)
+    }
+
+    fn lane(&self, code: u8) -> Arc<tokio::sync::Mutex<()>> {
+        lock(&self.lanes).entry(code).or_default().clone()
+    }
+
+    pub(super) fn link_up(&self, sender: mpsc::Sender<Bytes>) {
+        *lock(&self.outgoing) = Some(sender);
+        lock(&self.health).figures.link_up = true;
+    }
+
+    fn link_down(&self, reason: String) {
+        *lock(&self.outgoing) = None;
+        self.losses.fetch_add(1, Ordering::SeqCst);
+        // Dropping the senders wakes every waiting request with LinkLost.
+        lock(&self.waiters).clear();
+        lock(&self.health).figures.link_up = false;
+        tracing::warn!(%reason, "link to the car lost");
+        let _ = self.events.send(LinkEvent::Lost { reason });
+    }
+
+    fn dispatch(&self, payload: &Bytes) {
+        let identity = self.identity();
+        let (car, reply) = match Reply::decode(payload, identity.version) {
+            Ok(decoded) => decoded,
+            Err(error) => {
+                tracing::debug!(%error, "undecodable payload from the car");
+                lock(&self.health).figures.undecodable += 1;
+                return;
+            }
+        };
+        let ours = identity.car_id == ID_ALL || car == identity.car_id;
+        if let Reply::Printf(text) = reply {
+            if ours {
+                let _ = self.printf.send(text);
+            }
+            return;
+        }
+        let code = payload[1];
+        let waiter = {
+            let mut waiters = lock(&self.waiters);
+            waiters
+                .remove(&(Some(car), code))
+                .or_else(|| waiters.remove(&(None, code)))
+        };
+        let answer = Answer {
+            car,
+            reply,
+            received_at: Instant::now(),
+        };
+        let delivered = waiter.is_some_and(|tx| tx.send(answer).is_ok());
+        if !delivered {
+            tracing::debug!(car, code, "stray reply ignored");
+            lock(&self.health).figures.stray_replies += 1;
+        }
+    }
+
+    /// Sends a payload; notes the watchdog feed.
+    async fn send(&self, payload: Bytes, command: Option<CommandId>) -> Result<Instant, CarError> {
+        let sender = lock(&self.outgoing).clone().ok_or(CarError::LinkLost)?;
+        sender.send(payload).await.map_err(|_| CarError::LinkLost)?;
+        let now = Instant::now();
+        if command.is_some_and(CommandId::resets_watchdog) {
+            *lock(&self.last_feed) = Some(now);
+        }
+        Ok(now)
+    }
+
+    fn encode(&self, request: &Request) -> Result<(Bytes, Identity, Option<CommandId>), CarError> {
+        let identity = self.identity();
+        let payload = request.encode(identity.car_id, Dialect::host(identity.version))?;
+        Ok((payload, identity, request.command(identity.version)))
+    }
+
+    /// Sends a request without waiting for anything.
+    pub(super) async fn fire(&self, request: &Request) -> Result<(), CarError> {
+        let (payload, _, command) = self.encode(request)?;
+        self.send(payload, command).await.map(|_| ())
+    }
+
+    /// Sends `request` and waits for the reply with the same (car, command), retrying on timeouts.
+    pub(super) async fn exchange(
+        &self,
+        request: &Request,
+        per_try: Duration,
+        tries: u32,
+    ) -> Result<(Answer, Instant), CarError> {
+        let (payload, identity, command) = self.encode(request)?;
+        let command = command.unwrap_or(CommandId::GetState);
+        let code = payload[1];
+        let lane = self.lane(code);
+        let _one_at_a_time = lane.lock().await;
+        let key = ((identity.car_id != ID_ALL).then_some(identity.car_id), code);
+        for _ in 0..tries.max(1) {
+            let (tx, rx) = oneshot::channel();
+            lock(&self.waiters).insert(key, tx);
+            let _waiter = WaiterGuard { shared: self, key };
+            let sent_at = self.send(payload.clone(), Some(command)).await?;
+            match tokio::time::timeout(per_try, rx).await {
+                Ok(Ok(answer)) => {
+                    lock(&self.health)
+                        .record_rtt(answer.received_at.saturating_duration_since(sent_at));
+                    return Ok((answer, sent_at));
+                }
+                Ok(Err(_)) => return Err(CarError::LinkLost),
+                Err(_) => {
+                    lock(&self.health).figures.timeouts += 1;
+                    let _ = self.events.send(LinkEvent::Timeout { command });
+                }
+            }
+        }
+        Err(CarError::NoReply {
+            command,
+            tries: tries.max(1),
+            per_try,
+        })
+    }
+
+    pub(super) async fn acked(&self, request: &Request, per_try: Duration) -> Result<(), CarError> {
+        let reply = self
+            .exchange(request, per_try, self.config.tries)
+            .await?
+            .0
+            .reply;
+        let command = request.command(self.identity().version);
+        match reply {
+            Reply::Ack(acked) if Some(acked) == command => Ok(()),
+            other => Err(CarError::UnexpectedReply {
+                command: command.unwrap_or(CommandId::GetState),
+                reply: format!("{other:?}"),
+            }),
+        }
+    }
+
+    pub(super) async fn state(&self, tries: u32) -> Result<StateSample, CarError> {
+        let (answer, requested_at) = self
+            .exchange(&Request::GetState, self.config.request_timeout, tries)
+            .await?;
+        let Reply::State(state) = answer.reply else {
+            let reply = format!("{:?}", answer.reply);
+            return Err(CarError::UnexpectedReply {
+                command: CommandId::GetState,
+                reply,
+            });
+        };
+        let sample = StateSample {
+            state,
+            car_id: answer.car,
+            requested_at,
+            received_at: answer.received_at,
+        };
+        self.follow_version(state.version);
+        self.latest.send_replace(Some(sample));
+        Ok(sample)
+    }
+
+    /// Layouts and ids follow the version the car reports, also if it changes (a reflashed car behind the
+    /// same bridge after a reconnection).
+    fn follow_version(&self, reported: FirmwareVersion) {
+        let mut identity = lock(&self.identity);
+        if identity.version != reported {
+            tracing::warn!(from = %identity.version, to = %reported, "the car reports another firmware version");
+            identity.version = reported;
+        }
+    }
+
+    /// Sends a terminal command and collects the PRINTF lines that `relevant` accepts, until `done` says the
+    /// reply is complete, or the first line does not come within `terminal_timeout`, or no further line comes
+    /// within `terminal_quiet`.
+    pub(super) async fn terminal_lines(
+        &self,
+        command: &str,
+        relevant: impl Fn(&str) -> bool,
+        done: impl Fn(&[String]) -> bool,
+    ) -> Result<Vec<String>, CarError> {
+        let request = Request::TerminalCmd(command.to_string());
+        let (payload, _, cmd) = self.encode(&request)?;
+        let lane = self.lane(payload[1]);
+        let _one_at_a_time = lane.lock().await;
+        let mut printf = self.printf.subscribe();
+        let losses = self.losses.load(Ordering::SeqCst);
+        self.send(payload, cmd).await?;
+        let first_deadline = Instant::now() + self.config.terminal_timeout;
+        let mut lines: Vec<String> = Vec::new();
+        let mut deadline = first_deadline;
+        while !done(&lines) {
+            match tokio::time::timeout_at(deadline, printf.recv()).await {
+                Ok(Ok(text)) if relevant(&text) => {
+                    lines.push(text);
+                    deadline = Instant::now() + self.config.terminal_quiet;
+                }
+                Ok(Ok(_)) | Ok(Err(broadcast::error::RecvError::Lagged(_))) => {}
+                Ok(Err(broadcast::error::RecvError::Closed)) | Err(_) => break,
+            }
+        }
+        if self.losses.load(Ordering::SeqCst) != losses {
+            return Err(CarError::LinkLost);
+        }
+        Ok(lines)
+    }
+
+    /// Checks the duplicate-first-point rule for every packet of an upload before anything is sent: no packet
+    /// may start at the (x, y) where the packet before it (or, for the first, the last accepted one) started.
+    pub(super) fn check_packet_starts(&self, points: &[RoutePoint]) -> Result<(), CarError> {
+        let mut previous = lock(&self.route).last_first;
+        for (n, packet) in points.chunks(POINTS_PER_PACKET).enumerate() {
+            let first = (packet[0].px, packet[0].py);
+            if let Some((x, y)) = previous
+                && (x - first.0).abs() < DUPLICATE_POINT_THRESHOLD
+                && (y - first.1).abs() < DUPLICATE_POINT_THRESHOLD
+            {
+                return Err(CarError::DuplicateFirstPoint {
+                    index: n * POINTS_PER_PACKET,
+                });
+            }
+            previous = Some(first);
+        }
+        Ok(())
+    }
+
+    pub(super) fn remember_first_point(&self, first: &RoutePoint) {
+        lock(&self.route).last_first = Some((first.px, first.py));
+    }
+}
+
+/// Reads the link until it closes; reconnects if an address is known. Ends when cancelled.
+pub(super) async fn supervise(
+    shared: Arc<Shared>,
+    mut link: Link,
+    address: Option<CarAddress>,
+    cancel: CancellationToken,
+) {
+    loop {
+        shared.link_up(link.sender());
+        let reason = loop {
+            let incoming = tokio::select! {
+                _ = cancel.cancelled() => return,
+                incoming = link.recv() => incoming,
+            };
+            match incoming {
+                Some(Incoming::Payload(payload)) => shared.dispatch(&payload),
+                Some(Incoming::Dropped(error)) => {
+                    tracing::debug!(%error, "frame dropped");
+                    lock(&shared.health).figures.dropped_frames += 1;
+                }
+                Some(Incoming::Closed(reason)) => break reason,
+                None => break "link closed".to_string(),
+            }
+        };
+        shared.link_down(reason);
+        drop(link);
+        let Some(address) = address.as_ref() else {
+            return;
+        };
+        link = match reconnect(&shared, address, &cancel).await {
+            Some(link) => link,
+            None => return,
+        };
+        lock(&shared.health).figures.reconnects += 1;
+        let _ = shared.events.send(LinkEvent::Reconnected);
+    }
+}
+
+/// Retries with exponential backoff (250 ms to 5 s); `None` when cancelled.
+async fn reconnect(
+    shared: &Shared,
+    address: &CarAddress,
+    cancel: &CancellationToken,
+) -> Option<Link> {
+    let mut delay = Duration::from_millis(250);
+    loop {
+        tokio::select! {
+            _ = cancel.cancelled() => return None,
+            _ = tokio::time::sleep(delay) => {}
+        }
+        match Link::open(address, shared.config.connect_timeout).await {
+            Ok(link) => {
+                // The bridge's parser state survives a reconnect: wait past its 500 ms byte timeout.
+                tokio::select! {
+                    _ = cancel.cancelled() => return None,
+                    _ = tokio::time::sleep(PC_BYTE_TIMEOUT + Duration::from_millis(100)) => {}
+                }
+                return Some(link);
+            }
+            Err(error) => {
+                tracing::debug!(%error, %address, "reconnection failed");
+                delay = (delay * 2).min(Duration::from_secs(5));
+            }
+        }
+    }
+}
+
+/// Sends GET_STATE whenever nothing has fed the watchdog for `period`. Ends when cancelled.
+pub(super) async fn keep_alive(shared: Arc<Shared>, period: Duration, cancel: CancellationToken) {
+    loop {
+        let last = *lock(&shared.last_feed);
+        let due = last.map_or_else(Instant::now, |t| t + period);
+        tokio::select! {
+            _ = cancel.cancelled() => return,
+            _ = tokio::time::sleep_until(due) => {}
+        }
+        let fed_recently = lock(&shared.last_feed).is_some_and(|t| t.elapsed() < period);
+        if fed_recently {
+            continue;
+        }
+        if !shared.keepalive_on.load(Ordering::SeqCst) {
+            tokio::select! {
+                _ = cancel.cancelled() => return,
+                _ = tokio::time::sleep(period) => {}
+            }
+            continue;
+        }
+        // A failure is already counted in the health figures and reported as an event.
+        if let Err(error) = shared.state(1).await {
+            tracing::debug!(%error, "keepalive GET_STATE failed");
+            if matches!(error, CarError::LinkLost) {
+                tokio::select! {
+                    _ = cancel.cancelled() => return,
+                    _ = tokio::time::sleep(period) => {}
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,308 @@
+//! Fault injection through terminal commands (protocol §10, behaviour §8): probes, fault kinds, the command texts
+//! and the parsing of the firmware's PRINTF replies into typed outcomes.
+
+use std::fmt;
+use std::str::FromStr;
+
+use thiserror::Error;
+
+/// The longest probe id the firmware stores.
+pub const MAX_PROBE_ID: usize = 20;
+
+/// A fault-injection probe: a place in the firmware where a value can be disturbed.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub enum Probe {
+    /// The fused `px` packed into the GET_STATE reply (once per GET_STATE).
+    Px,
+    /// The odometry distance step fed to UWB dead reckoning (every odometry tick).
+    UwbTravelDist,
+    /// The yaw fed to UWB dead reckoning (every odometry tick).
+    UwbYaw,
+    /// The measured range to one anchor (every range reply from it).
+    UwbRange(u16),
+}
+
+impl fmt::Display for Probe {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Probe::Px => f.write_str("px"),
+            Probe::UwbTravelDist => f.write_str("uwb_travel_dist"),
+            Probe::UwbYaw => f.write_str("uwb_yaw"),
+            Probe::UwbRange(anchor) => write!(f, "uwb_range_{anchor}"),
+        }
+    }
+}
+
+/// A probe id the firmware does not know.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[error("unknown probe {0:?}: expected px, uwb_travel_dist, uwb_yaw or uwb_range_<anchor id>")]
+pub struct UnknownProbe(pub String);
+
+impl FromStr for Probe {
+    type Err = UnknownProbe;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "px" => Ok(Probe::Px),
+            "uwb_travel_dist" => Ok(Probe::UwbTravelDist),
+            "uwb_yaw" => Ok(Probe::UwbYaw),
+            _ => s
+                .strip_prefix("uwb_range_")
+                .and_then(|id| id.parse().ok())
+                .map(Probe::UwbRange)
+                .ok_or_else(|| UnknownProbe(s.into())),
+        }
+    }
+}
+
+/// What a fault does to the probed value.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum FaultKind {
+    /// Nothing, but it occupies a slot.
+    None,
+    /// XOR bit `clamp(trunc(param), 0, 31)` of the binary32 pattern.
+    Bitflip,
+    /// `x += param`.
+    Offset,
+    /// `x *= param`.
+    Amplification,
+    /// `x = param`.
+    SetTo,
+}
+
+impl fmt::Display for FaultKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            FaultKind::None => "NONE",
+            FaultKind::Bitflip => "BITFLIP",
+            FaultKind::Offset => "OFFSET",
+            FaultKind::Amplification => "AMPLIFICATION",
+            FaultKind::SetTo => "SET_TO",
+        })
+    }
+}
+
+/// One reason the firmware gave for refusing a fault-injection command.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum FaultRejection {
+    /// `Too long ID. Maximum length is 20`.
+    TooLongId,
+    /// `Invalid fault type <type>`.
+    InvalidType(String),
+    /// `Too many faults on this probe, fault not added.` (5 slots, never freed until `fi_clear_faults`).
+    TooManyFaults,
+    /// `Too many probes in use, fault not added.` (5 probes).
+    TooManyProbes,
+    /// `Wrong number of arguments`.
+    WrongArgumentCount,
+    /// `Invalid argument <arg>`.
+    InvalidArgument(String),
+}
+
+impl fmt::Display for FaultRejection {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            FaultRejection::TooLongId => f.write_str("probe id too long (maximum 20)"),
+            FaultRejection::InvalidType(kind) => write!(f, "invalid fault type {kind}"),
+            FaultRejection::TooManyFaults => f.write_str("too many faults on this probe"),
+            FaultRejection::TooManyProbes => f.write_str("too many probes in use"),
+            FaultRejection::WrongArgumentCount => f.write_str("wrong number of arguments"),
+            FaultRejection::InvalidArgument(arg) => write!(f, "invalid argument {arg}"),
+        }
+    }
+}
+
+/// A fault-injection command that did not do what was asked.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+pub enum FaultError {
+    /// The firmware refused it, for these reasons (it can print several).
+    #[error("fault injection refused: {}", .0.iter().map(ToString::to_string).collect::<Vec<_>>().join("; "))]
+    Rejected(Vec<FaultRejection>),
+    /// The reply matched neither success nor a known refusal.
+    #[error("unexpected fault-injection reply {0:?}")]
+    Unexpected(String),
+    /// The probe id is longer than the firmware accepts (checked before sending).
+    #[error("probe id {0:?} is longer than 20 characters")]
+    ProbeIdTooLong(String),
+    /// No reply text arrived.
+    #[error("no reply to the fault-injection command")]
+    NoReply,
+}
+
+/// The terminal command adding a fault. `param` is written with a decimal point, as in the protocol's vector.
+pub fn add_fault_command(
+    probe: &Probe,
+    kind: FaultKind,
+    param: f32,
+    start: i32,
+    duration: i32,
+) -> String {
+    format!("fi_add_fault {probe} {kind} {param:?} {start} {duration}")
+}
+
+/// The terminal command switching fault injection on or off.
+pub fn set_enabled_command(enabled: bool) -> String {
+    format!("fi_set_enabled {}", u8::from(enabled))
+}
+
+/// The terminal command freeing every probe and slot.
+pub const CLEAR_FAULTS_COMMAND: &str = "fi_clear_faults";
+/// The terminal command resetting the UWB position to the fused one.
+pub const RESET_UWB_POS_COMMAND: &str = "pos_uwb_reset_pos";
+
+fn rejection(line: &str) -> Option<FaultRejection> {
+    let line = line.trim_end_matches('\n');
+    if line.starts_with("Too long ID") {
+        Some(FaultRejection::TooLongId)
+    } else if let Some(kind) = line.strip_prefix("Invalid fault type ") {
+        Some(FaultRejection::InvalidType(kind.to_string()))
+    } else if line.starts_with("Too many faults on this probe") {
+        Some(FaultRejection::TooManyFaults)
+    } else if line.starts_with("Too many probes in use") {
+        Some(FaultRejection::TooManyProbes)
+    } else if line.starts_with("Wrong number of arguments") {
+        Some(FaultRejection::WrongArgumentCount)
+    } else {
+        line.strip_prefix("Invalid argument")
+            .map(|arg| FaultRejection::InvalidArgument(arg.trim().to_string()))
+    }
+}
+
+/// Whether a PRINTF line answers a fault-injection command (as opposed to an unrelated debug print).
+pub fn is_fault_reply(line: &str) -> bool {
+    rejection(line).is_some()
+        || line.contains("successfully added to probe")
+        || line.starts_with("Fault Injection ")
+        || line.starts_with("Faults cleared")
+        || line.starts_with("UWB Pos")
+}
+
+fn outcome(lines: &[String], success: impl Fn(&str) -> bool) -> Result<(), FaultError> {
+    if lines.is_empty() {
+        return Err(FaultError::NoReply);
+    }
+    let rejections: Vec<FaultRejection> = lines.iter().filter_map(|l| rejection(l)).collect();
+    if !rejections.is_empty() {
+        return Err(FaultError::Rejected(rejections));
+    }
+    if lines.iter().any(|l| success(l)) {
+        return Ok(());
+    }
+    Err(FaultError::Unexpected(lines.concat()))
+}
+
+/// Parses the reply lines of `fi_add_fault` for `probe`: success only on `successfully added to probe <probe>`.
+pub fn parse_add_fault_reply(lines: &[String], probe: &Probe) -> Result<(), FaultError> {
+    let expected = format!("successfully added to probe {probe}.");
+    outcome(lines, |l| l.contains(&expected))
+}
+
+/// Parses the reply lines of `fi_set_enabled`.
+pub fn parse_set_enabled_reply(lines: &[String], enabled: bool) -> Result<(), FaultError> {
+    let expected = if enabled {
+        "Fault Injection enabled"
+    } else {
+        "Fault Injection disabled"
+    };
+    outcome(lines, |l| l.starts_with(expected))
+}
+
+/// Parses the reply lines of `fi_clear_faults`.
+pub fn parse_clear_faults_reply(lines: &[String]) -> Result<(), FaultError> {
+    outcome(lines, |l| l.starts_with("Faults cleared"))
+}
+
+/// Parses the reply lines of `pos_uwb_reset_pos` (`UWB Position Reset`; the bridge simulator says `UWB Pos reset`).
+pub fn parse_reset_uwb_reply(lines: &[String]) -> Result<(), FaultError> {
+    outcome(lines, |l| l.starts_with("UWB Pos"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lines(texts: &[&str]) -> Vec<String> {
+        texts.iter().map(|t| t.to_string()).collect()
+    }
+
+    #[test]
+    fn command_text_matches_the_protocol_vector() {
+        let command = add_fault_command(&Probe::UwbRange(50), FaultKind::Offset, 2.0, 15, 8);
+        assert_eq!(command, "fi_add_fault uwb_range_50 OFFSET 2.0 15 8");
+    }
+
+    #[test]
+    fn success_is_recognised() {
+        let reply = lines(&[
+            "Fault OFFSET with parameter 2.00 successfully added to probe uwb_range_50.\n",
+        ]);
+        assert_eq!(parse_add_fault_reply(&reply, &Probe::UwbRange(50)), Ok(()));
+        assert!(matches!(
+            parse_add_fault_reply(&reply, &Probe::Px),
+            Err(FaultError::Unexpected(_))
+        ));
+    }
+
+    #[test]
+    fn refusals_are_typed() {
+        let reply = lines(&[
+            "Too long ID. Maximum length is 20\n",
+            "Invalid fault type offset\n",
+        ]);
+        assert_eq!(
+            parse_add_fault_reply(&reply, &Probe::Px),
+            Err(FaultError::Rejected(vec![
+                FaultRejection::TooLongId,
+                FaultRejection::InvalidType("offset".into())
+            ]))
+        );
+        let full = lines(&["Too many faults on this probe, fault not added.\n"]);
+        assert_eq!(
+            parse_add_fault_reply(&full, &Probe::Px),
+            Err(FaultError::Rejected(vec![FaultRejection::TooManyFaults]))
+        );
+        let probes = lines(&["Too many probes in use, fault not added.\n"]);
+        assert_eq!(
+            parse_add_fault_reply(&probes, &Probe::UwbYaw),
+            Err(FaultError::Rejected(vec![FaultRejection::TooManyProbes]))
+        );
+        assert_eq!(
+            parse_set_enabled_reply(&lines(&["Invalid argument 2\n"]), true),
+            Err(FaultError::Rejected(vec![FaultRejection::InvalidArgument(
+                "2".into()
+            )]))
+        );
+        assert_eq!(parse_clear_faults_reply(&[]), Err(FaultError::NoReply));
+    }
+
+    #[test]
+    fn other_replies_are_recognised() {
+        assert_eq!(
+            parse_set_enabled_reply(&lines(&["Fault Injection enabled\n"]), true),
+            Ok(())
+        );
+        assert!(parse_set_enabled_reply(&lines(&["Fault Injection disabled\n"]), true).is_err());
+        assert_eq!(
+            parse_clear_faults_reply(&lines(&["Faults cleared\n"])),
+            Ok(())
+        );
+        assert_eq!(
+            parse_reset_uwb_reply(&lines(&["UWB Position Reset\n"])),
+            Ok(())
+        );
+        assert_eq!(parse_reset_uwb_reply(&lines(&["UWB Pos reset\n"])), Ok(()));
+    }
+
+    #[test]
+    fn probes_round_trip() {
+        for probe in [
+            Probe::Px,
+            Probe::UwbTravelDist,
+            Probe::UwbYaw,
+            Probe::UwbRange(7),
+        ] {
+            assert_eq!(probe.to_string().parse(), Ok(probe));
+        }
+        assert!("uwb_range_x".parse::<Probe>().is_err());
+    }
+}

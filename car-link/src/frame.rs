@@ -1,0 +1,722 @@
+//! Framing (protocol §2): start byte, length, payload, CRC-16/XMODEM, end byte; and a streaming decoder that
+//! resynchronises after garbage.
+//!
+//! | Form | Bytes |
+//! |---|---|
+//! | short | `02 LEN payload CRC_HI CRC_LO 03` |
+//! | long | `03 LEN_HI LEN_LO payload CRC_HI CRC_LO 03` |
+//! | extra-long (PC side only) | `04 LEN(24 bit) payload CRC_HI CRC_LO 03` |
+//!
+//! The decoder is more tolerant than the reference receivers: when a candidate frame fails its length, CRC or
+//! end-byte check, only its start byte is dropped and the bytes after it are scanned again. A valid frame that a
+//! stray start byte in noise had swallowed is therefore recovered instead of lost. A candidate that never completes
+//! (a stray start byte announcing a long payload on a quiet link) is abandoned with [`FrameDecoder::expire`], which
+//! a reader calls after its byte timeout (500 ms in the reference PC tools) or at the end of the stream.
+
+use bytes::{Buf, BufMut, Bytes, BytesMut};
+use thiserror::Error;
+
+use crate::crc::checksum;
+
+/// Start byte of the short form (1-byte length).
+pub const START_SHORT: u8 = 0x02;
+/// Start byte of the long form (16-bit length).
+pub const START_LONG: u8 = 0x03;
+/// Start byte of the extra-long form (24-bit length; PC side only, never sent to the firmware).
+pub const START_EXTRA_LONG: u8 = 0x04;
+/// The byte that closes every frame.
+pub const END: u8 = 0x03;
+/// The largest payload the firmware sends or accepts.
+pub const FIRMWARE_MAX_PAYLOAD: usize = 1024;
+/// The largest payload the 12.x control station accepts.
+pub const PC_MAX_PAYLOAD: usize = 2_000_000;
+
+/// Which of the three frame layouts a frame uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum FrameForm {
+    /// `0x02` and a 1-byte length.
+    Short,
+    /// `0x03` and a 16-bit length.
+    Long,
+    /// `0x04` and a 24-bit length (PC side only).
+    ExtraLong,
+}
+
+impl FrameForm {
+    /// The start byte of this form.
+    pub fn start_byte(self) -> u8 {
+        match self {
+            FrameForm::Short => START_SHORT,
+            FrameForm::Long => START_LONG,
+            FrameForm::ExtraLong => START_EXTRA_LONG,
+        }
+    }
+
+    /// Bytes before the payload: the start byte and the length.
+    pub fn header_len(self) -> usize {
+        match self {
+            FrameForm::Short => 2,
+            FrameForm::Long => 3,
+            FrameForm::ExtraLong => 4,
+        }
+    }
+
+    fn from_start_byte(byte: u8) -> Option<FrameForm> {
+        match byte {
+            START_SHORT => Some(FrameForm::Short),
+            START_LONG => Some(FrameForm::Long),
+            START_EXTRA_LONG => Some(FrameForm::ExtraLong),
+            _ => None,
+        }
+    }
+}
+
+/// A frame whose length, CRC and end byte were all valid.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Frame {
+    /// The payload: `[id][cmd][data…]`.
+    pub payload: Bytes,
+    /// The layout it arrived in.
+    pub form: FrameForm,
+}
+
+/// Why a payload cannot be framed.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+pub enum FrameEncodeError {
+    /// A zero-length payload: every receiver drops it.
+    #[error("empty payload: receivers drop frames of length 0")]
+    EmptyPayload,
+    /// Longer than the receiver accepts (1024 bytes for the firmware).
+    #[error("payload of {len} bytes exceeds the limit of {max} bytes")]
+    PayloadTooLong {
+        /// The payload length.
+        len: usize,
+        /// The limit in force.
+        max: usize,
+    },
+}
+
+/// A candidate frame that was dropped. Offsets count every byte fed to the decoder since it was created.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+pub enum FrameError {
+    /// The length field is 0 or above the limit (the firmware's 256-byte short-form bug shows up as length 0).
+    #[error("frame at byte {offset}: length {len} is outside 1..={max}")]
+    BadLength {
+        /// Stream offset of the start byte.
+        offset: u64,
+        /// The announced length.
+        len: usize,
+        /// The decoder's payload limit.
+        max: usize,
+    },
+    /// The CRC does not match the payload.
+    #[error("frame at byte {offset}: CRC {received:#06x} received, {computed:#06x} computed")]
+    Checksum {
+        /// Stream offset of the start byte.
+        offset: u64,
+        /// CRC carried by the frame.
+        received: u16,
+        /// CRC computed over the payload.
+        computed: u16,
+    },
+    /// The byte after the CRC is not `0x03`.
+    #[error("frame at byte {offset}: end byte {found:#04x} at byte {end_offset}, expected 0x03")]
+    EndByte {
+        /// Stream offset of the start byte.
+        offset: u64,
+        /// Stream offset of the bad end byte.
+        end_offset: u64,
+        /// The byte found there.
+        found: u8,
+    },
+    /// The stream went quiet (or ended) in the middle of a candidate frame.
+    #[error("frame at byte {offset}: abandoned after {have} of {need} bytes")]
+    Incomplete {
+        /// Stream offset of the start byte.
+        offset: u64,
+        /// Bytes of the candidate received.
+        have: usize,
+        /// Bytes the candidate announced (header, payload, CRC and end byte), if the header was complete.
+        need: usize,
+    },
+}
+
+/// Frames payloads: short form up to `short_form_max`, then long form, then (if allowed) the extra-long form.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FrameEncoder {
+    short_form_max: usize,
+    max_payload: usize,
+    extra_long: bool,
+}
+
+impl Default for FrameEncoder {
+    fn default() -> Self {
+        FrameEncoder::to_firmware()
+    }
+}
+
+impl FrameEncoder {
+    /// What a host sends to the firmware (and what a well-behaved simulator sends back): short form up to 255
+    /// bytes, long form up to the firmware limit of 1024 bytes, never the extra-long form.
+    pub fn to_firmware() -> Self {
+        FrameEncoder {
+            short_form_max: 255,
+            max_payload: FIRMWARE_MAX_PAYLOAD,
+            extra_long: false,
+        }
+    }
+
+    /// The 12.x PC tools: short ≤ 255, long ≤ 65535, extra-long above, up to `max_payload`.
+    pub fn pc_side(max_payload: usize) -> Self {
+        FrameEncoder {
+            short_form_max: 255,
+            max_payload: max_payload.min(0xFF_FFFF),
+            extra_long: true,
+        }
+    }
+
+    /// Reproduces the firmware's short-form bug: a 256-byte payload is sent with length byte `0x00`, which every
+    /// receiver drops (behaviour quirk 22). For simulators that want to be faithful.
+    pub fn with_firmware_short_form_bug(self) -> Self {
+        FrameEncoder {
+            short_form_max: 256,
+            ..self
+        }
+    }
+
+    /// The largest payload this encoder frames.
+    pub fn max_payload(&self) -> usize {
+        self.max_payload
+    }
+
+    /// The form a payload of `len` bytes gets.
+    pub fn form_for(&self, len: usize) -> Result<FrameForm, FrameEncodeError> {
+        if len == 0 {
+            return Err(FrameEncodeError::EmptyPayload);
+        }
+        if len > self.max_payload {
+            return Err(FrameEncodeError::PayloadTooLong {
+                len,
+                max: self.max_payload,
+            });
+        }
+        if len <= self.short_form_max {
+            Ok(FrameForm::Short)
+        } else if len <= 0xFFFF {
+            Ok(FrameForm::Long)
+        } else if self.extra_long {
+            Ok(FrameForm::ExtraLong)
+        } else {
+            Err(FrameEncodeError::PayloadTooLong { len, max: 0xFFFF })
+        }
+    }
+
+    /// Appends the frame of `payload` to `dst`.
+    pub fn encode(
+        &self,
+        payload: &[u8],
+        dst: &mut BytesMut,
+    ) -> Result<FrameForm, FrameEncodeError> {
+        let form = self.form_for(payload.len())?;
+        let len = payload.len();
+        dst.reserve(len + form.header_len() + 3);
+        dst.put_u8(form.start_byte());
+        match form {
+            // The 256-byte bug: the length byte wraps to 0.
+            FrameForm::Short => dst.put_u8(len as u8),
+            FrameForm::Long => dst.put_u16(len as u16),
+            FrameForm::ExtraLong => dst.put_uint(len as u64, 3),
+        }
+        dst.put_slice(payload);
+        dst.put_u16(checksum(payload));
+        dst.put_u8(END);
+        Ok(form)
+    }
+
+    /// The frame of `payload` as a new buffer.
+    pub fn encode_to_bytes(&self, payload: &[u8]) -> Result<Bytes, FrameEncodeError> {
+        let mut dst = BytesMut::new();
+        self.encode(payload, &mut dst)?;
+        Ok(dst.freeze())
+    }
+}
+
+/// What a decoder accepts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DecoderLimits {
+    /// The largest payload accepted; longer lengths drop the candidate.
+    pub max_payload: usize,
+    /// Whether `0x04` starts an extra-long frame (PC receivers) or is garbage (the firmware).
+    pub accept_extra_long: bool,
+}
+
+impl DecoderLimits {
+    /// A host receiving from the car: the 1024-byte firmware limit (nothing the car sends is longer, and a small
+    /// limit drops bogus candidates sooner) and the extra-long form accepted.
+    pub fn host() -> Self {
+        DecoderLimits {
+            max_payload: FIRMWARE_MAX_PAYLOAD,
+            accept_extra_long: true,
+        }
+    }
+
+    /// The firmware's receiver: 1..=1024 bytes, no extra-long form. What a simulator of the car should use.
+    pub fn firmware() -> Self {
+        DecoderLimits {
+            max_payload: FIRMWARE_MAX_PAYLOAD,
+            accept_extra_long: false,
+        }
+    }
+}
+
+impl Default for DecoderLimits {
+    fn default() -> Self {
+        DecoderLimits::host()
+    }
+}
+
+/// Scanning state shared by [`FrameDecoder`] and [`FrameCodec`]: the stream offset of the first buffered byte.
+#[derive(Debug, Clone, Copy, Default)]
+struct Scanner {
+    limits: DecoderLimits,
+    offset: u64,
+    skipped: u64,
+}
+
+enum Candidate {
+    /// Not enough bytes yet.
+    Wait,
+    /// A complete, valid frame: its form, header length and payload length.
+    Valid {
+        form: FrameForm,
+        header: usize,
+        len: usize,
+    },
+    /// Drop the start byte and rescan.
+    Invalid(FrameError),
+}
+
+impl Scanner {
+    fn is_start(&self, byte: u8) -> bool {
+        match FrameForm::from_start_byte(byte) {
+            Some(FrameForm::ExtraLong) => self.limits.accept_extra_long,
+            Some(_) => true,
+            None => false,
+        }
+    }
+
+    fn advance(&mut self, buf: &mut BytesMut, n: usize) {
+        buf.advance(n);
+        self.offset += n as u64;
+    }
+
+    /// Drops garbage before the next start byte. Returns false if the buffer holds no start byte.
+    fn skip_garbage(&mut self, buf: &mut BytesMut) -> bool {
+        let start = buf.iter().position(|&b| self.is_start(b));
+        let garbage = start.unwrap_or(buf.len());
+        self.skipped += garbage as u64;
+        self.advance(buf, garbage);
+        start.is_some()
+    }
+
+    fn examine(&self, buf: &[u8]) -> Candidate {
+        let Some(form) = buf.first().copied().and_then(FrameForm::from_start_byte) else {
+            return Candidate::Wait;
+        };
+        let header = form.header_len();
+        if buf.len() < header {
+            return Candidate::Wait;
+        }
+        let len = buf[1..header]
+            .iter()
+            .fold(0usize, |acc, &b| (acc << 8) | usize::from(b));
+        let max = self.limits.max_payload;
+        if len == 0 || len > max {
+            return Candidate::Invalid(FrameError::BadLength {
+                offset: self.offset,
+                len,
+                max,
+            });
+        }
+        let total = header + len + 3;
+        if buf.len() < total {
+            return Candidate::Wait;
+        }
+        let payload = &buf[header..header + len];
+        let received = u16::from_be_bytes([buf[header + len], buf[header + len + 1]]);
+        let computed = checksum(payload);
+        if received != computed {
+            return Candidate::Invalid(FrameError::Checksum {
+                offset: self.offset,
+                received,
+                computed,
+            });
+        }
+        let end = buf[total - 1];
+        if end != END {
+            let end_offset = self.offset + (total - 1) as u64;
+            return Candidate::Invalid(FrameError::EndByte {
+                offset: self.offset,
+                end_offset,
+                found: end,
+            });
+        }
+        Candidate::Valid { form, header, len }
+    }
+
+    /// The next valid frame or dropped candidate in `buf`; `None` when more bytes are needed.
+    fn next(&mut self, buf: &mut BytesMut) -> Option<Result<Frame, FrameError>> {
+        if !self.skip_garbage(buf) {
+            return None;
+        }
+        match self.examine(buf) {
+            Candidate::Wait => None,
+            Candidate::Invalid(error) => {
+                self.advance(buf, 1);
+                Some(Err(error))
+            }
+            Candidate::Valid { form, header, len } => {
+                self.advance(buf, header);
+                let payload = buf.split_to(len).freeze();
+                self.offset += len as u64;
+                self.advance(buf, 3);
+                Some(Ok(Frame { payload, form }))
+            }
+        }
+    }
+
+    /// Abandons the pending candidate (its start byte is dropped; the rest is scanned again).
+    fn expire(&mut self, buf: &mut BytesMut) -> Option<FrameError> {
+        if !self.skip_garbage(buf) {
+            return None;
+        }
+        let need = buf
+            .first()
+            .copied()
+            .and_then(FrameForm::from_start_byte)
+            .filter(|form| buf.len() >= form.header_len())
+            .map(|form| {
+                let len = buf[1..form.header_len()]
+                    .iter()
+                    .fold(0usize, |acc, &b| (acc << 8) | usize::from(b));
+                form.header_len() + len + 3
+            })
+            .unwrap_or(0);
+        let error = FrameError::Incomplete {
+            offset: self.offset,
+            have: buf.len(),
+            need,
+        };
+        self.advance(buf, 1);
+        Some(error)
+    }
+}
+
+/// A streaming frame decoder: feed it bytes as they arrive, take frames (or dropped candidates) out.
+///
+/// It never panics, whatever it is fed, and after any garbage it finds the next valid frame.
+///
+/// ```
+/// use car_link::frame::FrameDecoder;
+/// let mut decoder = FrameDecoder::host();
+/// decoder.push(&[0xAA, 0x55]); // noise
+/// decoder.push(&[0x02, 0x02, 0x01, 0x78, 0xCC, 0xAE, 0x03]);
+/// let frame = decoder.next_frame().and_then(Result::ok).expect("one frame");
+/// assert_eq!(&frame.payload[..], &[0x01, 0x78]);
+/// ```
+#[derive(Debug, Default)]
+pub struct FrameDecoder {
+    scanner: Scanner,
+    buf: BytesMut,
+}
+
+impl FrameDecoder {
+    /// A decoder with the given limits.
+    pub fn new(limits: DecoderLimits) -> Self {
+        FrameDecoder {
+            scanner: Scanner {
+                limits,
+                ..Scanner::default()
+            },
+            buf: BytesMut::new(),
+        }
+    }
+
+    /// A decoder for a host receiving from the car ([`DecoderLimits::host`]).
+    pub fn host() -> Self {
+        FrameDecoder::new(DecoderLimits::host())
+    }
+
+    /// A decoder for the car side receiving from a host ([`DecoderLimits::firmware`]).
+    pub fn firmware() -> Self {
+        FrameDecoder::new(DecoderLimits::firmware())
+    }
+
+    /// Appends received bytes.
+    pub fn push(&mut self, bytes: &[u8]) {
+        self.buf.extend_from_slice(bytes);
+    }
+
+    /// The next valid frame, or the next dropped candidate; `None` when more bytes are needed.
+    pub fn next_frame(&mut self) -> Option<Result<Frame, FrameError>> {
+        self.scanner.next(&mut self.buf)
+    }
+
+    /// Abandons the candidate frame that is waiting for more bytes, so that the bytes after its start byte are
+    /// scanned again. Call it when the byte timeout elapses or the stream ends, then drain [`Self::next_frame`]
+    /// again; repeat until it returns `None`.
+    pub fn expire(&mut self) -> Option<FrameError> {
+        self.scanner.expire(&mut self.buf)
+    }
+
+    /// Everything still decodable at the end of a stream (or after a byte timeout): frames and dropped candidates,
+    /// in stream order. Leaves the decoder empty.
+    pub fn drain_stale(&mut self) -> Vec<Result<Frame, FrameError>> {
+        let mut out = Vec::new();
+        loop {
+            while let Some(item) = self.next_frame() {
+                out.push(item);
+            }
+            match self.expire() {
+                Some(error) => out.push(Err(error)),
+                None => return out,
+            }
+        }
+    }
+
+    /// Whether a candidate frame is waiting for more bytes.
+    pub fn has_pending(&self) -> bool {
+        !self.buf.is_empty()
+    }
+
+    /// Bytes discarded as garbage between frames so far.
+    pub fn skipped_bytes(&self) -> u64 {
+        self.scanner.skipped
+    }
+}
+
+/// A [`tokio_util::codec`] codec: encodes payloads into frames and decodes frames, yielding dropped candidates as
+/// `Err` items so that a [`tokio_util::codec::FramedRead`] keeps going after garbage.
+#[derive(Debug, Default)]
+pub struct FrameCodec {
+    encoder: FrameEncoder,
+    scanner: Scanner,
+}
+
+impl FrameCodec {
+    /// A codec with the given encoder and decoder limits.
+    pub fn new(encoder: FrameEncoder, limits: DecoderLimits) -> Self {
+        FrameCodec {
+            encoder,
+            scanner: Scanner {
+                limits,
+                ..Scanner::default()
+            },
+        }
+    }
+
+    /// The host side: frames to the firmware, decodes with [`DecoderLimits::host`].
+    pub fn host() -> Self {
+        FrameCodec::new(FrameEncoder::to_firmware(), DecoderLimits::host())
+    }
+
+    /// The car side (a simulator): short form ≤ 255, long form ≤ 1024, decodes like the firmware.
+    pub fn car() -> Self {
+        FrameCodec::new(FrameEncoder::to_firmware(), DecoderLimits::firmware())
+    }
+}
+
+impl tokio_util::codec::Decoder for FrameCodec {
+    type Item = Result<Frame, FrameError>;
+    type Error = std::io::Error;
+
+    fn decode(&mut self, src: &mut BytesMut) -> Result<Option<Self::Item>, Self::Error> {
+        Ok(self.scanner.next(src))
+    }
+
+    fn decode_eof(&mut self, src: &mut BytesMut) -> Result<Option<Self::Item>, Self::Error> {
+        if let Some(item) = self.scanner.next(src) {
+            return Ok(Some(item));
+        }
+        Ok(self.scanner.expire(src).map(Err))
+    }
+}
+
+impl<T: AsRef<[u8]>> tokio_util::codec::Encoder<T> for FrameCodec {
+    type Error = std::io::Error;
+
+    fn encode(&mut self, payload: T, dst: &mut BytesMut) -> Result<(), Self::Error> {
+        self.encoder
+            .encode(payload.as_ref(), dst)
+            .map(|_| ())
+            .map_err(|e| std::io::Error::new(std::io::ErrorKind::InvalidInput, e))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn decode_all(bytes: &[u8]) -> Vec<Result<Frame, FrameError>> {
+        let mut decoder = FrameDecoder::host();
+        decoder.push(bytes);
+        decoder.drain_stale()
+    }
+
+    fn frames(bytes: &[u8]) -> Vec<Bytes> {
+        decode_all(bytes)
+            .into_iter()
+            .filter_map(Result::ok)
+            .map(|f| f.payload)
+            .collect()
+    }
+
+    const GET_STATE_TO_1: [u8; 7] = [0x02, 0x02, 0x01, 0x78, 0xCC, 0xAE, 0x03];
+
+    #[test]
+    fn encodes_the_get_state_request_vector() {
+        let frame = FrameEncoder::to_firmware().encode_to_bytes(&[0x01, 0x78]);
+        assert_eq!(frame.as_deref().ok(), Some(&GET_STATE_TO_1[..]));
+    }
+
+    #[test]
+    fn decodes_after_garbage() {
+        let mut bytes = vec![0x00, 0xFF, 0x41, 0x42];
+        bytes.extend_from_slice(&GET_STATE_TO_1);
+        assert_eq!(frames(&bytes), vec![Bytes::from_static(&[0x01, 0x78])]);
+    }
+
+    #[test]
+    fn recovers_a_frame_swallowed_by_a_stray_start_byte() {
+        // A stray 0x02 announcing 9 bytes would, in the reference, eat the real frame.
+        let mut bytes = vec![0x02, 0x09];
+        bytes.extend_from_slice(&GET_STATE_TO_1);
+        bytes.extend_from_slice(&[0x00, 0x00, 0x00, 0x00]);
+        assert_eq!(frames(&bytes), vec![Bytes::from_static(&[0x01, 0x78])]);
+    }
+
+    #[test]
+    fn a_quiet_link_abandons_the_bogus_candidate() {
+        let mut decoder = FrameDecoder::host();
+        decoder.push(&[0x03, 0x03, 0xFF]); // long form, 1023 bytes announced
+        decoder.push(&GET_STATE_TO_1);
+        assert_eq!(decoder.next_frame(), None);
+        assert!(decoder.has_pending());
+        assert!(matches!(
+            decoder.expire(),
+            Some(FrameError::Incomplete {
+                offset: 0,
+                need: 1029,
+                ..
+            })
+        ));
+        let found: Vec<_> = std::iter::from_fn(|| decoder.next_frame())
+            .filter_map(Result::ok)
+            .collect();
+        assert_eq!(found.len(), 1);
+    }
+
+    #[test]
+    fn bad_crc_is_reported_with_its_offset() {
+        let mut bytes = vec![0xEE];
+        bytes.extend_from_slice(&[0x02, 0x02, 0x01, 0x78, 0xCC, 0xAF, 0x03]);
+        let result = decode_all(&bytes);
+        assert_eq!(
+            result.first(),
+            Some(&Err(FrameError::Checksum {
+                offset: 1,
+                received: 0xCCAF,
+                computed: 0xCCAE
+            }))
+        );
+    }
+
+    #[test]
+    fn bad_end_byte_is_reported() {
+        let result = decode_all(&[0x02, 0x02, 0x01, 0x78, 0xCC, 0xAE, 0x04]);
+        assert_eq!(
+            result.first(),
+            Some(&Err(FrameError::EndByte {
+                offset: 0,
+                end_offset: 6,
+                found: 0x04
+            }))
+        );
+    }
+
+    #[test]
+    fn length_zero_and_over_the_limit_are_dropped() {
+        assert!(matches!(
+            decode_all(&[0x02, 0x00, 0x01])[0],
+            Err(FrameError::BadLength { len: 0, .. })
+        ));
+        assert!(matches!(
+            decode_all(&[0x03, 0x04, 0x01, 0x00])[0],
+            Err(FrameError::BadLength {
+                len: 1025,
+                max: 1024,
+                ..
+            })
+        ));
+    }
+
+    #[test]
+    fn short_form_up_to_255_then_long_form() {
+        let encoder = FrameEncoder::to_firmware();
+        assert_eq!(encoder.form_for(255), Ok(FrameForm::Short));
+        assert_eq!(encoder.form_for(256), Ok(FrameForm::Long));
+        assert_eq!(encoder.form_for(1024), Ok(FrameForm::Long));
+        assert_eq!(
+            encoder.form_for(1025),
+            Err(FrameEncodeError::PayloadTooLong {
+                len: 1025,
+                max: 1024
+            })
+        );
+        assert_eq!(encoder.form_for(0), Err(FrameEncodeError::EmptyPayload));
+    }
+
+    #[test]
+    fn the_firmware_256_byte_bug_produces_a_frame_every_receiver_drops() {
+        let payload = vec![0x01; 256];
+        let frame = FrameEncoder::to_firmware()
+            .with_firmware_short_form_bug()
+            .encode_to_bytes(&payload);
+        let frame = frame.unwrap_or_default();
+        assert_eq!(&frame[..2], &[0x02, 0x00]);
+        assert!(frames(&frame).is_empty());
+        // The correct encoder uses the long form for it, and it decodes.
+        let good = FrameEncoder::to_firmware()
+            .encode_to_bytes(&payload)
+            .unwrap_or_default();
+        assert_eq!(&good[..3], &[0x03, 0x01, 0x00]);
+        assert_eq!(frames(&good), vec![Bytes::from(payload)]);
+    }
+
+    #[test]
+    fn the_extra_long_form_is_accepted_by_hosts_only() {
+        let payload = vec![0x01, 0x00, b'h', b'i'];
+        let mut frame = vec![0x04, 0x00, 0x00, 0x04];
+        frame.extend_from_slice(&payload);
+        frame.extend_from_slice(&checksum(&payload).to_be_bytes());
+        frame.push(END);
+        assert_eq!(frames(&frame), vec![Bytes::from(payload)]);
+        let mut firmware = FrameDecoder::firmware();
+        firmware.push(&frame);
+        assert!(firmware.drain_stale().into_iter().all(|r| r.is_err()));
+        let encoded = FrameEncoder::pc_side(PC_MAX_PAYLOAD)
+            .encode_to_bytes(&vec![7u8; 70_000])
+            .unwrap_or_default();
+        assert_eq!(&encoded[..4], &[0x04, 0x01, 0x11, 0x70]);
+    }
+
+    #[test]
+    fn frames_split_across_pushes_decode() {
+        let mut decoder = FrameDecoder::host();
+        for byte in GET_STATE_TO_1 {
+            assert_eq!(decoder.next_frame(), None);
+            decoder.push(&[byte]);
+        }
+        assert!(matches!(decoder.next_frame(), Some(Ok(_))));
+    }
+}

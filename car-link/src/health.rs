@@ -1,0 +1,97 @@
+//! Link health: round-trip times, timeouts, reconnects, and what was thrown away.
+
+use std::collections::VecDeque;
+use std::time::Duration;
+
+/// Round trips kept for the percentiles.
+const RTT_WINDOW: usize = 1024;
+
+/// A snapshot of a link's health.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct LinkHealth {
+    /// Whether the link is up now.
+    pub link_up: bool,
+    /// Median round trip over the last 1024 answered requests.
+    pub rtt_p50: Option<Duration>,
+    /// 99th-percentile round trip over the same window.
+    pub rtt_p99: Option<Duration>,
+    /// Answered requests since the start.
+    pub answered: u64,
+    /// Requests (tries) that timed out since the start.
+    pub timeouts: u64,
+    /// Successful reconnections since the start.
+    pub reconnects: u64,
+    /// Replies that matched no waiting request (duplicates, other cars, late answers).
+    pub stray_replies: u64,
+    /// Candidate frames dropped by the decoder (bad CRC, end byte, length, abandoned).
+    pub dropped_frames: u64,
+    /// Valid frames whose payload did not decode.
+    pub undecodable: u64,
+}
+
+/// Accumulates health figures; snapshots are taken with [`HealthRecorder::snapshot`].
+#[derive(Debug, Default)]
+pub(crate) struct HealthRecorder {
+    rtts: VecDeque<Duration>,
+    pub(crate) figures: LinkHealth,
+}
+
+impl HealthRecorder {
+    pub(crate) fn record_rtt(&mut self, rtt: Duration) {
+        if self.rtts.len() == RTT_WINDOW {
+            self.rtts.pop_front();
+        }
+        self.rtts.push_back(rtt);
+        self.figures.answered += 1;
+    }
+
+    pub(crate) fn snapshot(&self) -> LinkHealth {
+        let mut sorted: Vec<Duration> = self.rtts.iter().copied().collect();
+        sorted.sort_unstable();
+        LinkHealth {
+            rtt_p50: percentile(&sorted, 50),
+            rtt_p99: percentile(&sorted, 99),
+            ..self.figures.clone()
+        }
+    }
+}
+
+/// The nearest-rank percentile of sorted samples.
+pub fn percentile(sorted: &[Duration], pct: usize) -> Option<Duration> {
+    if sorted.is_empty() {
+        return None;
+    }
+    let rank = (pct * sorted.len()).div_ceil(100).clamp(1, sorted.len());
+    sorted.get(rank - 1).copied()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nearest_rank_percentiles() {
+        let samples: Vec<Duration> = (1..=100).map(Duration::from_millis).collect();
+        assert_eq!(percentile(&samples, 50), Some(Duration::from_millis(50)));
+        assert_eq!(percentile(&samples, 99), Some(Duration::from_millis(99)));
+        assert_eq!(percentile(&[], 50), None);
+        assert_eq!(
+            percentile(&samples[..1], 99),
+            Some(Duration::from_millis(1))
+        );
+    }
+
+    #[test]
+    fn the_window_keeps_the_latest_round_trips() {
+        let mut recorder = HealthRecorder::default();
+        for _ in 0..RTT_WINDOW {
+            recorder.record_rtt(Duration::from_secs(1));
+        }
+        for _ in 0..RTT_WINDOW {
+            recorder.record_rtt(Duration::from_millis(1));
+        }
+        let health = recorder.snapshot();
+        assert_eq!(health.rtt_p99, Some(Duration::from_millis(1)));
+        assert_eq!(health.answered, 2 * RTT_WINDOW as u64);
+    }
+}

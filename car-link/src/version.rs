@@ -1,0 +1,285 @@
+//! Firmware generations (protocol §0) and the command-id table (protocol §5).
+//!
+//! Everything version-dependent on the wire is decided here: the route-point size, the numbering of ids 76–89,
+//! the length of `AP_SET_ACTIVE` and the longest PRINTF.
+
+use std::fmt;
+
+/// A firmware version as reported by GET_STATE (`fw_major`, `fw_minor`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct FirmwareVersion {
+    /// `fw_major`: 10, 11 or 12.
+    pub major: u8,
+    /// `fw_minor`.
+    pub minor: u8,
+}
+
+impl FirmwareVersion {
+    /// 10.1, the firmware of the published UWB experiments.
+    pub const V10_1: FirmwareVersion = FirmwareVersion::new(10, 1);
+    /// 11.0, the transitional version.
+    pub const V11_0: FirmwareVersion = FirmwareVersion::new(11, 0);
+    /// 12.0, the first with 24-byte route points.
+    pub const V12_0: FirmwareVersion = FirmwareVersion::new(12, 0);
+    /// 12.1, the first with the new numbering of ids 76–89.
+    pub const V12_1: FirmwareVersion = FirmwareVersion::new(12, 1);
+    /// 12.3, the latest.
+    pub const V12_3: FirmwareVersion = FirmwareVersion::new(12, 3);
+
+    /// The version `major.minor`.
+    pub const fn new(major: u8, minor: u8) -> Self {
+        FirmwareVersion { major, minor }
+    }
+
+    /// Bytes per route point in AP_ADD_POINTS and AP_REPLACE_ROUTE: 24 from 12.0, 16 before.
+    pub fn route_point_size(self) -> usize {
+        if self.major >= 12 { 24 } else { 16 }
+    }
+
+    /// Whether ids 76–89 use the new numbering (12.1 and later).
+    pub fn new_command_ids(self) -> bool {
+        self >= FirmwareVersion::V12_1
+    }
+
+    /// Whether AP_SET_ACTIVE carries the second byte `reset_state` (12.3 and later).
+    pub fn set_active_has_reset(self) -> bool {
+        self >= FirmwareVersion::V12_3
+    }
+
+    /// The longest PRINTF text the firmware sends: 252 characters up to 12.1, 508 from 12.2.
+    pub fn max_printf_len(self) -> usize {
+        if self >= FirmwareVersion::new(12, 2) {
+            508
+        } else {
+            252
+        }
+    }
+
+    /// Whether GET_STATE swaps the fused and UWB positions when `use_uwb_pos` is set (11.0 and later).
+    pub fn swaps_uwb_position(self) -> bool {
+        self >= FirmwareVersion::V11_0
+    }
+}
+
+impl Default for FirmwareVersion {
+    /// The latest version, 12.3.
+    fn default() -> Self {
+        FirmwareVersion::V12_3
+    }
+}
+
+impl fmt::Display for FirmwareVersion {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}.{}", self.major, self.minor)
+    }
+}
+
+macro_rules! commands {
+    ($( $(#[$doc:meta])* $name:ident = $new:expr, $old:expr, $resets:expr; )*) => {
+        /// Every command of the protocol's id table (§5). Its wire id depends on the firmware version.
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+        pub enum CommandId {
+            $( $(#[$doc])* $name, )*
+        }
+
+        impl CommandId {
+            /// Every command, in table order.
+            pub const ALL: &'static [CommandId] = &[$(CommandId::$name,)*];
+
+            /// The wire id in `version`; `None` if the command does not exist there.
+            pub fn code(self, version: FirmwareVersion) -> Option<u8> {
+                match self {
+                    $( CommandId::$name => if version.new_command_ids() { $new } else { $old }, )*
+                }
+            }
+
+            /// Whether the firmware's communication watchdog is reset by this command (§9).
+            pub fn resets_watchdog(self) -> bool {
+                match self {
+                    $( CommandId::$name => $resets, )*
+                }
+            }
+        }
+    };
+}
+
+commands! {
+    /// Text output of the car (always stamped with the car's own id).
+    Printf = Some(0), Some(0), false;
+    /// A terminal command; replies with zero or more PRINTF.
+    TerminalCmd = Some(1), Some(1), true;
+    /// Forwarded to the motor controller.
+    VescFwd = Some(50), Some(50), true;
+    /// Sets the pose; no reply.
+    SetPos = Some(51), Some(51), true;
+    /// Sets the pose; acked.
+    SetPosAck = Some(52), Some(52), true;
+    /// Sets the ENU reference; acked.
+    SetEnuRef = Some(53), Some(53), true;
+    /// Reads the ENU reference.
+    GetEnuRef = Some(54), Some(54), true;
+    /// Appends route points; acked.
+    ApAddPoints = Some(55), Some(55), true;
+    /// Removes the last route point; acked.
+    ApRemoveLastPoint = Some(56), Some(56), true;
+    /// Empties the route and deactivates the autopilot; acked.
+    ApClearPoints = Some(57), Some(57), true;
+    /// Reads part of the route (no reply if more than 20 points are asked for).
+    ApGetRoutePart = Some(58), Some(58), false;
+    /// Activates or deactivates the autopilot; acked.
+    ApSetActive = Some(59), Some(59), true;
+    /// Replaces the route from the current segment on; acked.
+    ApReplaceRoute = Some(60), Some(60), true;
+    /// Re-times the route up to a point; acked.
+    ApSyncPoint = Some(61), Some(61), true;
+    /// RTCM3 correction bytes for the GNSS receiver.
+    SendRtcmUsb = Some(62), Some(62), false;
+    /// NMEA text over the radio.
+    SendNmeaRadio = Some(63), Some(63), false;
+    /// Sets the IMU yaw offset; no reply.
+    SetYawOffset = Some(64), Some(64), true;
+    /// Sets the IMU yaw offset; acked.
+    SetYawOffsetAck = Some(65), Some(65), true;
+    /// A log line for the bridge.
+    LogLineUsb = Some(66), Some(66), false;
+    /// Plot set-up.
+    PlotInit = Some(67), Some(67), false;
+    /// Plot data.
+    PlotData = Some(68), Some(68), false;
+    /// Plot graph added.
+    PlotAddGraph = Some(69), Some(69), false;
+    /// Plot graph selected.
+    PlotSetGraph = Some(70), Some(70), false;
+    /// Sets `ms_today`; no reply.
+    SetMsToday = Some(71), Some(71), true;
+    /// Sets the bridge's system time.
+    SetSystemTime = Some(72), Some(72), false;
+    /// Sets the bridge's system time; acked.
+    SetSystemTimeAck = Some(73), Some(73), false;
+    /// Reboots the bridge.
+    RebootSystem = Some(74), Some(74), false;
+    /// Reboots the bridge; acked.
+    RebootSystemAck = Some(75), Some(75), false;
+    /// Obsolete radar set-up (old numbering only).
+    RadarSetupSet = None, Some(76), false;
+    /// Obsolete radar read-back (old numbering only).
+    RadarSetupGet = None, Some(77), false;
+    /// Obsolete radar samples (old numbering only).
+    RadarSamples = None, Some(78), false;
+    /// Obsolete DW sample (old numbering only).
+    DwSample = None, Some(79), false;
+    /// Declared but handled nowhere: ignored by every firmware.
+    EmergencyStop = Some(76), Some(80), false;
+    /// Writes the main configuration to flash; acked after the write.
+    SetMainConfig = Some(77), Some(81), true;
+    /// Reads the main configuration.
+    GetMainConfig = Some(78), Some(82), true;
+    /// Reads the default main configuration.
+    GetMainConfigDefault = Some(79), Some(83), true;
+    /// Adds a UWB anchor; acked.
+    AddUwbAnchor = Some(80), Some(84), false;
+    /// Removes all UWB anchors; acked.
+    ClearUwbAnchors = Some(81), Some(85), false;
+    /// Ethernet log for the bridge.
+    LogEthernet = Some(82), Some(86), false;
+    /// A camera image (bridge).
+    CameraImage = Some(83), Some(87), false;
+    /// Starts the camera stream (bridge).
+    CameraStreamStart = Some(84), Some(88), false;
+    /// Acknowledges a camera frame (bridge).
+    CameraFrameAck = Some(85), Some(89), false;
+    /// IO board PWM duty (new numbering only).
+    IoBoardSetPwmDuty = Some(86), None, false;
+    /// IO board valve (new numbering only).
+    IoBoardSetValve = Some(87), None, false;
+    /// Hydraulic move (new numbering only).
+    HydraulicMove = Some(88), None, false;
+    /// Sent by the control station, ignored by every firmware (new numbering only).
+    Heartbeat = Some(89), None, false;
+    /// Reads the car state (§7).
+    GetState = Some(120), Some(120), true;
+    /// Manual throttle and steering; no reply.
+    RcControl = Some(121), Some(121), true;
+    /// Sets the steering servo directly; no reply.
+    SetServoDirect = Some(122), Some(122), true;
+    /// Multirotor state.
+    MrGetState = Some(160), Some(160), false;
+    /// Multirotor manual control.
+    MrRcControl = Some(161), Some(161), false;
+    /// Multirotor power override.
+    MrOverridePower = Some(162), Some(162), false;
+    /// Radio mote: start the UBX base.
+    MoteUbxStartBase = Some(200), Some(200), false;
+    /// Radio mote: UBX base started.
+    MoteUbxStartBaseAck = Some(201), Some(201), false;
+    /// Radio mote: UBX base status.
+    MoteUbxBaseStatus = Some(202), Some(202), false;
+}
+
+impl CommandId {
+    /// The command with wire id `code` in `version`, if any.
+    pub fn from_code(code: u8, version: FirmwareVersion) -> Option<CommandId> {
+        CommandId::ALL
+            .iter()
+            .copied()
+            .find(|c| c.code(version) == Some(code))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ids_76_to_89_change_at_12_1() {
+        assert_eq!(
+            CommandId::AddUwbAnchor.code(FirmwareVersion::V12_1),
+            Some(80)
+        );
+        assert_eq!(
+            CommandId::AddUwbAnchor.code(FirmwareVersion::V12_0),
+            Some(84)
+        );
+        assert_eq!(
+            CommandId::from_code(80, FirmwareVersion::V12_0),
+            Some(CommandId::EmergencyStop)
+        );
+        assert_eq!(
+            CommandId::from_code(89, FirmwareVersion::V10_1),
+            Some(CommandId::CameraFrameAck)
+        );
+        assert_eq!(
+            CommandId::from_code(89, FirmwareVersion::V12_3),
+            Some(CommandId::Heartbeat)
+        );
+        assert_eq!(CommandId::Heartbeat.code(FirmwareVersion::V11_0), None);
+        assert_eq!(CommandId::RadarSetupSet.code(FirmwareVersion::V12_3), None);
+    }
+
+    #[test]
+    fn ids_are_unique_in_every_generation() {
+        for version in [
+            FirmwareVersion::V10_1,
+            FirmwareVersion::V12_0,
+            FirmwareVersion::V12_3,
+        ] {
+            for code in 0..=255u8 {
+                let n = CommandId::ALL
+                    .iter()
+                    .filter(|c| c.code(version) == Some(code))
+                    .count();
+                assert!(n <= 1, "id {code} is used {n} times in {version}");
+            }
+        }
+    }
+
+    #[test]
+    fn layouts_follow_the_version() {
+        assert_eq!(FirmwareVersion::V11_0.route_point_size(), 16);
+        assert_eq!(FirmwareVersion::V12_0.route_point_size(), 24);
+        assert!(!FirmwareVersion::new(12, 2).set_active_has_reset());
+        assert!(FirmwareVersion::V12_3.set_active_has_reset());
+        assert_eq!(FirmwareVersion::V12_1.max_printf_len(), 252);
+        assert_eq!(FirmwareVersion::new(12, 2).max_printf_len(), 508);
+    }
+}

@@ -1,0 +1,246 @@
+//! A minimal responder: a fake car that answers the client over any byte stream, with knobs to misbehave.
+//! The full simulator is another crate; this one only answers what the client tests need.
+
+#![allow(dead_code)] // each test binary uses part of it
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+
+use car_link::config::MainConfig;
+use car_link::frame::FrameCodec;
+use car_link::message::{CarState, Dialect, EnuRef, Reply, Request, RoutePart};
+use car_link::version::{CommandId, FirmwareVersion};
+use futures::{SinkExt, StreamExt};
+use tokio::io::{AsyncRead, AsyncWrite};
+use tokio_util::codec::Framed;
+
+/// How the fake car behaves.
+#[derive(Debug, Clone)]
+pub struct Behaviour {
+    /// The car's own id.
+    pub id: u8,
+    /// The firmware version it reports.
+    pub version: FirmwareVersion,
+    /// Acks of AP_ADD_POINTS to swallow before answering normally.
+    pub drop_add_point_acks: usize,
+    /// Send every reply twice.
+    pub duplicate_replies: bool,
+    /// Before each GET_STATE reply, send a stray ack and a state from another car.
+    pub stray_replies: bool,
+    /// Answer this many requests, then go silent (keep the stream open, answer nothing).
+    pub silent_after: Option<usize>,
+    /// Answer this many requests, then close the stream.
+    pub hang_up_after: Option<usize>,
+    /// Before each terminal reply, send an unrelated debug PRINTF.
+    pub debug_noise: bool,
+}
+
+impl Default for Behaviour {
+    fn default() -> Self {
+        Behaviour {
+            id: 1,
+            version: FirmwareVersion::V12_3,
+            drop_add_point_acks: 0,
+            duplicate_replies: false,
+            stray_replies: false,
+            silent_after: None,
+            hang_up_after: None,
+            debug_noise: false,
+        }
+    }
+}
+
+/// What the fake car saw.
+#[derive(Debug, Default)]
+pub struct Log {
+    /// Every request decoded, in order.
+    pub requests: Vec<Request>,
+}
+
+/// The firmware's fault-injection bookkeeping: 5 probes of 5 slots.
+#[derive(Debug, Default)]
+struct Faults {
+    enabled: bool,
+    probes: HashMap<String, usize>,
+}
+
+impl Faults {
+    fn command(&mut self, text: &str) -> Vec<String> {
+        let tokens: Vec<&str> = text.split(' ').collect();
+        match tokens[0] {
+            "fi_add_fault" => self.add(&tokens),
+            "fi_clear_faults" => {
+                self.probes.clear();
+                vec!["Faults cleared\n".into()]
+            }
+            "fi_set_enabled" if tokens.len() != 2 => vec!["Wrong number of arguments\n".into()],
+            "fi_set_enabled" => match tokens[1] {
+                "0" | "1" => {
+                    self.enabled = tokens[1] == "1";
+                    let state = if self.enabled { "enabled" } else { "disabled" };
+                    vec![format!("Fault Injection {state}\n")]
+                }
+                other => vec![format!("Invalid argument {other}\n")],
+            },
+            "pos_uwb_reset_pos" => vec!["UWB Position Reset\n".into()],
+            "ping" => vec!["pong\n".into()],
+            "" => vec!["No command received\n".into()],
+            other => vec![format!(
+                "Invalid command: {other}\ntype help to list all available commands\n"
+            )],
+        }
+    }
+
+    fn add(&mut self, tokens: &[&str]) -> Vec<String> {
+        if tokens.len() != 6 {
+            return vec!["Wrong number of arguments\n".into()];
+        }
+        let (id, kind) = (tokens[1], tokens[2]);
+        let mut errors = Vec::new();
+        if id.len() > 20 {
+            errors.push("Too long ID. Maximum length is 20\n".to_string());
+        }
+        let valid = ["BITFLIP", "OFFSET", "AMPLIFICATION", "SET_TO"].contains(&kind)
+            || kind.eq_ignore_ascii_case("none");
+        if !valid {
+            errors.push(format!("Invalid fault type {kind}\n"));
+        }
+        if !errors.is_empty() {
+            return errors;
+        }
+        if !self.probes.contains_key(id) && self.probes.len() == 5 {
+            return vec!["Too many probes in use, fault not added.\n".into()];
+        }
+        let used = self.probes.entry(id.to_string()).or_default();
+        if *used == 5 {
+            return vec!["Too many faults on this probe, fault not added.\n".into()];
+        }
+        *used += 1;
+        let param: f32 = tokens[3].parse().unwrap_or(0.0);
+        vec![format!(
+            "Fault {kind} with parameter {param:.2} successfully added to probe {id}.\n"
+        )]
+    }
+}
+
+/// A plausible state, with the protocol's §13.5 values.
+pub fn sample_state(version: FirmwareVersion) -> CarState {
+    CarState {
+        version,
+        roll: 0.5,
+        pitch: -0.25,
+        yaw: 45.0,
+        accel: [0.01, -0.02, 1.0],
+        gyro: [0.0, 0.0, 0.1],
+        mag: [10.0, -20.0, 30.0],
+        px: 12.3456,
+        py: -7.5,
+        speed: 1.5,
+        v_in: 39.0,
+        temp_mos: 25.0,
+        mc_fault: 0,
+        px_gps: 12.34,
+        py_gps: -7.49,
+        ap_goal_px: 13.0,
+        ap_goal_py: -6.8,
+        ap_rad: 0.8,
+        ms_today: 45_296_789,
+        ap_route_left: 7,
+        px_uwb: 12.2,
+        py_uwb: -7.6,
+    }
+}
+
+/// Serves one stream until it closes (or the behaviour says to hang up).
+pub async fn serve<S>(stream: S, behaviour: Behaviour, log: Arc<Mutex<Log>>)
+where
+    S: AsyncRead + AsyncWrite + Unpin,
+{
+    let dialect = Dialect::firmware(behaviour.version);
+    let mut framed = Framed::new(stream, FrameCodec::car());
+    let mut faults = Faults::default();
+    let mut enu = EnuRef::default();
+    let mut config = MainConfig::factory_default(behaviour.version, behaviour.id);
+    let mut dropped_acks = 0;
+    let mut answered = 0usize;
+    while let Some(Ok(item)) = framed.next().await {
+        let Ok(frame) = item else { continue };
+        let Ok((id, request)) = Request::decode(&frame.payload, behaviour.version) else {
+            continue;
+        };
+        if id != behaviour.id && id != 255 && id != 254 {
+            continue;
+        }
+        if let Ok(mut log) = log.lock() {
+            log.requests.push(request.clone());
+        }
+        if behaviour.hang_up_after.is_some_and(|n| answered >= n) {
+            return;
+        }
+        if behaviour.silent_after.is_some_and(|n| answered >= n) {
+            continue;
+        }
+        answered += 1;
+        let reply_id = if id == 254 { 254 } else { behaviour.id };
+        let replies: Vec<Reply> = match &request {
+            Request::GetState => {
+                let mut replies = Vec::new();
+                if behaviour.stray_replies {
+                    replies.push(Reply::Ack(CommandId::ApAddPoints));
+                }
+                replies.push(Reply::State(sample_state(behaviour.version)));
+                replies
+            }
+            Request::TerminalCmd(text) => {
+                let mut lines = Vec::new();
+                if behaviour.debug_noise {
+                    lines.push("debug: uwb range 12.3\n".to_string());
+                }
+                lines.extend(faults.command(text));
+                lines.into_iter().map(Reply::Printf).collect()
+            }
+            Request::AddPoints(_) if dropped_acks < behaviour.drop_add_point_acks => {
+                dropped_acks += 1;
+                Vec::new()
+            }
+            Request::SetEnuRef(reference) => {
+                enu = *reference;
+                vec![Reply::Ack(CommandId::SetEnuRef)]
+            }
+            Request::GetEnuRef => vec![Reply::EnuRef(enu)],
+            Request::GetMainConfig => vec![Reply::MainConfig {
+                default: false,
+                config: config.clone(),
+            }],
+            Request::SetMainConfig(record) => {
+                config = record.clone();
+                vec![Reply::Ack(CommandId::SetMainConfig)]
+            }
+            Request::GetRoutePart { num, .. } if *num <= 20 => {
+                vec![Reply::RoutePart(RoutePart {
+                    route_len: 0,
+                    points: vec![Default::default(); usize::from(*num)],
+                })]
+            }
+            other => match other.command(behaviour.version) {
+                Some(command) if car_link::message::is_acked(command) => vec![Reply::Ack(command)],
+                _ => Vec::new(),
+            },
+        };
+        for reply in replies {
+            let copies = if behaviour.duplicate_replies { 2 } else { 1 };
+            for _ in 0..copies {
+                if behaviour.stray_replies && matches!(reply, Reply::State(_)) {
+                    let other_car = reply.encode(7, dialect).unwrap_or_default();
+                    let _ = framed.send(other_car).await;
+                }
+                let Ok(payload) = reply.encode(reply_id, dialect) else {
+                    continue;
+                };
+                if framed.send(payload).await.is_err() {
+                    return;
+                }
+            }
+        }
+    }
+}
