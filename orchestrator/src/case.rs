@@ -1,0 +1,1007 @@
+//! Case files and campaign records: the versioned JSON a run directory holds.
+//!
+//! A [`Case`] is one test on record: where it came from (campaign seed, test index, scenario name
+//! and hash, settings), the concrete command sequence (segment intents and points with speeds,
+//! ahead margins, fault parameters), the return route driven before it, the oracle's result per
+//! segment with the faults that preceded it, and the verdict with its reason. Replay consumes it;
+//! a person reads it; a person can write one by hand (only `format`, `schema_version`, `scenario`
+//! and `commands` are required). A [`CampaignRecord`] (`campaign.json`) describes the campaign.
+//! The format is documented field by field in `docs/case-format.md`.
+//!
+//! Reading checks the format name and version and names the offending field on a parse error;
+//! [`Case::check`] checks the values (finite coordinates, positive speeds, counts that agree)
+//! and [`Case::check_route`] checks the geometry against a scenario.
+
+use scenarios::{CampaignSettings, Interval, RangeFaultKind, Scenario};
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+use trajgen::{Point, RouteTail, check_route};
+
+use crate::model::{Command, Fault, FaultKind, Probe, Segment, SegmentIntent, TestPlan};
+use crate::oracle::{FailurePolicy, SegmentOutcome, Verdict};
+use crate::safety::{Abort, SafetyConfig};
+use crate::streaming::{Append, StreamingConfig};
+
+/// The `format` of a case file.
+pub const CASE_FORMAT: &str = "drivecheck-case";
+/// The `format` of a campaign record.
+pub const CAMPAIGN_FORMAT: &str = "drivecheck-campaign";
+/// The schema version this build writes and reads.
+pub const SCHEMA_VERSION: u32 = 1;
+
+/// Why a case file or campaign record was refused.
+#[derive(Debug, Error)]
+pub enum CaseError {
+    /// Not JSON of the expected shape; `path` names the field.
+    #[error("{path}: {message}")]
+    Parse {
+        /// Where in the document (for example `commands[3].points[0].speed`).
+        path: String,
+        /// What serde said.
+        message: String,
+    },
+    /// The `format` field names another kind of file.
+    #[error("format is `{found}`, expected `{expected}`")]
+    WrongFormat {
+        /// What the file says.
+        found: String,
+        /// What was expected.
+        expected: &'static str,
+    },
+    /// Written by a newer drivecheck (or an unknown version).
+    #[error("schema_version {found} is not supported (this drivecheck reads {SCHEMA_VERSION})")]
+    UnsupportedVersion {
+        /// What the file says.
+        found: u32,
+    },
+    /// A value is unusable; `path` names it.
+    #[error("{path}: {message}")]
+    Invalid {
+        /// Where in the document.
+        path: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A segment does not continue the route drivably in the scenario.
+    #[error("commands[{command}]: not drivable in the scenario: {violation}")]
+    NotDrivable {
+        /// The command's index.
+        command: usize,
+        /// The first violation `trajgen::check_route` found.
+        violation: trajgen::Violation,
+    },
+    /// Writing JSON failed.
+    #[error("cannot write JSON: {0}")]
+    Write(#[source] serde_json::Error),
+}
+
+fn invalid(path: impl Into<String>, message: impl Into<String>) -> CaseError {
+    CaseError::Invalid {
+        path: path.into(),
+        message: message.into(),
+    }
+}
+
+/// The scenario a case or campaign ran in.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioRef {
+    /// The scenario's name.
+    pub name: String,
+    /// Its content hash (`Scenario::hash`, lowercase hex SHA-256 of the canonical TOML); absent
+    /// in a hand-written case, which replay then runs only when told to.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub hash: Option<String>,
+}
+
+impl ScenarioRef {
+    /// The reference to `scenario`, with its hash.
+    pub fn of(scenario: &Scenario) -> Self {
+        Self {
+            name: scenario.name.clone(),
+            hash: Some(scenario.hash()),
+        }
+    }
+}
+
+/// An inclusive range in a record.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Range<T> {
+    /// Smallest value.
+    pub min: T,
+    /// Largest value.
+    pub max: T,
+}
+
+impl<T: Copy> From<Interval<T>> for Range<T> {
+    fn from(i: Interval<T>) -> Self {
+        Self {
+            min: i.min,
+            max: i.max,
+        }
+    }
+}
+
+impl<T: Copy> From<Range<T>> for Interval<T> {
+    fn from(r: Range<T>) -> Self {
+        Interval::new(r.min, r.max)
+    }
+}
+
+/// The settings a campaign ran with: the scenario's campaign settings, the ahead margin and the
+/// oracle's failure policy.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Settings {
+    /// Tests in the campaign.
+    pub tests: usize,
+    /// Commands per test, growing over the campaign.
+    pub test_size: Range<usize>,
+    /// Points per `run_segments`.
+    pub points_per_segment: Range<usize>,
+    /// Speed of a segment, km/h.
+    pub speed_kmh: Range<f64>,
+    /// Points of every segment's ahead margin.
+    pub ahead_margin: usize,
+    /// Largest allowed deviation of UWB from RTK, metres.
+    pub oracle_threshold_m: f64,
+    /// What happens after a failing segment.
+    pub failure_policy: FailurePolicy,
+    /// Command weights.
+    pub weights: Weights,
+    /// Fault parameter ranges.
+    pub faults: FaultRanges,
+    /// The safety monitor's limits.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub safety: Option<SafetyConfig>,
+    /// The streaming rule's constants.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub streaming: Option<StreamingConfig>,
+}
+
+/// Command weights in a record.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Weights {
+    /// `run_segments`.
+    pub run_segments: u32,
+    /// `add_fault` on an anchor's range.
+    pub anchor_range_fault: u32,
+    /// `add_fault` wheel slip.
+    pub wheel_slip_fault: u32,
+    /// `add_fault` yaw.
+    pub yaw_fault: u32,
+}
+
+/// Fault parameter ranges in a record.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FaultRanges {
+    /// Fault kinds of anchor range faults.
+    pub anchor_range_kinds: Vec<FaultKind>,
+    /// Anchor range fault parameter.
+    pub anchor_range_param: Range<f64>,
+    /// Anchor range fault start, probe iterations.
+    pub anchor_range_start: Range<u32>,
+    /// Anchor range fault duration, probe iterations.
+    pub anchor_range_duration: Range<u32>,
+    /// Wheel slip amplification.
+    pub wheel_slip_amplification: Range<f64>,
+    /// Wheel slip start, probe iterations.
+    pub wheel_slip_start: Range<u32>,
+    /// Wheel slip duration, probe iterations.
+    pub wheel_slip_duration: Range<u32>,
+    /// Yaw offset, degrees.
+    pub yaw_offset_deg: Range<f64>,
+    /// Yaw start, probe iterations.
+    pub yaw_start: Range<u32>,
+    /// Yaw duration, probe iterations.
+    pub yaw_duration: Range<u32>,
+}
+
+impl Settings {
+    /// The settings of a campaign in `scenario` with `tests` tests and `policy`.
+    pub fn new(scenario: &Scenario, tests: usize, policy: FailurePolicy) -> Self {
+        let c: &CampaignSettings = &scenario.campaign;
+        let f = &c.faults;
+        Self {
+            tests,
+            test_size: c.test_size.into(),
+            points_per_segment: c.points_per_segment.into(),
+            speed_kmh: c.speed_kmh.into(),
+            ahead_margin: scenario.generator.ahead_margin,
+            oracle_threshold_m: c.oracle_threshold_m,
+            failure_policy: policy,
+            weights: Weights {
+                run_segments: c.weights.run_segments,
+                anchor_range_fault: c.weights.anchor_range_fault,
+                wheel_slip_fault: c.weights.wheel_slip_fault,
+                yaw_fault: c.weights.yaw_fault,
+            },
+            faults: FaultRanges {
+                anchor_range_kinds: f
+                    .anchor_range
+                    .kinds
+                    .iter()
+                    .map(|&k| range_kind(k))
+                    .collect(),
+                anchor_range_param: f.anchor_range.param.into(),
+                anchor_range_start: f.anchor_range.start.into(),
+                anchor_range_duration: f.anchor_range.duration.into(),
+                wheel_slip_amplification: f.wheel_slip.amplification.into(),
+                wheel_slip_start: f.wheel_slip.start.into(),
+                wheel_slip_duration: f.wheel_slip.duration.into(),
+                yaw_offset_deg: f.yaw.offset_deg.into(),
+                yaw_start: f.yaw.start.into(),
+                yaw_duration: f.yaw.duration.into(),
+            },
+            safety: None,
+            streaming: None,
+        }
+    }
+
+    /// These settings with the safety monitor's and the streaming rule's constants.
+    pub fn with_runtime(self, safety: SafetyConfig, streaming: StreamingConfig) -> Self {
+        Self {
+            safety: Some(safety),
+            streaming: Some(streaming),
+            ..self
+        }
+    }
+}
+
+fn range_kind(kind: RangeFaultKind) -> FaultKind {
+    kind.into()
+}
+
+/// A point of a route with the speed the car drives towards it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RoutePointRecord {
+    /// East, metres (local ENU).
+    pub x: f64,
+    /// North, metres.
+    pub y: f64,
+    /// Speed towards this point, m/s.
+    pub speed: f64,
+}
+
+impl RoutePointRecord {
+    /// The position.
+    pub fn position(&self) -> Point {
+        Point::new(self.x, self.y)
+    }
+}
+
+/// A position without a speed (ahead margin points are never driven).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PointRecord {
+    /// East, metres.
+    pub x: f64,
+    /// North, metres.
+    pub y: f64,
+}
+
+impl From<Point> for PointRecord {
+    fn from(p: Point) -> Self {
+        Self { x: p.x, y: p.y }
+    }
+}
+
+impl From<PointRecord> for Point {
+    fn from(p: PointRecord) -> Self {
+        Point::new(p.x, p.y)
+    }
+}
+
+/// What the generator was asked for (absent in hand-written cases).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IntentRecord {
+    /// The generator's seed.
+    pub seed: u64,
+    /// Points asked for.
+    pub points: usize,
+    /// Speed, m/s.
+    pub speed_mps: f64,
+}
+
+/// One command of a case.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "command", rename_all = "snake_case", deny_unknown_fields)]
+pub enum CommandRecord {
+    /// Append these points to the car's route and drive them.
+    RunSegments {
+        /// What the generator was asked for; replay does not need it.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        intent: Option<IntentRecord>,
+        /// The points sent to the car, with their speeds.
+        points: Vec<RoutePointRecord>,
+        /// The ahead margin generated after them (never sent); may be empty in a hand-written
+        /// case.
+        #[serde(default, skip_serializing_if = "Vec::is_empty")]
+        margin: Vec<PointRecord>,
+    },
+    /// Inject a fault: `fi_add_fault probe kind param start duration`.
+    AddFault {
+        /// The probe id.
+        probe: Probe,
+        /// The fault type.
+        kind: FaultKind,
+        /// Its parameter.
+        param: f64,
+        /// Probe iterations before it applies.
+        start: u32,
+        /// Probe iterations it applies for.
+        duration: u32,
+    },
+}
+
+impl From<&Command> for CommandRecord {
+    fn from(command: &Command) -> Self {
+        match command {
+            Command::RunSegments(segment) => segment_record(segment),
+            Command::AddFault(f) => Self::AddFault {
+                probe: f.probe,
+                kind: f.kind,
+                param: f.param,
+                start: f.start,
+                duration: f.duration,
+            },
+        }
+    }
+}
+
+fn segment_record(segment: &Segment) -> CommandRecord {
+    let i = segment.intent;
+    CommandRecord::RunSegments {
+        intent: Some(IntentRecord {
+            seed: i.seed,
+            points: i.points,
+            speed_mps: i.speed_mps,
+        }),
+        points: segment
+            .points
+            .iter()
+            .map(|p| RoutePointRecord {
+                x: p.x,
+                y: p.y,
+                speed: i.speed_mps,
+            })
+            .collect(),
+        margin: segment.margin.iter().map(|&p| p.into()).collect(),
+    }
+}
+
+impl CommandRecord {
+    /// The model's command for this record. A segment needs its intent and one speed for all
+    /// its points (what the generator produces); hand-written segments without an intent are
+    /// replayed from their points directly.
+    pub fn to_command(&self, index: usize) -> Result<Command, CaseError> {
+        match self {
+            Self::AddFault {
+                probe,
+                kind,
+                param,
+                start,
+                duration,
+            } => Ok(Command::AddFault(Fault {
+                probe: *probe,
+                kind: *kind,
+                param: *param,
+                start: *start,
+                duration: *duration,
+            })),
+            Self::RunSegments {
+                intent,
+                points,
+                margin,
+            } => {
+                let path = format!("commands[{index}]");
+                let intent = intent.ok_or_else(|| invalid(&path, "no intent"))?;
+                if points.iter().any(|p| p.speed != intent.speed_mps) {
+                    return Err(invalid(path, "the points' speeds differ from the intent's"));
+                }
+                Ok(Command::RunSegments(Segment {
+                    intent: SegmentIntent {
+                        seed: intent.seed,
+                        points: intent.points,
+                        speed_mps: intent.speed_mps,
+                    },
+                    points: points.iter().map(RoutePointRecord::position).collect(),
+                    margin: margin.iter().map(|&p| p.into()).collect(),
+                }))
+            }
+        }
+    }
+}
+
+/// The oracle's result for one driven segment.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SegmentResult {
+    /// The segment's index among the test's segments (from 0).
+    pub segment_index: usize,
+    /// Its command's index in `commands`.
+    pub command_index: usize,
+    /// Indices (in `commands`) of the fault commands sent before it.
+    pub faults_preceding: Vec<usize>,
+    /// Indices of the faults estimated to be applying while it was driven (empty when not
+    /// estimated).
+    #[serde(default)]
+    pub faults_active: Vec<usize>,
+    /// The oracle's statistics and verdict.
+    pub oracle: SegmentOutcome,
+}
+
+/// One test on record (see the module doc and `docs/case-format.md`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Case {
+    /// Always `drivecheck-case`.
+    pub format: String,
+    /// The schema version (1).
+    pub schema_version: u32,
+    /// The drivecheck version that wrote it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tool_version: Option<String>,
+    /// The campaign's seed (absent when written by hand).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub campaign_seed: Option<u64>,
+    /// The test's index in its campaign, from 0.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_index: Option<usize>,
+    /// The scenario it ran in.
+    pub scenario: ScenarioRef,
+    /// The settings it was generated and judged with.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub settings: Option<Settings>,
+    /// True when it ran without fault commands.
+    #[serde(default)]
+    pub no_faults: bool,
+    /// The concrete command sequence.
+    pub commands: Vec<CommandRecord>,
+    /// The return route driven before the test (from the car's pose to the recovery route).
+    #[serde(default)]
+    pub return_route: Vec<RoutePointRecord>,
+    /// Per segment driven: the oracle's result.
+    #[serde(default)]
+    pub segments: Vec<SegmentResult>,
+    /// The verdict; absent when the case has not been run (hand-written).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub verdict: Option<Verdict>,
+    /// Why it failed or was aborted.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+    /// The stop the safety monitor (or the runner) demanded, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub abort: Option<Abort>,
+    /// How the segments were streamed: every append and the starvation events.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub streaming: Option<StreamingRecord>,
+}
+
+/// How a test's segments were streamed to the car.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StreamingRecord {
+    /// Every append, in order (times in milliseconds since the test started).
+    pub appends: Vec<Append>,
+    /// When the car reached the end of its route during the test, milliseconds since the test
+    /// started (should be empty).
+    pub starvations_ms: Vec<u64>,
+    /// The smallest margin left over the confirmed appends, seconds.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub smallest_margin_s: Option<f64>,
+}
+
+impl Case {
+    /// A not yet run case for `plan`: its commands, where it came from, no results.
+    pub fn planned(
+        plan: &TestPlan,
+        scenario: &Scenario,
+        campaign_seed: u64,
+        no_faults: bool,
+        settings: Settings,
+    ) -> Self {
+        Self {
+            format: CASE_FORMAT.to_owned(),
+            schema_version: SCHEMA_VERSION,
+            tool_version: Some(tool_version().to_owned()),
+            campaign_seed: Some(campaign_seed),
+            test_index: Some(plan.test_index),
+            scenario: ScenarioRef::of(scenario),
+            settings: Some(settings),
+            no_faults,
+            commands: plan.commands.iter().map(CommandRecord::from).collect(),
+            return_route: Vec::new(),
+            segments: Vec::new(),
+            verdict: None,
+            reason: None,
+            abort: None,
+            streaming: None,
+        }
+    }
+
+    /// Reads a case from JSON: shape, format name and version.
+    pub fn from_json(text: &str) -> Result<Self, CaseError> {
+        let case: Self = parse(text)?;
+        check_header(&case.format, CASE_FORMAT, case.schema_version)?;
+        Ok(case)
+    }
+
+    /// The case as pretty-printed JSON.
+    pub fn to_json(&self) -> Result<String, CaseError> {
+        serde_json::to_string_pretty(self).map_err(CaseError::Write)
+    }
+
+    /// Checks the values: finite coordinates, positive finite speeds, non-empty segments whose
+    /// intent agrees with their points, finite fault parameters, result indices in range.
+    pub fn check(&self) -> Result<(), CaseError> {
+        for (i, command) in self.commands.iter().enumerate() {
+            check_command(i, command)?;
+        }
+        check_route_points("return_route", &self.return_route)?;
+        self.check_results()
+    }
+
+    fn check_results(&self) -> Result<(), CaseError> {
+        for (i, result) in self.segments.iter().enumerate() {
+            let is_segment = matches!(
+                self.commands.get(result.command_index),
+                Some(CommandRecord::RunSegments { .. })
+            );
+            if !is_segment {
+                return Err(invalid(
+                    format!("segments[{i}].command_index"),
+                    "does not name a run_segments command",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks that every segment (with its margin, when recorded) continues the route drivably
+    /// from the end of `scenario`'s start route.
+    pub fn check_route(&self, scenario: &Scenario) -> Result<(), CaseError> {
+        let start = scenario.start_route.positions();
+        let mut tail = RouteTail::from_points(&start)
+            .map_err(|e| invalid("scenario.start_route", e.to_string()))?;
+        let constraints = scenario.constraints();
+        for (command, record) in self.commands.iter().enumerate() {
+            let CommandRecord::RunSegments { points, margin, .. } = record else {
+                continue;
+            };
+            let driven: Vec<Point> = points.iter().map(RoutePointRecord::position).collect();
+            let route: Vec<Point> = std::iter::once(tail.end)
+                .chain(driven.iter().copied())
+                .chain(margin.iter().map(|&p| Point::from(p)))
+                .collect();
+            check_route(&scenario.area, &route, &constraints, Some(tail.heading))
+                .map_err(|violation| CaseError::NotDrivable { command, violation })?;
+            tail = tail.advanced(&driven);
+        }
+        Ok(())
+    }
+}
+
+fn check_command(i: usize, command: &CommandRecord) -> Result<(), CaseError> {
+    let path = format!("commands[{i}]");
+    match command {
+        CommandRecord::AddFault {
+            param, duration, ..
+        } => {
+            if !param.is_finite() {
+                return Err(invalid(format!("{path}.param"), "must be finite"));
+            }
+            if *duration == 0 {
+                return Err(invalid(
+                    format!("{path}.duration"),
+                    "0 would make the fault permanent",
+                ));
+            }
+            Ok(())
+        }
+        CommandRecord::RunSegments {
+            intent,
+            points,
+            margin,
+        } => {
+            if points.is_empty() {
+                return Err(invalid(format!("{path}.points"), "a segment needs points"));
+            }
+            check_route_points(&format!("{path}.points"), points)?;
+            if let Some(intent) = intent
+                && intent.points != points.len()
+            {
+                return Err(invalid(
+                    format!("{path}.intent.points"),
+                    "differs from the number of points",
+                ));
+            }
+            match margin.iter().position(|p| !Point::from(*p).is_finite()) {
+                Some(j) => Err(invalid(format!("{path}.margin[{j}]"), "not finite")),
+                None => Ok(()),
+            }
+        }
+    }
+}
+
+fn check_route_points(path: &str, points: &[RoutePointRecord]) -> Result<(), CaseError> {
+    for (j, p) in points.iter().enumerate() {
+        if !p.position().is_finite() {
+            return Err(invalid(
+                format!("{path}[{j}]"),
+                "coordinates must be finite",
+            ));
+        }
+        if !(p.speed.is_finite() && p.speed > 0.0) {
+            return Err(invalid(
+                format!("{path}[{j}].speed"),
+                "must be positive and finite",
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// What a campaign's run directory says about it (`campaign.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CampaignRecord {
+    /// Always `drivecheck-campaign`.
+    pub format: String,
+    /// The schema version (1).
+    pub schema_version: u32,
+    /// The drivecheck version that ran it.
+    pub tool_version: String,
+    /// The one seed every test derives from.
+    pub seed: u64,
+    /// True when it ran without fault commands.
+    pub no_faults: bool,
+    /// The scenario.
+    pub scenario: ScenarioRef,
+    /// The settings.
+    pub settings: Settings,
+    /// The car it drove (`sim`, `tcp://…`, `udp://…`, `serial://…`).
+    pub car: String,
+    /// The car's firmware version as it reported it (absent if unknown).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub car_firmware_version: Option<String>,
+    /// When it started, RFC 3339 (for example `2026-11-22T10:55:21Z`).
+    pub started_at: String,
+    /// When it ended, RFC 3339; absent while running or if the process died.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ended_at: Option<String>,
+    /// The outcome, once it ended.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub summary: Option<CampaignSummary>,
+}
+
+/// A campaign's outcome.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CampaignSummary {
+    /// Tests run.
+    pub tests: usize,
+    /// Tests passed.
+    pub passed: usize,
+    /// Tests failed.
+    pub failed: usize,
+    /// Tests aborted.
+    pub aborted: usize,
+    /// Largest deviation seen in any segment, metres (absent without samples).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub worst_deviation_m: Option<f64>,
+    /// Case files of the failed and aborted tests, relative to the run directory.
+    pub failing_cases: Vec<String>,
+}
+
+impl CampaignRecord {
+    /// Reads a campaign record from JSON: shape, format name and version.
+    pub fn from_json(text: &str) -> Result<Self, CaseError> {
+        let record: Self = parse(text)?;
+        check_header(&record.format, CAMPAIGN_FORMAT, record.schema_version)?;
+        Ok(record)
+    }
+
+    /// The record as pretty-printed JSON.
+    pub fn to_json(&self) -> Result<String, CaseError> {
+        serde_json::to_string_pretty(self).map_err(CaseError::Write)
+    }
+}
+
+/// The version of drivecheck recorded in every file it writes.
+pub fn tool_version() -> &'static str {
+    env!("CARGO_PKG_VERSION")
+}
+
+fn parse<T: serde::de::DeserializeOwned>(text: &str) -> Result<T, CaseError> {
+    let de = &mut serde_json::Deserializer::from_str(text);
+    serde_path_to_error::deserialize(de).map_err(|e| CaseError::Parse {
+        path: e.path().to_string(),
+        message: e.inner().to_string(),
+    })
+}
+
+fn check_header(format: &str, expected: &'static str, version: u32) -> Result<(), CaseError> {
+    if format != expected {
+        return Err(CaseError::WrongFormat {
+            found: format.to_owned(),
+            expected,
+        });
+    }
+    if version != SCHEMA_VERSION {
+        return Err(CaseError::UnsupportedVersion { found: version });
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{Campaign, plan_test, start_tail};
+    use crate::oracle::{SegmentOracle, SegmentVerdict};
+
+    fn scenario(name: &str) -> Scenario {
+        scenarios::bundled::load(name).unwrap().scenario
+    }
+
+    fn run_case() -> (Scenario, Case) {
+        let s = scenario("parking-lot-2anchors");
+        let campaign = Campaign {
+            seed: 99,
+            tests: 10,
+            no_faults: false,
+        };
+        let plan = plan_test(&s, &campaign, 9, start_tail(&s).unwrap()).unwrap();
+        let settings = Settings::new(&s, 10, FailurePolicy::default())
+            .with_runtime(SafetyConfig::default(), StreamingConfig::default());
+        let mut case = Case::planned(&plan, &s, 99, false, settings);
+        let mut oracle = SegmentOracle::new();
+        oracle.push(Point::new(0.4, 0.3), Point::new(0.0, 0.0));
+        oracle.push(Point::new(1.2, 0.0), Point::new(0.1, 0.0));
+        let (command_index, _) = plan.segments().nth(1).unwrap();
+        case.segments.push(SegmentResult {
+            segment_index: 1,
+            command_index,
+            faults_preceding: plan.faults_before(command_index),
+            faults_active: vec![],
+            oracle: oracle.result(1.0),
+        });
+        case.return_route = vec![RoutePointRecord {
+            x: -26.0,
+            y: -60.0,
+            speed: 0.8,
+        }];
+        case.verdict = Some(Verdict::Failed);
+        case.reason = Some("segment 1: deviation 1.10 m above 1.00 m".to_owned());
+        case.abort = Some(Abort::new(
+            crate::safety::AbortReason::Interrupted,
+            std::time::Duration::from_millis(9000),
+        ));
+        case.streaming = Some(StreamingRecord {
+            appends: vec![Append {
+                decided_at: std::time::Duration::from_millis(1500),
+                time_to_end: std::time::Duration::from_millis(2100),
+                lead: std::time::Duration::from_millis(1800),
+                confirmed_after: Some(std::time::Duration::from_millis(160)),
+            }],
+            starvations_ms: vec![],
+            smallest_margin_s: Some(1.94),
+        });
+        (s, case)
+    }
+
+    #[test]
+    fn a_case_survives_a_round_trip_through_json() {
+        let (s, case) = run_case();
+        assert_eq!(case.segments[0].oracle.verdict, SegmentVerdict::Failed);
+        let json = case.to_json().unwrap();
+        let back = Case::from_json(&json).unwrap();
+        assert_eq!(back, case);
+        assert_eq!(back.check().map_err(|e| e.to_string()), Ok(()));
+        assert_eq!(back.check_route(&s).map_err(|e| e.to_string()), Ok(()));
+    }
+
+    #[test]
+    fn recorded_commands_give_back_the_planned_commands() {
+        let s = scenario("parking-lot-2anchors");
+        let campaign = Campaign {
+            seed: 5,
+            tests: 3,
+            no_faults: false,
+        };
+        let plan = plan_test(&s, &campaign, 2, start_tail(&s).unwrap()).unwrap();
+        for (i, command) in plan.commands.iter().enumerate() {
+            let record = CommandRecord::from(command);
+            assert_eq!(record.to_command(i).unwrap(), *command);
+        }
+    }
+
+    #[test]
+    fn a_campaign_record_survives_a_round_trip_through_json() {
+        let s = scenario("parking-lot-2anchors");
+        let record = CampaignRecord {
+            format: CAMPAIGN_FORMAT.to_owned(),
+            schema_version: SCHEMA_VERSION,
+            tool_version: tool_version().to_owned(),
+            seed: 42,
+            no_faults: true,
+            scenario: ScenarioRef::of(&s),
+            settings: Settings::new(&s, 10, FailurePolicy::ContinueAndRecord),
+            car: "sim".to_owned(),
+            car_firmware_version: Some("12.3".to_owned()),
+            started_at: "2026-11-22T10:55:21Z".to_owned(),
+            ended_at: Some("2026-11-22T10:56:02Z".to_owned()),
+            summary: Some(CampaignSummary {
+                tests: 10,
+                passed: 8,
+                failed: 1,
+                aborted: 1,
+                worst_deviation_m: Some(1.42),
+                failing_cases: vec!["case-003.json".to_owned(), "case-007.json".to_owned()],
+            }),
+        };
+        let back = CampaignRecord::from_json(&record.to_json().unwrap()).unwrap();
+        assert_eq!(back, record);
+    }
+
+    /// The JSON blocks of the documentation page, in order.
+    fn doc_examples() -> Vec<&'static str> {
+        let doc = include_str!("../../docs/case-format.md");
+        doc.split("```json\n")
+            .skip(1)
+            .filter_map(|block| block.split("\n```").next())
+            .collect()
+    }
+
+    #[test]
+    fn the_documented_hand_written_case_is_valid_and_drivable() {
+        let examples = doc_examples();
+        let case = Case::from_json(examples[0]).unwrap();
+        assert_eq!(case.check().map_err(|e| e.to_string()), Ok(()));
+        let s = scenario(&case.scenario.name);
+        assert_eq!(case.check_route(&s).map_err(|e| e.to_string()), Ok(()));
+        assert!(case.verdict.is_none());
+    }
+
+    #[test]
+    fn the_documented_recorded_case_and_campaign_parse() {
+        let examples = doc_examples();
+        let case = Case::from_json(examples[1]).unwrap();
+        assert_eq!(case.check().map_err(|e| e.to_string()), Ok(()));
+        assert_eq!(case.verdict, Some(Verdict::Failed));
+        CampaignRecord::from_json(examples[2]).unwrap();
+    }
+
+    #[test]
+    fn another_format_or_a_newer_version_is_refused() {
+        let (_, case) = run_case();
+        let mut other = case.clone();
+        other.format = CAMPAIGN_FORMAT.to_owned();
+        let error = Case::from_json(&other.to_json().unwrap()).unwrap_err();
+        assert!(matches!(error, CaseError::WrongFormat { .. }));
+        let mut newer = case;
+        newer.schema_version = 2;
+        let error = Case::from_json(&newer.to_json().unwrap()).unwrap_err();
+        assert!(matches!(error, CaseError::UnsupportedVersion { found: 2 }));
+    }
+
+    #[test]
+    fn a_parse_error_names_the_field() {
+        let text = r#"{"format": "drivecheck-case", "schema_version": 1,
+            "scenario": {"name": "x"},
+            "commands": [{"command": "run_segments", "points": [{"x": 1, "y": 2, "speed": "fast"}]}]}"#;
+        let error = Case::from_json(text).unwrap_err().to_string();
+        assert!(error.starts_with("commands[0]: invalid type"), "{error}");
+        let text = r#"{"format": "drivecheck-case", "schema_version": 1, "scenario": {"name": "x"},
+            "commands": [{"command": "add_fault", "probe": "uwb_range_x", "kind": "offset",
+            "param": 1.0, "start": 0, "duration": 1}]}"#;
+        let error = Case::from_json(text).unwrap_err().to_string();
+        assert!(error.contains("unknown probe"), "{error}");
+    }
+
+    #[test]
+    fn check_refuses_unusable_values() {
+        let base = |command: CommandRecord| Case {
+            format: CASE_FORMAT.to_owned(),
+            schema_version: SCHEMA_VERSION,
+            tool_version: None,
+            campaign_seed: None,
+            test_index: None,
+            scenario: ScenarioRef {
+                name: "x".to_owned(),
+                hash: None,
+            },
+            settings: None,
+            no_faults: false,
+            commands: vec![command],
+            return_route: vec![],
+            segments: vec![],
+            verdict: None,
+            reason: None,
+            abort: None,
+            streaming: None,
+        };
+        let point = |speed| RoutePointRecord {
+            x: 0.0,
+            y: 0.0,
+            speed,
+        };
+        let stopped = base(CommandRecord::RunSegments {
+            intent: None,
+            points: vec![point(0.0)],
+            margin: vec![],
+        });
+        assert!(
+            stopped
+                .check()
+                .unwrap_err()
+                .to_string()
+                .starts_with("commands[0].points[0].speed")
+        );
+        let empty = base(CommandRecord::RunSegments {
+            intent: None,
+            points: vec![],
+            margin: vec![],
+        });
+        assert!(empty.check().is_err());
+        let miscounted = base(CommandRecord::RunSegments {
+            intent: Some(IntentRecord {
+                seed: 1,
+                points: 2,
+                speed_mps: 1.0,
+            }),
+            points: vec![point(1.0)],
+            margin: vec![],
+        });
+        assert!(miscounted.check().is_err());
+        let permanent = base(CommandRecord::AddFault {
+            probe: Probe::UwbYaw,
+            kind: FaultKind::Offset,
+            param: 3.0,
+            start: 0,
+            duration: 0,
+        });
+        assert!(permanent.check().is_err());
+        let mut dangling = base(CommandRecord::AddFault {
+            probe: Probe::UwbYaw,
+            kind: FaultKind::Offset,
+            param: 3.0,
+            start: 0,
+            duration: 2,
+        });
+        dangling.segments.push(SegmentResult {
+            segment_index: 0,
+            command_index: 0,
+            faults_preceding: vec![],
+            faults_active: vec![],
+            oracle: SegmentOracle::new().result(1.0),
+        });
+        assert!(dangling.check().is_err());
+    }
+
+    #[test]
+    fn a_segment_outside_the_area_is_not_drivable() {
+        let (s, mut case) = run_case();
+        case.commands.insert(
+            0,
+            CommandRecord::RunSegments {
+                intent: None,
+                points: vec![RoutePointRecord {
+                    x: 1000.0,
+                    y: 1000.0,
+                    speed: 1.0,
+                }],
+                margin: vec![],
+            },
+        );
+        assert!(matches!(
+            case.check_route(&s),
+            Err(CaseError::NotDrivable { command: 0, .. })
+        ));
+    }
+}

@@ -1,0 +1,254 @@
+//! The commands a test is made of: drive a generated extension of the route ([`Segment`]) or
+//! inject a [`Fault`] into one of the car's UWB [`Probe`]s.
+//!
+//! A command is concrete: a [`Segment`] carries the points the car drives (and the ahead margin
+//! that proved a continuation exists), a [`Fault`] carries the exact firmware parameters. A
+//! command is what the runner sends and what a replay re-sends.
+
+use std::fmt;
+use std::str::FromStr;
+
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+use trajgen::Point;
+
+/// One step of a test.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Command {
+    /// Append a generated extension of the route and drive it.
+    RunSegments(Segment),
+    /// Inject a fault into one probe of the car's UWB positioning.
+    AddFault(Fault),
+}
+
+impl Command {
+    /// The command's name in case files and reports (`run_segments`, `add_fault`).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::RunSegments(_) => "run_segments",
+            Self::AddFault(_) => "add_fault",
+        }
+    }
+
+    /// The segment, when this command drives one.
+    pub fn segment(&self) -> Option<&Segment> {
+        match self {
+            Self::RunSegments(segment) => Some(segment),
+            Self::AddFault(_) => None,
+        }
+    }
+
+    /// The fault, when this command injects one.
+    pub fn fault(&self) -> Option<&Fault> {
+        match self {
+            Self::AddFault(fault) => Some(fault),
+            Self::RunSegments(_) => None,
+        }
+    }
+}
+
+/// What a `RunSegments` command asked the generator for: enough to generate its points again
+/// from the same route tail.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SegmentIntent {
+    /// Seed of the generator's RNG (`rand_pcg::Pcg64Mcg::seed_from_u64`).
+    pub seed: u64,
+    /// Number of points to append.
+    pub points: usize,
+    /// Speed of every point of the extension, m/s.
+    pub speed_mps: f64,
+}
+
+/// A generated extension of the route: the points the car drives, at one speed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Segment {
+    /// What was asked of the generator.
+    pub intent: SegmentIntent,
+    /// The concrete points, exactly `intent.points`, continuing the route tail. They are what the
+    /// car drives and what a replay re-sends.
+    pub points: Vec<Point>,
+    /// The ahead margin: the continuation generated after `points` (never sent) proving that the
+    /// car can always be slowed down and stopped inside the area.
+    pub margin: Vec<Point>,
+}
+
+impl Segment {
+    /// Length of the extension from `start` (the route's end before it) through its points, metres.
+    pub fn length_from(&self, start: Point) -> f64 {
+        let mut length = 0.0;
+        let mut previous = start;
+        for &p in &self.points {
+            length += previous.dist(p);
+            previous = p;
+        }
+        length
+    }
+}
+
+/// A probe of the firmware's fault injection: the site where a fault alters a value
+/// (`firmware-behaviour` §8.5). Serialized as the firmware's probe id.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
+pub enum Probe {
+    /// The measured range to one anchor, metres (`uwb_range_<anchor id>`).
+    UwbRange {
+        /// The anchor's UWB id.
+        anchor: u8,
+    },
+    /// The odometry distance step fed to UWB dead reckoning (`uwb_travel_dist`).
+    UwbTravelDist,
+    /// The yaw fed to UWB dead reckoning, degrees (`uwb_yaw`).
+    UwbYaw,
+}
+
+const RANGE_PREFIX: &str = "uwb_range_";
+const TRAVEL_DIST: &str = "uwb_travel_dist";
+const YAW: &str = "uwb_yaw";
+
+impl fmt::Display for Probe {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::UwbRange { anchor } => write!(f, "{RANGE_PREFIX}{anchor}"),
+            Self::UwbTravelDist => f.write_str(TRAVEL_DIST),
+            Self::UwbYaw => f.write_str(YAW),
+        }
+    }
+}
+
+/// A probe id that is not one drivecheck injects faults into.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[error("unknown probe `{0}` (expected uwb_range_<anchor id 0-255>, uwb_travel_dist or uwb_yaw)")]
+pub struct UnknownProbe(pub String);
+
+impl From<Probe> for String {
+    fn from(probe: Probe) -> Self {
+        probe.to_string()
+    }
+}
+
+impl TryFrom<String> for Probe {
+    type Error = UnknownProbe;
+
+    fn try_from(s: String) -> Result<Self, Self::Error> {
+        s.parse()
+    }
+}
+
+impl FromStr for Probe {
+    type Err = UnknownProbe;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            TRAVEL_DIST => Ok(Self::UwbTravelDist),
+            YAW => Ok(Self::UwbYaw),
+            _ => s
+                .strip_prefix(RANGE_PREFIX)
+                .filter(|id| !id.starts_with('+'))
+                .and_then(|id| id.parse::<u8>().ok())
+                .map(|anchor| Self::UwbRange { anchor })
+                .ok_or_else(|| UnknownProbe(s.to_owned())),
+        }
+    }
+}
+
+/// The firmware's fault types (`firmware-behaviour` §8.4).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FaultKind {
+    /// XOR bit `trunc(param)` (0–31) of the value's binary32 pattern.
+    #[serde(rename = "bitflip")]
+    BitFlip,
+    /// `x += param`.
+    Offset,
+    /// `x *= param`.
+    Amplification,
+    /// `x = param`.
+    SetTo,
+    /// Nothing, but it occupies a slot.
+    None,
+}
+
+impl FaultKind {
+    /// The name in case files (`bitflip`, `offset`, `amplification`, `set_to`, `none`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::BitFlip => "bitflip",
+            Self::Offset => "offset",
+            Self::Amplification => "amplification",
+            Self::SetTo => "set_to",
+            Self::None => "none",
+        }
+    }
+}
+
+impl From<scenarios::RangeFaultKind> for FaultKind {
+    fn from(kind: scenarios::RangeFaultKind) -> Self {
+        match kind {
+            scenarios::RangeFaultKind::Offset => Self::Offset,
+            scenarios::RangeFaultKind::Amplification => Self::Amplification,
+        }
+    }
+}
+
+/// One fault to inject: `fi_add_fault <probe> <kind> <param> <start> <duration>`.
+///
+/// `start` and `duration` count iterations of the probe, not seconds: the fault applies on calls
+/// `start + 1 … start + duration` of the probe after it is added (`firmware-behaviour` §8.3).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Fault {
+    /// Where the fault applies.
+    pub probe: Probe,
+    /// What it does to the value.
+    pub kind: FaultKind,
+    /// Its parameter (metres for ranges, a factor for amplification, degrees for yaw offsets).
+    pub param: f64,
+    /// Probe iterations after the add before it applies.
+    pub start: u32,
+    /// Probe iterations it applies for (0 would be permanent; generated faults are never 0).
+    pub duration: u32,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn probes_print_and_parse_as_the_firmware_names_them() {
+        for probe in [
+            Probe::UwbRange { anchor: 0 },
+            Probe::UwbRange { anchor: 255 },
+            Probe::UwbTravelDist,
+            Probe::UwbYaw,
+        ] {
+            assert_eq!(probe.to_string().parse::<Probe>(), Ok(probe));
+        }
+        assert_eq!(Probe::UwbRange { anchor: 7 }.to_string(), "uwb_range_7");
+    }
+
+    #[test]
+    fn unknown_probe_names_are_rejected() {
+        for name in [
+            "px",
+            "uwb_range_",
+            "uwb_range_256",
+            "uwb_range_+1",
+            "UWB_YAW",
+        ] {
+            assert!(name.parse::<Probe>().is_err(), "{name}");
+        }
+    }
+
+    #[test]
+    fn a_segment_measures_its_length_from_the_route_end() {
+        let segment = Segment {
+            intent: SegmentIntent {
+                seed: 0,
+                points: 2,
+                speed_mps: 1.0,
+            },
+            points: vec![Point::new(1.0, 0.0), Point::new(1.0, 2.0)],
+            margin: vec![],
+        };
+        assert!((segment.length_from(Point::new(0.0, 0.0)) - 3.0).abs() < 1e-12);
+    }
+}

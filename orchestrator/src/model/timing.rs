@@ -1,0 +1,117 @@
+//! When an injected fault applies, in time: probe iterations turned into durations.
+//!
+//! A fault's `start` and `duration` count calls of its probe (`firmware-behaviour` §8.3, §8.5):
+//! it applies on calls `start + 1 … start + duration` after it was added. One call of
+//! `uwb_travel_dist` or `uwb_yaw` is one odometry tick (10 ms in firmware 10.x, about 20 ms in
+//! 12.x); one call of `uwb_range_<id>` is one range measurement of that anchor, every
+//! `N × 100 ms` with `N` anchors in range. The car does not report its probe counters, so these
+//! windows are estimates: good enough to say which faults were probably applying during a
+//! segment, not to prove it.
+
+use std::time::Duration;
+
+use super::command::{Fault, Probe};
+
+/// How often the probes are called.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ProbeRates {
+    /// One odometry tick (10 ms in 10.x, 20 ms in 12.x).
+    pub odometry_tick: Duration,
+    /// One ranging slot of the round robin (100 ms).
+    pub ranging_slot: Duration,
+    /// Anchors in range (the round robin's length; at least 1 is assumed).
+    pub anchors_in_range: usize,
+}
+
+impl ProbeRates {
+    /// Firmware 10.x rates with `anchors` anchors in range.
+    pub fn firmware_10(anchors: usize) -> Self {
+        Self {
+            odometry_tick: Duration::from_millis(10),
+            ranging_slot: Duration::from_millis(100),
+            anchors_in_range: anchors,
+        }
+    }
+
+    /// Firmware 12.x rates (default board) with `anchors` anchors in range.
+    pub fn firmware_12(anchors: usize) -> Self {
+        Self {
+            odometry_tick: Duration::from_millis(20),
+            ..Self::firmware_10(anchors)
+        }
+    }
+
+    /// The time between two calls of `probe`.
+    pub fn iteration(&self, probe: Probe) -> Duration {
+        match probe {
+            Probe::UwbRange { .. } => self
+                .ranging_slot
+                .saturating_mul(u32::try_from(self.anchors_in_range.max(1)).unwrap_or(u32::MAX)),
+            Probe::UwbTravelDist | Probe::UwbYaw => self.odometry_tick,
+        }
+    }
+}
+
+/// The estimated time a fault applies: from `from` to `to`, on the clock `added_at` was given on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FaultWindow {
+    /// When it starts applying.
+    pub from: Duration,
+    /// When it stops.
+    pub to: Duration,
+}
+
+impl FaultWindow {
+    /// The window of `fault` added at `added_at`.
+    pub fn of(fault: &Fault, added_at: Duration, rates: &ProbeRates) -> Self {
+        let iteration = rates.iteration(fault.probe);
+        let from = added_at.saturating_add(iteration.saturating_mul(fault.start));
+        let to = from.saturating_add(iteration.saturating_mul(fault.duration));
+        Self { from, to }
+    }
+
+    /// Whether it overlaps the interval `from..=to` (a segment's drive).
+    pub fn overlaps(&self, from: Duration, to: Duration) -> bool {
+        self.from <= to && from <= self.to
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::FaultKind;
+
+    fn fault(probe: Probe, start: u32, duration: u32) -> Fault {
+        Fault {
+            probe,
+            kind: FaultKind::Offset,
+            param: 1.0,
+            start,
+            duration,
+        }
+    }
+
+    #[test]
+    fn an_anchor_fault_counts_ranges_of_the_round_robin() {
+        // Two anchors at 10.x rates: one range of an anchor every 200 ms.
+        let rates = ProbeRates::firmware_10(2);
+        let window = FaultWindow::of(
+            &fault(Probe::UwbRange { anchor: 50 }, 100, 8),
+            Duration::from_secs(3),
+            &rates,
+        );
+        assert_eq!(window.from, Duration::from_secs(23));
+        assert_eq!(window.to, Duration::from_millis(24_600));
+    }
+
+    #[test]
+    fn an_odometry_fault_counts_ticks() {
+        let rates = ProbeRates::firmware_12(2);
+        let window = FaultWindow::of(&fault(Probe::UwbYaw, 50, 10), Duration::ZERO, &rates);
+        assert_eq!(window.from, Duration::from_secs(1));
+        assert_eq!(window.to, Duration::from_millis(1200));
+        assert!(window.overlaps(Duration::from_millis(1100), Duration::from_secs(5)));
+        assert!(window.overlaps(Duration::ZERO, Duration::from_secs(1)));
+        assert!(!window.overlaps(Duration::from_millis(1201), Duration::from_secs(5)));
+    }
+}
