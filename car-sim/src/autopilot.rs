@@ -1,0 +1,1168 @@
+//! The pure-pursuit autopilot (behaviour doc §6): route ring, window scan, steering law, speed,
+//! end of route, and the replace/clear/activate semantics of both firmware generations.
+
+use crate::config::{ApTimeMode, CarConfig, VehicleParams};
+use crate::firmware::Firmware;
+use crate::motor::MotorCommand;
+use crate::terminal::scan_i32;
+
+/// Milliseconds per day.
+const MS_PER_DAY: i32 = 86_400_000;
+/// Brake current at the route end, A.
+const ROUTE_END_BRAKE_A: f32 = 10.0;
+/// Default look-ahead window, points.
+const DEFAULT_LOOK_AHEAD: usize = 8;
+
+/// One stored route point (the 16-byte 10.x layout has no `pz` and no `attributes`; they are 0).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RoutePoint {
+    /// East, m.
+    pub px: f32,
+    /// North, m.
+    pub py: f32,
+    /// Height, m (unused by the autopilot).
+    pub pz: f32,
+    /// Speed, m/s.
+    pub speed: f32,
+    /// Time, ms (time modes only).
+    pub time: i32,
+    /// 12.x attributes: bits 0–2 select the positioning source.
+    pub attributes: u32,
+}
+
+impl RoutePoint {
+    /// A point at `(px, py)` with a speed, time 0 and no attributes.
+    pub fn at(px: f32, py: f32, speed: f32) -> Self {
+        Self {
+            px,
+            py,
+            speed,
+            ..Self::default()
+        }
+    }
+
+    fn dist_to(&self, x: f32, y: f32) -> f32 {
+        (self.px - x).hypot(self.py - y)
+    }
+
+    fn dist(&self, other: &RoutePoint) -> f32 {
+        self.dist_to(other.px, other.py)
+    }
+}
+
+/// A planar pose as the firmware holds it: position in m, yaw in degrees clockwise from east.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct FwPose {
+    /// East, m.
+    pub x: f32,
+    /// North, m.
+    pub y: f32,
+    /// Yaw, degrees, positive clockwise.
+    pub yaw: f32,
+}
+
+/// What one autopilot cycle reads.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ApInputs {
+    /// The fused (RTK) pose.
+    pub fused: FwPose,
+    /// The UWB pose.
+    pub uwb: FwPose,
+    /// Odometry speed, m/s.
+    pub speed: f32,
+    /// Time of day, ms (−1 when unknown).
+    pub ms_today: i32,
+}
+
+/// What one autopilot cycle commands.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ApOutput {
+    /// A servo position command.
+    pub servo: Option<f32>,
+    /// A motor command.
+    pub motor: Option<MotorCommand>,
+    /// A zero-length segment was met in the window (quirk 9, guarded).
+    pub zero_length_segment: bool,
+}
+
+/// The result of storing a packet of points.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct StoreOutcome {
+    /// The packet repeated the previous packet's first point and was dropped (still acked).
+    pub dropped_as_duplicate: bool,
+    /// The ring overflowed: the write index reached the current segment (points not yet driven
+    /// were or will be overwritten).
+    pub ring_overflow: bool,
+}
+
+/// The route part returned by AP_GET_ROUTE_PART.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RoutePart {
+    /// The ring write index (`point_last`).
+    pub route_len: i32,
+    /// The requested points; indices outside the stored route are all-zero points.
+    pub points: Vec<RoutePoint>,
+}
+
+/// The autopilot state.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Autopilot {
+    firmware: Firmware,
+    route: Vec<RoutePoint>,
+    active: bool,
+    point_last: usize,
+    point_now: usize,
+    has_prev_point: bool,
+    goal: RoutePoint,
+    rad_now: f32,
+    rx_prev: Option<RoutePoint>,
+    route_left: i32,
+    start_time: i32,
+    started: bool,
+    route_end: bool,
+    sync_received: bool,
+    look_ahead: usize,
+    dynamic_rad: bool,
+    ang_dist_comp: bool,
+}
+
+/// One segment of the window, by ring indices.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Segment {
+    start: usize,
+    end: usize,
+}
+
+/// What the window scans found.
+struct Scan {
+    goal: RoutePoint,
+    speed_segment: Segment,
+    closest_start: usize,
+    zero_length: bool,
+}
+
+impl Autopilot {
+    /// A freshly booted autopilot: empty route, inactive.
+    pub fn new(firmware: Firmware) -> Self {
+        Self {
+            firmware,
+            route: vec![RoutePoint::default(); firmware.route_ring_size()],
+            active: false,
+            point_last: 0,
+            point_now: 0,
+            has_prev_point: false,
+            goal: RoutePoint::default(),
+            rad_now: -1.0,
+            rx_prev: None,
+            route_left: 0,
+            start_time: 0,
+            started: false,
+            route_end: false,
+            sync_received: false,
+            look_ahead: DEFAULT_LOOK_AHEAD,
+            dynamic_rad: true,
+            ang_dist_comp: true,
+        }
+    }
+
+    fn size(&self) -> usize {
+        self.route.len()
+    }
+
+    /// Whether the autopilot is active.
+    pub fn is_active(&self) -> bool {
+        self.active
+    }
+
+    /// The goal as reported in GET_STATE (`(0, 0)` after a clear).
+    pub fn goal(&self) -> (f32, f32) {
+        (self.goal.px, self.goal.py)
+    }
+
+    /// The look-ahead radius as reported (−1 when inactive or at the route end).
+    pub fn rad_now(&self) -> f32 {
+        self.rad_now
+    }
+
+    /// `ap_route_left` as reported (stale while inactive).
+    pub fn route_left(&self) -> i32 {
+        self.route_left
+    }
+
+    /// `point_now`: start index of the closest segment.
+    pub fn point_now(&self) -> usize {
+        self.point_now
+    }
+
+    /// `point_last`: the ring write index.
+    pub fn point_last(&self) -> usize {
+        self.point_last
+    }
+
+    /// The stored route point at a ring index.
+    pub fn route_point(&self, index: usize) -> Option<&RoutePoint> {
+        self.route.get(index)
+    }
+
+    // ----- commands -----
+
+    /// AP_ADD_POINTS: the duplicate check on the first point, then store every point.
+    pub fn add_points(&mut self, points: &[RoutePoint], cfg: &CarConfig) -> StoreOutcome {
+        let mut outcome = StoreOutcome::default();
+        let Some((first, rest)) = points.split_first() else {
+            return outcome;
+        };
+        if !self.accept_first(first) {
+            outcome.dropped_as_duplicate = true;
+            return outcome;
+        }
+        self.store(*first, cfg, &mut outcome);
+        for p in rest {
+            self.store(*p, cfg, &mut outcome);
+        }
+        outcome
+    }
+
+    /// AP_REPLACE_ROUTE.
+    pub fn replace_route(
+        &mut self,
+        points: &[RoutePoint],
+        cfg: &CarConfig,
+        ms_today: i32,
+    ) -> StoreOutcome {
+        let mut outcome = StoreOutcome::default();
+        let Some(first) = points.first() else {
+            return outcome;
+        };
+        if !self.active {
+            self.clear(ms_today);
+            return self.add_points(points, cfg);
+        }
+        let time_mode =
+            self.firmware.is_12x() && cfg.ap_mode_time != ApTimeMode::Speed && first.time > 0;
+        if time_mode {
+            self.replace_in_time_mode(points, cfg, &mut outcome);
+            return outcome;
+        }
+        self.point_last = self.point_now;
+        self.has_prev_point = false;
+        if self.accept_first(first) {
+            self.store(*first, cfg, &mut outcome);
+        } else {
+            outcome.dropped_as_duplicate = true;
+        }
+        for p in &points[1..] {
+            self.store(*p, cfg, &mut outcome);
+        }
+        outcome
+    }
+
+    /// 12.x time-mode replacement: move back to the newest point not later than the new one; if
+    /// a point is refused, the next one is tried as the replacement.
+    fn replace_in_time_mode(
+        &mut self,
+        points: &[RoutePoint],
+        cfg: &CarConfig,
+        outcome: &mut StoreOutcome,
+    ) {
+        self.has_prev_point = true;
+        for (k, p) in points.iter().enumerate() {
+            if k == 0 && !self.accept_first(p) {
+                outcome.dropped_as_duplicate = true;
+                continue;
+            }
+            if self.time_replace_one(*p, cfg, outcome) {
+                for rest in &points[k + 1..] {
+                    self.store(*rest, cfg, outcome);
+                }
+                return;
+            }
+        }
+    }
+
+    fn time_replace_one(
+        &mut self,
+        p: RoutePoint,
+        cfg: &CarConfig,
+        outcome: &mut StoreOutcome,
+    ) -> bool {
+        let size = self.size();
+        for _ in 0..size {
+            if self.point_last == self.point_now {
+                if p.time < self.route[self.point_now].time {
+                    return false;
+                }
+                self.store(p, cfg, outcome);
+                return true;
+            }
+            let newest = (self.point_last + size - 1) % size;
+            self.point_last = newest;
+            if self.route[newest].time <= p.time {
+                self.store(p, cfg, outcome);
+                return true;
+            }
+        }
+        false
+    }
+
+    fn accept_first(&mut self, first: &RoutePoint) -> bool {
+        if let Some(prev) = self.rx_prev
+            && prev.dist(first) < 1e-4
+        {
+            return false;
+        }
+        self.rx_prev = Some(*first);
+        true
+    }
+
+    fn store(&mut self, p: RoutePoint, cfg: &CarConfig, outcome: &mut StoreOutcome) {
+        let size = self.size();
+        self.route[self.point_last] = p;
+        self.point_last = (self.point_last + 1) % size;
+        if !self.has_prev_point {
+            self.route[(self.point_now + size - 1) % size] = p;
+            self.has_prev_point = true;
+        }
+        if cfg.ap_repeat_routes {
+            self.route[size - 1] = p;
+        }
+        if self.point_last == self.point_now {
+            outcome.ring_overflow = true;
+        }
+    }
+
+    /// AP_REMOVE_LAST_POINT: unless the route is down to the current segment start.
+    pub fn remove_last_point(&mut self) {
+        if self.point_last != self.point_now {
+            self.point_last = (self.point_last + self.size() - 1) % self.size();
+        }
+    }
+
+    /// AP_CLEAR_POINTS: empty the route and deactivate; `route_left` (and the 12.x started flag)
+    /// are kept.
+    pub fn clear(&mut self, ms_today: i32) {
+        self.active = false;
+        self.has_prev_point = false;
+        self.point_now = 0;
+        self.point_last = 0;
+        self.rx_prev = None;
+        self.goal = RoutePoint::default();
+        self.sync_received = false;
+        self.start_time = ms_today;
+    }
+
+    /// AP_SET_ACTIVE (with 12.3's `reset_state`; ignored by 10.x).
+    pub fn set_active(&mut self, active: bool, reset_state: bool, ms_today: i32) {
+        if active && !self.active {
+            self.start_time = ms_today;
+            self.route_end = false;
+        }
+        self.active = active;
+        if reset_state && self.firmware.is_12x() {
+            self.reset_state(ms_today);
+        }
+    }
+
+    /// Deactivates (RC_CONTROL, watchdog): the flag only.
+    pub fn deactivate(&mut self) {
+        self.active = false;
+    }
+
+    fn reset_state(&mut self, ms_today: i32) {
+        self.point_now = 0;
+        self.started = false;
+        self.route_left = 0;
+        self.goal = RoutePoint::default();
+        self.sync_received = false;
+        self.start_time = ms_today;
+    }
+
+    /// AP_GET_ROUTE_PART; `None` (no reply) when `num > 20`.
+    pub fn route_part(&self, first: i32, num: u8) -> Option<RoutePart> {
+        if num > 20 {
+            return None;
+        }
+        let points = (0..i64::from(num))
+            .map(|k| i64::from(first) + k)
+            .map(|idx| {
+                usize::try_from(idx)
+                    .ok()
+                    .filter(|&i| i < self.point_last)
+                    .map_or_else(RoutePoint::default, |i| self.route[i])
+            })
+            .collect();
+        Some(RoutePart {
+            route_len: self.point_last as i32,
+            points,
+        })
+    }
+
+    /// AP_SYNC_POINT: write a speed that reaches route index `point` in `time_ms` into the points
+    /// up to it, and switch time mode off until the route is cleared.
+    pub fn sync_point(
+        &mut self,
+        point: i32,
+        time_ms: i32,
+        min_diff: i32,
+        car: FwPose,
+        cfg: &CarConfig,
+    ) {
+        let size = self.size();
+        let Ok(target) = usize::try_from(point) else {
+            return;
+        };
+        if target >= size || time_ms < min_diff || time_ms <= 0 {
+            return;
+        }
+        let mut length = 0.0f32;
+        let mut index = (self.point_now + 1) % size;
+        length += self.route[index].dist_to(car.x, car.y);
+        let mut steps = 0;
+        while index != target && steps < size {
+            let next = (index + 1) % size;
+            length += self.route[index].dist(&self.route[next]);
+            index = next;
+            steps += 1;
+        }
+        if length < cfg.ap_base_rad {
+            return;
+        }
+        let speed = (length / (time_ms as f32 / 1000.0)).clamp(-cfg.ap_max_speed, cfg.ap_max_speed);
+        let mut i = self.point_now;
+        for _ in 0..size {
+            self.route[i].speed = speed;
+            if i == target {
+                break;
+            }
+            i = (i + 1) % size;
+        }
+        self.sync_received = true;
+    }
+
+    // ----- the control cycle -----
+
+    /// The route length and `route_left`, with the firmware's ring-wrap arithmetic.
+    fn route_len_and_left(&self) -> (usize, i32) {
+        let size = self.size() as i32;
+        let (now, last) = (self.point_now as i32, self.point_last as i32);
+        let len = if now > last { size + last - now } else { last };
+        let mut left = len - now;
+        if left < 0 {
+            left += size;
+        }
+        (len as usize, left)
+    }
+
+    /// One 10 ms cycle.
+    pub fn cycle(&mut self, cfg: &CarConfig, input: &ApInputs) -> ApOutput {
+        if !self.active {
+            self.rad_now = -1.0;
+            return ApOutput::default();
+        }
+        let (len, left) = self.route_len_and_left();
+        self.route_left = left;
+        let car = self.pose_source(cfg, input);
+        if len < 2 {
+            return if self.firmware.is_12x() {
+                ApOutput::default()
+            } else {
+                self.route_end_actions(cfg, input.ms_today)
+            };
+        }
+        let radius = self.radius(cfg, input.speed);
+        self.rad_now = radius;
+        if self.firmware.is_12x() && !self.started {
+            if self.route[0].dist_to(car.x, car.y) < 1.5 * radius {
+                self.started = true;
+            } else {
+                return self.drive_to_start(cfg, input, car);
+            }
+        }
+        let scan = self.scan(cfg, len, car, radius);
+        let last = self.last_index();
+        let at_end = !cfg.ap_repeat_routes
+            && self.route_left < 3
+            && self.route[last].dist_to(car.x, car.y) < radius;
+        self.point_now = scan.closest_start;
+        self.goal = scan.goal;
+        let mut out = if at_end {
+            self.route_end_actions(cfg, input.ms_today)
+        } else {
+            let speed = self.speed(cfg, input, car, scan.speed_segment);
+            self.drive(cfg, input.speed, car, speed)
+        };
+        out.zero_length_segment = scan.zero_length;
+        out
+    }
+
+    fn last_index(&self) -> usize {
+        (self.point_last + self.size() - 1) % self.size()
+    }
+
+    fn pose_source(&self, cfg: &CarConfig, input: &ApInputs) -> FwPose {
+        let use_uwb = match self.firmware {
+            Firmware::V10_1 => false,
+            Firmware::V12_3 => {
+                let attr = if self.started {
+                    self.route[self.point_now].attributes & 0b111
+                } else {
+                    0
+                };
+                match attr {
+                    1 => false,
+                    2 => true,
+                    _ => cfg.vehicle.use_uwb_pos,
+                }
+            }
+        };
+        if use_uwb { input.uwb } else { input.fused }
+    }
+
+    fn radius(&self, cfg: &CarConfig, speed: f32) -> f32 {
+        if !self.dynamic_rad {
+            return cfg.ap_base_rad;
+        }
+        match self.firmware {
+            Firmware::V10_1 => cfg.ap_base_rad / VehicleParams::steering_scale(speed),
+            Firmware::V12_3 => (cfg.ap_rad_time_ahead * speed.abs()).max(cfg.ap_base_rad),
+        }
+    }
+
+    fn drive_to_start(&mut self, cfg: &CarConfig, input: &ApInputs, car: FwPose) -> ApOutput {
+        self.point_now = 0;
+        self.goal = self.route[0];
+        let speed = self.route[0].speed;
+        self.drive(cfg, input.speed, car, speed)
+    }
+
+    /// The window's segment `i` (an unwrapped index), wrapped as the firmware does.
+    fn wrap(&self, i: usize) -> usize {
+        let mut ind = i;
+        if ind >= self.point_last {
+            if self.point_now <= self.point_last {
+                ind -= self.point_last;
+            } else if ind >= self.size() {
+                ind -= self.size();
+            }
+        }
+        ind % self.size()
+    }
+
+    fn window(&self, len: usize) -> impl Iterator<Item = Segment> + '_ {
+        let cap = if self.firmware.is_12x() { len - 1 } else { len };
+        let k = self.look_ahead.min(cap);
+        let start = self.point_now;
+        (start..start + k).map(|i| Segment {
+            start: self.wrap(i),
+            end: self.wrap(i + 1),
+        })
+    }
+
+    fn scan(&mut self, cfg: &CarConfig, len: usize, car: FwPose, radius: f32) -> Scan {
+        let last = self.last_index();
+        let repeat = cfg.ap_repeat_routes;
+        let mut goal = None;
+        let mut hit_segment = None;
+        let mut last_point_reached = false;
+        let mut zero_length = false;
+        let window: Vec<Segment> = self.window(len).collect();
+        for seg in window {
+            let (p1, p2) = (self.route[seg.start], self.route[seg.end]);
+            if repeat && time_before(p2.time, p1.time) {
+                let mut t = p2.time.wrapping_add(cfg.ap_time_add_repeat_ms);
+                if t > MS_PER_DAY {
+                    t -= MS_PER_DAY;
+                }
+                self.route[seg.end].time = t;
+            }
+            let hit = circle_segment_goal(car, radius, &p1, &p2);
+            zero_length |= p1.dist(&p2).powi(2) <= 1e-6;
+            if let Some(g) = hit {
+                goal = Some(g);
+                hit_segment = Some(seg);
+            }
+            if !repeat && seg.end == last && goal.is_some() {
+                last_point_reached = hit.is_some();
+                break;
+            }
+        }
+        let (closest, closest_seg) = self.closest(len, car, repeat, last);
+        let goal_point = if last_point_reached {
+            self.route[last]
+        } else {
+            goal.unwrap_or(closest)
+        };
+        Scan {
+            goal: goal_point,
+            speed_segment: hit_segment.unwrap_or(closest_seg),
+            closest_start: closest_seg.start,
+            zero_length,
+        }
+    }
+
+    fn closest(&self, len: usize, car: FwPose, repeat: bool, last: usize) -> (RoutePoint, Segment) {
+        let mut best: Option<(f32, RoutePoint, Segment)> = None;
+        for seg in self.window(len) {
+            let p = closest_point_on_segment(&self.route[seg.start], &self.route[seg.end], car);
+            let d = p.dist_to(car.x, car.y);
+            if best.as_ref().is_none_or(|(bd, _, _)| d < *bd) {
+                best = Some((d, p, seg));
+            }
+            if !repeat && seg.end == last {
+                break;
+            }
+        }
+        let fallback = Segment { start: 0, end: 1 };
+        best.map_or((self.route[0], fallback), |(_, p, s)| (p, s))
+    }
+
+    fn speed(&self, cfg: &CarConfig, input: &ApInputs, car: FwPose, seg: Segment) -> f32 {
+        let (a, b) = (self.route[seg.start], self.route[seg.end]);
+        let goal = self.goal;
+        if cfg.ap_mode_time == ApTimeMode::Speed || self.sync_received {
+            let da = goal.dist(&a);
+            let total = da + goal.dist(&b);
+            if total <= 0.0 || !total.is_finite() {
+                return a.speed;
+            }
+            return a.speed + da / total * (b.speed - a.speed);
+        }
+        self.time_mode_speed(cfg, input, car, a, b)
+    }
+
+    fn time_mode_speed(
+        &self,
+        cfg: &CarConfig,
+        input: &ApInputs,
+        car: FwPose,
+        a: RoutePoint,
+        b: RoutePoint,
+    ) -> f32 {
+        if input.ms_today < 0 {
+            return 0.0;
+        }
+        let goal = self.goal;
+        let dist_prev = (goal.dist(&a) * 1000.0) as i32;
+        let dist_tot = dist_prev.saturating_add((goal.dist(&b) * 1000.0) as i32);
+        let t_goal = map_int(dist_prev, 0, dist_tot, a.time, b.time);
+        let mut dt = t_goal.wrapping_sub(input.ms_today);
+        if cfg.ap_mode_time == ApTimeMode::RelativeToStart {
+            dt = dt.wrapping_add(self.start_time);
+        }
+        if dt < 0 {
+            dt = dt.wrapping_add(MS_PER_DAY);
+        }
+        if dt == 0 {
+            return 0.0;
+        }
+        goal.dist_to(car.x, car.y) / (dt as f32 / 1000.0)
+    }
+
+    fn drive(&self, cfg: &CarConfig, odo_speed: f32, car: FwPose, speed: f32) -> ApOutput {
+        let v = &cfg.vehicle;
+        let mut angle = steering_angle(
+            car,
+            self.goal.px,
+            self.goal.py,
+            v.axis_distance,
+            self.ang_dist_comp,
+        );
+        let max = v.steering_max_angle_rad * VehicleParams::steering_scale(odo_speed);
+        angle = angle.clamp(-max, max);
+        let speed = speed.clamp(-cfg.ap_max_speed, cfg.ap_max_speed);
+        let motor =
+            (!v.disable_motor).then(|| MotorCommand::Rpm((speed / v.speed_per_erpm()).trunc()));
+        ApOutput {
+            servo: Some(v.servo_for_angle(angle)),
+            motor,
+            zero_length_segment: false,
+        }
+    }
+
+    fn route_end_actions(&mut self, cfg: &CarConfig, ms_today: i32) -> ApOutput {
+        self.rad_now = -1.0;
+        let out = ApOutput {
+            servo: Some(cfg.vehicle.steering_center),
+            motor: (!cfg.vehicle.disable_motor)
+                .then_some(MotorCommand::CurrentBrake(ROUTE_END_BRAKE_A)),
+            zero_length_segment: false,
+        };
+        if self.firmware.is_12x() {
+            self.active = false;
+            self.route_end = true;
+            self.reset_state(ms_today);
+        }
+        out
+    }
+
+    // ----- terminal -----
+
+    /// Runs one of the `ap_*` terminal commands; `None` if `args[0]` is not one of them.
+    pub fn terminal(&mut self, args: &[&str]) -> Option<Vec<String>> {
+        let reply = match *args.first()? {
+            "ap_set_look_ahead" => self.cmd_look_ahead(args),
+            "ap_dynamic_rad" => on_off(args, |on| {
+                self.dynamic_rad = on;
+                "OK\n".to_string()
+            }),
+            "ap_ang_dist_comp" => on_off(args, |on| {
+                self.ang_dist_comp = on;
+                format!(
+                    "Angle distance compensation {}\n",
+                    if on { "enabled" } else { "disabled" }
+                )
+            }),
+            "ap_state" => self.state_text(),
+            _ => return None,
+        };
+        Some(vec![reply])
+    }
+
+    fn cmd_look_ahead(&mut self, args: &[&str]) -> String {
+        if args.len() != 2 {
+            return "Wrong number of arguments\n".to_string();
+        }
+        match scan_i32(args[1]) {
+            Some(n) if n >= 1 => {
+                self.look_ahead = n as usize;
+                format!("Now looking {n} points ahead along the route")
+            }
+            _ => "Invalid argument\n".to_string(),
+        }
+    }
+
+    fn state_text(&self) -> String {
+        let mut s = format!(
+            "m_is_active: {}\nm_has_prev_point: {}\nm_point_now: {}\nm_point_last: {}\n\
+             m_point_rx_prev_set: {}\nm_start_time: {}\nm_route_left: {}\n",
+            i32::from(self.active),
+            i32::from(self.has_prev_point),
+            self.point_now,
+            self.point_last,
+            i32::from(self.rx_prev.is_some()),
+            self.start_time,
+            self.route_left
+        );
+        if self.firmware.is_12x() {
+            s.push_str(&format!("m_route_end: {}\n", i32::from(self.route_end)));
+        }
+        s
+    }
+}
+
+fn on_off(args: &[&str], mut set: impl FnMut(bool) -> String) -> String {
+    if args.len() != 2 {
+        return "Wrong number of arguments\n".to_string();
+    }
+    match args[1] {
+        "0" => set(false),
+        "1" => set(true),
+        other => format!("Invalid argument {other}\n"),
+    }
+}
+
+/// Whether time of day `t1` is before `t2`, across midnight.
+fn time_before(t1: i32, t2: i32) -> bool {
+    let mut d = i64::from(t2) - i64::from(t1);
+    let half = i64::from(MS_PER_DAY / 2);
+    if d > half {
+        d -= i64::from(MS_PER_DAY);
+    } else if d < -half {
+        d += i64::from(MS_PER_DAY);
+    }
+    d > 0
+}
+
+/// Integer linear map (guarded against an empty input range).
+fn map_int(x: i32, in_min: i32, in_max: i32, out_min: i32, out_max: i32) -> i32 {
+    let span = i64::from(in_max) - i64::from(in_min);
+    if span == 0 {
+        return out_min;
+    }
+    let v = (i64::from(x) - i64::from(in_min)) * (i64::from(out_max) - i64::from(out_min)) / span
+        + i64::from(out_min);
+    v.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
+}
+
+/// The circle–segment goal: with one intersection that one, with two the one nearer the end; no
+/// solution for zero-length segments.
+fn circle_segment_goal(
+    car: FwPose,
+    radius: f32,
+    p1: &RoutePoint,
+    p2: &RoutePoint,
+) -> Option<RoutePoint> {
+    let (dx, dy) = (p2.px - p1.px, p2.py - p1.py);
+    let a = dx * dx + dy * dy;
+    if a <= 1e-6 {
+        return None;
+    }
+    let (fx, fy) = (p1.px - car.x, p1.py - car.y);
+    let b = 2.0 * (fx * dx + fy * dy);
+    let c = fx * fx + fy * fy - radius * radius;
+    let disc = b * b - 4.0 * a * c;
+    if disc < 0.0 || !disc.is_finite() {
+        return None;
+    }
+    let root = disc.sqrt();
+    let at = |t: f32| RoutePoint {
+        px: p1.px + t * dx,
+        py: p1.py + t * dy,
+        ..*p1
+    };
+    let hits: Vec<RoutePoint> = [(-b - root) / (2.0 * a), (-b + root) / (2.0 * a)]
+        .into_iter()
+        .filter(|t| (0.0..=1.0).contains(t))
+        .map(at)
+        .collect();
+    match hits.as_slice() {
+        [] => None,
+        [one] => Some(*one),
+        [first, second, ..] => Some(if first.dist(p2) < second.dist(p2) {
+            *first
+        } else {
+            *second
+        }),
+    }
+}
+
+/// The point of segment `p1–p2` closest to the car (parameter clamped to [0, 1]); a zero-length
+/// segment gives its point (the firmware computes 0/0 here).
+fn closest_point_on_segment(p1: &RoutePoint, p2: &RoutePoint, car: FwPose) -> RoutePoint {
+    let (dx, dy) = (p2.px - p1.px, p2.py - p1.py);
+    let len2 = dx * dx + dy * dy;
+    if len2 <= 0.0 {
+        return *p1;
+    }
+    let t = (((car.x - p1.px) * dx + (car.y - p1.py) * dy) / len2).clamp(0.0, 1.0);
+    RoutePoint {
+        px: p1.px + t * dx,
+        py: p1.py + t * dy,
+        ..*p1
+    }
+}
+
+/// The steering law of §6.3: pure pursuit with optional distance compensation.
+pub fn steering_angle(
+    car: FwPose,
+    goal_x: f32,
+    goal_y: f32,
+    wheelbase: f32,
+    compensate: bool,
+) -> f32 {
+    let theta = -car.yaw.to_radians();
+    let d = (goal_x - car.x).hypot(goal_y - car.y);
+    let gamma = theta - (goal_y - car.y).atan2(goal_x - car.x);
+    let dx = d * gamma.cos();
+    let dy = d * gamma.sin();
+    if dy.abs() <= 1e-6 {
+        return 0.0;
+    }
+    let mut r = -(dx * dx + dy * dy) / (2.0 * dy);
+    if compensate {
+        r /= (1.0 + 0.2 * d).min(5.0);
+    }
+    (wheelbase / r).atan()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cfg(fw: Firmware, repeat: bool) -> CarConfig {
+        let mut c = CarConfig::defaults(fw);
+        c.ap_repeat_routes = repeat;
+        c
+    }
+
+    fn straight(n: usize, speed: f32) -> Vec<RoutePoint> {
+        (0..n)
+            .map(|i| RoutePoint::at(i as f32, 0.0, speed))
+            .collect()
+    }
+
+    fn inputs(x: f32, y: f32, yaw: f32, speed: f32) -> ApInputs {
+        let pose = FwPose { x, y, yaw };
+        ApInputs {
+            fused: pose,
+            uwb: pose,
+            speed,
+            ms_today: -1,
+        }
+    }
+
+    #[test]
+    fn route_left_counts_from_the_current_segment_start_to_the_end() {
+        let c = cfg(Firmware::V10_1, false);
+        let mut ap = Autopilot::new(Firmware::V10_1);
+        ap.add_points(&straight(10, 1.0), &c);
+        ap.set_active(true, false, 0);
+        ap.cycle(&c, &inputs(0.2, 0.0, 0.0, 0.0));
+        assert_eq!(ap.route_left(), 10);
+        assert_eq!(ap.point_now(), 0);
+        ap.cycle(&c, &inputs(5.5, 0.0, 0.0, 0.0));
+        assert_eq!(ap.point_now(), 5);
+        ap.cycle(&c, &inputs(5.5, 0.0, 0.0, 0.0));
+        assert_eq!(ap.route_left(), 5);
+    }
+
+    #[test]
+    fn radius_rule_per_era() {
+        let ap10 = Autopilot::new(Firmware::V10_1);
+        let ap12 = Autopilot::new(Firmware::V12_3);
+        let c10 = CarConfig::defaults(Firmware::V10_1);
+        let c12 = CarConfig::defaults(Firmware::V12_3);
+        assert!((ap10.radius(&c10, 1.0) - 1.323).abs() < 1e-3);
+        assert!((ap10.radius(&c10, 2.0) - 1.452).abs() < 1e-3);
+        assert!((ap12.radius(&c12, 1.0) - 0.8).abs() < 1e-6);
+        assert!((ap12.radius(&c12, 2.0) - 1.6).abs() < 1e-6);
+    }
+
+    #[test]
+    fn steering_law_turns_left_towards_a_goal_on_the_left() {
+        let car = FwPose {
+            x: 0.0,
+            y: 0.0,
+            yaw: 0.0,
+        };
+        let left = steering_angle(car, 1.0, 1.0, 0.475, true);
+        let right = steering_angle(car, 1.0, -1.0, 0.475, true);
+        assert!(left > 0.0 && right < 0.0);
+        assert_eq!(steering_angle(car, 2.0, 0.0, 0.475, true), 0.0);
+        // R_pp = 1 m for a goal at (1, 1); with compensation R = 1 / (1 + 0.2·√2).
+        let expected = (0.475f32 / (1.0 / (1.0 + 0.2 * 2f32.sqrt()))).atan();
+        assert!((left - expected).abs() < 1e-5);
+    }
+
+    #[test]
+    fn goal_is_the_last_circle_hit_and_speed_is_interpolated_at_the_goal() {
+        let c = cfg(Firmware::V10_1, false);
+        let mut ap = Autopilot::new(Firmware::V10_1);
+        let mut pts = straight(10, 1.0);
+        pts[2].speed = 3.0;
+        ap.add_points(&pts, &c);
+        ap.set_active(true, false, 0);
+        let out = ap.cycle(&c, &inputs(0.5, 0.0, 0.0, 0.0));
+        let (gx, gy) = ap.goal();
+        assert!((gx - 1.7).abs() < 1e-5 && gy.abs() < 1e-6, "goal {gx},{gy}");
+        // Goal at 1.7 on segment 1→2: speed 1 + 0.7·2 = 2.4 m/s.
+        let rpm = (2.4f32 / c.vehicle.speed_per_erpm()).trunc();
+        match out.motor {
+            Some(MotorCommand::Rpm(r)) => assert!((r - rpm).abs() <= 1.0, "{r} vs {rpm}"),
+            other => panic!("expected an RPM command, got {other:?}"),
+        }
+        assert!((out.servo.unwrap() - c.vehicle.steering_center).abs() < 1e-6);
+    }
+
+    #[test]
+    fn end_of_route_10x_stays_active_and_brakes_every_cycle() {
+        let c = cfg(Firmware::V10_1, false);
+        let mut ap = Autopilot::new(Firmware::V10_1);
+        ap.add_points(&straight(5, 1.0), &c);
+        ap.set_active(true, false, 0);
+        // The first cycle moves point_now to 3; route_left is then 2 < 3.
+        ap.cycle(&c, &inputs(3.8, 0.0, 0.0, 0.0));
+        for _ in 0..3 {
+            let out = ap.cycle(&c, &inputs(3.8, 0.0, 0.0, 0.0));
+            assert_eq!(out.motor, Some(MotorCommand::CurrentBrake(10.0)));
+            assert_eq!(out.servo, Some(c.vehicle.steering_center));
+        }
+        assert!(ap.is_active());
+        assert_eq!(ap.rad_now(), -1.0);
+        // Appending resumes the drive.
+        ap.add_points(
+            &[
+                RoutePoint::at(5.0, 0.0, 1.0),
+                RoutePoint::at(6.0, 0.0, 1.0),
+                RoutePoint::at(7.0, 0.0, 1.0),
+            ],
+            &c,
+        );
+        let out = ap.cycle(&c, &inputs(3.8, 0.0, 0.0, 0.0));
+        assert!(matches!(out.motor, Some(MotorCommand::Rpm(_))));
+    }
+
+    #[test]
+    fn end_of_route_12_3_deactivates_resets_and_redrives_from_route_0() {
+        let c = cfg(Firmware::V12_3, false);
+        let mut ap = Autopilot::new(Firmware::V12_3);
+        ap.add_points(&straight(5, 1.0), &c);
+        ap.set_active(true, false, 0);
+        ap.cycle(&c, &inputs(0.0, 0.0, 0.0, 0.0));
+        let first = ap.cycle(&c, &inputs(3.8, 0.0, 0.0, 0.0));
+        assert!(matches!(first.motor, Some(MotorCommand::Rpm(_))));
+        let out = ap.cycle(&c, &inputs(3.8, 0.0, 0.0, 0.0));
+        assert_eq!(out.motor, Some(MotorCommand::CurrentBrake(10.0)));
+        assert!(!ap.is_active());
+        assert_eq!(
+            (ap.route_left(), ap.point_now(), ap.goal()),
+            (0, 0, (0.0, 0.0))
+        );
+        ap.set_active(true, false, 0);
+        ap.cycle(&c, &inputs(3.8, 0.0, 0.0, 0.0));
+        assert_eq!(ap.goal(), (0.0, 0.0), "heads for route[0] first");
+    }
+
+    #[test]
+    fn short_route_10x_brakes_12x_does_nothing() {
+        for (fw, expect_brake) in [(Firmware::V10_1, true), (Firmware::V12_3, false)] {
+            let c = cfg(fw, false);
+            let mut ap = Autopilot::new(fw);
+            ap.add_points(&straight(1, 1.0), &c);
+            ap.set_active(true, false, 0);
+            let out = ap.cycle(&c, &inputs(0.0, 0.0, 0.0, 0.0));
+            assert_eq!(out.motor.is_some(), expect_brake, "{fw}");
+        }
+    }
+
+    #[test]
+    fn duplicate_first_point_drops_the_packet_and_clear_forgets() {
+        let c = cfg(Firmware::V10_1, false);
+        let mut ap = Autopilot::new(Firmware::V10_1);
+        let pkt = straight(5, 1.0);
+        assert!(!ap.add_points(&pkt, &c).dropped_as_duplicate);
+        assert!(ap.add_points(&pkt, &c).dropped_as_duplicate);
+        assert_eq!(ap.point_last(), 5);
+        ap.clear(0);
+        assert!(!ap.add_points(&pkt, &c).dropped_as_duplicate);
+        assert_eq!(ap.point_last(), 5);
+    }
+
+    #[test]
+    fn clear_keeps_route_left_and_zeroes_the_goal() {
+        let c = cfg(Firmware::V10_1, false);
+        let mut ap = Autopilot::new(Firmware::V10_1);
+        ap.add_points(&straight(10, 1.0), &c);
+        ap.set_active(true, false, 0);
+        ap.cycle(&c, &inputs(0.5, 0.0, 0.0, 0.0));
+        ap.clear(0);
+        assert!(!ap.is_active());
+        assert_eq!(ap.route_left(), 10);
+        assert_eq!(ap.goal(), (0.0, 0.0));
+        ap.cycle(&c, &inputs(0.5, 0.0, 0.0, 0.0));
+        assert_eq!(ap.rad_now(), -1.0);
+    }
+
+    #[test]
+    fn replace_while_active_cuts_back_to_the_current_segment() {
+        let c = cfg(Firmware::V10_1, false);
+        let mut ap = Autopilot::new(Firmware::V10_1);
+        ap.add_points(&straight(10, 1.0), &c);
+        ap.set_active(true, false, 0);
+        ap.cycle(&c, &inputs(3.5, 0.0, 0.0, 0.0));
+        assert_eq!(ap.point_now(), 3);
+        let new: Vec<RoutePoint> = (0..3)
+            .map(|i| RoutePoint::at(3.0 + i as f32, 1.0, 1.0))
+            .collect();
+        ap.replace_route(&new, &c, 0);
+        assert_eq!(ap.point_last(), 6);
+        assert_eq!(ap.route_point(3).unwrap().py, 1.0);
+        assert!(ap.is_active());
+    }
+
+    #[test]
+    fn route_part_refuses_more_than_20_and_zeroes_missing_points() {
+        let c = cfg(Firmware::V10_1, false);
+        let mut ap = Autopilot::new(Firmware::V10_1);
+        ap.add_points(&straight(3, 1.0), &c);
+        assert!(ap.route_part(0, 21).is_none());
+        let part = ap.route_part(1, 4).unwrap();
+        assert_eq!(part.route_len, 3);
+        assert_eq!(part.points[0].px, 1.0);
+        assert_eq!(part.points[2], RoutePoint::default());
+        assert_eq!(
+            ap.route_part(-5, 1).unwrap().points[0],
+            RoutePoint::default()
+        );
+    }
+
+    #[test]
+    fn ring_overflow_overwrites_and_is_flagged() {
+        let c = cfg(Firmware::V10_1, false);
+        let mut ap = Autopilot::new(Firmware::V10_1);
+        let mut overflow = false;
+        for k in 0..101 {
+            let pts: Vec<RoutePoint> = (0..5)
+                .map(|i| RoutePoint::at((k * 5 + i) as f32, 0.0, 1.0))
+                .collect();
+            overflow |= ap.add_points(&pts, &c).ring_overflow;
+        }
+        assert!(overflow);
+        assert_eq!(ap.point_last(), 5);
+        assert_eq!(ap.route_point(0).unwrap().px, 500.0);
+    }
+
+    #[test]
+    fn zero_length_segments_are_guarded_and_flagged() {
+        let c = cfg(Firmware::V10_1, false);
+        let mut ap = Autopilot::new(Firmware::V10_1);
+        let pts = [
+            RoutePoint::at(0.0, 0.0, 1.0),
+            RoutePoint::at(0.0, 0.0, 1.0),
+            RoutePoint::at(1.0, 0.0, 1.0),
+            RoutePoint::at(2.0, 0.0, 1.0),
+            RoutePoint::at(3.0, 0.0, 1.0),
+        ];
+        ap.add_points(&pts, &c);
+        ap.set_active(true, false, 0);
+        let out = ap.cycle(&c, &inputs(0.0, 0.1, 0.0, 0.0));
+        assert!(out.zero_length_segment);
+        assert!(out.servo.is_some_and(f32::is_finite));
+    }
+
+    #[test]
+    fn past_the_end_circle_the_scan_wraps_onto_the_segment_back_to_route_0() {
+        // Quirk 8: an L-shaped route; the car stands beyond the route-end circle, next to the
+        // wrapped segment from the last point back to route[0].
+        let c = cfg(Firmware::V10_1, false);
+        let mut ap = Autopilot::new(Firmware::V10_1);
+        let mut pts: Vec<RoutePoint> = (0..6).map(|i| RoutePoint::at(i as f32, 0.0, 1.0)).collect();
+        pts.extend((1..5).map(|j| RoutePoint::at(5.0, j as f32, 1.0)));
+        ap.add_points(&pts, &c);
+        ap.set_active(true, false, 0);
+        ap.cycle(&c, &inputs(5.0, 3.5, -90.0, 0.0));
+        ap.cycle(&c, &inputs(5.0, 3.5, -90.0, 0.0));
+        assert_eq!(ap.point_now(), 8);
+        let out = ap.cycle(&c, &inputs(3.2, 2.0, 0.0, 0.0));
+        let (gx, gy) = ap.goal();
+        assert!(
+            (gy - 0.8 * gx).abs() < 1e-4,
+            "goal ({gx}, {gy}) on the way back to route[0]"
+        );
+        assert!(matches!(out.motor, Some(MotorCommand::Rpm(_))));
+    }
+
+    #[test]
+    fn terminal_texts() {
+        let mut ap = Autopilot::new(Firmware::V12_3);
+        assert_eq!(
+            ap.terminal(&["ap_set_look_ahead", "4"]).unwrap(),
+            ["Now looking 4 points ahead along the route"]
+        );
+        assert_eq!(
+            ap.terminal(&["ap_set_look_ahead", "0"]).unwrap(),
+            ["Invalid argument\n"]
+        );
+        assert_eq!(
+            ap.terminal(&["ap_set_look_ahead"]).unwrap(),
+            ["Wrong number of arguments\n"]
+        );
+        assert_eq!(ap.terminal(&["ap_dynamic_rad", "0"]).unwrap(), ["OK\n"]);
+        assert_eq!(
+            ap.terminal(&["ap_dynamic_rad", "x"]).unwrap(),
+            ["Invalid argument x\n"]
+        );
+        assert_eq!(
+            ap.terminal(&["ap_ang_dist_comp", "1"]).unwrap(),
+            ["Angle distance compensation enabled\n"]
+        );
+        assert_eq!(
+            ap.terminal(&["ap_ang_dist_comp", "0"]).unwrap(),
+            ["Angle distance compensation disabled\n"]
+        );
+        let state = &ap.terminal(&["ap_state"]).unwrap()[0];
+        assert!(state.starts_with("m_is_active: 0\nm_has_prev_point: 0\n"));
+        assert!(state.ends_with("m_route_left: 0\nm_route_end: 0\n"));
+        assert!(ap.terminal(&["ping"]).is_none());
+    }
+}
