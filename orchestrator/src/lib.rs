@@ -12,6 +12,7 @@ pub mod cli;
 pub mod commands;
 pub mod model;
 pub mod oracle;
+pub mod recording;
 pub mod safety;
 mod scenario_arg;
 mod seed;

@@ -1,0 +1,117 @@
+//! A campaign's telemetry recording: an MCAP file written as things happen, readable in Foxglove,
+//! the `mcap` CLI or any MCAP library.
+//!
+//! A [`Recorder`] opens the file at campaign start, writes one JSON message per event on the
+//! channel of its [`Topic`] (car state samples, commands and acks, planned segments and return
+//! routes, faults and their confirmation, oracle results, safety events, test starts and ends, and
+//! in a simulated run the simulator's hidden truth), and is finished at campaign end. The scenario
+//! and the campaign are MCAP metadata records. Every channel carries a JSON schema (`jsonschema`
+//! encoding) and JSON messages (`json` encoding).
+//!
+//! Log time: nanoseconds of the run's tokio clock since the campaign started (the `origin` the
+//! recorder is created with). In a virtual-time run the recording is therefore deterministic.
+//!
+//! Crash safety: messages collect in an in-memory chunk which is written and flushed whole when
+//! it spans [`RecordingStart::chunk_interval`] of log time, at [`Recorder::flush`] and before
+//! every metadata record. A killed process leaves a file that [`Recording`] (and `mcap`'s
+//! readers) read up to the last chunk written; dropping a recorder without [`Recorder::finish`]
+//! still completes the file.
+//!
+//! [`Recording`] reads a file back (also a cut-short one) for tests and replay. The format is
+//! documented channel by channel in `docs/recording.md`.
+//!
+//! Not here: deciding what to record when (the campaign runner), replay.
+
+mod reader;
+mod records;
+mod schema;
+#[cfg(test)]
+mod tests;
+mod topic;
+mod writer;
+
+use std::path::PathBuf;
+
+use thiserror::Error;
+
+pub use reader::{Recording, RecordingChannel, Stamped};
+pub use records::{
+    AckOutcome, CarCommand, CarStateRecord, CommandAck, CommandSent, FaultRecord, FaultSpec,
+    FaultStatus, OracleRecord, PlannedReturnRoute, PlannedSegment, Pose, Position, RadioPathKind,
+    RadioPathRecord, RangeOutcome, SafetyRecord, SimEvent, SimEventKind, SimFault, SimRange,
+    TestEvent, TestEventKind, TruthRecord,
+};
+pub use topic::{Record, Topic};
+pub use writer::{DEFAULT_CHUNK_INTERVAL, FinishedRecording, Recorder, RecordingStart};
+
+/// The `format` in a recording's `drivecheck.recording` metadata record.
+pub const RECORDING_FORMAT: &str = "drivecheck-recording";
+/// The recording format version this build writes and reads.
+pub const RECORDING_VERSION: u32 = 1;
+
+/// Why a recording could not be written or read.
+#[derive(Debug, Error)]
+pub enum RecordingError {
+    /// The file could not be created.
+    #[error("cannot create {path}: {source}")]
+    Create {
+        /// The file.
+        path: PathBuf,
+        /// What the system said.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file could not be read.
+    #[error("cannot read {path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// What the system said.
+        #[source]
+        source: std::io::Error,
+    },
+    /// Writing failed (disk full, closed file, …); the recorder refuses further writes.
+    #[error("cannot write the recording: {0}")]
+    Write(#[source] mcap::McapError),
+    /// The final flush or sync of the file failed.
+    #[error("cannot complete the recording: {0}")]
+    Complete(#[source] std::io::Error),
+    /// A message could not be encoded as JSON.
+    #[error("cannot encode a {topic} message: {source}")]
+    Encode {
+        /// The channel.
+        topic: &'static str,
+        /// What serde said.
+        #[source]
+        source: serde_json::Error,
+    },
+    /// The campaign record could not be written as JSON.
+    #[error("cannot encode the campaign record: {0}")]
+    Campaign(#[source] crate::case::CaseError),
+    /// The bytes do not start like an MCAP file.
+    #[error("not an MCAP file: {0}")]
+    NotMcap(#[source] mcap::McapError),
+    /// The file is not a drivecheck recording this build reads (its `drivecheck.recording`
+    /// metadata record is absent or names another format or version).
+    #[error(
+        "not a drivecheck recording version {RECORDING_VERSION} \
+         (format {format:?}, schema_version {version:?})"
+    )]
+    UnsupportedFormat {
+        /// The `format` found.
+        format: Option<String>,
+        /// The `schema_version` found.
+        version: Option<String>,
+    },
+    /// A message does not decode as its channel's record.
+    #[error("{topic} message {index}: {source}")]
+    Decode {
+        /// The channel.
+        topic: &'static str,
+        /// The message's position among the channel's messages, from 0.
+        index: usize,
+        /// What serde said.
+        #[source]
+        source: serde_json::Error,
+    },
+}

@@ -1,0 +1,223 @@
+//! Reading a recording back: its channels with their schemas, its metadata records, and its
+//! messages per channel as typed records. A file cut short (a killed campaign) reads up to the
+//! last complete chunk; [`Recording::cut_short`] says why it stopped.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use mcap::read::{ChunkFlattener, Options};
+use mcap::records::Record as McapRecord;
+
+use super::topic::{Record, Topic};
+use super::{RECORDING_FORMAT, RECORDING_VERSION, RecordingError};
+
+/// A channel of a recording, as the file declares it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RecordingChannel {
+    /// The topic name.
+    pub topic: String,
+    /// The message encoding (`json`).
+    pub message_encoding: String,
+    /// The schema's name (`drivecheck.CarState`, …); empty without a schema.
+    pub schema_name: String,
+    /// The schema's encoding (`jsonschema`); empty without a schema.
+    pub schema_encoding: String,
+    /// The schema's bytes.
+    pub schema: Vec<u8>,
+}
+
+/// A message read back, with its MCAP header fields.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Stamped<R> {
+    /// Log time: ns of the run's clock since the campaign started.
+    pub log_time_ns: u64,
+    /// The message's number on its channel, from 1.
+    pub sequence: u32,
+    /// The record.
+    pub message: R,
+}
+
+#[derive(Debug, Clone)]
+struct RawMessage {
+    channel_id: u16,
+    sequence: u32,
+    log_time: u64,
+    data: Vec<u8>,
+}
+
+/// A recording read into memory (see the module doc).
+#[derive(Debug, Clone, Default)]
+pub struct Recording {
+    channels: BTreeMap<u16, RecordingChannel>,
+    metadata: BTreeMap<String, BTreeMap<String, String>>,
+    messages: Vec<RawMessage>,
+    complete: bool,
+    cut_short: Option<String>,
+}
+
+#[derive(Debug, Clone)]
+struct SchemaRecord {
+    name: String,
+    encoding: String,
+    data: Vec<u8>,
+}
+
+impl Recording {
+    /// Reads the recording at `path`.
+    pub fn read(path: &Path) -> Result<Self, RecordingError> {
+        let bytes = std::fs::read(path).map_err(|source| RecordingError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        Self::from_bytes(&bytes)
+    }
+
+    /// Reads a recording from its bytes. Only bytes that do not start like an MCAP file are an
+    /// error; damage further on ends the reading there (see [`Recording::cut_short`]).
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, RecordingError> {
+        let mut recording = Recording::default();
+        let mut schemas = BTreeMap::new();
+        let mut started = false;
+        for record in ChunkFlattener::new_with_options(bytes, Options::ValidateChunkCrcs.into())
+            .map_err(RecordingError::NotMcap)?
+        {
+            match record {
+                Ok(McapRecord::Header(_)) => started = true,
+                Ok(record) => recording.take(record, &mut schemas),
+                Err(e) if !started => return Err(RecordingError::NotMcap(e)),
+                Err(e) => {
+                    recording.cut_short = Some(e.to_string());
+                    break;
+                }
+            }
+        }
+        if !started {
+            return Err(RecordingError::NotMcap(mcap::McapError::UnexpectedEof));
+        }
+        Ok(recording)
+    }
+
+    fn take(&mut self, record: McapRecord<'_>, schemas: &mut BTreeMap<u16, SchemaRecord>) {
+        match record {
+            McapRecord::Schema { header, data } => {
+                let schema = SchemaRecord {
+                    name: header.name,
+                    encoding: header.encoding,
+                    data: data.into_owned(),
+                };
+                schemas.insert(header.id, schema);
+            }
+            McapRecord::Channel(channel) => {
+                let schema = schemas.get(&channel.schema_id);
+                let entry = RecordingChannel {
+                    topic: channel.topic,
+                    message_encoding: channel.message_encoding,
+                    schema_name: schema.map(|s| s.name.clone()).unwrap_or_default(),
+                    schema_encoding: schema.map(|s| s.encoding.clone()).unwrap_or_default(),
+                    schema: schema.map(|s| s.data.clone()).unwrap_or_default(),
+                };
+                self.channels.insert(channel.id, entry);
+            }
+            McapRecord::Message { header, data } => self.messages.push(RawMessage {
+                channel_id: header.channel_id,
+                sequence: header.sequence,
+                log_time: header.log_time,
+                data: data.into_owned(),
+            }),
+            McapRecord::Metadata(m) => {
+                self.metadata.insert(m.name, m.metadata);
+            }
+            McapRecord::Footer(_) => self.complete = true,
+            _ => {}
+        }
+    }
+
+    /// Checks that the file is a drivecheck recording of the version this build reads (its
+    /// `drivecheck.recording` metadata record, written first, so a cut-short file has it too).
+    pub fn check_format(&self) -> Result<(), RecordingError> {
+        let header = self.metadata("drivecheck.recording");
+        let format = header.and_then(|h| h.get("format")).cloned();
+        let version = header.and_then(|h| h.get("schema_version")).cloned();
+        let expected_version = RECORDING_VERSION.to_string();
+        if format.as_deref() == Some(RECORDING_FORMAT)
+            && version.as_deref() == Some(expected_version.as_str())
+        {
+            return Ok(());
+        }
+        Err(RecordingError::UnsupportedFormat { format, version })
+    }
+
+    /// Whether the file was finished (it ends with its summary and footer).
+    pub fn is_complete(&self) -> bool {
+        self.complete && self.cut_short.is_none()
+    }
+
+    /// Why reading stopped before the end of a complete file (a truncated or damaged file), if
+    /// it did.
+    pub fn cut_short(&self) -> Option<&str> {
+        self.cut_short.as_deref()
+    }
+
+    /// The channels, in id order.
+    pub fn channels(&self) -> impl Iterator<Item = &RecordingChannel> {
+        self.channels.values()
+    }
+
+    /// The channel of `topic`, if the file declares it.
+    pub fn channel(&self, topic: Topic) -> Option<&RecordingChannel> {
+        self.channels.values().find(|c| c.topic == topic.name())
+    }
+
+    /// The metadata record `name` (`drivecheck.recording`, `drivecheck.scenario`,
+    /// `drivecheck.campaign`, `drivecheck.campaign_end`).
+    pub fn metadata(&self, name: &str) -> Option<&BTreeMap<String, String>> {
+        self.metadata.get(name)
+    }
+
+    /// Messages on all channels.
+    pub fn message_count(&self) -> usize {
+        self.messages.len()
+    }
+
+    /// Messages on `topic`'s channel.
+    pub fn count(&self, topic: Topic) -> usize {
+        self.raw(topic).count()
+    }
+
+    /// The messages of `R`'s channel in file order, decoded.
+    pub fn messages<R: Record>(&self) -> Result<Vec<Stamped<R>>, RecordingError> {
+        self.raw(R::TOPIC)
+            .enumerate()
+            .map(|(index, m)| {
+                let message =
+                    serde_json::from_slice(&m.data).map_err(|source| RecordingError::Decode {
+                        topic: R::TOPIC.name(),
+                        index,
+                        source,
+                    })?;
+                Ok(Stamped {
+                    log_time_ns: m.log_time,
+                    sequence: m.sequence,
+                    message,
+                })
+            })
+            .collect()
+    }
+
+    /// The JSON payloads of `topic`'s messages in file order, undecoded.
+    pub fn payloads(&self, topic: Topic) -> impl Iterator<Item = &[u8]> {
+        self.raw(topic).map(|m| m.data.as_slice())
+    }
+
+    fn raw(&self, topic: Topic) -> impl Iterator<Item = &RawMessage> {
+        let ids: Vec<u16> = self
+            .channels
+            .iter()
+            .filter(|(_, c)| c.topic == topic.name())
+            .map(|(&id, _)| id)
+            .collect();
+        self.messages
+            .iter()
+            .filter(move |m| ids.contains(&m.channel_id))
+    }
+}

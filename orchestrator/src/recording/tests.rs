@@ -1,0 +1,585 @@
+//! Tests of the recording: every channel read back, schemas that describe the messages, and what
+//! a killed or truncated recording still holds.
+
+use std::path::Path;
+use std::time::Duration;
+
+use car_link::{CarState, StateSample};
+use car_sim::{DebugEvent, FwPose, RadioPath, RangeResult, Truth};
+use scenarios::Scenario;
+use serde_json::Value;
+use tokio::time::{Instant, advance};
+
+use super::*;
+use crate::case::{
+    CAMPAIGN_FORMAT, CampaignRecord, RoutePointRecord, SCHEMA_VERSION, ScenarioRef, SegmentResult,
+    Settings, tool_version,
+};
+use crate::model::{Fault, FaultKind, Probe, Segment, SegmentIntent};
+use crate::oracle::{FailurePolicy, SegmentOracle, Verdict};
+use crate::safety::{Abort, AbortReason};
+
+fn scenario() -> Scenario {
+    scenarios::bundled::load("parking-lot-2anchors")
+        .unwrap()
+        .scenario
+}
+
+fn campaign(s: &Scenario) -> CampaignRecord {
+    CampaignRecord {
+        format: CAMPAIGN_FORMAT.to_owned(),
+        schema_version: SCHEMA_VERSION,
+        tool_version: tool_version().to_owned(),
+        seed: 42,
+        no_faults: false,
+        scenario: ScenarioRef::of(s),
+        settings: Settings::new(s, 3, FailurePolicy::default()),
+        car: "sim".to_owned(),
+        car_firmware_version: Some("12.3".to_owned()),
+        started_at: "2026-11-22T10:55:21Z".to_owned(),
+        ended_at: None,
+        summary: None,
+    }
+}
+
+fn create(path: &Path, s: &Scenario, simulated: bool, origin: Instant) -> Recorder {
+    let campaign = campaign(s);
+    let start = RecordingStart {
+        campaign: &campaign,
+        scenario: s,
+        origin,
+        simulated,
+        chunk_interval: DEFAULT_CHUNK_INTERVAL,
+    };
+    Recorder::create(path, &start).unwrap()
+}
+
+/// A state sample requested at `at` and received 12 ms later.
+fn sample(at: Instant, x: f64) -> StateSample {
+    let state = CarState {
+        px: x,
+        py: 2.0,
+        yaw: 90.0,
+        px_uwb: x + 0.3,
+        py_uwb: 2.4,
+        speed: 1.2,
+        ms_today: 40_000_123,
+        ap_route_left: 7,
+        ..CarState::default()
+    };
+    StateSample {
+        state,
+        car_id: 5,
+        requested_at: at,
+        received_at: at + Duration::from_millis(12),
+    }
+}
+
+fn fault() -> Fault {
+    Fault {
+        probe: Probe::UwbRange { anchor: 3 },
+        kind: FaultKind::Offset,
+        param: 1.5,
+        start: 2,
+        duration: 10,
+    }
+}
+
+fn segment() -> Segment {
+    Segment {
+        intent: SegmentIntent {
+            seed: 7,
+            points: 2,
+            speed_mps: 1.0,
+        },
+        points: vec![trajgen::Point::new(1.0, 2.0), trajgen::Point::new(2.0, 2.5)],
+        margin: vec![trajgen::Point::new(3.0, 3.0)],
+    }
+}
+
+fn truth(time_ms: u64) -> Truth {
+    let pose = FwPose {
+        x: 1.0,
+        y: 2.0,
+        yaw: 90.0,
+    };
+    Truth {
+        time_ms,
+        x: 1.0,
+        y: 2.0,
+        heading: 0.5,
+        speed: 1.0,
+        steering_angle: 0.1,
+        fused: pose,
+        uwb: FwPose {
+            x: f32::NAN,
+            ..pose
+        },
+    }
+}
+
+fn debug_events() -> Vec<DebugEvent> {
+    vec![
+        DebugEvent::Range {
+            at_ms: 900,
+            anchor: 3,
+            path: Some(RadioPath::Reflected {
+                wall: 1,
+                length: 12.0,
+                direct: 9.0,
+            }),
+            true_range: Some(9.1),
+            result: RangeResult::Measured(12.25),
+        },
+        DebugEvent::RangeFused {
+            at_ms: 950,
+            anchor: 3,
+            range: 13.75,
+            moved: true,
+        },
+        DebugEvent::Fault {
+            at_ms: 950,
+            probe: "uwb_range_3".to_owned(),
+            slots: 1,
+            iteration: 3,
+            before: 12.25,
+            after: 13.75,
+        },
+        DebugEvent::WatchdogExpired { at_ms: 990 },
+    ]
+}
+
+fn oracle_record() -> OracleRecord {
+    let mut oracle = SegmentOracle::new();
+    oracle.push(trajgen::Point::new(0.4, 0.3), trajgen::Point::new(0.0, 0.0));
+    OracleRecord {
+        test_index: 0,
+        result: SegmentResult {
+            segment_index: 0,
+            command_index: 1,
+            faults_preceding: vec![0],
+            faults_active: vec![],
+            oracle: oracle.result(1.0),
+        },
+    }
+}
+
+/// Writes one test's worth of every channel; returns the file's bytes.
+async fn record_every_channel(path: &Path, s: &Scenario) -> Vec<u8> {
+    let origin = Instant::now();
+    let mut recorder = create(path, s, true, origin);
+    recorder
+        .write(&TestEvent {
+            test_index: 0,
+            event: TestEventKind::Started { commands: 2 },
+        })
+        .unwrap();
+    recorder
+        .write(&PlannedReturnRoute {
+            test_index: 0,
+            points: vec![RoutePointRecord {
+                x: -1.0,
+                y: 0.0,
+                speed: 0.8,
+            }],
+        })
+        .unwrap();
+    recorder
+        .write(&PlannedSegment::new(0, 1, 0, &segment()))
+        .unwrap();
+    recorder.write(&FaultRecord::sent(0, 0, &fault())).unwrap();
+    let confirmation: Result<(), String> = Ok(());
+    recorder
+        .write(&FaultRecord::answered(0, 0, &fault(), &confirmation))
+        .unwrap();
+    let points = [car_link::RoutePoint::at(1.0, 2.0, 1.0)];
+    let id = recorder
+        .command_sent(Some(0), CarCommand::add_points(&points))
+        .unwrap();
+    advance(Duration::from_millis(30)).await;
+    let acked: Result<(), String> = Ok(());
+    recorder.command_answered(id, &acked).unwrap();
+    recorder.car_state(&sample(Instant::now(), 1.0)).unwrap();
+    advance(Duration::from_millis(1000)).await;
+    recorder.sim_truth(&truth(1000)).unwrap();
+    recorder.sim_events(&debug_events()).unwrap();
+    recorder.write(&oracle_record()).unwrap();
+    let abort = Abort::new(AbortReason::RtkLost, Duration::from_millis(1030));
+    recorder.write(&SafetyRecord::new(Some(0), abort)).unwrap();
+    recorder
+        .write(&TestEvent {
+            test_index: 0,
+            event: TestEventKind::Ended {
+                verdict: Verdict::Aborted,
+                reason: Some("RTK fix lost".to_owned()),
+            },
+        })
+        .unwrap();
+    let finished = recorder.finish().unwrap();
+    assert_eq!(finished.messages, 16);
+    std::fs::read(path).unwrap()
+}
+
+#[tokio::test(start_paused = true)]
+async fn every_channel_reads_back_what_was_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("campaign.mcap");
+    let s = scenario();
+    record_every_channel(&path, &s).await;
+    let recording = Recording::read(&path).unwrap();
+    assert!(recording.is_complete(), "{:?}", recording.cut_short());
+    for topic in Topic::ALL {
+        assert!(recording.count(topic) > 0, "no message on {topic}");
+    }
+    let commands = recording.messages::<CommandSent>().unwrap();
+    let acks = recording.messages::<CommandAck>().unwrap();
+    assert_eq!(acks[0].message.id, commands[0].message.id);
+    assert_eq!(acks[0].message.outcome, AckOutcome::Acked);
+    assert_eq!(acks[0].message.round_trip_ms, Some(30.0));
+    assert_eq!(acks[0].log_time_ns, 30_000_000);
+    let states = recording.messages::<CarStateRecord>().unwrap();
+    let origin = Instant::now() - Duration::from_millis(1030);
+    let at = origin + Duration::from_millis(30);
+    assert_eq!(
+        states[0].message,
+        CarStateRecord::new(&sample(at, 1.0), origin)
+    );
+    assert_eq!(states[0].message.requested_at_ns, 30_000_000);
+    assert_eq!(
+        states[0].log_time_ns, 42_000_000,
+        "a sample is logged when received"
+    );
+    let deviation = states[0].message.deviation_m.unwrap();
+    assert!((deviation - 0.5).abs() < 1e-9, "{deviation}");
+    let faults = recording.messages::<FaultRecord>().unwrap();
+    assert_eq!(faults[1].message.status, FaultStatus::Confirmed);
+    let segments = recording.messages::<PlannedSegment>().unwrap();
+    assert_eq!(
+        segments[0].message,
+        PlannedSegment::new(0, 1, 0, &segment())
+    );
+    let oracle = recording.messages::<OracleRecord>().unwrap();
+    assert_eq!(oracle[0].message, oracle_record());
+    let safety = recording.messages::<SafetyRecord>().unwrap();
+    assert_eq!(safety[0].message.message, "RTK fix lost");
+}
+
+#[tokio::test(start_paused = true)]
+async fn sim_records_carry_the_hidden_truth_at_their_simulation_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("campaign.mcap");
+    record_every_channel(&path, &scenario()).await;
+    let recording = Recording::read(&path).unwrap();
+    let truth = recording.messages::<TruthRecord>().unwrap();
+    assert_eq!(truth[0].log_time_ns, 1_030_000_000);
+    assert!(
+        truth[0].message.uwb.x.is_nan(),
+        "a NaN estimate reads back as NaN"
+    );
+    assert_eq!(truth[0].message.uwb_error_m, None);
+    let ranges = recording.messages::<SimRange>().unwrap();
+    assert_eq!(ranges.len(), 2);
+    assert_eq!(
+        ranges[0].log_time_ns, 930_000_000,
+        "sim 900 ms is 100 ms before the truth"
+    );
+    let SimRange::Request {
+        path,
+        outcome,
+        range_m,
+        ..
+    } = &ranges[0].message
+    else {
+        panic!("expected a request, got {:?}", ranges[0].message);
+    };
+    assert_eq!(path.map(|p| p.kind), Some(RadioPathKind::Reflected));
+    assert_eq!(*outcome, RangeOutcome::Measured);
+    assert_eq!(*range_m, Some(12.25));
+    let faults = recording.messages::<SimFault>().unwrap();
+    assert_eq!(
+        (faults[0].message.before, faults[0].message.after),
+        (12.25, 13.75)
+    );
+    let events = recording.messages::<SimEvent>().unwrap();
+    assert_eq!(events[0].message.event, SimEventKind::WatchdogExpired);
+}
+
+#[tokio::test(start_paused = true)]
+async fn the_scenario_and_campaign_are_metadata_records() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("campaign.mcap");
+    let s = scenario();
+    record_every_channel(&path, &s).await;
+    let recording = Recording::read(&path).unwrap();
+    assert_eq!(recording.check_format().map_err(|e| e.to_string()), Ok(()));
+    let header = recording.metadata("drivecheck.recording").unwrap();
+    assert_eq!(header["format"], RECORDING_FORMAT);
+    assert_eq!(header["schema_version"], RECORDING_VERSION.to_string());
+    let scenario = recording.metadata("drivecheck.scenario").unwrap();
+    assert_eq!(scenario["hash"], s.hash());
+    let reloaded = scenarios::from_toml_str(&scenario["toml"], "recording").unwrap();
+    assert_eq!(reloaded.scenario.hash(), s.hash());
+    let campaign = recording.metadata("drivecheck.campaign").unwrap();
+    assert_eq!(campaign["seed"], "42");
+    let record = CampaignRecord::from_json(&campaign["json"]).unwrap();
+    assert_eq!(record.scenario.hash, Some(s.hash()));
+}
+
+#[tokio::test(start_paused = true)]
+async fn every_channel_has_a_json_schema_its_messages_follow() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("campaign.mcap");
+    record_every_channel(&path, &scenario()).await;
+    let recording = Recording::read(&path).unwrap();
+    for topic in Topic::ALL {
+        let channel = recording.channel(topic).unwrap();
+        assert_eq!(channel.message_encoding, "json");
+        assert_eq!(channel.schema_encoding, "jsonschema");
+        assert_eq!(channel.schema_name, topic.schema_name());
+        let schema: Value = serde_json::from_slice(&channel.schema).unwrap();
+        assert_eq!(schema["type"], "object", "{topic}");
+        assert_eq!(schema["title"], topic.schema_name());
+        for (i, message) in raw_messages(&recording, topic).iter().enumerate() {
+            if let Err(e) = follows(&schema, message, "") {
+                panic!("{topic} message {i} does not follow its schema: {e}\n{message}");
+            }
+        }
+    }
+}
+
+/// `topic`'s messages as JSON values, as written.
+fn raw_messages(recording: &Recording, topic: Topic) -> Vec<Value> {
+    recording
+        .payloads(topic)
+        .map(|bytes| serde_json::from_slice(bytes).unwrap())
+        .collect()
+}
+
+/// Whether `value` follows `schema`, for the keywords our schemas use (`type`, `const`, `enum`,
+/// `oneOf`, `properties`, `required`, `items`); an unknown property is an error, so a field
+/// added to a record without its schema fails.
+fn follows(schema: &Value, value: &Value, path: &str) -> Result<(), String> {
+    if let Some(types) = schema.get("type") {
+        let types: Vec<&str> = match types {
+            Value::String(t) => vec![t.as_str()],
+            other => other
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter_map(Value::as_str)
+                .collect(),
+        };
+        if !types.iter().any(|t| has_type(value, t)) {
+            return Err(format!("{path}: {value} is not {types:?}"));
+        }
+    }
+    if schema.get("const").is_some_and(|c| c != value) {
+        return Err(format!("{path}: {value} is not {}", schema["const"]));
+    }
+    if let Some(values) = schema.get("enum").and_then(Value::as_array)
+        && !values.contains(value)
+    {
+        return Err(format!("{path}: {value} is not one of {values:?}"));
+    }
+    if let Some(variants) = schema.get("oneOf").and_then(Value::as_array) {
+        let matching = variants
+            .iter()
+            .filter(|v| follows(v, value, path).is_ok())
+            .count();
+        if matching != 1 {
+            return Err(format!("{path}: {value} matches {matching} variants"));
+        }
+    }
+    follows_members(schema, value, path)
+}
+
+fn follows_members(schema: &Value, value: &Value, path: &str) -> Result<(), String> {
+    if let (Some(object), Some(properties)) = (value.as_object(), schema.get("properties")) {
+        for (key, member) in object {
+            let Some(member_schema) = properties.get(key) else {
+                return Err(format!("{path}.{key}: not in the schema"));
+            };
+            follows(member_schema, member, &format!("{path}.{key}"))?;
+        }
+        let required = schema.get("required").and_then(Value::as_array);
+        for key in required.into_iter().flatten().filter_map(Value::as_str) {
+            if !object.contains_key(key) {
+                return Err(format!("{path}.{key}: required but absent"));
+            }
+        }
+    }
+    if let (Some(items), Some(item_schema)) = (value.as_array(), schema.get("items")) {
+        for (i, item) in items.iter().enumerate() {
+            follows(item_schema, item, &format!("{path}[{i}]"))?;
+        }
+    }
+    Ok(())
+}
+
+fn has_type(value: &Value, t: &str) -> bool {
+    match t {
+        "object" => value.is_object(),
+        "array" => value.is_array(),
+        "string" => value.is_string(),
+        "boolean" => value.is_boolean(),
+        "null" => value.is_null(),
+        "number" => value.is_number(),
+        "integer" => value.is_i64() || value.is_u64(),
+        _ => false,
+    }
+}
+
+#[test]
+fn the_schema_checker_refuses_a_field_the_schema_lacks() {
+    let schema = schema::schema(Topic::SimEvents);
+    let good = serde_json::json!({"sim_ms": 5, "event": "watchdog_expired"});
+    assert_eq!(follows(&schema, &good, ""), Ok(()));
+    let extra = serde_json::json!({"sim_ms": 5, "event": "watchdog_expired", "x": 1});
+    assert!(follows(&schema, &extra, "").is_err());
+    let wrong = serde_json::json!({"sim_ms": 5, "event": "reboot"});
+    assert!(follows(&schema, &wrong, "").is_err());
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_killed_recorder_leaves_every_chunk_written_before_the_kill() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("campaign.mcap");
+    let s = scenario();
+    let origin = Instant::now();
+    let mut recorder = create(&path, &s, false, origin);
+    recorder.car_state(&sample(origin, 1.0)).unwrap();
+    advance(Duration::from_millis(500)).await;
+    recorder.car_state(&sample(Instant::now(), 2.0)).unwrap();
+    advance(Duration::from_millis(600)).await;
+    // 1.1 s after the chunk opened: this message closes it and opens the next one.
+    recorder.car_state(&sample(Instant::now(), 3.0)).unwrap();
+    recorder.write(&test_started(1)).unwrap();
+    // A kill: no destructor runs, the open chunk and the file buffer are lost.
+    std::mem::forget(recorder);
+
+    let recording = Recording::read(&path).unwrap();
+    assert!(recording.check_format().is_ok());
+    assert!(!recording.is_complete());
+    assert!(recording.cut_short().is_some());
+    let states = recording.messages::<CarStateRecord>().unwrap();
+    let xs: Vec<f64> = states.iter().map(|m| m.message.rtk.x).collect();
+    assert_eq!(xs, [1.0, 2.0]);
+    assert_eq!(recording.count(Topic::Tests), 0);
+    assert!(recording.metadata("drivecheck.scenario").is_some());
+    assert!(recording.channel(Topic::SafetyEvents).is_some());
+    assert!(
+        recording.channel(Topic::SimTruth).is_none(),
+        "a real car has no /sim channels"
+    );
+}
+
+fn test_started(test_index: usize) -> TestEvent {
+    TestEvent {
+        test_index,
+        event: TestEventKind::Started { commands: 4 },
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_recorder_dropped_without_finish_completes_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("campaign.mcap");
+    let mut recorder = create(&path, &scenario(), false, Instant::now());
+    recorder.write(&test_started(0)).unwrap();
+    drop(recorder);
+    let recording = Recording::read(&path).unwrap();
+    assert!(recording.is_complete(), "{:?}", recording.cut_short());
+    assert_eq!(recording.count(Topic::Tests), 1);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_truncated_recording_reads_every_whole_chunk_in_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("campaign.mcap");
+    let mut recorder = create(&path, &scenario(), false, Instant::now());
+    for test_index in 0..12 {
+        recorder.write(&test_started(test_index)).unwrap();
+        if test_index % 3 == 2 {
+            recorder.flush().unwrap();
+        }
+    }
+    recorder.finish().unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let chunk_ends = chunk_ends(&bytes);
+    assert_eq!(chunk_ends.len(), 4);
+    let mut lengths: Vec<usize> = (0..bytes.len()).step_by(11).collect();
+    lengths.extend(chunk_ends.iter().flat_map(|&end| [end - 1, end, end + 1]));
+    for length in lengths {
+        let Ok(recording) = Recording::from_bytes(&bytes[..length]) else {
+            assert!(length < 100, "a {length}-byte prefix was refused");
+            continue;
+        };
+        // Whole messages of a chunk cut in the middle are read too, never a partial one.
+        let whole_chunks = chunk_ends.iter().filter(|&&end| end <= length).count();
+        let tests = recording.messages::<TestEvent>().unwrap();
+        let indices: Vec<usize> = tests.iter().map(|m| m.message.test_index).collect();
+        let expected: Vec<usize> = (0..indices.len()).collect();
+        assert_eq!(indices, expected, "prefix of {length} bytes");
+        let at_a_boundary = chunk_ends.contains(&length);
+        let most = if at_a_boundary { 0 } else { 2 };
+        let read = indices.len();
+        assert!(
+            (whole_chunks * 3..=whole_chunks * 3 + most).contains(&read),
+            "prefix of {length} bytes: {read} messages, {whole_chunks} whole chunks"
+        );
+    }
+}
+
+/// The offset just past each chunk record holding messages (the first chunk holds the schemas
+/// and channels).
+fn chunk_ends(bytes: &[u8]) -> Vec<usize> {
+    let summary = mcap::Summary::read(bytes).unwrap().unwrap();
+    summary
+        .chunk_indexes
+        .iter()
+        .filter(|c| !c.message_index_offsets.is_empty())
+        .map(|c| usize::try_from(c.chunk_start_offset + c.chunk_length).unwrap())
+        .collect()
+}
+
+#[test]
+fn bytes_that_are_not_mcap_are_refused() {
+    let error = Recording::from_bytes(b"{\"format\": \"drivecheck-case\"}").unwrap_err();
+    assert!(matches!(error, RecordingError::NotMcap(_)), "{error}");
+}
+
+#[test]
+fn another_mcap_file_is_not_a_drivecheck_recording() {
+    let mut bytes = Vec::new();
+    let mut writer = mcap::Writer::new(std::io::Cursor::new(&mut bytes)).unwrap();
+    writer.finish().unwrap();
+    drop(writer);
+    let recording = Recording::from_bytes(&bytes).unwrap();
+    assert!(recording.is_complete());
+    let error = recording.check_format().unwrap_err();
+    assert!(
+        matches!(
+            error,
+            RecordingError::UnsupportedFormat { format: None, .. }
+        ),
+        "{error}"
+    );
+}
+
+#[test]
+fn topics_have_unique_names_and_round_trip() {
+    for topic in Topic::ALL {
+        assert_eq!(Topic::from_name(topic.name()), Some(topic));
+    }
+    let mut names: Vec<&str> = Topic::ALL.iter().map(|t| t.name()).collect();
+    names.sort_unstable();
+    names.dedup();
+    assert_eq!(names.len(), Topic::ALL.len());
+}
+
+#[test]
+fn a_recorder_can_move_into_a_task() {
+    fn send<T: Send + 'static>() {}
+    send::<Recorder>();
+    send::<Recording>();
+}

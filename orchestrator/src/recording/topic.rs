@@ -1,0 +1,119 @@
+//! The channels of a recording: their topic names and which record type each carries.
+
+use std::fmt;
+
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+
+/// A channel of a recording.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Topic {
+    /// `/car/state`: every state sample the car answered ([`super::CarStateRecord`]).
+    CarState,
+    /// `/commands`: every command sent to the car, fault commands aside ([`super::CommandSent`]).
+    Commands,
+    /// `/acks`: the car's answer to each command ([`super::CommandAck`]).
+    Acks,
+    /// `/tests`: a test started or ended ([`super::TestEvent`]).
+    Tests,
+    /// `/plan/segments`: each segment as planned ([`super::PlannedSegment`]).
+    PlanSegments,
+    /// `/plan/return_route`: each return route as planned ([`super::PlannedReturnRoute`]).
+    PlanReturnRoute,
+    /// `/faults`: fault commands and their confirmation ([`super::FaultRecord`]).
+    Faults,
+    /// `/oracle/segments`: the oracle's result per driven segment ([`super::OracleRecord`]).
+    OracleSegments,
+    /// `/safety/events`: the stops the safety monitor demanded ([`super::SafetyRecord`]).
+    SafetyEvents,
+    /// `/sim/truth`: the simulated car's true pose and estimates ([`super::TruthRecord`]).
+    SimTruth,
+    /// `/sim/ranges`: every simulated UWB range and its fate ([`super::SimRange`]).
+    SimRanges,
+    /// `/sim/faults`: each fault application inside the simulator ([`super::SimFault`]).
+    SimFaults,
+    /// `/sim/events`: the simulated firmware's watchdog and quirk events ([`super::SimEvent`]).
+    SimEvents,
+}
+
+impl Topic {
+    /// Every channel, in registration order.
+    pub const ALL: [Topic; 13] = [
+        Topic::CarState,
+        Topic::Commands,
+        Topic::Acks,
+        Topic::Tests,
+        Topic::PlanSegments,
+        Topic::PlanReturnRoute,
+        Topic::Faults,
+        Topic::OracleSegments,
+        Topic::SafetyEvents,
+        Topic::SimTruth,
+        Topic::SimRanges,
+        Topic::SimFaults,
+        Topic::SimEvents,
+    ];
+
+    /// The topic name (`/car/state`, …).
+    pub fn name(self) -> &'static str {
+        match self {
+            Topic::CarState => "/car/state",
+            Topic::Commands => "/commands",
+            Topic::Acks => "/acks",
+            Topic::Tests => "/tests",
+            Topic::PlanSegments => "/plan/segments",
+            Topic::PlanReturnRoute => "/plan/return_route",
+            Topic::Faults => "/faults",
+            Topic::OracleSegments => "/oracle/segments",
+            Topic::SafetyEvents => "/safety/events",
+            Topic::SimTruth => "/sim/truth",
+            Topic::SimRanges => "/sim/ranges",
+            Topic::SimFaults => "/sim/faults",
+            Topic::SimEvents => "/sim/events",
+        }
+    }
+
+    /// The channel's schema name (`drivecheck.CarState`, …).
+    pub fn schema_name(self) -> &'static str {
+        match self {
+            Topic::CarState => "drivecheck.CarState",
+            Topic::Commands => "drivecheck.CommandSent",
+            Topic::Acks => "drivecheck.CommandAck",
+            Topic::Tests => "drivecheck.TestEvent",
+            Topic::PlanSegments => "drivecheck.PlannedSegment",
+            Topic::PlanReturnRoute => "drivecheck.PlannedReturnRoute",
+            Topic::Faults => "drivecheck.Fault",
+            Topic::OracleSegments => "drivecheck.OracleSegment",
+            Topic::SafetyEvents => "drivecheck.SafetyEvent",
+            Topic::SimTruth => "drivecheck.SimTruth",
+            Topic::SimRanges => "drivecheck.SimRange",
+            Topic::SimFaults => "drivecheck.SimFault",
+            Topic::SimEvents => "drivecheck.SimEvent",
+        }
+    }
+
+    /// The channel for `name`, if it is one of ours.
+    pub fn from_name(name: &str) -> Option<Topic> {
+        Topic::ALL.into_iter().find(|t| t.name() == name)
+    }
+
+    /// Whether only a simulated run records this channel.
+    pub fn is_simulator_only(self) -> bool {
+        matches!(
+            self,
+            Topic::SimTruth | Topic::SimRanges | Topic::SimFaults | Topic::SimEvents
+        )
+    }
+}
+
+impl fmt::Display for Topic {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A message type of a recording: the record one channel carries, as JSON.
+pub trait Record: Serialize + DeserializeOwned {
+    /// Its channel.
+    const TOPIC: Topic;
+}

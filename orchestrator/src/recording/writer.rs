@@ -1,0 +1,353 @@
+//! The [`Recorder`]: writes a campaign's MCAP file append-only as things happen.
+//!
+//! Messages go into an in-memory chunk (no compression) that is written whole and flushed to the
+//! operating system when its messages span the chunk interval of log time, at [`Recorder::flush`]
+//! and before each metadata record. The file therefore only ever grows by whole records: a killed
+//! process leaves every chunk written before the kill, and loses the open one.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::Path;
+use std::time::Duration;
+
+use car_link::StateSample;
+use car_sim::{DebugEvent, Truth};
+use mcap::records::{MessageHeader, Metadata};
+use mcap::write::NoSeek;
+use mcap::{WriteOptions, Writer};
+use scenarios::Scenario;
+use tokio::time::Instant;
+
+use super::records::{
+    AckOutcome, CarCommand, CarStateRecord, CommandAck, CommandSent, SimRecord, TruthRecord,
+    nanos_since,
+};
+use super::topic::{Record, Topic};
+use super::{RECORDING_FORMAT, RECORDING_VERSION, RecordingError, schema};
+use crate::case::{CampaignRecord, tool_version};
+
+/// The default [`RecordingStart::chunk_interval`]: at most one second of messages is lost when the
+/// process is killed while messages flow.
+pub const DEFAULT_CHUNK_INTERVAL: Duration = Duration::from_secs(1);
+
+/// Chunks are also closed when they reach this many bytes.
+const CHUNK_BYTES: u64 = 256 * 1024;
+
+type Sink = NoSeek<BufWriter<File>>;
+
+/// What a recording starts with.
+#[derive(Debug, Clone)]
+pub struct RecordingStart<'a> {
+    /// The campaign (`campaign.json` as written at its start): a metadata record.
+    pub campaign: &'a CampaignRecord,
+    /// The scenario: its canonical TOML and hash in a metadata record.
+    pub scenario: &'a Scenario,
+    /// The instant the campaign started on the run's tokio clock: log time 0.
+    pub origin: Instant,
+    /// A simulated run: the `/sim/*` channels are registered.
+    pub simulated: bool,
+    /// The longest span of log time one chunk holds ([`DEFAULT_CHUNK_INTERVAL`]).
+    pub chunk_interval: Duration,
+}
+
+/// What [`Recorder::finish`] wrote.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FinishedRecording {
+    /// Messages on all channels.
+    pub messages: u64,
+    /// Chunks.
+    pub chunks: u32,
+}
+
+/// A campaign's recording being written (see the module doc).
+///
+/// Every write is synchronous and small (a JSON encoding into memory; a chunk write to the OS
+/// page cache once per chunk interval). Dropping a recorder without [`Recorder::finish`]
+/// completes the file as well, ignoring errors.
+pub struct Recorder {
+    writer: Writer<Sink>,
+    channels: HashMap<Topic, u16>,
+    sequences: HashMap<Topic, u32>,
+    origin: Instant,
+    chunk_interval: u64,
+    chunk_opened_at: Option<u64>,
+    next_command: u64,
+    pending_commands: BTreeMap<u64, (u64, &'static str)>,
+    sim_offset_ns: Option<i128>,
+}
+
+impl std::fmt::Debug for Recorder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Recorder")
+            .field("channels", &self.channels)
+            .field("origin", &self.origin)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Recorder {
+    /// Creates the file at `path` (replacing one there), registers the channels with their
+    /// schemas, writes the metadata records and flushes: the file is readable from here on.
+    pub fn create(path: &Path, start: &RecordingStart<'_>) -> Result<Self, RecordingError> {
+        let file = File::create(path).map_err(|source| RecordingError::Create {
+            path: path.to_owned(),
+            source,
+        })?;
+        let options = WriteOptions::new()
+            .compression(None)
+            .chunk_size(Some(CHUNK_BYTES))
+            .disable_seeking(true)
+            .library(format!("drivecheck {} (mcap-rs)", tool_version()));
+        let writer = options
+            .create(NoSeek::new(BufWriter::new(file)))
+            .map_err(RecordingError::Write)?;
+        let mut recorder = Self {
+            writer,
+            channels: HashMap::new(),
+            sequences: HashMap::new(),
+            origin: start.origin,
+            chunk_interval: u64::try_from(start.chunk_interval.as_nanos()).unwrap_or(u64::MAX),
+            chunk_opened_at: None,
+            next_command: 1,
+            pending_commands: BTreeMap::new(),
+            sim_offset_ns: None,
+        };
+        recorder.register_channels(start.simulated)?;
+        recorder.write_start_metadata(start)?;
+        recorder.flush()?;
+        Ok(recorder)
+    }
+
+    fn register_channels(&mut self, simulated: bool) -> Result<(), RecordingError> {
+        let topics = Topic::ALL
+            .into_iter()
+            .filter(|t| simulated || !t.is_simulator_only());
+        for topic in topics {
+            let schema = schema::schema(topic).to_string();
+            let schema_id = self
+                .writer
+                .add_schema(topic.schema_name(), "jsonschema", schema.as_bytes())
+                .map_err(RecordingError::Write)?;
+            let channel = self
+                .writer
+                .add_channel(schema_id, topic.name(), "json", &BTreeMap::new())
+                .map_err(RecordingError::Write)?;
+            self.channels.insert(topic, channel);
+        }
+        Ok(())
+    }
+
+    fn write_start_metadata(&mut self, start: &RecordingStart<'_>) -> Result<(), RecordingError> {
+        let recording = [
+            ("format", RECORDING_FORMAT.to_owned()),
+            ("schema_version", RECORDING_VERSION.to_string()),
+            ("tool_version", tool_version().to_owned()),
+            (
+                "log_time",
+                "ns of the run's tokio clock since the campaign started".to_owned(),
+            ),
+            ("simulated", start.simulated.to_string()),
+        ];
+        self.metadata("drivecheck.recording", &recording)?;
+        let s = start.scenario;
+        let scenario = [
+            ("name", s.name.clone()),
+            ("hash", s.hash()),
+            ("toml", s.to_toml()),
+        ];
+        self.metadata("drivecheck.scenario", &scenario)?;
+        self.campaign_metadata("drivecheck.campaign", start.campaign)
+    }
+
+    /// Writes `campaign` (as it stands at the end, with its summary) as the
+    /// `drivecheck.campaign_end` metadata record. Call it before [`Recorder::finish`].
+    pub fn campaign_ended(&mut self, campaign: &CampaignRecord) -> Result<(), RecordingError> {
+        self.campaign_metadata("drivecheck.campaign_end", campaign)
+    }
+
+    fn campaign_metadata(
+        &mut self,
+        name: &str,
+        campaign: &CampaignRecord,
+    ) -> Result<(), RecordingError> {
+        let json = campaign.to_json().map_err(RecordingError::Campaign)?;
+        let entries = [
+            ("seed", campaign.seed.to_string()),
+            ("car", campaign.car.clone()),
+            ("started_at", campaign.started_at.clone()),
+            ("no_faults", campaign.no_faults.to_string()),
+            ("json", json),
+        ];
+        self.metadata(name, &entries)
+    }
+
+    /// Writes a metadata record (which closes the open chunk) and flushes.
+    fn metadata(&mut self, name: &str, entries: &[(&str, String)]) -> Result<(), RecordingError> {
+        let metadata = Metadata {
+            name: name.to_owned(),
+            metadata: entries
+                .iter()
+                .map(|(k, v)| ((*k).to_owned(), v.clone()))
+                .collect(),
+        };
+        self.writer
+            .write_metadata(&metadata)
+            .map_err(RecordingError::Write)?;
+        self.flush()
+    }
+
+    /// The log time of now: ns of the tokio clock since the origin.
+    pub fn now_ns(&self) -> u64 {
+        nanos_since(self.origin, Instant::now())
+    }
+
+    /// Records `message` on its channel at the current tokio time.
+    pub fn write<R: Record>(&mut self, message: &R) -> Result<(), RecordingError> {
+        self.write_at_ns(self.now_ns(), message)
+    }
+
+    /// Records `message` on its channel at `at` on the tokio clock.
+    pub fn write_at<R: Record>(&mut self, at: Instant, message: &R) -> Result<(), RecordingError> {
+        self.write_at_ns(nanos_since(self.origin, at), message)
+    }
+
+    /// Records `message` with log time `log_time` (ns since the origin). A message for a channel
+    /// that is not registered (`/sim/*` in a run on a real car) is ignored.
+    fn write_at_ns<R: Record>(&mut self, log_time: u64, message: &R) -> Result<(), RecordingError> {
+        let Some(&channel_id) = self.channels.get(&R::TOPIC) else {
+            return Ok(());
+        };
+        let data = serde_json::to_vec(message).map_err(|source| RecordingError::Encode {
+            topic: R::TOPIC.name(),
+            source,
+        })?;
+        self.close_chunk_if_due(log_time)?;
+        let sequence = self.sequences.entry(R::TOPIC).or_insert(0);
+        *sequence = sequence.wrapping_add(1);
+        let header = MessageHeader {
+            channel_id,
+            sequence: *sequence,
+            log_time,
+            publish_time: log_time,
+        };
+        self.writer
+            .write_to_known_channel(&header, &data)
+            .map_err(RecordingError::Write)?;
+        self.chunk_opened_at.get_or_insert(log_time);
+        Ok(())
+    }
+
+    fn close_chunk_if_due(&mut self, log_time: u64) -> Result<(), RecordingError> {
+        match self.chunk_opened_at {
+            Some(opened) if log_time.saturating_sub(opened) >= self.chunk_interval => self.flush(),
+            _ => Ok(()),
+        }
+    }
+
+    /// Writes the open chunk and flushes the file to the operating system: everything recorded
+    /// so far survives a kill from here on. Call it at the end of each test.
+    pub fn flush(&mut self) -> Result<(), RecordingError> {
+        self.chunk_opened_at = None;
+        self.writer.flush().map_err(RecordingError::Write)
+    }
+
+    /// Records a state sample at the time it was received.
+    pub fn car_state(&mut self, sample: &StateSample) -> Result<(), RecordingError> {
+        let record = CarStateRecord::new(sample, self.origin);
+        self.write_at(sample.received_at, &record)
+    }
+
+    /// Records a command about to be sent during test `test_index` (if any) and returns its id
+    /// for [`Recorder::command_answered`].
+    pub fn command_sent(
+        &mut self,
+        test_index: Option<usize>,
+        command: CarCommand,
+    ) -> Result<u64, RecordingError> {
+        let id = self.next_command;
+        self.next_command += 1;
+        let name = command.name();
+        let now = self.now_ns();
+        self.write_at_ns(
+            now,
+            &CommandSent {
+                id,
+                test_index,
+                command,
+            },
+        )?;
+        self.pending_commands.insert(id, (now, name));
+        Ok(id)
+    }
+
+    /// Records the car's answer to command `id` (the car-link call's result), with the round
+    /// trip since [`Recorder::command_sent`].
+    pub fn command_answered<T, E: std::fmt::Display>(
+        &mut self,
+        id: u64,
+        result: &Result<T, E>,
+    ) -> Result<(), RecordingError> {
+        let now = self.now_ns();
+        let sent = self.pending_commands.remove(&id);
+        let ack = CommandAck {
+            id,
+            command: sent.map_or("unknown", |(_, name)| name).to_owned(),
+            outcome: AckOutcome::of(result),
+            round_trip_ms: sent.map(|(at, _)| now.saturating_sub(at) as f64 / 1e6),
+        };
+        self.write_at_ns(now, &ack)
+    }
+
+    /// Records the simulator's truth now, and remembers how its clock maps to log time for
+    /// [`Recorder::sim_events`].
+    pub fn sim_truth(&mut self, truth: &Truth) -> Result<(), RecordingError> {
+        let now = self.now_ns();
+        self.sim_offset_ns = Some(i128::from(now) - i128::from(truth.time_ms) * 1_000_000);
+        self.write_at_ns(now, &TruthRecord::from(truth))
+    }
+
+    /// Records the simulator's debug events on `/sim/ranges`, `/sim/faults` and `/sim/events`.
+    /// Their log time is their simulation time mapped through the last [`Recorder::sim_truth`]
+    /// (the time of this call before any truth).
+    pub fn sim_events(&mut self, events: &[DebugEvent]) -> Result<(), RecordingError> {
+        for event in events {
+            let record = SimRecord::from(event);
+            let log_time = self.sim_log_time(record.sim_ms());
+            match &record {
+                SimRecord::Range(r) => self.write_at_ns(log_time, r)?,
+                SimRecord::Fault(f) => self.write_at_ns(log_time, f)?,
+                SimRecord::Event(e) => self.write_at_ns(log_time, e)?,
+            }
+        }
+        Ok(())
+    }
+
+    fn sim_log_time(&self, sim_ms: u64) -> u64 {
+        match self.sim_offset_ns {
+            Some(offset) => {
+                let ns = offset + i128::from(sim_ms) * 1_000_000;
+                u64::try_from(ns.max(0)).unwrap_or(u64::MAX)
+            }
+            None => self.now_ns(),
+        }
+    }
+
+    /// Completes the file (the last chunk, the summary with indexes and statistics, the footer)
+    /// and syncs it to disk.
+    pub fn finish(mut self) -> Result<FinishedRecording, RecordingError> {
+        let summary = self.writer.finish().map_err(RecordingError::Write)?;
+        let stats = summary.stats.unwrap_or_default();
+        let file = self
+            .writer
+            .into_inner()
+            .into_inner()
+            .into_inner()
+            .map_err(|e| RecordingError::Complete(e.into_error()))?;
+        file.sync_all().map_err(RecordingError::Complete)?;
+        Ok(FinishedRecording {
+            messages: stats.message_count,
+            chunks: stats.chunk_count,
+        })
+    }
+}
