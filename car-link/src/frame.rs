@@ -1,5 +1,5 @@
 //! Framing (protocol §2): start byte, length, payload, CRC-16/XMODEM, end byte; and a streaming decoder that
-//! resynchronises after garbage.
+//! resynchronises after garbage without ever waiting on a bogus candidate.
 //!
 //! | Form | Bytes |
 //! |---|---|
@@ -7,11 +7,36 @@
 //! | long | `03 LEN_HI LEN_LO payload CRC_HI CRC_LO 03` |
 //! | extra-long (PC side only) | `04 LEN(24 bit) payload CRC_HI CRC_LO 03` |
 //!
-//! The decoder is more tolerant than the reference receivers: when a candidate frame fails its length, CRC or
-//! end-byte check, only its start byte is dropped and the bytes after it are scanned again. A valid frame that a
-//! stray start byte in noise had swallowed is therefore recovered instead of lost. A candidate that never completes
-//! (a stray start byte announcing a long payload on a quiet link) is abandoned with [`FrameDecoder::expire`], which
-//! a reader calls after its byte timeout (500 ms in the reference PC tools) or at the end of the stream.
+//! # How the decoder resynchronises
+//!
+//! The reference receivers parse one candidate at a time: a stray start byte in noise swallows the real frame
+//! after it, and a candidate that announces more bytes than ever arrive blocks the receiver until its byte timeout.
+//! [`FrameDecoder`] instead follows every candidate in parallel. Every start byte that is not inside a delivered
+//! frame opens a candidate, and each candidate is settled on its own as soon as its bytes allow:
+//!
+//! - a candidate whose length, CRC or end byte is wrong is dropped (reported as a [`FrameError`]); the candidates
+//!   that start inside it are followed anyway, so a real frame that a stray start byte swallowed is recovered;
+//! - a candidate that is still incomplete *waits without holding anything up*: the bytes after its start byte are
+//!   scanned on, and a valid frame among them is delivered the moment its end byte arrives;
+//! - a valid frame is delivered and consumed whole, with every candidate that starts inside it, so a payload that
+//!   happens to contain frame-like bytes is never split up.
+//!
+//! When several candidates can be settled with the bytes at hand, the one that starts first wins. Frames therefore
+//! come out in the order in which their end bytes arrive, which is stream order. A frame that follows a bad one is
+//! delivered as soon as its last byte arrives: the bad frame's trailing `0x03`, taken for the start of a long frame,
+//! simply waits in the background until its announced length has arrived (and fails its CRC) or until
+//! [`FrameDecoder::expire`], which a reader calls after its byte timeout (500 ms in the reference PC tools) or at the
+//! end of the stream. Apart from the chance frames below, garbage of any kind never delays or loses a valid frame
+//! that follows it.
+//!
+//! The price is that no decoder can tell a real frame from bytes that happen to form one. Besides the chance
+//! frames in garbage that every resynchronising receiver shares, this decoder can deliver a chance frame inside a
+//! real frame's payload when that real frame is still arriving; the real frame is delivered too, after it. For
+//! random payload bytes a chance frame needs a start byte, a fitting length, the matching CRC and the end byte,
+//! about 2⁻³⁰ per payload byte. Waiting candidates keep their bytes buffered, at most one frame of the largest
+//! accepted length.
+
+use std::collections::VecDeque;
 
 use bytes::{Buf, BufMut, Bytes, BytesMut};
 use thiserror::Error;
@@ -275,28 +300,51 @@ impl Default for DecoderLimits {
     }
 }
 
-/// Scanning state shared by [`FrameDecoder`] and [`FrameCodec`]: the stream offset of the first buffered byte.
-#[derive(Debug, Clone, Copy, Default)]
+/// Scanning state shared by [`FrameDecoder`] and [`FrameCodec`]. Positions are stream offsets: `offset` is the
+/// offset of the first buffered byte, `scan` the first byte not yet looked at as a possible start byte.
+#[derive(Debug, Clone, Default)]
 struct Scanner {
     limits: DecoderLimits,
     offset: u64,
+    scan: u64,
+    /// Candidates waiting for more bytes, oldest first; all start before `scan`.
+    pending: VecDeque<Pending>,
+    /// Delivered frames whose bytes are still buffered (an older waiting candidate holds them), oldest first: the
+    /// bytes that are not garbage when they are let go of.
+    delivered: VecDeque<(u64, u64)>,
     skipped: u64,
 }
 
+/// A candidate frame waiting for more bytes.
+#[derive(Debug, Clone, Copy)]
+struct Pending {
+    /// Stream offset of its start byte.
+    start: u64,
+    /// Stream offset just past its end byte, once its length is known.
+    end: Option<u64>,
+}
+
 enum Candidate {
-    /// Not enough bytes yet.
-    Wait,
+    /// Not enough bytes yet; the total frame length once the header is complete.
+    Wait(Option<usize>),
     /// A complete, valid frame: its form, header length and payload length.
     Valid {
         form: FrameForm,
         header: usize,
         len: usize,
     },
-    /// Drop the start byte and rescan.
+    /// Not a frame.
     Invalid(FrameError),
 }
 
 impl Scanner {
+    fn new(limits: DecoderLimits) -> Self {
+        Scanner {
+            limits,
+            ..Scanner::default()
+        }
+    }
+
     fn is_start(&self, byte: u8) -> bool {
         match FrameForm::from_start_byte(byte) {
             Some(FrameForm::ExtraLong) => self.limits.accept_extra_long,
@@ -305,60 +353,57 @@ impl Scanner {
         }
     }
 
-    fn advance(&mut self, buf: &mut BytesMut, n: usize) {
-        buf.advance(n);
-        self.offset += n as u64;
+    /// Stream offset just past the last buffered byte.
+    fn buffered_end(&self, buf: &[u8]) -> u64 {
+        self.offset + buf.len() as u64
     }
 
-    /// Drops garbage before the next start byte. Returns false if the buffer holds no start byte.
-    fn skip_garbage(&mut self, buf: &mut BytesMut) -> bool {
-        let start = buf.iter().position(|&b| self.is_start(b));
-        let garbage = start.unwrap_or(buf.len());
-        self.skipped += garbage as u64;
-        self.advance(buf, garbage);
-        start.is_some()
+    /// Index into the buffer of stream offset `at` (which is never before `offset`).
+    fn index(&self, at: u64) -> usize {
+        usize::try_from(at.saturating_sub(self.offset)).unwrap_or(usize::MAX)
     }
 
-    fn examine(&self, buf: &[u8]) -> Candidate {
-        let Some(form) = buf.first().copied().and_then(FrameForm::from_start_byte) else {
-            return Candidate::Wait;
+    /// The candidate starting at stream offset `start`.
+    fn examine(&self, buf: &[u8], start: u64) -> Candidate {
+        let bytes = buf.get(self.index(start)..).unwrap_or_default();
+        let Some(form) = bytes.first().copied().and_then(FrameForm::from_start_byte) else {
+            return Candidate::Wait(None);
         };
         let header = form.header_len();
-        if buf.len() < header {
-            return Candidate::Wait;
-        }
-        let len = buf[1..header]
+        let Some(length) = bytes.get(1..header) else {
+            return Candidate::Wait(None);
+        };
+        let len = length
             .iter()
             .fold(0usize, |acc, &b| (acc << 8) | usize::from(b));
         let max = self.limits.max_payload;
         if len == 0 || len > max {
             return Candidate::Invalid(FrameError::BadLength {
-                offset: self.offset,
+                offset: start,
                 len,
                 max,
             });
         }
         let total = header + len + 3;
-        if buf.len() < total {
-            return Candidate::Wait;
-        }
-        let payload = &buf[header..header + len];
-        let received = u16::from_be_bytes([buf[header + len], buf[header + len + 1]]);
+        let Some(frame) = bytes.get(..total) else {
+            return Candidate::Wait(Some(total));
+        };
+        let payload = &frame[header..header + len];
+        let received = u16::from_be_bytes([frame[total - 3], frame[total - 2]]);
         let computed = checksum(payload);
         if received != computed {
             return Candidate::Invalid(FrameError::Checksum {
-                offset: self.offset,
+                offset: start,
                 received,
                 computed,
             });
         }
-        let end = buf[total - 1];
-        if end != END {
-            let end_offset = self.offset + (total - 1) as u64;
+        let found = frame[total - 1];
+        if found != END {
             return Candidate::Invalid(FrameError::EndByte {
-                offset: self.offset,
-                end_offset,
-                found: end,
+                offset: start,
+                end_offset: start + (total - 1) as u64,
+                found,
             });
         }
         Candidate::Valid { form, header, len }
@@ -366,55 +411,152 @@ impl Scanner {
 
     /// The next valid frame or dropped candidate in `buf`; `None` when more bytes are needed.
     fn next(&mut self, buf: &mut BytesMut) -> Option<Result<Frame, FrameError>> {
-        if !self.skip_garbage(buf) {
-            return None;
-        }
-        match self.examine(buf) {
-            Candidate::Wait => None,
-            Candidate::Invalid(error) => {
-                self.advance(buf, 1);
-                Some(Err(error))
+        self.check_buffer(buf);
+        let item = self.resolve_pending(buf).or_else(|| self.scan_new(buf));
+        self.release(buf);
+        item
+    }
+
+    /// Re-examines the waiting candidates that may have completed, oldest first, and settles the first that did.
+    fn resolve_pending(&mut self, buf: &mut BytesMut) -> Option<Result<Frame, FrameError>> {
+        let available = self.buffered_end(buf);
+        for i in 0..self.pending.len() {
+            let Pending { start, end } = self.pending[i];
+            if end.is_some_and(|end| end > available) {
+                continue;
             }
-            Candidate::Valid { form, header, len } => {
-                self.advance(buf, header);
-                let payload = buf.split_to(len).freeze();
-                self.offset += len as u64;
-                self.advance(buf, 3);
-                Some(Ok(Frame { payload, form }))
+            match self.examine(buf, start) {
+                Candidate::Wait(total) => self.pending[i].end = total.map(|t| start + t as u64),
+                Candidate::Invalid(error) => {
+                    self.pending.remove(i);
+                    return Some(Err(error));
+                }
+                Candidate::Valid { form, header, len } => {
+                    return Some(Ok(self.deliver(buf, start, form, header, len)));
+                }
+            }
+        }
+        None
+    }
+
+    /// Looks at the bytes not scanned yet: skips those that cannot start a frame, settles complete candidates and
+    /// leaves incomplete ones waiting without letting them hold up the bytes after them.
+    fn scan_new(&mut self, buf: &mut BytesMut) -> Option<Result<Frame, FrameError>> {
+        loop {
+            let from = self.index(self.scan);
+            let found = buf
+                .get(from..)
+                .and_then(|rest| rest.iter().position(|&b| self.is_start(b)));
+            let Some(at) = found else {
+                self.scan = self.buffered_end(buf);
+                return None;
+            };
+            let start = self.scan + at as u64;
+            self.scan = start + 1;
+            match self.examine(buf, start) {
+                Candidate::Wait(total) => self.pending.push_back(Pending {
+                    start,
+                    end: total.map(|t| start + t as u64),
+                }),
+                Candidate::Invalid(error) => return Some(Err(error)),
+                Candidate::Valid { form, header, len } => {
+                    return Some(Ok(self.deliver(buf, start, form, header, len)));
+                }
             }
         }
     }
 
-    /// Abandons the pending candidate (its start byte is dropped; the rest is scanned again).
-    fn expire(&mut self, buf: &mut BytesMut) -> Option<FrameError> {
-        if !self.skip_garbage(buf) {
-            return None;
+    /// Hands out the valid frame at `start`. Candidates that start inside it are dropped with it; older waiting
+    /// candidates keep their bytes, and so the payload is copied out only while one exists.
+    fn deliver(
+        &mut self,
+        buf: &mut BytesMut,
+        start: u64,
+        form: FrameForm,
+        header: usize,
+        len: usize,
+    ) -> Frame {
+        let end = start + (header + len + 3) as u64;
+        self.pending.retain(|p| p.start < start);
+        while self.delivered.back().is_some_and(|&(s, _)| s >= start) {
+            self.delivered.pop_back();
         }
-        let need = buf
-            .first()
-            .copied()
-            .and_then(FrameForm::from_start_byte)
-            .filter(|form| buf.len() >= form.header_len())
-            .map(|form| {
-                let len = buf[1..form.header_len()]
-                    .iter()
-                    .fold(0usize, |acc, &b| (acc << 8) | usize::from(b));
-                form.header_len() + len + 3
-            })
-            .unwrap_or(0);
-        let error = FrameError::Incomplete {
-            offset: self.offset,
-            have: buf.len(),
-            need,
+        self.scan = self.scan.max(end);
+        self.delivered.push_back((start, end));
+        let payload = if self.pending.is_empty() {
+            self.release_to(buf, start + header as u64);
+            let payload = buf.split_to(len.min(buf.len())).freeze();
+            self.offset += payload.len() as u64;
+            payload
+        } else {
+            let from = self.index(start) + header;
+            buf.get(from..from + len)
+                .map(Bytes::copy_from_slice)
+                .unwrap_or_default()
         };
-        self.advance(buf, 1);
+        Frame { payload, form }
+    }
+
+    /// Drops the bytes no candidate needs any more: everything before the oldest waiting candidate and the scan
+    /// position.
+    fn release(&mut self, buf: &mut BytesMut) {
+        let keep = self
+            .pending
+            .front()
+            .map_or(self.scan, |p| p.start.min(self.scan));
+        self.release_to(buf, keep);
+    }
+
+    /// Drops the bytes before stream offset `to`, counting those outside delivered frames as skipped garbage.
+    fn release_to(&mut self, buf: &mut BytesMut, to: u64) {
+        let to = to.clamp(self.offset, self.buffered_end(buf));
+        let mut garbage = to - self.offset;
+        while let Some(&(start, end)) = self.delivered.front() {
+            if start >= to {
+                break;
+            }
+            let covered_end = end.min(to);
+            garbage = garbage.saturating_sub(covered_end.saturating_sub(start.max(self.offset)));
+            if end > to {
+                break;
+            }
+            self.delivered.pop_front();
+        }
+        self.skipped += garbage;
+        buf.advance(self.index(to));
+        self.offset = to;
+    }
+
+    /// Abandons the oldest waiting candidate; the bytes after its start byte have been scanned already.
+    fn expire(&mut self, buf: &mut BytesMut) -> Option<FrameError> {
+        self.check_buffer(buf);
+        let Pending { start, end } = self.pending.pop_front()?;
+        let available = self.buffered_end(buf);
+        let error = FrameError::Incomplete {
+            offset: start,
+            have: usize::try_from(available.saturating_sub(start)).unwrap_or(usize::MAX),
+            need: end.map_or(0, |end| usize::try_from(end - start).unwrap_or(usize::MAX)),
+        };
+        self.release(buf);
         Some(error)
+    }
+
+    /// Keeps the state consistent with a buffer that someone else shortened (a codec's buffer can be replaced):
+    /// positions past its end are forgotten. Never happens with [`FrameDecoder`].
+    fn check_buffer(&mut self, buf: &BytesMut) {
+        let available = self.buffered_end(buf);
+        if self.scan > available {
+            self.scan = available;
+            self.pending.retain(|p| p.start < available);
+            self.delivered.clear();
+        }
     }
 }
 
 /// A streaming frame decoder: feed it bytes as they arrive, take frames (or dropped candidates) out.
 ///
-/// It never panics, whatever it is fed, and after any garbage it finds the next valid frame.
+/// It never panics, whatever it is fed, and after any garbage it delivers the next valid frame as soon as that
+/// frame's last byte arrives (see the [module documentation](self)).
 ///
 /// ```
 /// use car_link::frame::FrameDecoder;
@@ -434,10 +576,7 @@ impl FrameDecoder {
     /// A decoder with the given limits.
     pub fn new(limits: DecoderLimits) -> Self {
         FrameDecoder {
-            scanner: Scanner {
-                limits,
-                ..Scanner::default()
-            },
+            scanner: Scanner::new(limits),
             buf: BytesMut::new(),
         }
     }
@@ -462,9 +601,10 @@ impl FrameDecoder {
         self.scanner.next(&mut self.buf)
     }
 
-    /// Abandons the candidate frame that is waiting for more bytes, so that the bytes after its start byte are
-    /// scanned again. Call it when the byte timeout elapses or the stream ends, then drain [`Self::next_frame`]
-    /// again; repeat until it returns `None`.
+    /// Abandons the oldest candidate frame that is waiting for more bytes (the bytes after its start byte have
+    /// been scanned for frames already, so nothing is lost). Call it when the byte timeout elapses or the stream
+    /// ends, after draining [`Self::next_frame`]; repeat until it returns `None`. Waiting candidates never hold up
+    /// a valid frame, so this only reports them and frees their bytes.
     pub fn expire(&mut self) -> Option<FrameError> {
         self.scanner.expire(&mut self.buf)
     }
@@ -484,12 +624,12 @@ impl FrameDecoder {
         }
     }
 
-    /// Whether a candidate frame is waiting for more bytes.
+    /// Whether bytes are buffered: a candidate frame waiting for more bytes, or bytes not looked at yet.
     pub fn has_pending(&self) -> bool {
         !self.buf.is_empty()
     }
 
-    /// Bytes discarded as garbage between frames so far.
+    /// Bytes discarded as garbage so far: every byte let go of that was not part of a delivered frame.
     pub fn skipped_bytes(&self) -> u64 {
         self.scanner.skipped
     }
@@ -508,10 +648,7 @@ impl FrameCodec {
     pub fn new(encoder: FrameEncoder, limits: DecoderLimits) -> Self {
         FrameCodec {
             encoder,
-            scanner: Scanner {
-                limits,
-                ..Scanner::default()
-            },
+            scanner: Scanner::new(limits),
         }
     }
 
@@ -596,24 +733,85 @@ mod tests {
     }
 
     #[test]
-    fn a_quiet_link_abandons_the_bogus_candidate() {
+    fn a_bogus_candidate_neither_holds_up_the_next_frame_nor_outlives_the_timeout() {
         let mut decoder = FrameDecoder::host();
         decoder.push(&[0x03, 0x03, 0xFF]); // long form, 1023 bytes announced
         decoder.push(&GET_STATE_TO_1);
-        assert_eq!(decoder.next_frame(), None);
-        assert!(decoder.has_pending());
+        let items: Vec<_> = std::iter::from_fn(|| decoder.next_frame()).collect();
+        // The second 0x03 announces 0xFF02 bytes: dropped at once; then the frame, without a timeout.
         assert!(matches!(
+            &items[..],
+            [Err(FrameError::BadLength { offset: 1, .. }), Ok(frame)]
+                if frame.payload[..] == [0x01, 0x78]
+        ));
+        assert!(decoder.has_pending());
+        assert_eq!(
             decoder.expire(),
             Some(FrameError::Incomplete {
                 offset: 0,
+                have: 10,
                 need: 1029,
+            })
+        );
+        assert_eq!(decoder.next_frame(), None);
+        assert_eq!(decoder.expire(), None);
+        assert!(!decoder.has_pending());
+        assert_eq!(decoder.skipped_bytes(), 3);
+    }
+
+    #[test]
+    fn a_good_frame_right_after_a_bad_crc_is_delivered_at_once() {
+        let mut decoder = FrameDecoder::host();
+        decoder.push(&[0x02, 0x02, 0x01, 0x78, 0xCC, 0xAF, 0x03]);
+        let dropped: Vec<_> = std::iter::from_fn(|| decoder.next_frame()).collect();
+        assert!(!dropped.is_empty() && dropped.iter().all(Result::is_err));
+        // The request/reply link is quiet now; the reply arrives and must come out without any timeout.
+        decoder.push(&GET_STATE_TO_1);
+        assert!(
+            matches!(decoder.next_frame(), Some(Ok(frame)) if frame.payload[..] == [0x01, 0x78])
+        );
+        assert_eq!(decoder.next_frame(), None);
+        // The bad frame's end byte, read as a long-form start announcing 0x0202 bytes, waits in the background.
+        assert!(matches!(
+            decoder.expire(),
+            Some(FrameError::Incomplete {
+                offset: 6,
+                need: 520,
                 ..
             })
         ));
-        let found: Vec<_> = std::iter::from_fn(|| decoder.next_frame())
-            .filter_map(Result::ok)
-            .collect();
-        assert_eq!(found.len(), 1);
+    }
+
+    #[test]
+    fn a_frame_swallowed_by_a_stray_start_byte_comes_out_before_the_timeout() {
+        let mut decoder = FrameDecoder::host();
+        decoder.push(&[0x02, 0x09]);
+        decoder.push(&GET_STATE_TO_1);
+        assert!(matches!(decoder.next_frame(), Some(Ok(_))));
+        assert_eq!(decoder.next_frame(), None);
+        // The stray candidate completes with the next bytes, fails its CRC and frees the buffer.
+        decoder.push(&[0x00, 0x00, 0x00, 0x00, 0x00]);
+        let rest: Vec<_> = std::iter::from_fn(|| decoder.next_frame()).collect();
+        assert!(rest.iter().all(Result::is_err), "{rest:?}");
+        assert!(!decoder.has_pending());
+        assert_eq!(decoder.skipped_bytes(), 7);
+    }
+
+    #[test]
+    fn a_valid_frame_is_consumed_whole_even_while_an_older_candidate_waits() {
+        // The payload holds a complete frame of its own; it must not come out as a frame.
+        let inner = [0x02, 0x02, 0x01, 0x78, 0xCC, 0xAE, 0x03];
+        let mut payload = vec![0x01, 0x00];
+        payload.extend_from_slice(&inner);
+        let outer = FrameEncoder::to_firmware()
+            .encode_to_bytes(&payload)
+            .unwrap_or_default();
+        let mut decoder = FrameDecoder::host();
+        decoder.push(&outer);
+        assert!(matches!(decoder.next_frame(), Some(Ok(frame)) if frame.payload == payload));
+        assert_eq!(decoder.next_frame(), None);
+        assert!(!decoder.has_pending());
+        assert_eq!(decoder.skipped_bytes(), 0);
     }
 
     #[test]

@@ -116,8 +116,9 @@ pub struct LinkClosed;
 impl Link {
     /// A link over any byte stream carrying frames: a TCP stream, a serial port, the host end of [`sim_pipe`].
     ///
-    /// `byte_timeout` abandons a partly received frame after that long without a byte ([`PC_BYTE_TIMEOUT`] in
-    /// the reference tools), so that a stray start byte cannot hold back the frames after it.
+    /// `byte_timeout` reports and frees a partly received frame candidate after that long without a
+    /// byte ([`PC_BYTE_TIMEOUT`] in the reference tools); it never holds back the frames after it,
+    /// which the decoder delivers as soon as their end byte arrives.
     pub fn over_stream<S>(stream: S, byte_timeout: Duration) -> Link
     where
         S: AsyncRead + AsyncWrite + Send + 'static,

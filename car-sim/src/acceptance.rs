@@ -7,7 +7,8 @@ use scenarios::geometry::{Area, Point, Polygon, point_segment_distance};
 
 use crate::noise::Noise;
 use crate::{
-    Car, CarOptions, Firmware, Placement, RcMode, RoutePoint, StateReport, World, WorldAnchor,
+    Car, CarOptions, Firmware, Placement, RadioPath, RcMode, RoutePoint, StateReport, World,
+    WorldAnchor,
 };
 
 /// The fence of `parking-lot-2anchors.xml` (route id 2).
@@ -649,4 +650,147 @@ fn the_rock_and_its_wall_reflection_raise_the_uwb_deviation() {
          {rock95:.3} m (max {rock_max:.3}) with it"
     );
     assert!(rock95 > clear95 + 0.2, "{rock95:.3} vs {clear95:.3}");
+}
+
+/// One GET_STATE poll of a drive: whether the car was in the rock's shadow (anchor 234 reached
+/// only by the wall reflection), for how long it had been in or out of it, and the deviation.
+struct ShadowSample {
+    shadowed: bool,
+    settled_ms: u64,
+    deviation: f64,
+}
+
+/// A fixed-seed random drive through the bundled `parking-lot-rock` with its environment.
+fn rock_lot_drive(seed: u64, ms: u64) -> Vec<ShadowSample> {
+    let scenario = scenarios::bundled::load("parking-lot-rock")
+        .expect("bundled")
+        .scenario;
+    let mut route = scenario.start_route.positions();
+    let mut noise = Noise::stream(seed, 96);
+    random_route(&scenario.area, &mut route, 800.0, 0.5, &mut noise);
+    let points = route_points(&route, |_| 1.5);
+    let world = World::from_scenario(&scenario);
+    let anchor = world.anchor(234).expect("anchor 234").position;
+    let mut car = Car::new(CarOptions {
+        seed,
+        world: world.clone(),
+        preload_anchors: true,
+        placement: Placement::at_start_of(&scenario).expect("a start"),
+        ..CarOptions::default()
+    });
+    car.step();
+    let mut driver = Driver::new(car, &points);
+    let (mut samples, mut last, mut since) = (Vec::new(), false, 0u64);
+    driver.run(ms, |car, s| {
+        let t = car.truth();
+        let shadowed = !matches!(
+            world.radio_path(Point::new(t.x, t.y), anchor),
+            RadioPath::LineOfSight { .. }
+        );
+        if shadowed != last {
+            (last, since) = (shadowed, car.now_ms());
+        }
+        if car.now_ms() > 5_000 {
+            samples.push(ShadowSample {
+                shadowed,
+                settled_ms: car.now_ms() - since,
+                deviation: deviation(s),
+            });
+        }
+    });
+    samples
+}
+
+/// The illustrative rock of `parking-lot-rock` must make a region of the lot fail the 1 m oracle
+/// (anchor 234 reached only by a wall reflection 1.1–1.8 m longer than the direct path) and
+/// leave the rest, the start route included, nominal.
+#[test]
+fn the_illustrative_rock_shadows_a_minority_of_the_lot_with_a_deviation_of_about_two_metres() {
+    let scenario = scenarios::bundled::load("parking-lot-rock")
+        .expect("bundled")
+        .scenario;
+    let world = World::from_scenario(&scenario);
+    let anchor = world.anchor(234).expect("anchor 234").position;
+    // The geometry on a 0.25 m grid: the shadow's share and the reflection's extra length.
+    let bbox = scenario.area.bbox();
+    let (mut drivable, mut extra) = (0usize, Vec::new());
+    for i in 0..=((bbox.size().0 / 0.25) as usize) {
+        for j in 0..=((bbox.size().1 / 0.25) as usize) {
+            let p = Point::new(bbox.min.x + i as f64 * 0.25, bbox.min.y + j as f64 * 0.25);
+            if !scenario.area.contains_point(p) {
+                continue;
+            }
+            drivable += 1;
+            match world.radio_path(p, anchor) {
+                RadioPath::LineOfSight { .. } => {}
+                RadioPath::Reflected { length, direct, .. } => extra.push(length - direct),
+                RadioPath::Blocked => panic!("{p:?}: blocked without a reflection"),
+            }
+        }
+    }
+    let share = extra.len() as f64 / drivable as f64;
+    let (extra_min, extra_max) = (percentile(extra.clone(), 0.0), percentile(extra, 1.0));
+    println!(
+        "rock lot: shadow {:.1} % of the lot, reflection {extra_min:.2}–{extra_max:.2} m longer",
+        share * 100.0
+    );
+    assert!((0.15..0.35).contains(&share), "shadow share {share:.3}");
+    assert!(extra_min > 1.0 && extra_max < 3.0);
+    for p in scenario
+        .start_route
+        .positions()
+        .into_iter()
+        .chain(scenario.recovery_route.positions())
+    {
+        let path = world.radio_path(p, anchor);
+        assert!(matches!(path, RadioPath::LineOfSight { .. }), "{p:?}");
+    }
+
+    // A drive through it: the deviation once the filter has settled, in and out of the shadow.
+    let samples = rock_lot_drive(81, 300_000);
+    let time_share = samples.iter().filter(|s| s.shadowed).count() as f64 / samples.len() as f64;
+    let inside: Vec<f64> = samples
+        .iter()
+        .filter(|s| s.shadowed && s.settled_ms >= 2_000)
+        .map(|s| s.deviation)
+        .collect();
+    let outside: Vec<f64> = samples
+        .iter()
+        .filter(|s| !s.shadowed && s.settled_ms >= 3_000)
+        .map(|s| s.deviation)
+        .collect();
+    let failing = inside.iter().filter(|&&d| d > 1.0).count() as f64 / inside.len() as f64;
+    let (in50, in95) = (
+        percentile(inside.clone(), 0.5),
+        percentile(inside.clone(), 0.95),
+    );
+    let (out50, out95) = (
+        percentile(outside.clone(), 0.5),
+        percentile(outside.clone(), 0.95),
+    );
+    println!(
+        "rock lot drive: {:.1} % of the time in the shadow; settled deviation in it p50 {in50:.2} m, \
+         p95 {in95:.2} m, {:.0} % over 1 m ({} samples); outside p50 {out50:.2} m, p95 {out95:.2} m \
+         ({} samples); overall p95 {:.2} m",
+        time_share * 100.0,
+        failing * 100.0,
+        inside.len(),
+        outside.len(),
+        percentile(samples.iter().map(|s| s.deviation).collect(), 0.95),
+    );
+    assert!(
+        inside.len() >= 200,
+        "the drive spent too little time in the shadow"
+    );
+    assert!(
+        (1.0..2.5).contains(&in50),
+        "median deviation in the shadow {in50:.2} m"
+    );
+    assert!(in95 < 3.0, "p95 deviation in the shadow {in95:.2} m");
+    assert!(
+        failing > 0.5,
+        "only {:.0} % of the shadow fails the 1 m oracle",
+        failing * 100.0
+    );
+    assert!(out95 < 0.6, "p95 deviation outside the shadow {out95:.2} m");
 }

@@ -1,6 +1,6 @@
 //! Scenario files: malformed files are refused with the right message, the bundled areas load
 //! with exactly the expected warnings, the reference XML imports to the bundled scenarios, and the
-//! illustrative rock of the rock parking lot really hides anchor 234.
+//! illustrative rock of the rock parking lot really hides anchor 234 from part of the lot, and only part.
 
 use std::path::{Path, PathBuf};
 
@@ -316,7 +316,7 @@ fn hidden_by(rock: &Polygon, from: Point, to: Point) -> bool {
 }
 
 #[test]
-fn the_illustrative_rock_hides_anchor_234_from_much_of_the_lot_and_the_wall_reflects() {
+fn the_illustrative_rock_hides_anchor_234_from_a_minority_of_the_lot_and_the_wall_reflects() {
     let scenario = bundled::load("parking-lot-rock").unwrap().scenario;
     let env = &scenario.environment;
     assert!(env.obstacles.iter().all(|o| o.illustrative));
@@ -359,23 +359,30 @@ fn the_illustrative_rock_hides_anchor_234_from_much_of_the_lot_and_the_wall_refl
             }
         }
     }
+    // About a quarter of the lot (0.25 m grid: 25.5 %) is in the shadow, all of it with a reflection.
     let share = hidden as f64 / drivable as f64;
     assert!(
-        share > 0.25,
+        share > 0.15,
         "the rock hides only {:.0} % of the lot",
         share * 100.0
     );
     assert!(
-        share < 0.75,
+        share < 0.35,
         "the rock hides {:.0} % of the lot",
         share * 100.0
     );
     assert!(hidden_with_reflection as f64 > 0.9 * hidden as f64);
-    let start = scenario.start_route.positions()[0];
-    assert!(
-        hidden_by(rock, start, anchor),
-        "the start of every test is in the shadow"
-    );
+    for p in scenario
+        .start_route
+        .positions()
+        .into_iter()
+        .chain(scenario.recovery_route.positions())
+    {
+        assert!(
+            !hidden_by(rock, p, anchor),
+            "{p:?}: the start and recovery routes keep line of sight"
+        );
+    }
     assert_eq!(behind_wall, 0, "the wall itself hides nothing from the lot");
 }
 
