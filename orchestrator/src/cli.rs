@@ -17,6 +17,11 @@ pub struct Cli {
 /// The subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Run a test campaign: drive generated tests with injected faults and judge UWB against
+    /// RTK. Exit status: 0 every test passed, 1 a test failed or was aborted, 2 error.
+    Run(RunArgs),
+    /// Serve a simulated car over TCP (like the reference bridge) or UDP.
+    Sim(SimArgs),
     /// Check a test area before any car drives in it.
     #[command(subcommand)]
     Area(AreaCommand),
@@ -29,6 +34,81 @@ pub enum Command {
     /// Measure drivecheck's own speed (run with `cargo run --release`).
     #[command(subcommand)]
     Bench(BenchCommand),
+}
+
+/// Options of `drivecheck run`.
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// Scenario: a bundled name, a .toml file or a reference .xml.
+    #[arg(long, default_value = "parking-lot-2anchors")]
+    pub scenario: String,
+    /// The car: `sim` (the embedded simulated car), `tcp://HOST:PORT`, `udp://HOST:PORT` or
+    /// `serial:///dev/ttyACM0`.
+    #[arg(long, default_value = "sim")]
+    pub car: String,
+    /// Tests in the campaign (default: the scenario's, 10 for the bundled ones).
+    #[arg(long)]
+    pub tests: Option<usize>,
+    /// The campaign's seed (printed when not given).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Plan the same tests without their fault commands.
+    #[arg(long)]
+    pub no_faults: bool,
+    /// Run the embedded simulated car against the wall clock instead of in virtual time.
+    #[arg(long)]
+    pub realtime: bool,
+    /// The run directory (default `runs/<UTC timestamp>-<scenario>-<seed>/`).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+}
+
+/// Options of `drivecheck sim`.
+#[derive(Debug, Args)]
+pub struct SimArgs {
+    /// Scenario: a bundled name, a .toml file or a reference .xml.
+    #[arg(long)]
+    pub scenario: String,
+    /// Address to listen on (loopback unless told otherwise).
+    #[arg(long, default_value = "127.0.0.1:8300")]
+    pub listen: std::net::SocketAddr,
+    /// Serve UDP instead of TCP (replies go to the sender's address at the port + 1).
+    #[arg(long)]
+    pub udp: bool,
+    /// Firmware generation: 10.1 or 12.3.
+    #[arg(long, default_value = "10.1")]
+    pub firmware: String,
+    /// Seed of the simulation's random draws (physics and link).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Added one-way latency of the link, for example `150ms`.
+    #[arg(long, value_parser = humantime::parse_duration)]
+    pub link_latency: Option<std::time::Duration>,
+    /// Extra one-way delay drawn uniformly from 0 to this, for example `40ms`.
+    #[arg(long, value_parser = humantime::parse_duration)]
+    pub link_jitter: Option<std::time::Duration>,
+    /// Probability that a payload is lost, for example `2%` or `0.02`.
+    #[arg(long, value_parser = parse_probability)]
+    pub link_loss: Option<f64>,
+}
+
+/// Parses `2%` or `0.02` into a probability in 0..=1.
+pub fn parse_probability(text: &str) -> Result<f64, String> {
+    let (number, scale) = match text.trim().strip_suffix('%') {
+        Some(percent) => (percent, 100.0),
+        None => (text.trim(), 1.0),
+    };
+    let value = number
+        .trim()
+        .parse::<f64>()
+        .map_err(|e| format!("{text:?}: {e}"))?
+        / scale;
+    if !(0.0..=1.0).contains(&value) {
+        return Err(format!(
+            "{text:?}: a probability is between 0 and 1 (0–100 %)"
+        ));
+    }
+    Ok(value)
 }
 
 /// `drivecheck bench …`
@@ -199,5 +279,55 @@ impl From<StrategyArg> for trajgen::Strategy {
             StrategyArg::Wedge => trajgen::Strategy::Wedge,
             StrategyArg::Reference => trajgen::Strategy::Reference,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_probability_is_a_fraction_or_a_percentage() {
+        assert_eq!(parse_probability("2%"), Ok(0.02));
+        assert_eq!(parse_probability("0.02"), Ok(0.02));
+        assert_eq!(parse_probability(" 100 % "), Ok(1.0));
+        assert!(parse_probability("101%").is_err());
+        assert!(parse_probability("-0.1").is_err());
+        assert!(parse_probability("lots").is_err());
+    }
+
+    #[test]
+    fn run_defaults_to_the_embedded_car_on_the_two_anchor_lot() {
+        let cli = Cli::try_parse_from(["drivecheck", "run"]).unwrap();
+        let Command::Run(args) = cli.command else {
+            panic!("not the run command");
+        };
+        assert_eq!(args.car, "sim");
+        assert_eq!(args.scenario, "parking-lot-2anchors");
+        assert!(!args.realtime && !args.no_faults);
+    }
+
+    #[test]
+    fn sim_takes_human_durations() {
+        let cli = Cli::try_parse_from([
+            "drivecheck",
+            "sim",
+            "--scenario",
+            "courtyard",
+            "--link-latency",
+            "150ms",
+            "--link-loss",
+            "2%",
+        ])
+        .unwrap();
+        let Command::Sim(args) = cli.command else {
+            panic!("not the sim command");
+        };
+        assert_eq!(
+            args.link_latency,
+            Some(std::time::Duration::from_millis(150))
+        );
+        assert_eq!(args.link_loss, Some(0.02));
+        assert!(args.listen.ip().is_loopback());
     }
 }

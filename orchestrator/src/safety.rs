@@ -136,6 +136,11 @@ pub enum AbortReason {
     Starved,
     /// The operator interrupted the campaign.
     Interrupted,
+    /// The car refused or did not answer a command of the test.
+    CommandRefused {
+        /// The command's index in the test.
+        command_index: usize,
+    },
 }
 
 impl AbortReason {
@@ -148,7 +153,8 @@ impl AbortReason {
             | Self::OffRoute { .. }
             | Self::StaleTelemetry { .. }
             | Self::NoPosition
-            | Self::LinkLost => StopAction::Brake,
+            | Self::LinkLost
+            | Self::CommandRefused { .. } => StopAction::Brake,
         }
     }
 }
@@ -177,6 +183,9 @@ impl fmt::Display for AbortReason {
             Self::LinkLost => f.write_str("link lost"),
             Self::Starved => f.write_str("the car reached the end of its route (starvation)"),
             Self::Interrupted => f.write_str("interrupted"),
+            Self::CommandRefused { command_index } => {
+                write!(f, "command {command_index} failed")
+            }
         }
     }
 }

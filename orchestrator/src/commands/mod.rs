@@ -5,7 +5,9 @@ mod bench;
 mod bench_recovery;
 mod route;
 mod route_return;
+mod run;
 mod scenario;
+mod sim;
 
 use std::process::ExitCode;
 
@@ -16,6 +18,8 @@ use crate::cli::{AreaCommand, BenchCommand, Cli, Command, RouteCommand, Scenario
 /// Runs a parsed command line and returns the process's exit status.
 pub fn run(cli: Cli) -> Result<ExitCode> {
     match cli.command {
+        Command::Run(args) => run::run(&args),
+        Command::Sim(args) => sim::serve(&args),
         Command::Area(AreaCommand::Validate(args)) => area::validate(&args),
         Command::Route(RouteCommand::Generate(args)) => route::generate(&args),
         Command::Route(RouteCommand::Return(args)) => route_return::plan(&args),

@@ -1,0 +1,66 @@
+//! `drivecheck sim`: a simulated car served over TCP (like the reference bridge) or UDP, in real
+//! time, with optional impairment of its side of the link, until Ctrl-C.
+
+use std::process::ExitCode;
+
+use anyhow::{Context, Result};
+use car_sim::{Firmware, LinkImpairment, SimConfig};
+
+use crate::cli::SimArgs;
+use crate::scenario_arg::{load_scenario, print_warnings};
+
+/// Serves the simulated car until Ctrl-C.
+pub fn serve(args: &SimArgs) -> Result<ExitCode> {
+    let loaded = load_scenario(&args.scenario)?;
+    print_warnings(&loaded);
+    let config = sim_config(args, &loaded.scenario)?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")?;
+    runtime.block_on(serve_until_ctrl_c(args, &config))?;
+    Ok(ExitCode::SUCCESS)
+}
+
+fn sim_config(args: &SimArgs, scenario: &scenarios::Scenario) -> Result<SimConfig> {
+    let firmware: Firmware = args
+        .firmware
+        .parse()
+        .with_context(|| format!("--firmware {}", args.firmware))?;
+    Ok(SimConfig {
+        firmware,
+        seed: args.seed,
+        link: LinkImpairment {
+            latency: args.link_latency.unwrap_or_default(),
+            jitter: args.link_jitter.unwrap_or_default(),
+            loss: args.link_loss.unwrap_or_default(),
+            ..LinkImpairment::default()
+        },
+        ..SimConfig::from_scenario(scenario)
+    })
+}
+
+async fn serve_until_ctrl_c(args: &SimArgs, config: &SimConfig) -> Result<()> {
+    let sim = if args.udp {
+        car_sim::serve_udp(args.listen, config).await
+    } else {
+        car_sim::serve_tcp(args.listen, config).await
+    }
+    .with_context(|| format!("cannot listen on {}", args.listen))?;
+    let scheme = if args.udp { "udp" } else { "tcp" };
+    let address = sim.local_addr().unwrap_or(args.listen);
+    eprintln!(
+        "simulated car (firmware {}, seed {}) at {scheme}://{address}; latency {:?} + up to {:?}, loss {:.1} %; Ctrl-C stops it",
+        config.firmware,
+        config.seed,
+        config.link.latency,
+        config.link.jitter,
+        config.link.loss * 100.0
+    );
+    tokio::signal::ctrl_c()
+        .await
+        .context("cannot wait for Ctrl-C")?;
+    sim.shutdown();
+    Ok(())
+}

@@ -1,0 +1,238 @@
+//! The run directory: `campaign.json` (written when the campaign starts, and again with its end
+//! time and summary when it ends, however it ends) and one case file per test,
+//! `case-000.json`, `case-001.json`, … in the formats of [`crate::case`].
+
+use std::path::{Path, PathBuf};
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use scenarios::Scenario;
+
+use super::{RunConfig, RunError};
+use crate::case::{
+    CAMPAIGN_FORMAT, CampaignRecord, CampaignSummary, Case, SCHEMA_VERSION, ScenarioRef, Settings,
+    tool_version,
+};
+use crate::oracle::Verdict;
+use crate::safety::SafetyConfig;
+use crate::streaming::StreamingConfig;
+
+/// The file name of the campaign record in a run directory.
+pub const CAMPAIGN_FILE: &str = "campaign.json";
+
+/// One test of a campaign, as the final table shows it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TestSummary {
+    /// The test's index.
+    pub test_index: usize,
+    /// Its case file, relative to the run directory.
+    pub file: String,
+    /// Its verdict (`None` if it never ran).
+    pub verdict: Option<Verdict>,
+    /// Why it failed or was aborted.
+    pub reason: Option<String>,
+    /// Its largest deviation of UWB from RTK, metres.
+    pub worst_deviation_m: Option<f64>,
+    /// Times the car reached the end of its route during the test.
+    pub starvations: usize,
+    /// The smallest margin left at an append, seconds.
+    pub smallest_margin_s: Option<f64>,
+}
+
+/// What a finished campaign wrote.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CampaignReport {
+    /// The run directory.
+    pub dir: PathBuf,
+    /// `campaign.json` as written at the end.
+    pub record: CampaignRecord,
+    /// Every test that was started, in order.
+    pub tests: Vec<TestSummary>,
+}
+
+/// A run directory being written.
+#[derive(Debug)]
+pub struct RunDirectory {
+    path: PathBuf,
+    record: CampaignRecord,
+    tests: Vec<TestSummary>,
+}
+
+impl RunDirectory {
+    /// Creates the directory (and its parents) and writes the first `campaign.json`.
+    pub fn create(
+        config: &RunConfig,
+        scenario: &Scenario,
+        settings: Settings,
+    ) -> Result<Self, RunError> {
+        let path = config.out_dir.clone();
+        std::fs::create_dir_all(&path).map_err(|source| RunError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        let record = CampaignRecord {
+            format: CAMPAIGN_FORMAT.to_owned(),
+            schema_version: SCHEMA_VERSION,
+            tool_version: tool_version().to_owned(),
+            seed: config.campaign.seed,
+            no_faults: config.campaign.no_faults,
+            scenario: ScenarioRef::of(scenario),
+            settings,
+            car: config.car_label.clone(),
+            car_firmware_version: None,
+            started_at: rfc3339_now(),
+            ended_at: None,
+            summary: None,
+        };
+        let dir = Self {
+            path,
+            record,
+            tests: Vec::new(),
+        };
+        dir.write_record()?;
+        Ok(dir)
+    }
+
+    /// The directory.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The campaign's settings (with the runtime constants once preflight set them).
+    pub fn settings(&self) -> &Settings {
+        &self.record.settings
+    }
+
+    /// Records the car's firmware version.
+    pub fn set_firmware(&mut self, version: String) {
+        self.record.car_firmware_version = Some(version);
+    }
+
+    /// Records the safety limits and streaming constants in force.
+    pub fn set_runtime(&mut self, safety: SafetyConfig, streaming: StreamingConfig) {
+        self.record.settings = self.record.settings.clone().with_runtime(safety, streaming);
+    }
+
+    /// Writes a test's case file.
+    pub fn write_case(&mut self, case: &Case) -> Result<(), RunError> {
+        let test_index = case.test_index.unwrap_or(self.tests.len());
+        let file = format!("case-{test_index:03}.json");
+        write(&self.path.join(&file), &case.to_json()?)?;
+        self.tests.push(summarise(test_index, file, case));
+        Ok(())
+    }
+
+    /// Writes the final `campaign.json` (end time and summary) and returns the report.
+    pub fn finish(mut self) -> Result<CampaignReport, RunError> {
+        self.record.ended_at = Some(rfc3339_now());
+        self.record.summary = Some(self.summary());
+        self.write_record()?;
+        Ok(CampaignReport {
+            dir: self.path,
+            record: self.record,
+            tests: self.tests,
+        })
+    }
+
+    fn summary(&self) -> CampaignSummary {
+        let count = |v: Verdict| self.tests.iter().filter(|t| t.verdict == Some(v)).count();
+        CampaignSummary {
+            tests: self.tests.len(),
+            passed: count(Verdict::Passed),
+            failed: count(Verdict::Failed),
+            aborted: count(Verdict::Aborted),
+            worst_deviation_m: self
+                .tests
+                .iter()
+                .filter_map(|t| t.worst_deviation_m)
+                .max_by(f64::total_cmp),
+            failing_cases: self
+                .tests
+                .iter()
+                .filter(|t| t.verdict != Some(Verdict::Passed))
+                .map(|t| t.file.clone())
+                .collect(),
+        }
+    }
+
+    fn write_record(&self) -> Result<(), RunError> {
+        write(&self.path.join(CAMPAIGN_FILE), &self.record.to_json()?)
+    }
+}
+
+fn summarise(test_index: usize, file: String, case: &Case) -> TestSummary {
+    let streaming = case.streaming.as_ref();
+    TestSummary {
+        test_index,
+        file,
+        verdict: case.verdict,
+        reason: case.reason.clone(),
+        worst_deviation_m: case
+            .segments
+            .iter()
+            .filter_map(|s| s.oracle.stats.map(|stats| stats.max_m))
+            .max_by(f64::total_cmp),
+        starvations: streaming.map_or(0, |s| s.starvations_ms.len()),
+        smallest_margin_s: streaming.and_then(|s| s.smallest_margin_s),
+    }
+}
+
+fn write(path: &Path, text: &str) -> Result<(), RunError> {
+    std::fs::write(path, format!("{text}\n")).map_err(|source| RunError::Io {
+        path: path.to_owned(),
+        source,
+    })
+}
+
+/// Now as RFC 3339 UTC with whole seconds, for example `2026-11-22T10:55:21Z`.
+pub fn rfc3339_now() -> String {
+    let (date, [h, m, s]) = utc_now();
+    format!("{date}T{h:02}:{m:02}:{s:02}Z")
+}
+
+/// The default run directory name: `<UTC timestamp>-<scenario>-<seed>`, for example
+/// `20261122T105521Z-parking-lot-2anchors-7`.
+pub fn run_dir_name(scenario: &str, seed: u64) -> String {
+    let (date, [h, m, s]) = utc_now();
+    let compact: String = date.chars().filter(|c| *c != '-').collect();
+    format!("{compact}T{h:02}{m:02}{s:02}Z-{scenario}-{seed}")
+}
+
+/// Today's date (`YYYY-MM-DD`) and the time of day in UTC.
+fn utc_now() -> (String, [u64; 3]) {
+    let secs = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let (days, rem) = (secs / 86_400, secs % 86_400);
+    let (y, mo, d) = civil_from_days(i64::try_from(days).unwrap_or(0));
+    (
+        format!("{y:04}-{mo:02}-{d:02}"),
+        [rem / 3600, rem % 3600 / 60, rem % 60],
+    )
+}
+
+/// The proleptic Gregorian date of a day count since 1970-01-01 (H. Hinnant's algorithm).
+fn civil_from_days(days: i64) -> (i64, u32, u32) {
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = u32::try_from(doy - (153 * mp + 2) / 5 + 1).unwrap_or(1);
+    let m = u32::try_from(if mp < 10 { mp + 3 } else { mp - 9 }).unwrap_or(1);
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    (y, m, d)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn days_convert_to_civil_dates() {
+        assert_eq!(civil_from_days(0), (1970, 1, 1));
+        assert_eq!(civil_from_days(11_016), (2000, 2, 29));
+        // 2026-11-22 is day 20 779.
+        assert_eq!(civil_from_days(20_779), (2026, 11, 22));
+    }
+}

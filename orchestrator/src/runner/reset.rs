@@ -1,0 +1,367 @@
+//! The reset before every test (method §6): clear the faults and the route, plan a return route
+//! from the car's RTK pose with the `recovery` crate, drive it and the rest of the recovery route
+//! to its end, brake to a stop, and set the UWB estimate to the RTK estimate (its position with
+//! `pos_uwb_reset_pos`, and from firmware 11.0 its heading too, with SET_POS). The test drive then
+//! starts from where the car stands, at the end of the recovery route: every test starts from the
+//! same known state. A car the safety monitor braked just outside the drivable region is first
+//! driven back in ([`reentry`]).
+
+use std::time::Duration;
+
+use car_link::{CarError, RoutePoint, StateSample};
+use recovery::{PlanConfig, ReturnRoute};
+use tokio::time::{Instant, MissedTickBehavior, sleep_until};
+use trajgen::{Area, Point, Pose};
+
+use super::telemetry::{Sample, Telemetry};
+use super::{
+    BRAKE_CURRENT_A, BRAKE_TIMEOUT, Context, RunError, STOPPED_SPEED_MPS, Stopped, retried,
+};
+use crate::safety::{Abort, AbortReason, CarSample, SafetyConfig, SafetyMonitor};
+use crate::streaming::{Streamer, Waypoint};
+
+/// Slack on top of the time a reset drive needs at its speeds.
+const RESET_SLACK: Duration = Duration::from_secs(60);
+/// Near the end of its route and slower than this, the car has stopped at the route end.
+const NEAR_END: Duration = Duration::from_secs(2);
+/// Largest distance outside the drivable region from which the reset drives the car back.
+pub const MAX_REENTRY_M: f64 = 1.5;
+/// How far inside the drivable region a re-entry aims.
+pub const REENTRY_INSIDE_M: f64 = 0.5;
+
+/// Where the reset left the car.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ResetDone {
+    /// The return route driven: from the car's position to the joint with the recovery route,
+    /// with the speed of each point.
+    pub return_route: Vec<(Point, f64)>,
+    /// Where the car stands, stopped, with UWB equal to RTK.
+    pub standing: Point,
+}
+
+/// How braking ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BrakeEnd {
+    /// The car is slower than 0.1 m/s.
+    Stopped,
+    /// It did not stop within [`BRAKE_TIMEOUT`].
+    TimedOut,
+    /// The link is lost.
+    LinkLost,
+}
+
+/// Resets the car for test `test_index` (see the module doc).
+///
+/// Timeout: the drive is bounded by the route's length at its speeds plus 60 s, braking by
+/// [`BRAKE_TIMEOUT`]. Cancellation: the context's token brakes the car and returns an
+/// `Interrupted` abort; dropping the future leaves the car driving until its watchdog stops it.
+pub(crate) async fn reset(
+    ctx: &Context<'_>,
+    telemetry: &mut Telemetry,
+    test_index: usize,
+) -> Result<ResetDone, Stopped> {
+    let car = ctx.car;
+    retried(|| car.clear_faults())
+        .await
+        .map_err(|e| car_stop("clearing the faults", e))?;
+    car.clear_route()
+        .await
+        .map_err(|e| car_stop("clearing the route", e))?;
+    let sample = retried(|| car.state())
+        .await
+        .map_err(|e| car_stop("reading the state", e))?;
+    let car_pose = pose_of(&sample);
+    let entry = reentry(&ctx.scenario.area, car_pose);
+    let route = plan_return(ctx, entry.unwrap_or(car_pose), test_index)?;
+    let speed = recovery_speed(ctx);
+    let mut return_route: Vec<(Point, f64)> = entry
+        .map(|_| (car_pose.position, speed))
+        .into_iter()
+        .chain(route.points.iter().map(|&p| (p, speed)))
+        .collect();
+    let mut drive: Vec<Waypoint> = return_route
+        .iter()
+        .map(|&(position, speed)| Waypoint { position, speed })
+        .collect();
+    drive.extend(recovery_rest(ctx, &route));
+    // Re-entering, the car may first have to turn away from the boundary.
+    let slack = entry.map_or(0.0, |_| MAX_REENTRY_M);
+    let safety = SafetyConfig {
+        area_margin_m: ctx.safety.area_margin_m + slack,
+        max_cross_track_m: ctx.safety.max_cross_track_m + slack,
+        ..ctx.safety
+    };
+    follow_to_end(ctx, telemetry, &drive, safety, test_index).await?;
+    retried(|| car.reset_uwb_pos())
+        .await
+        .map_err(|e| car_stop("resetting the UWB position", e))?;
+    let standing = retried(|| car.state())
+        .await
+        .map_err(|e| car_stop("reading the state", e))?;
+    if car.version().major >= 11 {
+        // From 11.0 `pos_uwb_reset_pos` resets the position only (firmware §7.5); SET_POS with
+        // the RTK pose also sets the UWB heading.
+        let s = &standing.state;
+        let pose = car_link::message::Pose {
+            x: s.px,
+            y: s.py,
+            yaw: s.yaw,
+        };
+        retried(|| car.set_pos(pose))
+            .await
+            .map_err(|e| car_stop("setting the UWB pose", e))?;
+    }
+    Ok(ResetDone {
+        return_route: std::mem::take(&mut return_route),
+        standing: Point::new(standing.state.px, standing.state.py),
+    })
+}
+
+/// A failed car command: a lost link aborts the test, anything else stops the campaign.
+pub(crate) fn car_stop(what: &str, error: CarError) -> Stopped {
+    match error {
+        CarError::LinkLost => Stopped::Abort(Abort::new(AbortReason::LinkLost, Duration::ZERO)),
+        other => Stopped::Error(RunError::car(what, other)),
+    }
+}
+
+/// The car's pose from a state: RTK position, heading from the clockwise yaw in degrees.
+pub fn pose_of(sample: &StateSample) -> Pose {
+    let s = &sample.state;
+    Pose::new(Point::new(s.px, s.py), (-s.yaw).to_radians())
+}
+
+/// Where a car standing outside the drivable region by at most [`MAX_REENTRY_M`] (the safety
+/// monitor braked it there) re-enters it: [`REENTRY_INSIDE_M`] inside the nearest boundary, on
+/// the line from the car through the nearest boundary point, heading that way. `None` when the
+/// car is inside (or too far out to drive back unattended).
+pub fn reentry(area: &Area, car: Pose) -> Option<Pose> {
+    let p = car.position;
+    if area.contains_point(p) || !p.is_finite() {
+        return None;
+    }
+    let nearest = area
+        .edges()
+        .iter()
+        .map(|e| closest_on_segment(p, e.a, e.b))
+        .min_by(|a, b| a.dist(p).total_cmp(&b.dist(p)))?;
+    let outside_by = nearest.dist(p);
+    if outside_by > MAX_REENTRY_M || outside_by == 0.0 {
+        return None;
+    }
+    let inward = (nearest - p) * (1.0 / outside_by);
+    let entry = nearest + inward * REENTRY_INSIDE_M;
+    area.contains_point(entry)
+        .then(|| Pose::new(entry, inward.heading()))
+}
+
+fn closest_on_segment(p: Point, a: Point, b: Point) -> Point {
+    let ab = b - a;
+    let length_sq = ab.dot(ab);
+    if length_sq == 0.0 {
+        return a;
+    }
+    a + ab * ((p - a).dot(ab) / length_sq).clamp(0.0, 1.0)
+}
+
+fn plan_return(ctx: &Context<'_>, from: Pose, test_index: usize) -> Result<ReturnRoute, Stopped> {
+    let scenario = ctx.scenario;
+    let seed = crate::model::test_rng_seed(ctx.config.campaign.seed, test_index);
+    let mut first = [0u8; 8];
+    first.copy_from_slice(&seed[..8]);
+    let mut rng = crate::seed::rng(u64::from_le_bytes(first));
+    PlanConfig::default()
+        .plan(
+            &scenario.area,
+            from,
+            &scenario.recovery_route.positions(),
+            &scenario.constraints(),
+            &mut rng,
+        )
+        .map_err(|source| Stopped::Error(RunError::Recovery { test_index, source }))
+}
+
+/// The speed of the reset drive: the recovery route's (its first point's).
+fn recovery_speed(ctx: &Context<'_>) -> f64 {
+    ctx.scenario
+        .recovery_route
+        .first()
+        .map_or(super::SAFE_STOP_SPEED_MPS, |p| p.speed)
+}
+
+/// The recovery route after the return route's joint, at the recovery speed.
+fn recovery_rest(ctx: &Context<'_>, route: &ReturnRoute) -> Vec<Waypoint> {
+    let speed = recovery_speed(ctx);
+    route
+        .joined(&ctx.scenario.recovery_route.positions())
+        .into_iter()
+        .skip(route.points.len())
+        .map(|position| Waypoint { position, speed })
+        .collect()
+}
+
+/// Uploads `route`, drives it until the car stops at its end (watched with `safety`), then
+/// brakes to a stop.
+async fn follow_to_end(
+    ctx: &Context<'_>,
+    telemetry: &mut Telemetry,
+    route: &[Waypoint],
+    safety: SafetyConfig,
+    test_index: usize,
+) -> Result<(), Stopped> {
+    let points: Vec<RoutePoint> = route
+        .iter()
+        .map(|w| RoutePoint::at(w.position.x, w.position.y, w.speed))
+        .collect();
+    ctx.car
+        .add_points(&points)
+        .await
+        .map_err(|e| car_stop("uploading the return route", e))?;
+    ctx.car
+        .set_autopilot(true, false)
+        .await
+        .map_err(|e| car_stop("starting the autopilot", e))?;
+    let outcome = watch_until_end(ctx, telemetry, route, safety).await;
+    let braked = brake_until_stopped(ctx, telemetry).await;
+    match (outcome, braked) {
+        (Err(abort), _) => Err(Stopped::Abort(abort)),
+        (Ok(false), _) => Err(Stopped::Error(RunError::Reset {
+            test_index,
+            reason: format!(
+                "the car did not reach the end of the recovery route within {} s",
+                (expected_duration(route) + RESET_SLACK).as_secs()
+            ),
+        })),
+        (Ok(true), BrakeEnd::LinkLost) => Err(Stopped::Abort(Abort::new(
+            AbortReason::LinkLost,
+            Duration::ZERO,
+        ))),
+        (Ok(true), BrakeEnd::TimedOut) => Err(Stopped::Error(RunError::Reset {
+            test_index,
+            reason: "the car did not stop at the end of the recovery route".to_owned(),
+        })),
+        (Ok(true), BrakeEnd::Stopped) => Ok(()),
+    }
+}
+
+/// Watches the car drive `route` until it stands at its end (`true`) or the time it needs plus
+/// [`RESET_SLACK`] has passed (`false`); an abort from the safety monitor, the link or the
+/// operator.
+async fn watch_until_end(
+    ctx: &Context<'_>,
+    telemetry: &mut Telemetry,
+    route: &[Waypoint],
+    config: SafetyConfig,
+) -> Result<bool, Abort> {
+    let t0 = Instant::now();
+    let positions: Vec<Point> = route.iter().map(|w| w.position).collect();
+    let mut safety = SafetyMonitor::new(ctx.scenario.area.clone(), config, Duration::ZERO);
+    safety.set_route(&positions);
+    let mut streamer = Streamer::new(ctx.config.streaming, route);
+    let deadline = t0 + expected_duration(route) + RESET_SLACK;
+    let mut ticker = tokio::time::interval(ctx.config.state_period);
+    ticker.set_missed_tick_behavior(MissedTickBehavior::Delay);
+    telemetry.drain();
+    loop {
+        let now = t0.elapsed();
+        tokio::select! {
+            biased;
+            () = ctx.cancel.cancelled() => {
+                return Err(safety.stop(AbortReason::Interrupted, now));
+            }
+            sample = telemetry.next() => {
+                let Sample::State(sample) = sample else {
+                    return Err(safety.link_lost(now));
+                };
+                let s = &sample.state;
+                let position = Point::new(s.px, s.py);
+                let now = t0.elapsed();
+                // GET_STATE carries no fix type (firmware §5): the fused position is the reference.
+                if let Some(abort) = safety.sample(now, CarSample { position, rtk_fix: true }) {
+                    return Err(abort);
+                }
+                let decision = streamer.observe(now, position);
+                let stopped = s.speed.abs() < STOPPED_SPEED_MPS;
+                if decision.starved || (decision.time_to_end < NEAR_END && stopped) {
+                    return Ok(true);
+                }
+            }
+            _ = ticker.tick() => {
+                if let Some(abort) = safety.tick(t0.elapsed()) {
+                    return Err(abort);
+                }
+            }
+            () = sleep_until(deadline) => return Ok(false),
+        }
+    }
+}
+
+/// The time `route` takes at its speeds (at least 0.1 m/s).
+fn expected_duration(route: &[Waypoint]) -> Duration {
+    let seconds: f64 = route
+        .windows(2)
+        .map(|w| w[0].position.dist(w[1].position) / w[1].speed.max(0.1))
+        .sum();
+    Duration::try_from_secs_f64(seconds).unwrap_or(Duration::MAX / 4)
+}
+
+/// Brakes with [`BRAKE_CURRENT_A`] at every state sample until the car is slower than
+/// [`STOPPED_SPEED_MPS`], at most [`BRAKE_TIMEOUT`].
+pub(crate) async fn brake_until_stopped(ctx: &Context<'_>, telemetry: &mut Telemetry) -> BrakeEnd {
+    let deadline = Instant::now() + BRAKE_TIMEOUT;
+    telemetry.drain();
+    loop {
+        if let Err(CarError::LinkLost) = ctx.car.brake(BRAKE_CURRENT_A).await {
+            return BrakeEnd::LinkLost;
+        }
+        tokio::select! {
+            biased;
+            sample = telemetry.next() => match sample {
+                Sample::LinkLost => return BrakeEnd::LinkLost,
+                Sample::State(s) if s.state.speed.abs() < STOPPED_SPEED_MPS => {
+                    return BrakeEnd::Stopped;
+                }
+                Sample::State(_) => {}
+            },
+            () = sleep_until(deadline) => return BrakeEnd::TimedOut,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use trajgen::Polygon;
+
+    use super::*;
+
+    fn square() -> Area {
+        let fence = Polygon::new(vec![
+            Point::new(0.0, 0.0),
+            Point::new(10.0, 0.0),
+            Point::new(10.0, 10.0),
+            Point::new(0.0, 10.0),
+        ])
+        .unwrap();
+        Area::new(fence, vec![]).unwrap()
+    }
+
+    #[test]
+    fn a_car_just_outside_re_enters_half_a_metre_inside_the_nearest_edge() {
+        let car = Pose::new(Point::new(10.4, 5.0), 0.0);
+        let entry = reentry(&square(), car).unwrap();
+        assert!(entry.position.dist(Point::new(9.5, 5.0)) < 1e-9);
+        assert!((entry.heading.abs() - std::f64::consts::PI).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_car_inside_or_far_outside_needs_no_re_entry() {
+        assert_eq!(
+            reentry(&square(), Pose::new(Point::new(5.0, 5.0), 0.0)),
+            None
+        );
+        assert_eq!(
+            reentry(&square(), Pose::new(Point::new(13.0, 5.0), 0.0)),
+            None
+        );
+    }
+}

@@ -1,0 +1,53 @@
+//! `drivecheck run` end to end on the embedded simulated car in virtual time: the exit status
+//! says whether every test passed, and the run directory holds the campaign and its cases.
+
+use std::process::{Command, Output};
+
+fn run(args: &[&str], out: &std::path::Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_drivecheck"))
+        .arg("run")
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .expect("the drivecheck binary runs")
+}
+
+fn text(output: &Output) -> String {
+    format!(
+        "stdout: {}\nstderr: {}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    )
+}
+
+#[test]
+fn a_campaign_with_faults_that_finds_a_failure_exits_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run(&["--seed", "1", "--tests", "3"], dir.path());
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("| failed |"));
+    for file in [
+        "campaign.json",
+        "case-000.json",
+        "case-001.json",
+        "case-002.json",
+    ] {
+        assert!(dir.path().join(file).is_file(), "{file} missing");
+    }
+}
+
+#[test]
+fn the_same_campaign_without_faults_passes_and_exits_zero() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run(&["--seed", "1", "--tests", "3", "--no-faults"], dir.path());
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("seed 1"));
+}
+
+#[test]
+fn an_unknown_car_address_is_an_error_with_exit_two() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run(&["--car", "carrier-pigeon://7"], dir.path());
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+}

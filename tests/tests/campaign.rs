@@ -1,0 +1,199 @@
+//! Campaigns end to end on the embedded simulated car, in virtual time: a campaign writes a run
+//! directory whose files parse and validate, the same seed gives identical case files, faults on
+//! the two-anchor parking lot find failures that the same campaign without faults does not, and
+//! a lost link or an interrupt ends the campaign as an error with a complete run directory.
+
+use std::path::Path;
+use std::time::Duration;
+
+use car_link::{Car, CarConfig};
+use car_sim::{SimConfig, SimHandle};
+use indicatif::ProgressBar;
+use orchestrator::case::{CampaignRecord, Case};
+use orchestrator::model::Campaign;
+use orchestrator::oracle::{SegmentVerdict, Verdict};
+use orchestrator::runner::{CampaignReport, RunConfig, RunError, run_campaign};
+use scenarios::Scenario;
+use tokio_util::sync::CancellationToken;
+
+const SCENARIO: &str = "parking-lot-2anchors";
+
+fn scenario() -> Scenario {
+    scenarios::bundled::load(SCENARIO).unwrap().scenario
+}
+
+/// The embedded simulated car of a campaign with `seed`, and a link to it.
+async fn sim_car(scenario: &Scenario, seed: u64) -> (Car, SimHandle) {
+    let config = SimConfig {
+        seed,
+        ..SimConfig::from_scenario(scenario)
+    };
+    let (stream, sim) = car_sim::spawn_in_process(&config);
+    let car_config = CarConfig {
+        request_timeout: Duration::from_secs(1),
+        terminal_timeout: Duration::from_secs(2),
+        ..CarConfig::default()
+    };
+    let car = Car::over_stream(stream, car_config).await.unwrap();
+    (car, sim)
+}
+
+fn config(seed: u64, tests: usize, no_faults: bool, out: &Path) -> RunConfig {
+    let campaign = Campaign {
+        seed,
+        tests,
+        no_faults,
+    };
+    RunConfig::new(campaign, out.to_owned(), "sim")
+}
+
+async fn campaign(seed: u64, tests: usize, no_faults: bool, out: &Path) -> CampaignReport {
+    let scenario = scenario();
+    let (car, _sim) = sim_car(&scenario, seed).await;
+    let config = config(seed, tests, no_faults, out);
+    run_campaign(
+        &car,
+        &scenario,
+        &config,
+        &CancellationToken::new(),
+        &ProgressBar::hidden(),
+    )
+    .await
+    .unwrap()
+}
+
+fn read_case(dir: &Path, test_index: usize) -> Case {
+    let text = std::fs::read_to_string(dir.join(format!("case-{test_index:03}.json"))).unwrap();
+    Case::from_json(&text).unwrap()
+}
+
+fn read_record(dir: &Path) -> CampaignRecord {
+    CampaignRecord::from_json(&std::fs::read_to_string(dir.join("campaign.json")).unwrap()).unwrap()
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_campaign_writes_a_run_directory_that_parses_and_validates() {
+    let dir = tempfile::tempdir().unwrap();
+    let report = campaign(1, 3, false, dir.path()).await;
+    let record = read_record(dir.path());
+    assert_eq!(record, report.record);
+    assert_eq!(record.seed, 1);
+    assert_eq!(record.car_firmware_version.as_deref(), Some("10.1"));
+    assert!(record.ended_at.is_some());
+    let summary = record.summary.unwrap();
+    assert_eq!(summary.tests, 3);
+    assert_eq!(summary.passed + summary.failed + summary.aborted, 3);
+    let s = scenario();
+    for test_index in 0..3 {
+        let case = read_case(dir.path(), test_index);
+        assert_eq!(case.check().map_err(|e| e.to_string()), Ok(()));
+        assert_eq!(case.check_route(&s).map_err(|e| e.to_string()), Ok(()));
+        assert!(case.verdict.is_some());
+        assert!(!case.return_route.is_empty(), "test {test_index}");
+        assert!(!case.segments.is_empty(), "test {test_index}");
+        let streaming = case.streaming.unwrap();
+        assert!(streaming.starvations_ms.is_empty(), "test {test_index}");
+        assert!(
+            streaming
+                .appends
+                .iter()
+                .all(|a| a.confirmed_after.is_some())
+        );
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn the_same_seed_gives_identical_case_files() {
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    campaign(2, 3, false, a.path()).await;
+    campaign(2, 3, false, b.path()).await;
+    for test_index in 0..3 {
+        let name = format!("case-{test_index:03}.json");
+        let first = std::fs::read(a.path().join(&name)).unwrap();
+        let second = std::fs::read(b.path().join(&name)).unwrap();
+        assert!(first == second, "{name} differs between two runs of seed 2");
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn faults_find_failures_that_the_same_campaign_without_faults_does_not() {
+    let (with, without) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let faulty = campaign(1, 3, false, with.path()).await;
+    let clean = campaign(1, 3, true, without.path()).await;
+    let failed: Vec<Case> = (0..3)
+        .map(|i| read_case(with.path(), i))
+        .filter(|c| c.verdict == Some(Verdict::Failed))
+        .collect();
+    assert!(!failed.is_empty(), "seed 1 with faults found no failure");
+    for case in &failed {
+        let failing = case
+            .segments
+            .iter()
+            .find(|s| s.oracle.verdict == SegmentVerdict::Failed)
+            .unwrap();
+        assert!(failing.oracle.stats.unwrap().max_m > 1.0);
+        assert!(
+            !failing.faults_preceding.is_empty(),
+            "the failing segment names the faults before it"
+        );
+    }
+    let summary = clean.record.summary.unwrap();
+    assert_eq!((summary.passed, summary.failed), (3, 0), "{summary:?}");
+    assert!(faulty.record.summary.unwrap().failed > 0);
+}
+
+#[tokio::test(start_paused = true)]
+async fn killing_the_simulator_mid_test_aborts_the_test_and_the_campaign() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenario = scenario();
+    let (car, sim) = sim_car(&scenario, 3).await;
+    let config = config(3, 3, true, dir.path());
+    // The first reset drive takes about 15 s of virtual time; at 25 s the car drives test 0.
+    tokio::spawn(async move {
+        tokio::time::sleep(Duration::from_secs(25)).await;
+        sim.shutdown();
+    });
+    let result = run_campaign(
+        &car,
+        &scenario,
+        &config,
+        &CancellationToken::new(),
+        &ProgressBar::hidden(),
+    )
+    .await;
+    assert!(
+        matches!(result, Err(RunError::LinkLost { test_index: 0 })),
+        "{result:?}"
+    );
+    let case = read_case(dir.path(), 0);
+    assert_eq!(case.verdict, Some(Verdict::Aborted));
+    assert_eq!(case.reason.as_deref(), Some("link lost"));
+    let summary = read_record(dir.path()).summary.unwrap();
+    assert_eq!((summary.tests, summary.aborted), (1, 1));
+}
+
+#[tokio::test(start_paused = true)]
+async fn an_interrupt_stops_the_car_safely_and_completes_the_run_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenario = scenario();
+    let (car, sim) = sim_car(&scenario, 3).await;
+    let config = config(3, 3, true, dir.path());
+    let cancel = CancellationToken::new();
+    let interrupt = cancel.clone();
+    tokio::spawn(async move {
+        tokio::time::sleep(Duration::from_secs(25)).await;
+        interrupt.cancel();
+    });
+    let result = run_campaign(&car, &scenario, &config, &cancel, &ProgressBar::hidden()).await;
+    assert!(
+        matches!(result, Err(RunError::Interrupted { test_index: 0 })),
+        "{result:?}"
+    );
+    assert!(sim.truth().speed.abs() < 0.1, "the car still moves");
+    let case = read_case(dir.path(), 0);
+    assert_eq!(case.verdict, Some(Verdict::Aborted));
+    assert_eq!(case.reason.as_deref(), Some("interrupted"));
+    let record = read_record(dir.path());
+    assert!(record.ended_at.is_some());
+    assert_eq!(record.summary.unwrap().tests, 1);
+}
