@@ -49,12 +49,13 @@ fn config(seed: u64, tests: usize, no_faults: bool, out: &Path) -> RunConfig {
 
 async fn campaign(seed: u64, tests: usize, no_faults: bool, out: &Path) -> CampaignReport {
     let scenario = scenario();
-    let (car, _sim) = sim_car(&scenario, seed).await;
+    let (car, sim) = sim_car(&scenario, seed).await;
     let config = config(seed, tests, no_faults, out);
     run_campaign(
         &car,
         &scenario,
         &config,
+        Some(&sim),
         &CancellationToken::new(),
         &ProgressBar::hidden(),
     )
@@ -153,10 +154,12 @@ async fn killing_the_simulator_mid_test_aborts_the_test_and_the_campaign() {
         tokio::time::sleep(Duration::from_secs(25)).await;
         sim.shutdown();
     });
+    // The simulator's handle moves into the task that kills it: recorded as a real car.
     let result = run_campaign(
         &car,
         &scenario,
         &config,
+        None,
         &CancellationToken::new(),
         &ProgressBar::hidden(),
     )
@@ -184,7 +187,15 @@ async fn an_interrupt_stops_the_car_safely_and_completes_the_run_directory() {
         tokio::time::sleep(Duration::from_secs(25)).await;
         interrupt.cancel();
     });
-    let result = run_campaign(&car, &scenario, &config, &cancel, &ProgressBar::hidden()).await;
+    let result = run_campaign(
+        &car,
+        &scenario,
+        &config,
+        Some(&sim),
+        &cancel,
+        &ProgressBar::hidden(),
+    )
+    .await;
     assert!(
         matches!(result, Err(RunError::Interrupted { test_index: 0 })),
         "{result:?}"

@@ -86,7 +86,7 @@ async fn campaign_on(
     scenario: &Scenario,
     config: &RunConfig,
 ) -> Result<CampaignReport, anyhow::Error> {
-    let (car, _sim) = connect(address, scenario, config.campaign.seed).await?;
+    let (car, sim) = connect(address, scenario, config.campaign.seed).await?;
     let cancel = CancellationToken::new();
     let on_ctrl_c = cancel.clone();
     tokio::spawn(async move {
@@ -96,7 +96,7 @@ async fn campaign_on(
         }
     });
     let progress = progress_bar(config.campaign.tests);
-    let result = run_campaign(&car, scenario, config, &cancel, &progress).await;
+    let result = run_campaign(&car, scenario, config, sim.as_ref(), &cancel, &progress).await;
     progress.finish_and_clear();
     result.map_err(|error| anyhow::Error::new(CampaignFailed::new(error, &config.out_dir)))
 }

@@ -10,6 +10,9 @@
 //! each extra packet of the next segment. Samples are assigned to the segment the car drives
 //! (from where the streamer locates it on the route); a segment is judged when the car leaves
 //! it. The first failing segment ends the test under the default policy.
+//!
+//! Recorded in the campaign's journal as they happen: every command with its answer (fault
+//! commands as sent and confirmed or refused), every state sample, and the first stop demanded.
 
 use std::future::Future;
 use std::pin::Pin;
@@ -29,6 +32,7 @@ use super::{
 use crate::case::{Case, SegmentResult, StreamingRecord};
 use crate::model::{Command, Fault, FaultWindow, Segment, TestPlan};
 use crate::oracle::{JudgedSegment, SegmentOracle, SegmentOutcome, test_verdict};
+use crate::recording::{CarCommand, FaultRecord, SafetyRecord};
 use crate::safety::{Abort, AbortReason, CarSample, SafetyMonitor};
 use crate::streaming::{Decision, Streamer, Waypoint};
 
@@ -90,7 +94,7 @@ pub(crate) async fn drive(
     generation: Duration,
 ) -> DriveOutcome {
     let start = start_route(ctx, standing);
-    let uploaded = upload_start(ctx, &start).await;
+    let uploaded = upload_start(ctx, &start, plan.test_index).await;
     // The test's clock and the monitor start when the car does.
     let mut drive = Drive::new(ctx, plan, &start, generation);
     if let Err(stopped) = uploaded {
@@ -116,17 +120,31 @@ fn start_route(ctx: &Context<'_>, standing: Point) -> Vec<Waypoint> {
     .collect()
 }
 
-async fn upload_start(ctx: &Context<'_>, route: &[Waypoint]) -> Result<(), Stopped> {
-    ctx.car
-        .clear_route()
+async fn upload_start(
+    ctx: &Context<'_>,
+    route: &[Waypoint],
+    test_index: usize,
+) -> Result<(), Stopped> {
+    let (car, journal, test) = (ctx.car, ctx.journal, Some(test_index));
+    journal
+        .call(test, CarCommand::ClearRoute, car.clear_route())
         .await
         .map_err(|e| car_stop("clearing the route", e))?;
-    ctx.car
-        .add_points(&route_points(route))
+    let points = route_points(route);
+    journal
+        .call(
+            test,
+            CarCommand::add_points(&points),
+            car.add_points(&points),
+        )
         .await
         .map_err(|e| car_stop("uploading the start route", e))?;
-    ctx.car
-        .set_autopilot(true, false)
+    let start = CarCommand::SetAutopilot {
+        active: true,
+        reset: false,
+    };
+    journal
+        .call(test, start, car.set_autopilot(true, false))
         .await
         .map_err(|e| car_stop("starting the autopilot", e))
 }
@@ -179,9 +197,18 @@ enum Phase {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum OpKind {
-    Append { append: usize },
-    Fault { command: usize },
-    Extension { append: usize },
+    /// A segment appended (`id`: its number in the recording).
+    Append {
+        append: usize,
+        id: Option<u64>,
+    },
+    Fault {
+        command: usize,
+    },
+    Extension {
+        append: usize,
+        id: Option<u64>,
+    },
 }
 
 type OpFuture = Pin<Box<dyn Future<Output = Result<(), CarError>> + Send>>;
@@ -278,7 +305,7 @@ impl<'c, 'a> Drive<'c, 'a> {
         let mut op: Option<InFlight> = None;
         let mut ticker = tokio::time::interval(self.ctx.config.state_period);
         ticker.set_missed_tick_behavior(MissedTickBehavior::Delay);
-        telemetry.drain();
+        telemetry.drain(self.ctx.journal);
         while self.phase != Phase::Done {
             self.lossy = telemetry.unanswered() > 0 || self.ctx.car.health().timeouts > 0;
             if op.is_none() {
@@ -289,15 +316,17 @@ impl<'c, 'a> Drive<'c, 'a> {
                 biased;
                 () = self.ctx.cancel.cancelled(), if interruptible => Event::Interrupt,
                 (kind, result) = wait_op(&mut op) => Event::Op(kind, result),
-                sample = telemetry.next() => Event::Sample(sample),
+                sample = telemetry.next(self.ctx.journal) => Event::Sample(sample),
                 _ = ticker.tick() => Event::Tick,
             };
             if matches!(event, Event::Op(..)) {
                 op = None;
             }
             self.handle(event);
-            if matches!(self.phase, Phase::Braking | Phase::Done) {
-                op = None;
+            if matches!(self.phase, Phase::Braking | Phase::Done)
+                && let Some((kind, _)) = op.take()
+            {
+                self.record_answer(kind, &Err::<(), _>("abandoned: the drive stopped"));
             }
             if self.brake_now {
                 self.brake().await;
@@ -323,7 +352,15 @@ impl<'c, 'a> Drive<'c, 'a> {
 
     async fn brake(&mut self) {
         self.brake_now = false;
-        if let Err(CarError::LinkLost) = self.ctx.car.brake(BRAKE_CURRENT_A).await {
+        let brake = CarCommand::Brake {
+            current_a: BRAKE_CURRENT_A,
+        };
+        let test = Some(self.plan.test_index);
+        let braked = self
+            .ctx
+            .journal
+            .call(test, brake, self.ctx.car.brake(BRAKE_CURRENT_A));
+        if let Err(CarError::LinkLost) = braked.await {
             let abort = self.safety.link_lost(self.now());
             self.on_abort(abort);
         }
@@ -382,6 +419,8 @@ impl<'c, 'a> Drive<'c, 'a> {
             return;
         }
         self.abort = Some(abort);
+        let record = SafetyRecord::new(Some(self.plan.test_index), abort);
+        self.ctx.journal.write(&record);
         if abort.reason == AbortReason::LinkLost {
             self.phase = Phase::Done;
             return;
@@ -475,6 +514,8 @@ impl<'c, 'a> Drive<'c, 'a> {
 
     fn fault_op(&mut self, fault: Fault) -> InFlight {
         let command = self.cursor;
+        let sent = FaultRecord::sent(self.plan.test_index, command, &fault);
+        self.ctx.journal.write(&sent);
         let car = self.ctx.car.clone();
         let probe = link_probe(fault.probe);
         let kind = link_kind(fault.kind);
@@ -516,8 +557,9 @@ impl<'c, 'a> Drive<'c, 'a> {
         self.decision = None;
         let car = self.ctx.car.clone();
         let points = route_points(&waypoints);
+        let id = self.record_add_points(&points);
         let future = async move { car.add_points(&points).await };
-        (OpKind::Append { append }, Box::pin(future))
+        (OpKind::Append { append, id }, Box::pin(future))
     }
 
     /// The safe stop's slow extension, generated with the ahead margin from the route's end;
@@ -564,23 +606,47 @@ impl<'c, 'a> Drive<'c, 'a> {
         self.phase = Phase::Extending;
         let car = self.ctx.car.clone();
         let points = route_points(&waypoints);
+        let id = self.record_add_points(&points);
         let future = async move { car.add_points(&points).await };
-        Some((OpKind::Extension { append }, Box::pin(future)))
+        Some((OpKind::Extension { append, id }, Box::pin(future)))
+    }
+
+    /// Records the AP_ADD_POINTS about to be sent; its id in the recording.
+    fn record_add_points(&self, points: &[RoutePoint]) -> Option<u64> {
+        let command = CarCommand::add_points(points);
+        self.ctx.journal.sent(Some(self.plan.test_index), command)
+    }
+
+    /// Records the answer to the command `kind`.
+    fn record_answer<E: std::fmt::Display>(&self, kind: OpKind, result: &Result<(), E>) {
+        let journal = self.ctx.journal;
+        match kind {
+            OpKind::Append { id, .. } | OpKind::Extension { id, .. } => {
+                journal.answered(id, result);
+            }
+            OpKind::Fault { command } => {
+                if let Some(fault) = self.plan.commands[command].fault() {
+                    let test_index = self.plan.test_index;
+                    journal.write(&FaultRecord::answered(test_index, command, fault, result));
+                }
+            }
+        }
     }
 
     fn op_done(&mut self, kind: OpKind, result: Result<(), CarError>) {
+        self.record_answer(kind, &result);
         let now = self.now();
         match (kind, result) {
             (_, Err(CarError::LinkLost)) => {
                 let abort = self.safety.link_lost(now);
                 self.on_abort(abort);
             }
-            (OpKind::Append { append }, Ok(())) => self.streamer.confirmed(append, now),
+            (OpKind::Append { append, .. }, Ok(())) => self.streamer.confirmed(append, now),
             (OpKind::Fault { command }, Ok(())) => {
                 self.faults.push((command, now));
                 self.cursor += 1;
             }
-            (OpKind::Extension { append }, Ok(())) => {
+            (OpKind::Extension { append, .. }, Ok(())) => {
                 self.streamer.confirmed(append, now);
                 if self.phase == Phase::Extending {
                     self.phase = Phase::Rolling;

@@ -18,16 +18,23 @@
 //!    extension generated with the ahead margin, then braking until the speed is below 0.1 m/s
 //!    (or braking at once when the monitor demands it).
 //! 4. The **record** ([`record`]): `campaign.json` (written at the start and again at the end)
-//!    and one case file per test, in the formats of [`crate::case`].
+//!    and one case file per test, in the formats of [`crate::case`]; and all along, the
+//!    telemetry recording `campaign.mcap` ([`crate::recording`], written through a journal):
+//!    every state sample, every command sent with its answer, the planned segments and return
+//!    routes, the fault commands, the oracle results, the safety stops, each test's start and
+//!    end, and with the embedded simulator its truth and debug events.
 //!
 //! Invariants: a lost link is never a pass (the test is `aborted` with reason `link lost` and the
 //! campaign ends as an error); every random choice derives from the campaign seed; in virtual
-//! time the same seed gives identical case files (nothing in a case file reads the wall clock).
+//! time the same seed gives identical case files (nothing in a case file reads the wall clock)
+//! and a recording whose messages are identical (its log time is tokio's clock); a recording
+//! error ends the campaign as an error after the running test.
 //!
 //! Not here: planning the tests (`crate::model`), judging samples (`crate::oracle`), the safety
 //! and streaming rules (`crate::safety`, `crate::streaming`), the wire protocol (`car-link`).
 
 pub mod drive;
+mod journal;
 pub mod preflight;
 pub mod record;
 pub mod reset;
@@ -37,6 +44,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use car_link::{Car, CarError};
+use car_sim::SimHandle;
 use indicatif::ProgressBar;
 use scenarios::Scenario;
 use thiserror::Error;
@@ -46,12 +54,19 @@ use trajgen::{GenerationError, Generator, Strategy};
 use crate::case::{Case, CaseError, RoutePointRecord, Settings};
 use crate::model::{Campaign, ModelError, Planner, ProbeRates, TestPlan};
 use crate::oracle::{FailurePolicy, Verdict};
+use crate::recording::{
+    DEFAULT_CHUNK_INTERVAL, OracleRecord, PlannedSegment, Recorder, RecordingError, RecordingStart,
+    SafetyRecord, TestEvent, TestEventKind,
+};
 use crate::safety::{Abort, AbortReason, SafetyConfig};
 use crate::streaming::StreamingConfig;
 
 pub use preflight::Preflight;
-pub use record::{CampaignReport, RunDirectory, TestSummary, rfc3339_now, run_dir_name};
+pub use record::{
+    CampaignReport, RECORDING_FILE, RunDirectory, TestSummary, rfc3339_now, run_dir_name,
+};
 
+use journal::Journal;
 use telemetry::Telemetry;
 
 /// Speed of the safe stop's extension, m/s (method §6).
@@ -149,6 +164,9 @@ pub enum RunError {
     /// A case file or the campaign record could not be written.
     #[error(transparent)]
     Case(#[from] CaseError),
+    /// The recording (`campaign.mcap`) could not be written.
+    #[error("recording: {0}")]
+    Recording(#[source] RecordingError),
     /// Writing the run directory failed.
     #[error("{path}: {source}")]
     Io {
@@ -189,14 +207,19 @@ pub(crate) struct Context<'a> {
     pub(crate) generator: Generator,
     pub(crate) rates: ProbeRates,
     pub(crate) cancel: &'a CancellationToken,
+    pub(crate) journal: &'a Journal<'a>,
 }
 
-/// Runs a campaign against `car` in `scenario` and writes its run directory.
+/// Runs a campaign against `car` in `scenario` and writes its run directory, with its recording
+/// `campaign.mcap`; `sim` is the embedded simulator's handle when `car` is simulated (its truth
+/// and debug events are recorded too), `None` for a real car.
 ///
 /// Returns the report when every test ran (whatever their verdicts); an error when the campaign
 /// could not run to its end (preflight refused, link lost, interrupted, a reset or a plan
 /// failed): the run directory is then still complete (`campaign.json` with its end time and
-/// summary, a case file for every test started).
+/// summary, a case file for every test started, the recording completed as far as it could be
+/// written). A recording that cannot be written is an error ([`RunError::Recording`]): the
+/// campaign stops after the running test.
 ///
 /// Timeout: every car command is bounded by the link's timeouts; a reset drive by its route's
 /// length at its speed plus 60 s; braking by [`BRAKE_TIMEOUT`]. Cancellation: `cancel` performs
@@ -207,25 +230,61 @@ pub async fn run_campaign(
     car: &Car,
     scenario: &Scenario,
     config: &RunConfig,
+    sim: Option<&SimHandle>,
     cancel: &CancellationToken,
     progress: &ProgressBar,
 ) -> Result<CampaignReport, RunError> {
+    let origin = tokio::time::Instant::now();
     let settings = Settings::new(scenario, config.campaign.tests, config.policy);
     let mut dir = RunDirectory::create(config, scenario, settings)?;
-    let result = run_tests(car, scenario, config, cancel, progress, &mut dir).await;
+    let start = RecordingStart {
+        campaign: dir.record(),
+        scenario,
+        origin,
+        simulated: sim.is_some(),
+        chunk_interval: DEFAULT_CHUNK_INTERVAL,
+    };
+    let journal = match Recorder::create(&dir.path().join(RECORDING_FILE), &start) {
+        Ok(recorder) => Journal::new(recorder, sim),
+        Err(error) => {
+            dir.finish()?;
+            return Err(RunError::Recording(error));
+        }
+    };
+    let run = Run {
+        car,
+        scenario,
+        config,
+        cancel,
+        progress,
+        journal: &journal,
+    };
+    let result = run_tests(&run, &mut dir).await;
     let report = dir.finish()?;
-    result.map(|()| report)
+    let recorded = journal.finish(&report.record);
+    result.and(recorded).map(|()| report)
 }
 
-async fn run_tests(
-    car: &Car,
-    scenario: &Scenario,
-    config: &RunConfig,
-    cancel: &CancellationToken,
-    progress: &ProgressBar,
-    dir: &mut RunDirectory,
-) -> Result<(), RunError> {
-    let preflight = Preflight::run(car, scenario, config).await?;
+/// What [`run_tests`] works with.
+struct Run<'a> {
+    car: &'a Car,
+    scenario: &'a Scenario,
+    config: &'a RunConfig,
+    cancel: &'a CancellationToken,
+    progress: &'a ProgressBar,
+    journal: &'a Journal<'a>,
+}
+
+async fn run_tests(run: &Run<'_>, dir: &mut RunDirectory) -> Result<(), RunError> {
+    let Run {
+        car,
+        scenario,
+        config,
+        cancel,
+        progress,
+        journal,
+    } = *run;
+    let preflight = Preflight::run(car, scenario, config, journal).await?;
     if !preflight.switched_off.is_empty() {
         progress.println(format!(
             "preflight: switched off {}",
@@ -244,6 +303,7 @@ async fn run_tests(
             .map_err(RunError::Generator)?,
         rates: preflight.rates,
         cancel,
+        journal,
     };
     let planner = Planner::new(scenario)?;
     let start_tail = crate::model::start_tail(scenario)?;
@@ -265,6 +325,7 @@ async fn run_tests(
         );
         let end = run_test(&ctx, &mut telemetry, &plan, &mut case, per_segment).await;
         dir.write_case(&case)?;
+        record_test_end(journal, test_index, &case);
         progress.set_message(format!(
             "test {test_index}: {}",
             case.verdict.map_or("not run", Verdict::as_str)
@@ -273,8 +334,48 @@ async fn run_tests(
         if let TestEnd::Stop(error) = end {
             return Err(error);
         }
+        journal.check()?;
     }
     Ok(())
+}
+
+/// Records a test's oracle results and its end, and writes the recording's open chunk.
+fn record_test_end(journal: &Journal<'_>, test_index: usize, case: &Case) {
+    for result in &case.segments {
+        journal.write(&OracleRecord {
+            test_index,
+            result: result.clone(),
+        });
+    }
+    if let Some(verdict) = case.verdict {
+        journal.write(&TestEvent {
+            test_index,
+            event: TestEventKind::Ended {
+                verdict,
+                reason: case.reason.clone(),
+            },
+        });
+    }
+    journal.flush();
+}
+
+/// Records that test `plan` starts, with its segments as planned.
+fn record_test_start(journal: &Journal<'_>, plan: &TestPlan) {
+    let test_index = plan.test_index;
+    journal.write(&TestEvent {
+        test_index,
+        event: TestEventKind::Started {
+            commands: plan.commands.len(),
+        },
+    });
+    for (segment_index, (command_index, segment)) in plan.segments().enumerate() {
+        journal.write(&PlannedSegment::new(
+            test_index,
+            command_index,
+            segment_index,
+            segment,
+        ));
+    }
 }
 
 /// Resets the car, drives the test and records the outcome in `case`.
@@ -288,8 +389,9 @@ async fn run_test(
     let test_index = plan.test_index;
     let reset = match reset::reset(ctx, telemetry, test_index).await {
         Ok(reset) => reset,
-        Err(stopped) => return record_stop_before_drive(case, stopped, test_index),
+        Err(stopped) => return record_stop_before_drive(ctx.journal, case, stopped, test_index),
     };
+    record_test_start(ctx.journal, plan);
     case.return_route = reset
         .return_route
         .iter()
@@ -350,10 +452,16 @@ pub(crate) enum Stopped {
     Error(RunError),
 }
 
-fn record_stop_before_drive(case: &mut Case, stopped: Stopped, test_index: usize) -> TestEnd {
+fn record_stop_before_drive(
+    journal: &Journal<'_>,
+    case: &mut Case,
+    stopped: Stopped,
+    test_index: usize,
+) -> TestEnd {
     case.verdict = Some(Verdict::Aborted);
     match stopped {
         Stopped::Abort(abort) => {
+            journal.write(&SafetyRecord::new(None, abort));
             case.reason = Some(format!("reset: {}", abort.reason));
             case.abort = Some(abort);
             match abort.reason {

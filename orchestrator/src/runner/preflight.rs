@@ -5,7 +5,8 @@
 //! fused position reported: switched by a read-modify-write, then read back, and refused with a
 //! clear message if it still deviates); the scenario's anchors uploaded; fault injection enabled
 //! with every slot cleared; the car inside the fence; the UWB estimate reset to the RTK one; and
-//! the round trip of GET_STATE measured over a few requests.
+//! the round trip of GET_STATE measured over a few requests. The fault-injection and UWB
+//! commands and the state samples are recorded in the campaign's journal.
 
 use std::time::Duration;
 
@@ -14,8 +15,10 @@ use car_link::message::Anchor;
 use scenarios::Scenario;
 use trajgen::Point;
 
+use super::journal::Journal;
 use super::{RunConfig, RunError, retried};
 use crate::model::ProbeRates;
+use crate::recording::CarCommand;
 use crate::safety::SafetyConfig;
 
 /// GET_STATE requests the round trip is measured over.
@@ -48,7 +51,12 @@ impl Preflight {
     ///
     /// Timeout: each command as bounded by the car's link configuration. Cancellation: the car
     /// may be left partly prepared; run the preflight again.
-    pub async fn run(car: &Car, scenario: &Scenario, config: &RunConfig) -> Result<Self, RunError> {
+    pub(crate) async fn run(
+        car: &Car,
+        scenario: &Scenario,
+        config: &RunConfig,
+        journal: &Journal<'_>,
+    ) -> Result<Self, RunError> {
         let version = car.version();
         let rates = match version.major {
             10 => ProbeRates::firmware_10(scenario.anchors.len()),
@@ -64,17 +72,18 @@ impl Preflight {
         retried(|| car.upload_anchors(&anchors))
             .await
             .map_err(|e| RunError::car("uploading the anchors", e))?;
-        retried(|| car.set_fi_enabled(true))
+        let enable = CarCommand::SetFaultInjection { enabled: true };
+        retried(|| journal.call(None, enable.clone(), car.set_fi_enabled(true)))
             .await
             .map_err(|e| RunError::car("enabling fault injection", e))?;
-        retried(|| car.clear_faults())
+        retried(|| journal.call(None, CarCommand::ClearFaults, car.clear_faults()))
             .await
             .map_err(|e| RunError::car("clearing the faults", e))?;
-        check_inside_fence(car, scenario).await?;
-        retried(|| car.reset_uwb_pos())
+        check_inside_fence(car, scenario, journal).await?;
+        retried(|| journal.call(None, CarCommand::ResetUwbPos, car.reset_uwb_pos()))
             .await
             .map_err(|e| RunError::car("resetting the UWB position", e))?;
-        let rtt_p99 = measure_round_trip(car).await?;
+        let rtt_p99 = measure_round_trip(car, journal).await?;
         Ok(Self::from_round_trip(rtt_p99, config, rates, switched_off))
     }
 
@@ -138,10 +147,15 @@ fn anchors(scenario: &Scenario) -> Vec<Anchor> {
         .collect()
 }
 
-async fn check_inside_fence(car: &Car, scenario: &Scenario) -> Result<(), RunError> {
+async fn check_inside_fence(
+    car: &Car,
+    scenario: &Scenario,
+    journal: &Journal<'_>,
+) -> Result<(), RunError> {
     let sample = retried(|| car.state())
         .await
         .map_err(|e| RunError::car("reading the car's state", e))?;
+    journal.state(&sample);
     let at = Point::new(sample.state.px, sample.state.py);
     if !at.is_finite() || !scenario.area.contains_point(at) {
         return Err(RunError::Preflight(format!(
@@ -152,12 +166,13 @@ async fn check_inside_fence(car: &Car, scenario: &Scenario) -> Result<(), RunErr
     Ok(())
 }
 
-async fn measure_round_trip(car: &Car) -> Result<Duration, RunError> {
+async fn measure_round_trip(car: &Car, journal: &Journal<'_>) -> Result<Duration, RunError> {
     let mut rtts = Vec::with_capacity(RTT_PROBES);
     for _ in 0..RTT_PROBES {
         let sample = retried(|| car.state())
             .await
             .map_err(|e| RunError::car("measuring the round trip", e))?;
+        journal.state(&sample);
         rtts.push(sample.rtt());
     }
     rtts.sort_unstable();

@@ -1,6 +1,7 @@
 //! The run directory: `campaign.json` (written when the campaign starts, and again with its end
-//! time and summary when it ends, however it ends) and one case file per test,
-//! `case-000.json`, `case-001.json`, … in the formats of [`crate::case`].
+//! time and summary when it ends, however it ends), one case file per test,
+//! `case-000.json`, `case-001.json`, … in the formats of [`crate::case`], and the recording
+//! `campaign.mcap` (written by [`crate::recording::Recorder`], see `docs/recording.md`).
 
 use std::path::{Path, PathBuf};
 use std::time::{SystemTime, UNIX_EPOCH};
@@ -18,6 +19,8 @@ use crate::streaming::StreamingConfig;
 
 /// The file name of the campaign record in a run directory.
 pub const CAMPAIGN_FILE: &str = "campaign.json";
+/// The file name of the recording in a run directory.
+pub const RECORDING_FILE: &str = "campaign.mcap";
 
 /// One test of a campaign, as the final table shows it.
 #[derive(Debug, Clone, PartialEq)]
@@ -95,6 +98,11 @@ impl RunDirectory {
     /// The directory.
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// `campaign.json` as last written.
+    pub fn record(&self) -> &CampaignRecord {
+        &self.record
     }
 
     /// The campaign's settings (with the runtime constants once preflight set them).

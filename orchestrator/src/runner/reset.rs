@@ -5,6 +5,9 @@
 //! starts from where the car stands, at the end of the recovery route: every test starts from the
 //! same known state. A car the safety monitor braked just outside the drivable region is first
 //! driven back in ([`reentry`]).
+//!
+//! Recorded: the return route as planned, every command (between tests: without a test index)
+//! with its answer, and every state sample.
 
 use std::time::Duration;
 
@@ -17,6 +20,8 @@ use super::telemetry::{Sample, Telemetry};
 use super::{
     BRAKE_CURRENT_A, BRAKE_TIMEOUT, Context, RunError, STOPPED_SPEED_MPS, Stopped, retried,
 };
+use crate::case::RoutePointRecord;
+use crate::recording::{CarCommand, PlannedReturnRoute, Pose as RecordedPose};
 use crate::safety::{Abort, AbortReason, CarSample, SafetyConfig, SafetyMonitor};
 use crate::streaming::{Streamer, Waypoint};
 
@@ -61,15 +66,18 @@ pub(crate) async fn reset(
     test_index: usize,
 ) -> Result<ResetDone, Stopped> {
     let car = ctx.car;
-    retried(|| car.clear_faults())
+    let journal = ctx.journal;
+    retried(|| journal.call(None, CarCommand::ClearFaults, car.clear_faults()))
         .await
         .map_err(|e| car_stop("clearing the faults", e))?;
-    car.clear_route()
+    journal
+        .call(None, CarCommand::ClearRoute, car.clear_route())
         .await
         .map_err(|e| car_stop("clearing the route", e))?;
     let sample = retried(|| car.state())
         .await
         .map_err(|e| car_stop("reading the state", e))?;
+    journal.state(&sample);
     let car_pose = pose_of(&sample);
     let entry = reentry(&ctx.scenario.area, car_pose);
     let route = plan_return(ctx, entry.unwrap_or(car_pose), test_index)?;
@@ -79,6 +87,17 @@ pub(crate) async fn reset(
         .into_iter()
         .chain(route.points.iter().map(|&p| (p, speed)))
         .collect();
+    journal.write(&PlannedReturnRoute {
+        test_index,
+        points: return_route
+            .iter()
+            .map(|&(p, speed)| RoutePointRecord {
+                x: p.x,
+                y: p.y,
+                speed,
+            })
+            .collect(),
+    });
     let mut drive: Vec<Waypoint> = return_route
         .iter()
         .map(|&(position, speed)| Waypoint { position, speed })
@@ -92,12 +111,13 @@ pub(crate) async fn reset(
         ..ctx.safety
     };
     follow_to_end(ctx, telemetry, &drive, safety, test_index).await?;
-    retried(|| car.reset_uwb_pos())
+    retried(|| journal.call(None, CarCommand::ResetUwbPos, car.reset_uwb_pos()))
         .await
         .map_err(|e| car_stop("resetting the UWB position", e))?;
     let standing = retried(|| car.state())
         .await
         .map_err(|e| car_stop("reading the state", e))?;
+    journal.state(&standing);
     if car.version().major >= 11 {
         // From 11.0 `pos_uwb_reset_pos` resets the position only (firmware §7.5); SET_POS with
         // the RTK pose also sets the UWB heading.
@@ -107,7 +127,14 @@ pub(crate) async fn reset(
             y: s.py,
             yaw: s.yaw,
         };
-        retried(|| car.set_pos(pose))
+        let command = CarCommand::SetPos {
+            pose: RecordedPose {
+                x: s.px,
+                y: s.py,
+                yaw_deg: s.yaw,
+            },
+        };
+        retried(|| journal.call(None, command.clone(), car.set_pos(pose)))
             .await
             .map_err(|e| car_stop("setting the UWB pose", e))?;
     }
@@ -213,12 +240,21 @@ async fn follow_to_end(
         .iter()
         .map(|w| RoutePoint::at(w.position.x, w.position.y, w.speed))
         .collect();
-    ctx.car
-        .add_points(&points)
+    let journal = ctx.journal;
+    journal
+        .call(
+            None,
+            CarCommand::add_points(&points),
+            ctx.car.add_points(&points),
+        )
         .await
         .map_err(|e| car_stop("uploading the return route", e))?;
-    ctx.car
-        .set_autopilot(true, false)
+    let start = CarCommand::SetAutopilot {
+        active: true,
+        reset: false,
+    };
+    journal
+        .call(None, start, ctx.car.set_autopilot(true, false))
         .await
         .map_err(|e| car_stop("starting the autopilot", e))?;
     let outcome = watch_until_end(ctx, telemetry, route, safety).await;
@@ -261,7 +297,7 @@ async fn watch_until_end(
     let deadline = t0 + expected_duration(route) + RESET_SLACK;
     let mut ticker = tokio::time::interval(ctx.config.state_period);
     ticker.set_missed_tick_behavior(MissedTickBehavior::Delay);
-    telemetry.drain();
+    telemetry.drain(ctx.journal);
     loop {
         let now = t0.elapsed();
         tokio::select! {
@@ -269,7 +305,7 @@ async fn watch_until_end(
             () = ctx.cancel.cancelled() => {
                 return Err(safety.stop(AbortReason::Interrupted, now));
             }
-            sample = telemetry.next() => {
+            sample = telemetry.next(ctx.journal) => {
                 let Sample::State(sample) = sample else {
                     return Err(safety.link_lost(now));
                 };
@@ -309,14 +345,19 @@ fn expected_duration(route: &[Waypoint]) -> Duration {
 /// [`STOPPED_SPEED_MPS`], at most [`BRAKE_TIMEOUT`].
 pub(crate) async fn brake_until_stopped(ctx: &Context<'_>, telemetry: &mut Telemetry) -> BrakeEnd {
     let deadline = Instant::now() + BRAKE_TIMEOUT;
-    telemetry.drain();
+    let journal = ctx.journal;
+    telemetry.drain(journal);
     loop {
-        if let Err(CarError::LinkLost) = ctx.car.brake(BRAKE_CURRENT_A).await {
+        let brake = CarCommand::Brake {
+            current_a: BRAKE_CURRENT_A,
+        };
+        let braked = journal.call(None, brake, ctx.car.brake(BRAKE_CURRENT_A));
+        if let Err(CarError::LinkLost) = braked.await {
             return BrakeEnd::LinkLost;
         }
         tokio::select! {
             biased;
-            sample = telemetry.next() => match sample {
+            sample = telemetry.next(journal) => match sample {
                 Sample::LinkLost => return BrakeEnd::LinkLost,
                 Sample::State(s) if s.state.speed.abs() < STOPPED_SPEED_MPS => {
                     return BrakeEnd::Stopped;

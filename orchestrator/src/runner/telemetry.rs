@@ -4,6 +4,9 @@
 //! GET_STATE requests are one at a time on the link (replies carry no request id), so a sample
 //! cannot come faster than one round trip. A request without a reply within the sample timeout
 //! is dropped (car-link discards its late reply as stray) and the next tick asks again.
+//!
+//! Every sample taken from the channel (also one thrown away by [`Telemetry::drain`]) is
+//! recorded in the campaign's journal.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -13,6 +16,8 @@ use car_link::{Car, CarError, StateSample};
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tokio::time::MissedTickBehavior;
+
+use super::journal::Journal;
 
 /// One item of the telemetry.
 #[derive(Debug, Clone)]
@@ -49,14 +54,24 @@ impl Telemetry {
         self.unanswered.load(Ordering::Relaxed)
     }
 
-    /// The next sample; `LinkLost` also once the task has ended. Cancel-safe.
-    pub(crate) async fn next(&mut self) -> Sample {
-        self.rx.recv().await.unwrap_or(Sample::LinkLost)
+    /// The next sample, recorded in `journal`; `LinkLost` also once the task has ended.
+    /// Cancel-safe.
+    pub(crate) async fn next(&mut self, journal: &Journal<'_>) -> Sample {
+        let sample = self.rx.recv().await.unwrap_or(Sample::LinkLost);
+        if let Sample::State(state) = &sample {
+            journal.state(state);
+        }
+        sample
     }
 
-    /// Throws away a sample that waited while nobody listened (call before a drive loop).
-    pub(crate) fn drain(&mut self) {
-        while self.rx.try_recv().is_ok() {}
+    /// Throws away (after recording it in `journal`) a sample that waited while nobody
+    /// listened (call before a drive loop).
+    pub(crate) fn drain(&mut self, journal: &Journal<'_>) {
+        while let Ok(sample) = self.rx.try_recv() {
+            if let Sample::State(state) = &sample {
+                journal.state(state);
+            }
+        }
     }
 }
 

@@ -1,0 +1,142 @@
+//! The runner's side of the recording: a [`Journal`] wraps the campaign's
+//! [`Recorder`](crate::recording::Recorder) (and, in a simulated run, the simulator's handle)
+//! so that the drive, the reset and the telemetry can record through a shared reference.
+//!
+//! Recording never interrupts a drive: the first recording error is kept (later writes are
+//! skipped) and the runner ends the campaign with [`RunError::Recording`] at the end of the
+//! test, after the car's safe stop. The journal's methods therefore return nothing.
+
+use std::future::Future;
+use std::sync::{Mutex, MutexGuard};
+
+use car_link::{CarError, StateSample};
+use car_sim::SimHandle;
+
+use super::RunError;
+use crate::case::CampaignRecord;
+use crate::recording::{CarCommand, Record, Recorder, RecordingError};
+
+/// The recorder and the first error it returned.
+#[derive(Debug)]
+struct State {
+    recorder: Option<Recorder>,
+    error: Option<RecordingError>,
+}
+
+/// The campaign's recording, shared by the runner's parts (see the module doc).
+#[derive(Debug)]
+pub(crate) struct Journal<'a> {
+    state: Mutex<State>,
+    sim: Option<&'a SimHandle>,
+}
+
+impl<'a> Journal<'a> {
+    /// Records through `recorder`; with `sim`, every state sample also records the simulator's
+    /// truth and debug events.
+    pub(crate) fn new(recorder: Recorder, sim: Option<&'a SimHandle>) -> Self {
+        Self {
+            state: Mutex::new(State {
+                recorder: Some(recorder),
+                error: None,
+            }),
+            sim,
+        }
+    }
+
+    fn lock(&self) -> MutexGuard<'_, State> {
+        self.state.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Runs `write` on the recorder unless an error happened before; keeps its error.
+    fn with<T>(&self, write: impl FnOnce(&mut Recorder) -> Result<T, RecordingError>) -> Option<T> {
+        let mut state = self.lock();
+        if state.error.is_some() {
+            return None;
+        }
+        let result = write(state.recorder.as_mut()?);
+        match result {
+            Ok(value) => Some(value),
+            Err(error) => {
+                state.error = Some(error);
+                None
+            }
+        }
+    }
+
+    /// Records `message` on its channel now.
+    pub(crate) fn write<R: Record>(&self, message: &R) {
+        self.with(|r| r.write(message));
+    }
+
+    /// Records a command about to be sent; its id for [`Journal::answered`] (`None` once
+    /// recording failed).
+    pub(crate) fn sent(&self, test_index: Option<usize>, command: CarCommand) -> Option<u64> {
+        self.with(|r| r.command_sent(test_index, command))
+    }
+
+    /// Records the answer to command `id`.
+    pub(crate) fn answered<T, E: std::fmt::Display>(&self, id: Option<u64>, result: &Result<T, E>) {
+        if let Some(id) = id {
+            self.with(|r| r.command_answered(id, result));
+        }
+    }
+
+    /// Sends a command with `send`, recording it and its answer.
+    pub(crate) async fn call<T, Fut>(
+        &self,
+        test_index: Option<usize>,
+        command: CarCommand,
+        send: Fut,
+    ) -> Result<T, CarError>
+    where
+        Fut: Future<Output = Result<T, CarError>>,
+    {
+        let id = self.sent(test_index, command);
+        let result = send.await;
+        self.answered(id, &result);
+        result
+    }
+
+    /// Records a state sample and, in a simulated run, the simulator's truth and the debug
+    /// events since the last sample.
+    pub(crate) fn state(&self, sample: &StateSample) {
+        self.with(|r| r.car_state(sample));
+        if let Some(sim) = self.sim {
+            let truth = sim.truth();
+            let events = sim.take_events();
+            self.with(|r| {
+                r.sim_truth(&truth)?;
+                r.sim_events(&events)
+            });
+        }
+    }
+
+    /// Writes the open chunk to the file (end of a test).
+    pub(crate) fn flush(&self) {
+        self.with(Recorder::flush);
+    }
+
+    /// The first recording error, as the campaign's error.
+    pub(crate) fn check(&self) -> Result<(), RunError> {
+        match self.lock().error.take() {
+            Some(error) => Err(RunError::Recording(error)),
+            None => Ok(()),
+        }
+    }
+
+    /// Writes the campaign's end record and completes the file.
+    pub(crate) fn finish(self, campaign: &CampaignRecord) -> Result<(), RunError> {
+        let state = self.state.into_inner().unwrap_or_else(|e| e.into_inner());
+        if let Some(error) = state.error {
+            return Err(RunError::Recording(error));
+        }
+        let Some(mut recorder) = state.recorder else {
+            return Ok(());
+        };
+        recorder
+            .campaign_ended(campaign)
+            .and_then(|()| recorder.finish())
+            .map(drop)
+            .map_err(RunError::Recording)
+    }
+}
