@@ -181,13 +181,17 @@ pub fn segment_hit(origin: Point, end: Point, c: Point, d: Point) -> Option<f64>
 
 /// Distance from `p` to the closed segment `a–b`.
 pub fn point_segment_distance(p: Point, a: Point, b: Point) -> f64 {
+    p.dist(closest_point_on_segment(p, a, b))
+}
+
+/// The point of the closed segment `a–b` nearest to `p` (`a` when the segment is a point).
+pub fn closest_point_on_segment(p: Point, a: Point, b: Point) -> Point {
     let ab = b - a;
     let len2 = ab.dot(ab);
     if len2 == 0.0 {
-        return p.dist(a);
+        return a;
     }
-    let t = ((p - a).dot(ab) / len2).clamp(0.0, 1.0);
-    p.dist(a + ab * t)
+    a + ab * ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
 }
 
 /// Distance between the closed segments `a–b` and `c–d` (zero when they intersect).

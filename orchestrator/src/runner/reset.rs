@@ -14,6 +14,7 @@ use std::time::Duration;
 use car_link::{CarError, RoutePoint, StateSample};
 use recovery::{PlanConfig, ReturnRoute};
 use tokio::time::{Instant, MissedTickBehavior, sleep_until};
+use trajgen::geometry::closest_point_on_segment;
 use trajgen::{Area, Point, Pose};
 
 use super::telemetry::{Sample, Telemetry};
@@ -170,7 +171,7 @@ pub fn reentry(area: &Area, car: Pose) -> Option<Pose> {
     let nearest = area
         .edges()
         .iter()
-        .map(|e| closest_on_segment(p, e.a, e.b))
+        .map(|e| closest_point_on_segment(p, e.a, e.b))
         .min_by(|a, b| a.dist(p).total_cmp(&b.dist(p)))?;
     let outside_by = nearest.dist(p);
     if outside_by > MAX_REENTRY_M || outside_by == 0.0 {
@@ -180,15 +181,6 @@ pub fn reentry(area: &Area, car: Pose) -> Option<Pose> {
     let entry = nearest + inward * REENTRY_INSIDE_M;
     area.contains_point(entry)
         .then(|| Pose::new(entry, inward.heading()))
-}
-
-fn closest_on_segment(p: Point, a: Point, b: Point) -> Point {
-    let ab = b - a;
-    let length_sq = ab.dot(ab);
-    if length_sq == 0.0 {
-        return a;
-    }
-    a + ab * ((p - a).dot(ab) / length_sq).clamp(0.0, 1.0)
 }
 
 fn plan_return(ctx: &Context<'_>, from: Pose, test_index: usize) -> Result<ReturnRoute, Stopped> {
