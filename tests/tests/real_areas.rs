@@ -90,6 +90,8 @@ proptest! {
         prop_assert_eq!(route.points[0], pose.position);
         check_route(&s.area, &route.checked_points(), &c, Some(pose.heading))
             .map_err(|v| TestCaseError::fail(format!("{}: {v}", s.name)))?;
-        prop_assert!(route.quality.length >= route.quality.lower_bound);
+        // A route along the straight line measures the bound up to rounding.
+        let q = &route.quality;
+        prop_assert!(q.length >= q.lower_bound * (1.0 - 1e-12), "{}: {pose:?}: {q:?}", s.name);
     }
 }
