@@ -2,6 +2,7 @@
 //! determinism and the watchdog, with fixtures copied from the bundled two-anchor parking lot.
 
 use std::collections::VecDeque;
+use std::f64::consts::PI;
 
 use scenarios::geometry::{Area, Point, Polygon, point_segment_distance};
 
@@ -219,16 +220,45 @@ fn cross_track(route: &[Point], k: &mut usize, p: Point) -> f64 {
     d
 }
 
+/// How the car steers in a cross-track measurement.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Steering {
+    /// The documented firmware: §6.3 with the distance compensation dividing `R_pp`.
+    Documented,
+    /// The documented firmware with `ap_ang_dist_comp 0`.
+    CompensationOff,
+    /// The 2016 code: the distance compensation multiplies the steering angle (not reproduced by
+    /// the simulator; a test-only experiment for comparison).
+    MultiplyAngle2016,
+    /// The documented law with perfect sensing and steering: no GNSS noise or delay and an
+    /// instant servo, i.e. the floor of the law itself at the 10 ms tick.
+    DocumentedIdealSensors,
+}
+
+/// Cross-track error of the true position from the planned polyline, at the 20 Hz polls.
+struct CrossTrack {
+    p50: f64,
+    p95: f64,
+    max: f64,
+    samples: usize,
+    outside: bool,
+}
+
+/// Drives the scenario's start route and `length_m` of random route at 3 m/s and measures the
+/// cross-track error of the true position (start route and last segments excluded).
 fn drive_and_measure(
     scenario: &scenarios::Scenario,
     firmware: Firmware,
     seed: u64,
-) -> (f64, f64, bool) {
+    length_m: f64,
+    steering: Steering,
+    configure: impl Fn(&mut Car),
+) -> CrossTrack {
     let area = &scenario.area;
     let mut route = scenario.start_route.positions();
     let start_len = route.len();
     let mut noise = Noise::stream(seed, 99);
-    random_route(area, &mut route, 200.0, 0.6, &mut noise);
+    random_route(area, &mut route, length_m, 0.6, &mut noise);
     let start_speeds: Vec<f64> = scenario
         .start_route
         .points
@@ -236,13 +266,32 @@ fn drive_and_measure(
         .map(|p| p.speed)
         .collect();
     let points = route_points(&route, |i| start_speeds.get(i).copied().unwrap_or(3.0));
-    let car = Car::new(CarOptions {
+    let ideal = steering == Steering::DocumentedIdealSensors;
+    let mut car = Car::new(CarOptions {
         firmware,
         seed,
         world: World::from_scenario(scenario),
         placement: Placement::at_start_of(scenario).expect("a start route"),
+        gnss: crate::GnssModel {
+            sigma_m: if ideal { 0.0 } else { 0.015 },
+            latency_ms: if ideal { 0 } else { 100 },
+            ..crate::GnssModel::default()
+        },
         ..CarOptions::default()
     });
+    if steering == Steering::CompensationOff {
+        assert_eq!(
+            car.terminal("ap_ang_dist_comp 0"),
+            ["Angle distance compensation disabled\n"]
+        );
+    }
+    if ideal {
+        let mut config = *car.config();
+        config.vehicle.steering_ramp_time = 0.0;
+        car.set_config(config);
+    }
+    configure(&mut car);
+    crate::autopilot::experiment::set_multiply_angle(steering == Steering::MultiplyAngle2016);
     let mut driver = Driver::new(car, &points);
     let (mut errors, mut k, mut outside) = (Vec::new(), 0usize, false);
     let total_ms = ((polyline_length(&route) / 3.0 + 30.0) * 1000.0) as u64;
@@ -255,23 +304,29 @@ fn drive_and_measure(
             errors.push(e);
         }
     });
+    crate::autopilot::experiment::set_multiply_angle(false);
     assert!(
         k + 3 >= route.len(),
         "the car did not reach the route end (segment {k} of {})",
         route.len()
     );
-    (
-        percentile(errors.clone(), 0.95),
-        percentile(errors, 1.0),
+    CrossTrack {
+        p50: percentile(errors.clone(), 0.5),
+        p95: percentile(errors.clone(), 0.95),
+        max: percentile(errors.clone(), 1.0),
+        samples: errors.len(),
         outside,
-    )
+    }
 }
 
-/// The issue asks for a cross-track p95 below 0.15 m. The documented autopilot cannot do that on
-/// the method's routes (turns up to 30° every 0.6–2 m) at 3 m/s: 10.1's look-ahead is 1.59 m there
-/// and its distance compensation over-steers (p95 ≈ 0.20 m measured; 0.15 m without it), and
-/// 12.3's look-ahead is 0.8 s · 3 m/s = 2.4 m (p95 ≈ 0.5 m). The bounds below guard the measured
-/// behaviour of the faithful model; the figures are printed with `--nocapture`.
+/// The issue asks for a cross-track p95 below 0.15 m. The documented autopilot with its default
+/// configuration cannot do that on the method's routes (turns up to 30° every 0.6–2 m) at 3 m/s:
+/// pure pursuit cuts the corners by an amount set by its look-ahead radius, 1.59 m for 10.1 there
+/// (p95 0.15–0.21 m over 1 km routes; 0.14–0.16 m with `ap_ang_dist_comp 0`) and 0.8 s · 3 m/s =
+/// 2.4 m for 12.3 (p95 0.28–0.53 m). Perfect sensing and an instant servo change nothing (the floor
+/// is the law's geometry), and the 2016 law that multiplied the angle is no better. The bounds below
+/// guard the measured behaviour of the faithful model; the figures are printed with `--nocapture`,
+/// and the ignored `cross_track_at_3_m_s_*` tests measure more.
 #[test]
 fn drives_the_start_route_and_200_m_at_3_m_s_on_every_bundled_area_inside_the_fence() {
     for (k, name) in scenarios::bundled::names().iter().enumerate() {
@@ -279,11 +334,125 @@ fn drives_the_start_route_and_200_m_at_3_m_s_on_every_bundled_area_inside_the_fe
             .expect("a bundled area")
             .scenario;
         for (firmware, bound) in [(Firmware::V10_1, 0.25), (Firmware::V12_3, 0.6)] {
-            let (p95, max, outside) = drive_and_measure(&scenario, firmware, k as u64 + 1);
-            println!("{name} {firmware}: cross-track p95 {p95:.3} m, max {max:.3} m");
-            assert!(p95 < bound, "{name} {firmware}: cross-track p95 {p95:.3} m");
-            assert!(!outside, "{name} {firmware}: the car left the area");
+            let m = drive_and_measure(
+                &scenario,
+                firmware,
+                k as u64 + 1,
+                200.0,
+                Steering::Documented,
+                |_| {},
+            );
+            println!(
+                "{name} {firmware}: cross-track p95 {:.3} m, max {:.3} m",
+                m.p95, m.max
+            );
+            assert!(
+                m.p95 < bound,
+                "{name} {firmware}: cross-track p95 {:.3} m",
+                m.p95
+            );
+            assert!(!m.outside, "{name} {firmware}: the car left the area");
         }
+    }
+}
+
+/// The measurement behind issue 4's figure: cross-track p50/p95/max at 3 m/s over 1 km routes on
+/// every bundled area, seeds 1–5, both generations, for the documented steering law, without the
+/// distance compensation, with the 2016 law, and with the documented law on ideal sensors. Long:
+/// run it with `cargo test -p car-sim --release -- --ignored --nocapture cross_track_at_3`.
+#[test]
+#[ignore = "long measurement; run explicitly"]
+fn cross_track_at_3_m_s_per_firmware_area_seed_and_steering_law() {
+    let laws = [
+        Steering::Documented,
+        Steering::CompensationOff,
+        Steering::MultiplyAngle2016,
+        Steering::DocumentedIdealSensors,
+    ];
+    println!("firmware area seed law: p50 / p95 / max cross-track, m (samples)");
+    for firmware in [Firmware::V10_1, Firmware::V12_3] {
+        for law in laws {
+            let mut all_p95 = Vec::new();
+            for name in scenarios::bundled::names() {
+                let scenario = scenarios::bundled::load(name)
+                    .expect("a bundled area")
+                    .scenario;
+                for seed in 1..=5 {
+                    let m = drive_and_measure(&scenario, firmware, seed, 1000.0, law, |_| {});
+                    println!(
+                        "{firmware} {name} {seed} {law:?}: {:.3} / {:.3} / {:.3} ({}){}",
+                        m.p50,
+                        m.p95,
+                        m.max,
+                        m.samples,
+                        if m.outside { " LEFT THE AREA" } else { "" }
+                    );
+                    all_p95.push(m.p95);
+                }
+            }
+            println!(
+                "{firmware} {law:?}: p95 over the runs {:.3}–{:.3} m, median {:.3} m",
+                percentile(all_p95.clone(), 0.0),
+                percentile(all_p95.clone(), 1.0),
+                percentile(all_p95, 0.5)
+            );
+        }
+    }
+}
+
+/// Cross-track at 3 m/s with the look-ahead radius an orchestrator can configure (documented
+/// knobs: SET_MAIN_CONFIG `ap_base_rad` / `ap_rad_time_ahead`, terminal `ap_ang_dist_comp`), over
+/// 500 m routes on every bundled area, seeds 1–2. Long: run it with
+/// `cargo test -p car-sim --release -- --ignored --nocapture cross_track_at_3`.
+#[test]
+#[ignore = "long measurement; run explicitly"]
+fn cross_track_at_3_m_s_with_the_documented_look_ahead_settings() {
+    // (firmware, distance compensation, ap_base_rad, ap_rad_time_ahead): the look-ahead radius at
+    // 3 m/s is 1.3225 · ap_base_rad (10.1) or max(3 · ap_rad_time_ahead, ap_base_rad) (12.3).
+    let settings = [
+        (Firmware::V10_1, true, 1.2, 0.0),
+        (Firmware::V10_1, false, 1.2, 0.0),
+        (Firmware::V10_1, true, 1.0, 0.0),
+        (Firmware::V10_1, false, 1.0, 0.0),
+        (Firmware::V12_3, true, 0.8, 0.8),
+        (Firmware::V12_3, true, 0.8, 0.5),
+        (Firmware::V12_3, false, 0.8, 0.5),
+        (Firmware::V12_3, false, 0.8, 0.4),
+    ];
+    for (firmware, compensation, base_rad, time_ahead) in settings {
+        let mut p95 = Vec::new();
+        for name in scenarios::bundled::names() {
+            let scenario = scenarios::bundled::load(name)
+                .expect("a bundled area")
+                .scenario;
+            for seed in 1..=2 {
+                let m = drive_and_measure(
+                    &scenario,
+                    firmware,
+                    seed,
+                    500.0,
+                    if compensation {
+                        Steering::Documented
+                    } else {
+                        Steering::CompensationOff
+                    },
+                    |car| {
+                        let mut config = *car.config();
+                        config.ap_base_rad = base_rad;
+                        config.ap_rad_time_ahead = time_ahead;
+                        car.set_config(config);
+                    },
+                );
+                assert!(!m.outside, "{name}: the car left the area");
+                p95.push(m.p95);
+            }
+        }
+        let text: Vec<String> = p95.iter().map(|p| format!("{p:.3}")).collect();
+        println!(
+            "{firmware} compensation {compensation} ap_base_rad {base_rad} ap_rad_time_ahead \
+             {time_ahead}: cross-track p95 per area and seed {}",
+            text.join(" ")
+        );
     }
 }
 
@@ -793,4 +962,47 @@ fn the_illustrative_rock_shadows_a_minority_of_the_lot_with_a_deviation_of_about
         failing * 100.0
     );
     assert!(out95 < 0.6, "p95 deviation outside the shadow {out95:.2} m");
+}
+
+/// Item 3 of issue 4: the 12.3 UWB heading after SET_POS. The car stands 3 s after boot with its
+/// anchors (so the heading estimator's p_old is left near the boot estimate, (0, 0)), then the
+/// orchestrator's reset (`pos_uwb_reset_pos` + SET_POS with the RTK pose) and a drive. SET_POS
+/// sets the heading exactly; afterwards the documented estimator (stale p_old, kept drift, PI
+/// loop on the estimate's track) keeps it within a few degrees of the truth (3.5–6.6° measured).
+#[test]
+fn the_12_3_uwb_heading_after_set_pos_starts_exact_and_stays_within_ten_degrees() {
+    let area = lot_area();
+    let mut route = start_points();
+    let mut noise = Noise::stream(3, 94);
+    random_route(&area, &mut route, 150.0, 0.5, &mut noise);
+    let points = route_points(&route, |_| 3.0);
+    let mut car = placed_car(Firmware::V12_3, 3, &route);
+    for _ in 0..300 {
+        car.step();
+        if car.now_ms().is_multiple_of(50) {
+            car.get_state();
+        }
+    }
+    let heading_error = |car: &Car| {
+        let t = car.truth();
+        let e = (f64::from(-t.uwb.yaw).to_radians() - t.heading + PI).rem_euclid(2.0 * PI) - PI;
+        e.to_degrees().abs()
+    };
+    let mut driver = Driver::new(car, &points);
+    let fused_yaw = driver.car.truth().fused.yaw;
+    assert!(
+        (driver.car.truth().uwb.yaw - fused_yaw).abs() < 1e-3,
+        "SET_POS gives the UWB estimate the RTK heading"
+    );
+    let (mut worst, mut devs) = (0.0f64, Vec::new());
+    driver.run(40_000, |car, s| {
+        worst = worst.max(heading_error(car));
+        devs.push(deviation(s));
+    });
+    let (p95, max) = (percentile(devs.clone(), 0.95), percentile(devs, 1.0));
+    println!(
+        "12.3 after SET_POS: heading error ≤ {worst:.1}°, deviation p95 {p95:.2} m, max {max:.2} m"
+    );
+    assert!(worst < 10.0, "UWB heading error {worst:.1}°");
+    assert!(max < 1.5, "UWB–RTK deviation {max:.2} m");
 }

@@ -843,6 +843,12 @@ fn closest_point_on_segment(p1: &RoutePoint, p2: &RoutePoint, car: FwPose) -> Ro
 }
 
 /// The steering law of §6.3: pure pursuit with optional distance compensation.
+///
+/// The distance compensation divides the pursuit radius, `R_pp ← R_pp / min(1 + 0.2·D, 5)`, before
+/// `δ = atan(L / R_pp)`: that is the documented law of both generations (the firmware that has the
+/// `ap_ang_dist_comp` switch). The 2016 code before that switch multiplied the angle instead,
+/// `δ = atan(L / R_pp) · min(1 + 0.2·D, 5)`; it is not reproduced (the acceptance tests measure it
+/// for comparison only).
 pub fn steering_angle(
     car: FwPose,
     goal_x: f32,
@@ -860,9 +866,35 @@ pub fn steering_angle(
     }
     let mut r = -(dx * dx + dy * dy) / (2.0 * dy);
     if compensate {
-        r /= (1.0 + 0.2 * d).min(5.0);
+        let correction = (1.0 + 0.2 * d).min(5.0);
+        #[cfg(test)]
+        if experiment::multiply_angle() {
+            return (wheelbase / r).atan() * correction;
+        }
+        r /= correction;
     }
     (wheelbase / r).atan()
+}
+
+/// Test-only experiments on the steering law, per thread (each test runs on its own thread).
+#[cfg(test)]
+pub(crate) mod experiment {
+    use std::cell::Cell;
+
+    thread_local! {
+        static MULTIPLY_ANGLE: Cell<bool> = const { Cell::new(false) };
+    }
+
+    /// Whether this thread's cars apply the distance compensation the 2016 way (multiplying the
+    /// steering angle) instead of the documented way (dividing the pursuit radius).
+    pub(crate) fn multiply_angle() -> bool {
+        MULTIPLY_ANGLE.with(Cell::get)
+    }
+
+    /// Switches this thread's distance compensation to the 2016 law (`true`) or back.
+    pub(crate) fn set_multiply_angle(on: bool) {
+        MULTIPLY_ANGLE.with(|c| c.set(on));
+    }
 }
 
 #[cfg(test)]
@@ -929,9 +961,14 @@ mod tests {
         let right = steering_angle(car, 1.0, -1.0, 0.475, true);
         assert!(left > 0.0 && right < 0.0);
         assert_eq!(steering_angle(car, 2.0, 0.0, 0.475, true), 0.0);
-        // R_pp = 1 m for a goal at (1, 1); with compensation R = 1 / (1 + 0.2·√2).
-        let expected = (0.475f32 / (1.0 / (1.0 + 0.2 * 2f32.sqrt()))).atan();
+        // R_pp = 1 m for a goal at (1, 1); with compensation R = 1 / (1 + 0.2·√2) (§6.3 step 4
+        // divides the radius), not the 2016 law that multiplied the angle.
+        let correction = 1.0 + 0.2 * 2f32.sqrt();
+        let expected = (0.475f32 / (1.0 / correction)).atan();
         assert!((left - expected).abs() < 1e-5);
+        let multiplied = 0.475f32.atan() * correction;
+        assert!((left - multiplied).abs() > 0.01);
+        assert!((steering_angle(car, 1.0, 1.0, 0.475, false) - 0.475f32.atan()).abs() < 1e-6);
     }
 
     #[test]

@@ -314,8 +314,11 @@ pub struct UwbEstimator {
     yaw_drift: f32,
     clamp_value: f32,
     clamped: bool,
-    yaw_history: Vec<f32>,
-    yaw_history_next: usize,
+    /// The yaw history's array; only the entries before `yaw_history_ptr` count.
+    yaw_history: [f32; YAW_HISTORY],
+    /// The firmware's pointer: entries since the last heading correction, restarting at 0 when it
+    /// reaches [`YAW_HISTORY`] (so the mean covers only the entries since that restart).
+    yaw_history_ptr: usize,
     p_old: (f32, f32),
     range_updates: u32,
 }
@@ -334,8 +337,8 @@ impl UwbEstimator {
             yaw_drift: 0.0,
             clamp_value: 0.0,
             clamped: false,
-            yaw_history: Vec::with_capacity(YAW_HISTORY),
-            yaw_history_next: 0,
+            yaw_history: [0.0; YAW_HISTORY],
+            yaw_history_ptr: 0,
             p_old: (0.0, 0.0),
             range_updates: 0,
         }
@@ -405,12 +408,11 @@ impl UwbEstimator {
     }
 
     fn push_yaw(&mut self, yaw_s: f32) {
-        if self.yaw_history.len() < YAW_HISTORY {
-            self.yaw_history.push(yaw_s);
-        } else {
-            self.yaw_history[self.yaw_history_next] = yaw_s;
+        self.yaw_history[self.yaw_history_ptr] = yaw_s;
+        self.yaw_history_ptr += 1;
+        if self.yaw_history_ptr >= YAW_HISTORY {
+            self.yaw_history_ptr = 0;
         }
-        self.yaw_history_next = (self.yaw_history_next + 1) % YAW_HISTORY;
     }
 
     /// A range `r` to an anchor at `(ax, ay)` (after the probe). Returns whether the estimate
@@ -480,11 +482,12 @@ impl UwbEstimator {
         } else {
             (self.px - self.p_old.0).hypot(self.py - self.p_old.1)
         };
-        if moved > 0.1 && !self.yaw_history.is_empty() && !self.clamped {
+        let history = &self.yaw_history[..self.yaw_history_ptr];
+        if moved > 0.1 && !history.is_empty() && !self.clamped {
             let track = (self.py - self.p_old.1)
                 .atan2(self.px - self.p_old.0)
                 .to_degrees();
-            let avg = self.yaw_history.iter().sum::<f32>() / self.yaw_history.len() as f32;
+            let avg = history.iter().sum::<f32>() / history.len() as f32;
             let est = wrap180(track - avg);
             let delta = wrap180(est - self.gyro_offset);
             if delta.abs() < 0.25 {
@@ -496,8 +499,7 @@ impl UwbEstimator {
             }
             self.yaw_drift = (self.yaw_drift + 0.5 * delta).clamp(-3.5, 3.5);
             self.p_old = (self.px, self.py);
-            self.yaw_history.clear();
-            self.yaw_history_next = 0;
+            self.yaw_history_ptr = 0;
         }
         self.range_updates = self.range_updates.saturating_add(1);
     }
@@ -640,6 +642,70 @@ mod tests {
         e.dead_reckon(1.0, 90.0, 1.0, 0.02, true);
         // Heading = yaw_s + gyro_offset = −90° CCW: south.
         assert!((e.position().1 + 1.0).abs() < 1e-6);
+    }
+
+    /// A 12.x range to a far anchor due north that agrees exactly with the estimate: the estimate
+    /// does not move, only the heading estimation runs.
+    fn agreeing_range(e: &mut UwbEstimator, imu_yaw: f32) {
+        let (px, py) = e.position();
+        let a = imu_yaw.to_radians();
+        let antenna = (
+            px + ANTENNA_OFFSET_M * a.cos(),
+            py + ANTENNA_OFFSET_M * a.sin(),
+        );
+        let (ax, ay) = (0.0, 100.0);
+        e.range_update(ax, ay, (ax - antenna.0).hypot(ay - antenna.1), 0.1);
+    }
+
+    #[test]
+    fn the_12x_yaw_history_pointer_restarts_at_50_and_the_mean_covers_only_what_follows() {
+        let mut e = UwbEstimator::new(Firmware::V12_3);
+        e.dead_reckon(0.0, 0.0, 0.0, 0.02, true);
+        agreeing_range(&mut e, 0.0);
+        agreeing_range(&mut e, 0.0);
+        // 50 ticks east at 0.5 m/s (IMU yaw 0°): the pointer is back at 0, the history counts as
+        // empty, so a range after 0.5 m of travel corrects nothing and keeps p_old.
+        for _ in 0..50 {
+            e.dead_reckon(0.01, 0.0, 0.5, 0.02, true);
+        }
+        agreeing_range(&mut e, 0.0);
+        assert_eq!(e.yaw_state(), (0.0, 0.0));
+        // One more tick with the IMU at −20° (20° CCW): the mean is that single entry, not the
+        // last 50, so the estimate (track ≈ 0.4° − 20°) pulls gyro_offset and saturates the drift.
+        e.dead_reckon(0.01, -20.0, 0.5, 0.02, true);
+        agreeing_range(&mut e, -20.0);
+        let (offset, drift) = e.yaw_state();
+        assert!((offset + 0.25).abs() < 1e-6, "{offset}");
+        assert_eq!(drift, -3.5);
+    }
+
+    #[test]
+    fn set_pos_sets_the_12x_heading_but_keeps_p_old_and_the_drift() {
+        let mut e = UwbEstimator::new(Firmware::V12_3);
+        e.dead_reckon(0.0, 0.0, 0.0, 0.02, true);
+        agreeing_range(&mut e, 0.0);
+        agreeing_range(&mut e, 0.0);
+        // SET_POS 5 m north of p_old, heading east (yaw 0° clockwise).
+        e.set_pose(FwPose {
+            x: 0.0,
+            y: 5.0,
+            yaw: 0.0,
+        });
+        assert_eq!(e.yaw(), 0.0);
+        e.dead_reckon(0.01, 0.0, 0.5, 0.02, true);
+        assert!((e.position().0 - 0.01).abs() < 1e-6, "dead reckons east");
+        // The first correction measures the track from the stale p_old: the jump reads as motion
+        // to the north (§7.5 — SET_POS sets px, py and gyro_offset only).
+        agreeing_range(&mut e, 0.0);
+        assert_eq!(e.yaw_state(), (0.25, 3.5));
+        // A second SET_POS restores the heading and keeps the drift.
+        e.set_pose(FwPose {
+            x: 0.0,
+            y: 5.0,
+            yaw: 30.0,
+        });
+        assert!((e.yaw() - 30.0).abs() < 1e-5);
+        assert_eq!(e.yaw_state().1, 3.5);
     }
 
     #[test]
