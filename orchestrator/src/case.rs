@@ -15,7 +15,7 @@
 use scenarios::{CampaignSettings, Interval, RangeFaultKind, Scenario};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
-use trajgen::{Point, RouteTail, check_route};
+use trajgen::{GenerationError, Generator, Point, RouteTail, check_route};
 
 use crate::model::{Command, Fault, FaultKind, Probe, Segment, SegmentIntent, TestPlan};
 use crate::oracle::{FailurePolicy, SegmentOutcome, Verdict};
@@ -69,6 +69,18 @@ pub enum CaseError {
         command: usize,
         /// The first violation `trajgen::check_route` found.
         violation: trajgen::Violation,
+    },
+    /// No ahead margin can follow a segment that has none: the car could not be stopped safely
+    /// inside the area after it.
+    #[error(
+        "commands[{command}]: no ahead margin can follow this segment, so the car could not be \
+         stopped safely inside the area after it: {error}"
+    )]
+    NoAheadMargin {
+        /// The command's index.
+        command: usize,
+        /// Why the generator failed.
+        error: GenerationError,
     },
     /// Writing JSON failed.
     #[error("cannot write JSON: {0}")]
@@ -354,21 +366,25 @@ impl From<&Command> for CommandRecord {
     }
 }
 
-fn segment_record(segment: &Segment) -> CommandRecord {
-    let i = segment.intent;
-    CommandRecord::RunSegments {
-        intent: Some(IntentRecord {
+impl From<SegmentIntent> for IntentRecord {
+    fn from(i: SegmentIntent) -> Self {
+        Self {
             seed: i.seed,
             points: i.points,
             speed_mps: i.speed_mps,
-        }),
+        }
+    }
+}
+
+fn segment_record(segment: &Segment) -> CommandRecord {
+    CommandRecord::RunSegments {
+        intent: segment.intent.map(IntentRecord::from),
         points: segment
-            .points
-            .iter()
-            .map(|p| RoutePointRecord {
+            .waypoints()
+            .map(|(p, speed)| RoutePointRecord {
                 x: p.x,
                 y: p.y,
-                speed: i.speed_mps,
+                speed,
             })
             .collect(),
         margin: segment.margin.iter().map(|&p| p.into()).collect(),
@@ -376,10 +392,9 @@ fn segment_record(segment: &Segment) -> CommandRecord {
 }
 
 impl CommandRecord {
-    /// The model's command for this record. A segment needs its intent and one speed for all
-    /// its points (what the generator produces); hand-written segments without an intent are
-    /// replayed from their points directly.
-    pub fn to_command(&self, index: usize) -> Result<Command, CaseError> {
+    /// The model's command for this record: a segment with its recorded points and speeds (and
+    /// its intent and margin when recorded), or a fault.
+    pub fn to_command(&self) -> Command {
         match self {
             Self::AddFault {
                 probe,
@@ -387,33 +402,27 @@ impl CommandRecord {
                 param,
                 start,
                 duration,
-            } => Ok(Command::AddFault(Fault {
+            } => Command::AddFault(Fault {
                 probe: *probe,
                 kind: *kind,
                 param: *param,
                 start: *start,
                 duration: *duration,
-            })),
+            }),
             Self::RunSegments {
                 intent,
                 points,
                 margin,
-            } => {
-                let path = format!("commands[{index}]");
-                let intent = intent.ok_or_else(|| invalid(&path, "no intent"))?;
-                if points.iter().any(|p| p.speed != intent.speed_mps) {
-                    return Err(invalid(path, "the points' speeds differ from the intent's"));
-                }
-                Ok(Command::RunSegments(Segment {
-                    intent: SegmentIntent {
-                        seed: intent.seed,
-                        points: intent.points,
-                        speed_mps: intent.speed_mps,
-                    },
-                    points: points.iter().map(RoutePointRecord::position).collect(),
-                    margin: margin.iter().map(|&p| p.into()).collect(),
-                }))
-            }
+            } => Command::RunSegments(Segment {
+                intent: intent.map(|i| SegmentIntent {
+                    seed: i.seed,
+                    points: i.points,
+                    speed_mps: i.speed_mps,
+                }),
+                points: points.iter().map(RoutePointRecord::position).collect(),
+                speeds: points.iter().map(|p| p.speed).collect(),
+                margin: margin.iter().map(|&p| p.into()).collect(),
+            }),
         }
     }
 }
@@ -587,6 +596,88 @@ impl Case {
     }
 }
 
+impl Case {
+    /// The plan a replay drives as test `test_index`: the recorded commands (without the fault
+    /// commands when `no_faults`) from the end of `scenario`'s start route. Checks the values
+    /// ([`Case::check`]) and that every segment is drivable in `scenario`
+    /// ([`Case::check_route`]) first: a car is never sent a route that leaves the area. A
+    /// segment without a recorded ahead margin (written by hand) gets one from `generator`
+    /// (seeded with `seed`), or the case is refused: the car must always be able to stop inside
+    /// the area.
+    pub fn replay_plan(
+        &self,
+        scenario: &Scenario,
+        generator: &Generator,
+        seed: u64,
+        no_faults: bool,
+        test_index: usize,
+    ) -> Result<TestPlan, CaseError> {
+        self.check()?;
+        self.check_route(scenario)?;
+        let case = self.with_margins(scenario, generator, seed)?;
+        case.check_route(scenario)?;
+        if !self
+            .commands
+            .iter()
+            .any(|c| matches!(c, CommandRecord::RunSegments { .. }))
+        {
+            return Err(invalid("commands", "no run_segments command to drive"));
+        }
+        let start = scenario.start_route.positions();
+        let start_tail = RouteTail::from_points(&start)
+            .map_err(|e| invalid("scenario.start_route", e.to_string()))?;
+        let commands = case
+            .commands
+            .iter()
+            .filter(|c| !(no_faults && matches!(c, CommandRecord::AddFault { .. })))
+            .map(CommandRecord::to_command)
+            .collect();
+        Ok(TestPlan {
+            test_index,
+            start_tail,
+            commands,
+        })
+    }
+}
+
+impl Case {
+    /// This case with an ahead margin generated after every segment that has none: one more
+    /// point and its margin, proven inside the area from the route as it stands after the
+    /// segment.
+    fn with_margins(
+        &self,
+        scenario: &Scenario,
+        generator: &Generator,
+        seed: u64,
+    ) -> Result<Case, CaseError> {
+        let start = scenario.start_route.positions();
+        let mut tail = RouteTail::from_points(&start)
+            .map_err(|e| invalid("scenario.start_route", e.to_string()))?;
+        let mut rng = crate::seed::rng(seed);
+        let mut case = self.clone();
+        for (command, record) in case.commands.iter_mut().enumerate() {
+            let CommandRecord::RunSegments { points, margin, .. } = record else {
+                continue;
+            };
+            let driven: Vec<Point> = points.iter().map(RoutePointRecord::position).collect();
+            tail = tail.advanced(&driven);
+            if !margin.is_empty() {
+                continue;
+            }
+            let extension = generator
+                .extend(&scenario.area, &tail, 1, &mut rng)
+                .map_err(|error| CaseError::NoAheadMargin { command, error })?;
+            *margin = extension
+                .points
+                .iter()
+                .chain(&extension.margin)
+                .map(|&p| p.into())
+                .collect();
+        }
+        Ok(case)
+    }
+}
+
 fn check_command(i: usize, command: &CommandRecord) -> Result<(), CaseError> {
     let path = format!("commands[{i}]");
     match command {
@@ -678,6 +769,28 @@ pub struct CampaignRecord {
     /// The outcome, once it ended.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub summary: Option<CampaignSummary>,
+    /// For a replay (`drivecheck replay`): the case every test drove again.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub replay_of: Option<ReplayOf>,
+}
+
+/// The case a replay drove again.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReplayOf {
+    /// The case file as given on the command line.
+    pub case: String,
+    /// Its campaign's seed, if recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub campaign_seed: Option<u64>,
+    /// Its test index, if recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_index: Option<usize>,
+    /// Its verdict, if it was run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub verdict: Option<Verdict>,
+    /// True when the replay left out its fault commands.
+    pub no_faults: bool,
 }
 
 /// A campaign's outcome.
@@ -815,9 +928,9 @@ mod tests {
             no_faults: false,
         };
         let plan = plan_test(&s, &campaign, 2, start_tail(&s).unwrap()).unwrap();
-        for (i, command) in plan.commands.iter().enumerate() {
+        for command in &plan.commands {
             let record = CommandRecord::from(command);
-            assert_eq!(record.to_command(i).unwrap(), *command);
+            assert_eq!(record.to_command(), *command);
         }
     }
 
@@ -844,6 +957,7 @@ mod tests {
                 worst_deviation_m: Some(1.42),
                 failing_cases: vec!["case-003.json".to_owned(), "case-007.json".to_owned()],
             }),
+            replay_of: None,
         };
         let back = CampaignRecord::from_json(&record.to_json().unwrap()).unwrap();
         assert_eq!(back, record);
@@ -866,6 +980,33 @@ mod tests {
         let s = scenario(&case.scenario.name);
         assert_eq!(case.check_route(&s).map_err(|e| e.to_string()), Ok(()));
         assert!(case.verdict.is_none());
+    }
+
+    #[test]
+    fn a_hand_written_case_gets_a_proven_ahead_margin_for_every_segment() {
+        let case = Case::from_json(doc_examples()[0]).unwrap();
+        let s = scenario(&case.scenario.name);
+        let generator =
+            trajgen::Generator::new(s.generator.generator_config(trajgen::Strategy::Wedge))
+                .unwrap();
+        let plan = case.replay_plan(&s, &generator, 1, false, 4).unwrap();
+        assert_eq!(plan.test_index, 4);
+        assert_eq!(plan.commands.len(), case.commands.len());
+        let mut tail = plan.start_tail;
+        for (_, segment) in plan.segments() {
+            assert_eq!(segment.margin.len(), s.generator.ahead_margin + 1);
+            assert!(segment.intent.is_none());
+            assert!(segment.speeds.iter().all(|&v| v == 1.5));
+            let route: Vec<Point> = std::iter::once(tail.end)
+                .chain(segment.points.iter().copied())
+                .chain(segment.margin.iter().copied())
+                .collect();
+            assert!(check_route(&s.area, &route, &s.constraints(), Some(tail.heading)).is_ok());
+            tail = tail.advanced(&segment.points);
+        }
+        let without = case.replay_plan(&s, &generator, 1, true, 0).unwrap();
+        assert_eq!(without.commands.len(), 3);
+        assert_eq!(without.faults().count(), 0);
     }
 
     #[test]

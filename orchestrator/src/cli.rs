@@ -20,6 +20,11 @@ pub enum Command {
     /// Run a test campaign: drive generated tests with injected faults and judge UWB against
     /// RTK. Exit status: 0 every test passed, 1 a test failed or was aborted, 2 error.
     Run(RunArgs),
+    /// Drive a recorded case again, N times after the same reset, and compare the runs segment by
+    /// segment. Exit status: 0 every run passed, 1 a run failed or was aborted, 2 error.
+    Replay(ReplayArgs),
+    /// List run directories (campaigns and replays) with their summary, or show one.
+    Runs(RunsArgs),
     /// Serve a simulated car over TCP (like the reference bridge) or UDP.
     Sim(SimArgs),
     /// Check a test area before any car drives in it.
@@ -61,6 +66,68 @@ pub struct RunArgs {
     /// The run directory (default `runs/<UTC timestamp>-<scenario>-<seed>/`).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+}
+
+/// Options of `drivecheck replay`.
+#[derive(Debug, Args)]
+pub struct ReplayArgs {
+    /// The case file to drive again (a `case-NNN.json` of a run directory, or written by hand:
+    /// see docs/case-format.md).
+    #[arg(value_name = "CASE.json")]
+    pub case: PathBuf,
+    /// How many times to drive it.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub times: u32,
+    /// Leave out the case's fault commands (does the failure disappear without them?).
+    #[arg(long)]
+    pub no_faults: bool,
+    /// The car: `sim` (a fresh embedded simulated car for every run), `tcp://HOST:PORT`,
+    /// `udp://HOST:PORT` or `serial:///dev/ttyACM0`.
+    #[arg(long, default_value = "sim")]
+    pub car: String,
+    /// Scenario: a bundled name, a .toml file or a reference .xml (default: the bundled scenario
+    /// the case names).
+    #[arg(long)]
+    pub scenario: Option<String>,
+    /// Replay even when the scenario's hash differs from the case's (or the case has none).
+    #[arg(long)]
+    pub ignore_scenario_hash: bool,
+    /// Seed of the reset's return route, the safe stop and the simulated car (default: the
+    /// case's campaign seed).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Give run k the seed SEED + k − 1 (other sensor noise each run) instead of the same seed.
+    #[arg(long)]
+    pub vary_seed: bool,
+    /// Run the embedded simulated car against the wall clock instead of in virtual time.
+    #[arg(long)]
+    pub realtime: bool,
+    /// The replay directory (default `runs/<UTC timestamp>-replay-<scenario>-<seed>/`); each run
+    /// writes a run directory `run-1/`, `run-2/`, … inside it, the comparison `replay.json`.
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+}
+
+/// Options of `drivecheck runs`.
+#[derive(Debug, Args)]
+pub struct RunsArgs {
+    /// Where the run directories are.
+    #[arg(long, default_value = "runs", value_name = "DIR")]
+    pub dir: PathBuf,
+    /// Show one run directory instead of listing them.
+    #[command(subcommand)]
+    pub command: Option<RunsCommand>,
+}
+
+/// Subcommands of `drivecheck runs`.
+#[derive(Debug, Subcommand)]
+pub enum RunsCommand {
+    /// Show a run directory: its campaign record and every test, or a replay's comparison.
+    Show {
+        /// The run directory (a path, or a name inside `--dir`).
+        #[arg(value_name = "DIR")]
+        run: PathBuf,
+    },
 }
 
 /// Options of `drivecheck sim`.

@@ -15,6 +15,7 @@ pub mod commands;
 pub mod model;
 pub mod oracle;
 pub mod recording;
+pub mod replay;
 pub mod runner;
 pub mod safety;
 mod scenario_arg;

@@ -3,9 +3,11 @@
 mod area;
 mod bench;
 mod bench_recovery;
+mod replay;
 mod route;
 mod route_return;
 mod run;
+mod runs;
 mod scenario;
 mod sim;
 
@@ -19,6 +21,8 @@ use crate::cli::{AreaCommand, BenchCommand, Cli, Command, RouteCommand, Scenario
 pub fn run(cli: Cli) -> Result<ExitCode> {
     match cli.command {
         Command::Run(args) => run::run(&args),
+        Command::Replay(args) => replay::replay(&args),
+        Command::Runs(args) => runs::runs(&args),
         Command::Sim(args) => sim::serve(&args),
         Command::Area(AreaCommand::Validate(args)) => area::validate(&args),
         Command::Route(RouteCommand::Generate(args)) => route::generate(&args),

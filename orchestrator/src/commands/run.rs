@@ -55,7 +55,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     finish(result, wall)
 }
 
-fn runtime(virtual_time: bool) -> Result<tokio::runtime::Runtime> {
+pub(super) fn runtime(virtual_time: bool) -> Result<tokio::runtime::Runtime> {
     let runtime = if virtual_time {
         tokio::runtime::Builder::new_current_thread()
             .enable_all()
@@ -101,7 +101,9 @@ async fn campaign_on(
     result.map_err(|error| anyhow::Error::new(CampaignFailed::new(error, &config.out_dir)))
 }
 
-async fn connect(
+/// The car at `address`; for `sim` a fresh embedded simulated car seeded with `seed`, with its
+/// handle.
+pub(super) async fn connect(
     address: &CarAddress,
     scenario: &Scenario,
     seed: u64,
@@ -123,7 +125,7 @@ async fn connect(
     Ok((car, Some(sim)))
 }
 
-fn progress_bar(tests: usize) -> ProgressBar {
+pub(super) fn progress_bar(tests: usize) -> ProgressBar {
     let bar = ProgressBar::new(tests as u64);
     if let Ok(style) =
         ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} tests  {msg}")
@@ -136,13 +138,13 @@ fn progress_bar(tests: usize) -> ProgressBar {
 /// A campaign that did not run to its end, with where its record is.
 #[derive(Debug, thiserror::Error)]
 #[error("{error} (run directory {})", dir.display())]
-struct CampaignFailed {
+pub(super) struct CampaignFailed {
     error: RunError,
     dir: PathBuf,
 }
 
 impl CampaignFailed {
-    fn new(error: RunError, dir: &std::path::Path) -> Self {
+    pub(super) fn new(error: RunError, dir: &std::path::Path) -> Self {
         Self {
             error,
             dir: dir.to_owned(),
@@ -152,7 +154,7 @@ impl CampaignFailed {
 
 fn finish(result: Result<CampaignReport>, wall: Duration) -> Result<ExitCode> {
     let report = result?;
-    print_table(&report, wall);
+    print_report(&report, Some(wall));
     let summary = report.record.summary.as_ref();
     let all_passed = summary.is_some_and(|s| s.passed == s.tests && s.tests > 0);
     Ok(if all_passed {
@@ -162,7 +164,8 @@ fn finish(result: Result<CampaignReport>, wall: Duration) -> Result<ExitCode> {
     })
 }
 
-fn print_table(report: &CampaignReport, wall: Duration) {
+/// Prints a campaign's table of tests and its summary (with the wall time when known).
+pub(super) fn print_report(report: &CampaignReport, wall: Option<Duration>) {
     println!("| test | verdict | worst deviation | starvations | smallest margin | reason |");
     println!("|---|---|---|---|---|---|");
     for t in &report.tests {
@@ -182,13 +185,16 @@ fn print_table(report: &CampaignReport, wall: Duration) {
     };
     println!();
     println!(
-        "tests {}, passed {}, failed {}, aborted {}, worst deviation {}; {:.1} s wall time",
+        "tests {}, passed {}, failed {}, aborted {}, worst deviation {}{}",
         s.tests,
         s.passed,
         s.failed,
         s.aborted,
         metres(s.worst_deviation_m),
-        wall.as_secs_f64()
+        wall.map_or_else(String::new, |w| format!(
+            "; {:.1} s wall time",
+            w.as_secs_f64()
+        ))
     );
     for file in &s.failing_cases {
         println!("  {}", report.dir.join(file).display());
@@ -196,6 +202,6 @@ fn print_table(report: &CampaignReport, wall: Duration) {
     println!("run directory: {}", report.dir.display());
 }
 
-fn metres(value: Option<f64>) -> String {
+pub(super) fn metres(value: Option<f64>) -> String {
     value.map_or_else(|| "-".to_owned(), |m| format!("{m:.2} m"))
 }

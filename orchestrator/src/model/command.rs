@@ -59,20 +59,45 @@ pub struct SegmentIntent {
     pub speed_mps: f64,
 }
 
-/// A generated extension of the route: the points the car drives, at one speed.
+/// An extension of the route: the points the car drives, each with its speed.
+///
+/// Generated segments have an intent and one speed for all their points; segments replayed from
+/// a hand-written case may have neither (their points and speeds are what the case says).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Segment {
-    /// What was asked of the generator.
-    pub intent: SegmentIntent,
-    /// The concrete points, exactly `intent.points`, continuing the route tail. They are what the
-    /// car drives and what a replay re-sends.
+    /// What was asked of the generator; `None` for a segment written by hand.
+    pub intent: Option<SegmentIntent>,
+    /// The concrete points continuing the route tail (exactly `intent.points` when generated).
+    /// They are what the car drives and what a replay re-sends.
     pub points: Vec<Point>,
+    /// The speed towards each point, m/s (as many as `points`).
+    pub speeds: Vec<f64>,
     /// The ahead margin: the continuation generated after `points` (never sent) proving that the
-    /// car can always be slowed down and stopped inside the area.
+    /// car can always be slowed down and stopped inside the area; may be empty when written by
+    /// hand.
     pub margin: Vec<Point>,
 }
 
 impl Segment {
+    /// The segment the generator produced for `intent`: every point at the intent's speed.
+    pub fn generated(intent: SegmentIntent, points: Vec<Point>, margin: Vec<Point>) -> Self {
+        Self {
+            intent: Some(intent),
+            speeds: vec![intent.speed_mps; points.len()],
+            points,
+            margin,
+        }
+    }
+
+    /// The points with their speeds (a missing speed repeats the last one).
+    pub fn waypoints(&self) -> impl Iterator<Item = (Point, f64)> + '_ {
+        let last = self.speeds.last().copied().unwrap_or(0.0);
+        self.points
+            .iter()
+            .enumerate()
+            .map(move |(i, &p)| (p, self.speeds.get(i).copied().unwrap_or(last)))
+    }
+
     /// Length of the extension from `start` (the route's end before it) through its points, metres.
     pub fn length_from(&self, start: Point) -> f64 {
         let mut length = 0.0;
@@ -240,15 +265,16 @@ mod tests {
 
     #[test]
     fn a_segment_measures_its_length_from_the_route_end() {
-        let segment = Segment {
-            intent: SegmentIntent {
+        let segment = Segment::generated(
+            SegmentIntent {
                 seed: 0,
                 points: 2,
                 speed_mps: 1.0,
             },
-            points: vec![Point::new(1.0, 0.0), Point::new(1.0, 2.0)],
-            margin: vec![],
-        };
+            vec![Point::new(1.0, 0.0), Point::new(1.0, 2.0)],
+            vec![],
+        );
+        assert_eq!(segment.speeds, vec![1.0, 1.0]);
         assert!((segment.length_from(Point::new(0.0, 0.0)) - 3.0).abs() < 1e-12);
     }
 }

@@ -42,11 +42,11 @@ impl PlanContext {
         let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(intent.seed);
         let area = &self.preconditions.area;
         let extension = self.generator.extend(area, tail, intent.points, &mut rng)?;
-        Ok(Segment {
+        Ok(Segment::generated(
             intent,
-            points: extension.points,
-            margin: extension.margin,
-        })
+            extension.points,
+            extension.margin,
+        ))
     }
 
     fn remember(&self, error: GenerationError) {

@@ -149,11 +149,15 @@ impl Preconditions {
     /// A segment may run when it has its intended number of points at a positive speed and its
     /// points and full ahead margin form a drivable continuation of the tail.
     pub fn segment_continues(&self, tail: &RouteTail, segment: &Segment) -> bool {
-        let intent = &segment.intent;
-        if intent.points == 0 || segment.points.len() != intent.points {
+        if segment.points.is_empty()
+            || segment.speeds.len() != segment.points.len()
+            || segment
+                .intent
+                .is_some_and(|intent| intent.points != segment.points.len())
+        {
             return false;
         }
-        if !(intent.speed_mps.is_finite() && intent.speed_mps > 0.0) {
+        if !segment.speeds.iter().all(|v| v.is_finite() && *v > 0.0) {
             return false;
         }
         if segment.margin.len() != self.ahead_margin {

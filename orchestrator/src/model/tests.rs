@@ -36,7 +36,8 @@ fn assert_drivable(s: &Scenario, plan: &TestPlan) {
     let constraints = s.constraints();
     let mut tail = plan.start_tail;
     for (_, segment) in plan.segments() {
-        assert_eq!(segment.points.len(), segment.intent.points);
+        assert_eq!(Some(segment.points.len()), segment.intent.map(|i| i.points));
+        assert_eq!(segment.speeds.len(), segment.points.len());
         assert_eq!(segment.margin.len(), s.generator.ahead_margin);
         let route: Vec<Point> = std::iter::once(tail.end)
             .chain(segment.points.iter().copied())
@@ -179,7 +180,8 @@ fn segment_intents_follow_the_settings() {
     let s = parking_lot();
     let c = &s.campaign;
     for (_, segment) in plan(&s, 8, 9).segments() {
-        let i = segment.intent;
+        let i = segment.intent.expect("generated segments have an intent");
+        assert!(segment.speeds.iter().all(|&v| v == i.speed_mps));
         assert!((c.points_per_segment.min..=c.points_per_segment.max).contains(&i.points));
         let kmh = i.speed_mps * 3.6;
         assert!(c.speed_kmh.min - 1e-9 <= kmh && kmh <= c.speed_kmh.max + 1e-9);

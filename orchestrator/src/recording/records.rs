@@ -349,8 +349,9 @@ pub struct PlannedSegment {
     pub command_index: usize,
     /// The segment's index among the test's segments.
     pub segment_index: usize,
-    /// What the generator was asked for.
-    pub intent: IntentRecord,
+    /// What the generator was asked for (absent for a segment written by hand).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub intent: Option<IntentRecord>,
     /// The points the car drives, with their speeds.
     pub points: Vec<RoutePointRecord>,
     /// The ahead margin generated after them (never sent).
@@ -366,23 +367,17 @@ impl PlannedSegment {
         segment_index: usize,
         segment: &Segment,
     ) -> Self {
-        let i = segment.intent;
         Self {
             test_index,
             command_index,
             segment_index,
-            intent: IntentRecord {
-                seed: i.seed,
-                points: i.points,
-                speed_mps: i.speed_mps,
-            },
+            intent: segment.intent.map(IntentRecord::from),
             points: segment
-                .points
-                .iter()
-                .map(|p| RoutePointRecord {
+                .waypoints()
+                .map(|(p, speed)| RoutePointRecord {
                     x: p.x,
                     y: p.y,
-                    speed: i.speed_mps,
+                    speed,
                 })
                 .collect(),
             margin: segment.margin.iter().map(|&p| p.into()).collect(),

@@ -253,7 +253,6 @@ fn planned_segment() -> Value {
             "test_index",
             "command_index",
             "segment_index",
-            "intent",
             "points",
             "margin",
         ],

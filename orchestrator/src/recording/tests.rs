@@ -39,6 +39,7 @@ fn campaign(s: &Scenario) -> CampaignRecord {
         started_at: "2026-11-22T10:55:21Z".to_owned(),
         ended_at: None,
         summary: None,
+        replay_of: None,
     }
 }
 
@@ -86,15 +87,15 @@ fn fault() -> Fault {
 }
 
 fn segment() -> Segment {
-    Segment {
-        intent: SegmentIntent {
+    Segment::generated(
+        SegmentIntent {
             seed: 7,
             points: 2,
             speed_mps: 1.0,
         },
-        points: vec![trajgen::Point::new(1.0, 2.0), trajgen::Point::new(2.0, 2.5)],
-        margin: vec![trajgen::Point::new(3.0, 3.0)],
-    }
+        vec![trajgen::Point::new(1.0, 2.0), trajgen::Point::new(2.0, 2.5)],
+        vec![trajgen::Point::new(3.0, 3.0)],
+    )
 }
 
 fn truth(time_ms: u64) -> Truth {

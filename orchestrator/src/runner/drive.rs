@@ -534,11 +534,9 @@ impl<'c, 'a> Drive<'c, 'a> {
 
     fn append_op(&mut self, decision: Decision, segment: &Segment) -> InFlight {
         let command_index = self.cursor;
-        let speed = segment.intent.speed_mps;
         let waypoints: Vec<Waypoint> = segment
-            .points
-            .iter()
-            .map(|&position| Waypoint { position, speed })
+            .waypoints()
+            .map(|(position, speed)| Waypoint { position, speed })
             .collect();
         let append = self.streamer.appended(self.now(), &decision, &waypoints);
         self.safety.extend_route(&segment.points);

@@ -51,7 +51,7 @@ use thiserror::Error;
 use tokio_util::sync::CancellationToken;
 use trajgen::{GenerationError, Generator, Strategy};
 
-use crate::case::{Case, CaseError, RoutePointRecord, Settings};
+use crate::case::{Case, CaseError, ReplayOf, RoutePointRecord, Settings};
 use crate::model::{Campaign, ModelError, Planner, ProbeRates, TestPlan};
 use crate::oracle::{FailurePolicy, Verdict};
 use crate::recording::{
@@ -96,6 +96,19 @@ pub struct RunConfig {
     pub out_dir: PathBuf,
     /// The car as the user named it (`sim`, `tcp://…`), for `campaign.json`.
     pub car_label: String,
+    /// A recorded case to drive in every test instead of generated tests (`drivecheck replay`).
+    pub replay: Option<ReplaySource>,
+}
+
+/// A case driven again instead of generated tests: every test of the campaign drives its plan
+/// after the usual reset.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReplaySource {
+    /// The plan every test drives (its test index is set per test), see
+    /// [`Case::replay_plan`].
+    pub plan: TestPlan,
+    /// Where it came from, for `campaign.json`.
+    pub of: ReplayOf,
 }
 
 impl RunConfig {
@@ -109,6 +122,7 @@ impl RunConfig {
             state_period: Duration::from_millis(50),
             out_dir,
             car_label: car_label.into(),
+            replay: None,
         }
     }
 }
@@ -314,7 +328,13 @@ async fn run_tests(run: &Run<'_>, dir: &mut RunDirectory) -> Result<(), RunError
             return Err(RunError::Interrupted { test_index });
         }
         let started = tokio::time::Instant::now();
-        let plan = planner.plan_test(&config.campaign, test_index, start_tail)?;
+        let plan = match &config.replay {
+            Some(replay) => TestPlan {
+                test_index,
+                ..replay.plan.clone()
+            },
+            None => planner.plan_test(&config.campaign, test_index, start_tail)?,
+        };
         let per_segment = started.elapsed() / plan.segments().count().max(1) as u32;
         let mut case = Case::planned(
             &plan,

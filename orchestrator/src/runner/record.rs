@@ -85,6 +85,7 @@ impl RunDirectory {
             started_at: rfc3339_now(),
             ended_at: None,
             summary: None,
+            replay_of: config.replay.as_ref().map(|r| r.of.clone()),
         };
         let dir = Self {
             path,
@@ -164,6 +165,14 @@ impl RunDirectory {
 
     fn write_record(&self) -> Result<(), RunError> {
         write(&self.path.join(CAMPAIGN_FILE), &self.record.to_json()?)
+    }
+}
+
+impl TestSummary {
+    /// The summary of test `test_index` from its case file `file` (relative to the run
+    /// directory) holding `case`.
+    pub fn of(test_index: usize, file: String, case: &Case) -> Self {
+        summarise(test_index, file, case)
     }
 }
 

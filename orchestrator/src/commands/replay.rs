@@ -1,0 +1,293 @@
+//! `drivecheck replay CASE.json`: a recorded (or hand-written) case driven again N times, each
+//! after the same reset, each recorded like a campaign, then compared segment by segment.
+//!
+//! Every run is a one-test campaign of its own in `run-K/` inside the replay directory
+//! (`campaign.json` naming the case it replays, `case-000.json`, `campaign.mcap`). With the
+//! embedded simulated car every run gets a fresh simulator seeded alike, so in virtual time
+//! with one seed the runs are identical (`--vary-seed` varies the sensor noise instead); a real
+//! car is connected once and reset before each run. The comparison (`replay.json`, see
+//! [`crate::replay`]) is written and printed at the end, also when a run ended the replay early.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use car_link::{Car, CarAddress};
+use indicatif::ProgressBar;
+use scenarios::Scenario;
+use tokio_util::sync::CancellationToken;
+use trajgen::{Generator, Strategy};
+
+use super::run::{CampaignFailed, connect, metres, runtime};
+use crate::case::{Case, ReplayOf, ScenarioRef};
+use crate::cli::ReplayArgs;
+use crate::model::{Campaign, TestPlan};
+use crate::oracle::Verdict;
+use crate::replay::{Comparison, REPLAY_FILE, ReplayRun};
+use crate::runner::{ReplaySource, RunConfig, rfc3339_now, run_campaign};
+use crate::scenario_arg::{load_scenario, print_warnings};
+use crate::seed::choose_seed;
+
+/// Replays the case and prints the comparison. Exit status: 0 every run passed, 1 a run failed
+/// or was aborted, 2 an error (the case refused, the link lost, interrupted, …).
+pub fn replay(args: &ReplayArgs) -> Result<ExitCode> {
+    let path = &args.case;
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let case = Case::from_json(&text).with_context(|| path.display().to_string())?;
+    let scenario = scenario_of(args, &case)?;
+    check_hash(&case, &scenario, args.ignore_scenario_hash)?;
+    let generator = Generator::new(scenario.generator.generator_config(Strategy::Wedge))
+        .context("the scenario's generator settings")?;
+    let seed = args
+        .seed
+        .or(case.campaign_seed)
+        .unwrap_or_else(|| choose_seed(None));
+    let plan = case
+        .replay_plan(&scenario, &generator, seed, args.no_faults, 0)
+        .with_context(|| format!("{}: cannot be replayed", path.display()))?;
+    let address: CarAddress = args
+        .car
+        .parse()
+        .with_context(|| format!("--car {}", args.car))?;
+    let out = args.out.clone().unwrap_or_else(|| {
+        PathBuf::from("runs").join(crate::runner::run_dir_name(
+            &format!("replay-{}", scenario.name),
+            seed,
+        ))
+    });
+    let of = ReplayOf {
+        case: path.display().to_string(),
+        campaign_seed: case.campaign_seed,
+        test_index: case.test_index,
+        verdict: case.verdict,
+        no_faults: args.no_faults,
+    };
+    let virtual_time = address == CarAddress::Sim && !args.realtime;
+    eprintln!(
+        "replaying {} {} time(s) on {} with car {}{}{}, seed {seed}{}, writing {}",
+        path.display(),
+        args.times,
+        scenario.name,
+        args.car,
+        if virtual_time { " (virtual time)" } else { "" },
+        if args.no_faults {
+            " without its faults"
+        } else {
+            ""
+        },
+        if args.vary_seed { " + run − 1" } else { "" },
+        out.display()
+    );
+    std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
+    let started = Instant::now();
+    let job = Job {
+        args,
+        address: &address,
+        scenario: &scenario,
+        plan: &plan,
+        of: &of,
+        seed,
+        out: &out,
+        policy: case.settings.as_ref().map(|s| s.failure_policy),
+    };
+    let (runs, error) = runtime(virtual_time)?.block_on(job.run_all());
+    let comparison = Comparison::new(&case, of.clone(), ScenarioRef::of(&scenario), &runs);
+    let file = out.join(REPLAY_FILE);
+    std::fs::write(&file, format!("{}\n", comparison.to_json()?))
+        .with_context(|| format!("cannot write {}", file.display()))?;
+    print!("{}", comparison.table());
+    println!(
+        "{:.1} s wall time; replay directory: {} ({REPLAY_FILE} written {})",
+        started.elapsed().as_secs_f64(),
+        out.display(),
+        rfc3339_now()
+    );
+    if let Some(error) = error {
+        return Err(error);
+    }
+    let all_passed = comparison
+        .runs
+        .iter()
+        .all(|r| r.verdict == Some(Verdict::Passed));
+    Ok(if all_passed {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
+}
+
+/// The scenario to replay in: `--scenario`, or the bundled one the case names.
+fn scenario_of(args: &ReplayArgs, case: &Case) -> Result<Scenario> {
+    let loaded = match &args.scenario {
+        Some(arg) => load_scenario(arg)?,
+        None => {
+            let name = &case.scenario.name;
+            if scenarios::bundled::text(name).is_none() {
+                bail!(
+                    "{}: scenario.name `{name}` is not a bundled scenario; give its file with \
+                     --scenario",
+                    args.case.display()
+                );
+            }
+            load_scenario(name)?
+        }
+    };
+    print_warnings(&loaded);
+    Ok(loaded.scenario)
+}
+
+/// Refuses a case recorded in another scenario (or without a hash) unless told to proceed.
+fn check_hash(case: &Case, scenario: &Scenario, ignore: bool) -> Result<()> {
+    let hash = scenario.hash();
+    let problem = match &case.scenario.hash {
+        Some(recorded) if *recorded == hash => return Ok(()),
+        Some(recorded) => format!(
+            "the case was recorded in scenario `{}` with hash {}, but scenario `{}` hashes to {}",
+            case.scenario.name,
+            short(recorded),
+            scenario.name,
+            short(&hash)
+        ),
+        None => format!(
+            "the case names no scenario hash, so it cannot be checked against scenario `{}`",
+            scenario.name
+        ),
+    };
+    if ignore {
+        eprintln!("warning: {problem}; replaying anyway (--ignore-scenario-hash)");
+        return Ok(());
+    }
+    bail!("{problem}; pass --ignore-scenario-hash to replay it anyway")
+}
+
+fn short(hash: &str) -> &str {
+    hash.get(..12).unwrap_or(hash)
+}
+
+/// Everything the runs share.
+struct Job<'a> {
+    args: &'a ReplayArgs,
+    address: &'a CarAddress,
+    scenario: &'a Scenario,
+    plan: &'a TestPlan,
+    of: &'a ReplayOf,
+    seed: u64,
+    out: &'a Path,
+    policy: Option<crate::oracle::FailurePolicy>,
+}
+
+impl Job<'_> {
+    /// Drives every run; stops early at the first run that ended with an error (returned).
+    async fn run_all(&self) -> (Vec<(ReplayRun, Option<Case>)>, Option<anyhow::Error>) {
+        let cancel = CancellationToken::new();
+        let on_ctrl_c = cancel.clone();
+        tokio::spawn(async move {
+            if tokio::signal::ctrl_c().await.is_ok() {
+                eprintln!("interrupted: stopping the car safely");
+                on_ctrl_c.cancel();
+            }
+        });
+        // A real car is connected once; the simulated one is fresh for every run.
+        let mut shared: Option<Car> = None;
+        let mut runs = Vec::new();
+        for k in 0..self.args.times {
+            let seed = if self.args.vary_seed {
+                self.seed.wrapping_add(u64::from(k))
+            } else {
+                self.seed
+            };
+            let dir = format!("run-{}", k + 1);
+            let result = self.run_one(&mut shared, seed, &dir, &cancel).await;
+            let case = read_case(&self.out.join(&dir));
+            let run = ReplayRun {
+                dir,
+                seed,
+                verdict: case.as_ref().and_then(|c| c.verdict),
+                reason: case.as_ref().and_then(|c| c.reason.clone()),
+            };
+            eprintln!(
+                "run {}/{}: {}, worst deviation {}{}",
+                k + 1,
+                self.args.times,
+                run.verdict.map_or("not run", Verdict::as_str),
+                case.as_ref().map_or_else(|| "-".to_owned(), worst),
+                run.reason
+                    .as_deref()
+                    .map_or_else(String::new, |r| format!(" ({r})"))
+            );
+            runs.push((run, case));
+            if let Err(error) = result {
+                return (runs, Some(error));
+            }
+        }
+        (runs, None)
+    }
+
+    async fn run_one(
+        &self,
+        shared: &mut Option<Car>,
+        seed: u64,
+        dir: &str,
+        cancel: &CancellationToken,
+    ) -> Result<()> {
+        let mut config = RunConfig::new(
+            Campaign {
+                seed,
+                tests: 1,
+                no_faults: self.args.no_faults,
+            },
+            self.out.join(dir),
+            self.args.car.clone(),
+        );
+        config.replay = Some(ReplaySource {
+            plan: self.plan.clone(),
+            of: self.of.clone(),
+        });
+        if let Some(policy) = self.policy {
+            config.policy = policy;
+        }
+        let (car, sim) = match shared {
+            Some(car) => (car.clone(), None),
+            None => {
+                let (car, sim) = connect(self.address, self.scenario, seed).await?;
+                if sim.is_none() {
+                    *shared = Some(car.clone());
+                }
+                (car, sim)
+            }
+        };
+        let result = run_campaign(
+            &car,
+            self.scenario,
+            &config,
+            sim.as_ref(),
+            cancel,
+            &ProgressBar::hidden(),
+        )
+        .await;
+        if let Some(sim) = sim {
+            sim.shutdown();
+        }
+        result
+            .map(|_| ())
+            .map_err(|error| anyhow::Error::new(CampaignFailed::new(error, &config.out_dir)))
+    }
+}
+
+/// The case a run wrote, if any.
+fn read_case(dir: &Path) -> Option<Case> {
+    let text = std::fs::read_to_string(dir.join("case-000.json")).ok()?;
+    Case::from_json(&text).ok()
+}
+
+/// The worst deviation of a run, for messages.
+fn worst(case: &Case) -> String {
+    metres(
+        case.segments
+            .iter()
+            .filter_map(|s| s.oracle.stats.map(|stats| stats.max_m))
+            .max_by(f64::total_cmp),
+    )
+}

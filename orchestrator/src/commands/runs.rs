@@ -1,0 +1,263 @@
+//! `drivecheck runs` lists the run directories under `--dir` (campaigns and replays) with their
+//! summary; `drivecheck runs show DIR` shows one: a campaign's record and every test, or a
+//! replay's comparison.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, bail};
+
+use super::run::{metres, print_report};
+use crate::case::{CampaignRecord, Case};
+use crate::cli::{RunsArgs, RunsCommand};
+use crate::replay::{Comparison, REPLAY_FILE};
+use crate::runner::{CampaignReport, TestSummary};
+
+/// The campaign record's file name in a run directory.
+const CAMPAIGN_FILE: &str = "campaign.json";
+
+/// Lists or shows run directories. Exit status 0, or 2 when the directory cannot be read.
+pub fn runs(args: &RunsArgs) -> Result<ExitCode> {
+    match &args.command {
+        None => list(&args.dir),
+        Some(RunsCommand::Show { run }) => {
+            let dir = if run.exists() {
+                run.clone()
+            } else {
+                args.dir.join(run)
+            };
+            show(&dir)
+        }
+    }
+}
+
+/// What a directory under `--dir` holds.
+enum Entry {
+    Campaign(Box<CampaignRecord>),
+    Replay(Box<Comparison>),
+    /// A record that cannot be read (or a replay without its comparison yet), and why.
+    Unreadable(String),
+}
+
+fn read_entry(dir: &Path) -> Option<Entry> {
+    let replay = dir.join(REPLAY_FILE);
+    let campaign = dir.join(CAMPAIGN_FILE);
+    if replay.exists() {
+        return Some(match read_comparison(&replay) {
+            Ok(c) => Entry::Replay(Box::new(c)),
+            Err(e) => Entry::Unreadable(format!("{e:#}")),
+        });
+    }
+    if campaign.exists() {
+        return Some(match read_campaign(&campaign) {
+            Ok(c) => Entry::Campaign(Box::new(c)),
+            Err(e) => Entry::Unreadable(format!("{e:#}")),
+        });
+    }
+    dir.join("run-1").join(CAMPAIGN_FILE).exists().then(|| {
+        Entry::Unreadable("a replay without its comparison (still running or killed)".to_owned())
+    })
+}
+
+fn read_comparison(path: &Path) -> Result<Comparison> {
+    let text = std::fs::read_to_string(path).with_context(|| path.display().to_string())?;
+    Comparison::from_json(&text).with_context(|| path.display().to_string())
+}
+
+fn read_campaign(path: &Path) -> Result<CampaignRecord> {
+    let text = std::fs::read_to_string(path).with_context(|| path.display().to_string())?;
+    CampaignRecord::from_json(&text).with_context(|| path.display().to_string())
+}
+
+fn list(root: &Path) -> Result<ExitCode> {
+    let entries = match std::fs::read_dir(root) {
+        Ok(entries) => entries,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            println!(
+                "no run directories in {} (it does not exist)",
+                root.display()
+            );
+            return Ok(ExitCode::SUCCESS);
+        }
+        Err(e) => return Err(e).with_context(|| format!("cannot read {}", root.display())),
+    };
+    let mut dirs: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_dir())
+        .collect();
+    dirs.sort();
+    println!(
+        "| run directory | kind | scenario | seed | car | tests | passed | failed | aborted | worst deviation | ended |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    let mut shown = 0;
+    for dir in &dirs {
+        let Some(entry) = read_entry(dir) else {
+            continue;
+        };
+        shown += 1;
+        let name = dir
+            .file_name()
+            .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+        println!("| {name} | {} |", row(&entry));
+    }
+    println!("\n{shown} run directories in {}", root.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+fn row(entry: &Entry) -> String {
+    match entry {
+        Entry::Campaign(r) => {
+            let kind = match &r.replay_of {
+                Some(of) => format!("replay run of {}", of.case),
+                None if r.no_faults => "campaign, no faults".to_owned(),
+                None => "campaign".to_owned(),
+            };
+            let counts = r.summary.as_ref().map_or_else(
+                || "- | - | - | - | -".to_owned(),
+                |s| {
+                    format!(
+                        "{} | {} | {} | {} | {}",
+                        s.tests,
+                        s.passed,
+                        s.failed,
+                        s.aborted,
+                        metres(s.worst_deviation_m)
+                    )
+                },
+            );
+            format!(
+                "{kind} | {} | {} | {} | {counts} | {}",
+                r.scenario.name,
+                r.seed,
+                r.car,
+                r.ended_at.as_deref().unwrap_or("(did not end)")
+            )
+        }
+        Entry::Replay(c) => {
+            let count = |v| c.runs.iter().filter(|r| r.verdict == Some(v)).count();
+            use crate::oracle::Verdict;
+            let worst = c
+                .segments
+                .iter()
+                .flat_map(|s| s.max_m.iter().flatten())
+                .copied()
+                .max_by(f64::total_cmp);
+            format!(
+                "replay ×{} of {}{} | {} | {} | - | {} | {} | {} | {} | {} | -",
+                c.runs.len(),
+                c.replay_of.case,
+                if c.replay_of.no_faults {
+                    ", no faults"
+                } else {
+                    ""
+                },
+                c.scenario.name,
+                c.runs
+                    .first()
+                    .map_or_else(String::new, |r| r.seed.to_string()),
+                c.runs.len(),
+                count(Verdict::Passed),
+                count(Verdict::Failed),
+                count(Verdict::Aborted),
+                metres(worst)
+            )
+        }
+        Entry::Unreadable(why) => format!("unreadable: {why} | | | | | | | | | |"),
+    }
+}
+
+fn show(dir: &Path) -> Result<ExitCode> {
+    match read_entry(dir) {
+        None => bail!(
+            "{} is not a run directory (no {CAMPAIGN_FILE} or {REPLAY_FILE})",
+            dir.display()
+        ),
+        Some(Entry::Unreadable(why)) => bail!("{}: {why}", dir.display()),
+        Some(Entry::Replay(c)) => {
+            println!(
+                "replay of {} in {}{}",
+                c.replay_of.case,
+                c.scenario.name,
+                if c.replay_of.no_faults {
+                    ", without its faults"
+                } else {
+                    ""
+                }
+            );
+            for run in &c.runs {
+                println!(
+                    "  {}: seed {}, {}{}",
+                    run.dir,
+                    run.seed,
+                    run.verdict
+                        .map_or("not run", crate::oracle::Verdict::as_str),
+                    run.reason
+                        .as_deref()
+                        .map_or_else(String::new, |r| format!(" ({r})"))
+                );
+            }
+            println!();
+            print!("{}", c.table());
+            Ok(ExitCode::SUCCESS)
+        }
+        Some(Entry::Campaign(record)) => {
+            show_campaign(dir, *record)?;
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
+
+fn show_campaign(dir: &Path, record: CampaignRecord) -> Result<()> {
+    println!(
+        "campaign: scenario {} (hash {}), seed {}{}, car {} (firmware {}), drivecheck {}",
+        record.scenario.name,
+        record
+            .scenario
+            .hash
+            .as_deref()
+            .map_or("-", |h| h.get(..12).unwrap_or(h)),
+        record.seed,
+        if record.no_faults { ", no faults" } else { "" },
+        record.car,
+        record.car_firmware_version.as_deref().unwrap_or("unknown"),
+        record.tool_version
+    );
+    if let Some(of) = &record.replay_of {
+        println!("replay of {}", of.case);
+    }
+    println!(
+        "started {}, ended {}",
+        record.started_at,
+        record.ended_at.as_deref().unwrap_or("- (did not end)")
+    );
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("cannot read {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with("case-") && n.ends_with(".json"))
+        })
+        .collect();
+    files.sort();
+    let mut tests = Vec::new();
+    for (i, path) in files.iter().enumerate() {
+        let file = path
+            .file_name()
+            .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+        let text = std::fs::read_to_string(path).with_context(|| path.display().to_string())?;
+        let case = Case::from_json(&text).with_context(|| path.display().to_string())?;
+        tests.push(TestSummary::of(case.test_index.unwrap_or(i), file, &case));
+    }
+    println!();
+    print_report(
+        &CampaignReport {
+            dir: dir.to_owned(),
+            record,
+            tests,
+        },
+        None,
+    );
+    Ok(())
+}
