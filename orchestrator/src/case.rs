@@ -987,8 +987,7 @@ mod tests {
         let case = Case::from_json(doc_examples()[0]).unwrap();
         let s = scenario(&case.scenario.name);
         let generator =
-            trajgen::Generator::new(s.generator.generator_config(trajgen::Strategy::Wedge))
-                .unwrap();
+            Generator::new(s.generator.generator_config(trajgen::Strategy::Wedge)).unwrap();
         let plan = case.replay_plan(&s, &generator, 1, false, 4).unwrap();
         assert_eq!(plan.test_index, 4);
         assert_eq!(plan.commands.len(), case.commands.len());

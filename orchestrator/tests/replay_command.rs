@@ -200,15 +200,19 @@ fn a_case_from_another_scenario_is_refused_unless_told() {
     assert_eq!(out.status.code(), Some(1), "{}", text(&out));
 }
 
-/// The hand-written example of docs/case-format.md, replayed in its scenario.
-#[test]
-fn the_documented_hand_written_case_replays() {
-    let doc = include_str!("../../docs/case-format.md");
-    let example = doc
+/// The first JSON example of docs/case-format.md: a case written by hand.
+fn hand_written_example() -> &'static str {
+    include_str!("../../docs/case-format.md")
         .split("```json\n")
         .nth(1)
         .and_then(|block| block.split("\n```").next())
-        .expect("the page has a hand-written example");
+        .expect("the page has a hand-written example")
+}
+
+/// The hand-written example of docs/case-format.md, replayed in its scenario.
+#[test]
+fn the_documented_hand_written_case_replays() {
+    let example = hand_written_example();
     let tmp = tempfile::tempdir().unwrap();
     let file = tmp.path().join("hand.json");
     std::fs::write(&file, example).unwrap();
@@ -234,12 +238,7 @@ fn the_documented_hand_written_case_replays() {
 
 #[test]
 fn a_case_that_leaves_the_area_is_refused_before_driving() {
-    let doc = include_str!("../../docs/case-format.md");
-    let example = doc
-        .split("```json\n")
-        .nth(1)
-        .and_then(|block| block.split("\n```").next())
-        .unwrap();
+    let example = hand_written_example();
     let mut case = Case::from_json(example).unwrap();
     if let orchestrator::case::CommandRecord::RunSegments { points, .. } = &mut case.commands[3] {
         points[3].x = 500.0;

@@ -19,7 +19,7 @@ use scenarios::Scenario;
 use tokio_util::sync::CancellationToken;
 use trajgen::{Generator, Strategy};
 
-use super::run::{CampaignFailed, connect, metres, runtime};
+use super::run::{CampaignFailed, cancel_on_ctrl_c, connect, metres, runtime};
 use crate::case::{Case, ReplayOf, ScenarioRef};
 use crate::cli::ReplayArgs;
 use crate::model::{Campaign, TestPlan};
@@ -181,14 +181,7 @@ struct Job<'a> {
 impl Job<'_> {
     /// Drives every run; stops early at the first run that ended with an error (returned).
     async fn run_all(&self) -> (Vec<(ReplayRun, Option<Case>)>, Option<anyhow::Error>) {
-        let cancel = CancellationToken::new();
-        let on_ctrl_c = cancel.clone();
-        tokio::spawn(async move {
-            if tokio::signal::ctrl_c().await.is_ok() {
-                eprintln!("interrupted: stopping the car safely");
-                on_ctrl_c.cancel();
-            }
-        });
+        let cancel = cancel_on_ctrl_c();
         // A real car is connected once; the simulated one is fresh for every run.
         let mut shared: Option<Car> = None;
         let mut runs = Vec::new();

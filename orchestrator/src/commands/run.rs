@@ -87,14 +87,7 @@ async fn campaign_on(
     config: &RunConfig,
 ) -> Result<CampaignReport, anyhow::Error> {
     let (car, sim) = connect(address, scenario, config.campaign.seed).await?;
-    let cancel = CancellationToken::new();
-    let on_ctrl_c = cancel.clone();
-    tokio::spawn(async move {
-        if tokio::signal::ctrl_c().await.is_ok() {
-            eprintln!("interrupted: stopping the car safely");
-            on_ctrl_c.cancel();
-        }
-    });
+    let cancel = cancel_on_ctrl_c();
     let progress = progress_bar(config.campaign.tests);
     let result = run_campaign(&car, scenario, config, sim.as_ref(), &cancel, &progress).await;
     progress.finish_and_clear();
@@ -123,6 +116,20 @@ pub(super) async fn connect(
         .await
         .context("cannot connect to the embedded simulated car")?;
     Ok((car, Some(sim)))
+}
+
+/// A token cancelled when the operator presses Ctrl-C (the runner then stops the car safely).
+/// Call it inside the runtime.
+pub(super) fn cancel_on_ctrl_c() -> CancellationToken {
+    let cancel = CancellationToken::new();
+    let on_ctrl_c = cancel.clone();
+    tokio::spawn(async move {
+        if tokio::signal::ctrl_c().await.is_ok() {
+            eprintln!("interrupted: stopping the car safely");
+            on_ctrl_c.cancel();
+        }
+    });
+    cancel
 }
 
 pub(super) fn progress_bar(tests: usize) -> ProgressBar {
