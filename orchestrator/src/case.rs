@@ -475,6 +475,10 @@ pub struct Case {
     /// The return route driven before the test (from the car's pose to the recovery route).
     #[serde(default)]
     pub return_route: Vec<RoutePointRecord>,
+    /// The clearance from every edge the return route keeps, metres, when it is less than the
+    /// scenario's `clearance_m` (the car stood inside the clearance band); absent otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub return_clearance_m: Option<f64>,
     /// Per segment driven: the oracle's result.
     #[serde(default)]
     pub segments: Vec<SegmentResult>,
@@ -526,6 +530,7 @@ impl Case {
             no_faults,
             commands: plan.commands.iter().map(CommandRecord::from).collect(),
             return_route: Vec::new(),
+            return_clearance_m: None,
             segments: Vec::new(),
             verdict: None,
             reason: None,
@@ -553,6 +558,14 @@ impl Case {
             check_command(i, command)?;
         }
         check_route_points("return_route", &self.return_route)?;
+        if let Some(clearance) = self.return_clearance_m
+            && !(clearance.is_finite() && clearance >= 0.0)
+        {
+            return Err(invalid(
+                "return_clearance_m",
+                "must be finite and non-negative",
+            ));
+        }
         self.check_results()
     }
 
@@ -889,6 +902,7 @@ mod tests {
             y: -60.0,
             speed: 0.8,
         }];
+        case.return_clearance_m = Some(0.25);
         case.verdict = Some(Verdict::Failed);
         case.reason = Some("segment 1: deviation 1.10 m above 1.00 m".to_owned());
         case.abort = Some(Abort::new(
@@ -1060,6 +1074,7 @@ mod tests {
             no_faults: false,
             commands: vec![command],
             return_route: vec![],
+            return_clearance_m: None,
             segments: vec![],
             verdict: None,
             reason: None,
@@ -1122,6 +1137,20 @@ mod tests {
             oracle: SegmentOracle::new().result(1.0),
         });
         assert!(dangling.check().is_err());
+        let mut negative = base(CommandRecord::RunSegments {
+            intent: None,
+            points: vec![point(1.0)],
+            margin: vec![],
+        });
+        assert_eq!(negative.check().map_err(|e| e.to_string()), Ok(()));
+        negative.return_clearance_m = Some(-0.25);
+        assert!(
+            negative
+                .check()
+                .unwrap_err()
+                .to_string()
+                .starts_with("return_clearance_m")
+        );
     }
 
     #[test]

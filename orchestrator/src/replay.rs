@@ -257,6 +257,7 @@ mod tests {
                 margin: vec![],
             }],
             return_route: vec![],
+            return_clearance_m: None,
             segments,
             verdict: Some(verdict),
             reason: None,

@@ -21,6 +21,10 @@
 //! shortening pass. Every plan carries its [`Quality`]: length, a lower bound, their ratio, and
 //! what was tried.
 //!
+//! A car that stopped nearer an edge than the constraints' clearance cannot start a route that
+//! keeps it: [`PlanConfig::plan_with_fallback`] then plans with half the clearance, or none, and
+//! the route says which it keeps ([`ReturnRoute::clearance`]).
+//!
 //! ```
 //! use rand::SeedableRng;
 //! use trajgen::{Area, Constraints, Point, Polygon, Pose};
@@ -64,7 +68,10 @@ mod tests;
 pub use arcs::{ArcConnector, can_turn_around};
 pub use error::{RecoveryError, Tried};
 pub use join::Join;
-pub use planner::{JoinPolicy, PlanConfig, Planner, Quality, ReturnRoute, UnknownPlanner};
+pub use planner::{
+    FALLBACK_CLEARANCE_FRACTIONS, JoinPolicy, PlanConfig, Planner, Quality, ReturnRoute,
+    UnknownPlanner,
+};
 pub use reference::ReferenceConfig;
 pub use search::SearchConfig;
 pub use shorten::Shortening;

@@ -27,6 +27,10 @@ const DUBINS_WINDOW: usize = 16;
 /// Dubins shortcuts do the long stretches.
 const TIGHT_ARCS_WINDOW: usize = 16;
 
+/// The clearances [`PlanConfig::plan_with_fallback`] tries, as fractions of the constraints'
+/// clearance, in order: all of it, half, none.
+pub const FALLBACK_CLEARANCE_FRACTIONS: [f64; 3] = [1.0, 0.5, 0.0];
+
 /// Most segments of a reference arc (a sanity limit on the configuration).
 const MAX_ARC_STEPS: usize = 1000;
 
@@ -127,7 +131,8 @@ pub struct Quality {
 pub struct ReturnRoute {
     /// The route: the car's position first, the joining point last. Its first segment turns less
     /// than the limit from the car's heading; `points` followed by [`Join::next`] passes
-    /// [`trajgen::check_route`] with the car's heading (see [`ReturnRoute::checked_points`]).
+    /// [`trajgen::check_route`] with the car's heading and [`ReturnRoute::clearance`] (see
+    /// [`ReturnRoute::checked_points`]).
     pub points: Vec<Point>,
     /// Where it joins the recovery route.
     pub join: Join,
@@ -135,6 +140,10 @@ pub struct ReturnRoute {
     pub quality: Quality,
     /// The planner that made it.
     pub planner: Planner,
+    /// The clearance from every edge the route keeps, metres: the constraints' own, or less when
+    /// [`PlanConfig::plan_with_fallback`] had to relax it. `points` followed by [`Join::next`]
+    /// passes [`trajgen::check_route`] with the constraints and this clearance.
+    pub clearance: f64,
 }
 
 impl ReturnRoute {
@@ -241,6 +250,50 @@ impl PlanConfig {
         Ok(route)
     }
 
+    /// Plans like [`PlanConfig::plan`], relaxing the clearance when no route keeps it: tries
+    /// the constraints' clearance, then half of it, then none ([`FALLBACK_CLEARANCE_FRACTIONS`]),
+    /// and returns the first route found; its [`ReturnRoute::clearance`] says which one it keeps.
+    ///
+    /// This is for a car that stopped inside the clearance band (nearer an edge than the
+    /// clearance, e.g. after cutting a corner): no route can start there and keep the clearance,
+    /// since its first point is the car's position. A clearance larger than the car's distance to
+    /// the nearest edge is skipped without planning. Only [`RecoveryError::NoRoute`] and
+    /// [`RecoveryError::InvalidRecoveryRoute`] (nothing joinable with that clearance) move on to
+    /// the next clearance; any other error is returned at once, and when every clearance fails
+    /// the error of the last (no clearance) is returned.
+    pub fn plan_with_fallback<R: Rng + ?Sized>(
+        &self,
+        area: &Area,
+        from: Pose,
+        recovery_route: &[Point],
+        constraints: &Constraints,
+        rng: &mut R,
+    ) -> Result<ReturnRoute, RecoveryError> {
+        check_constraints(constraints)?;
+        check_pose(area, from)?;
+        let room = area.boundary_distance(from.position);
+        let mut clearances: Vec<f64> = FALLBACK_CLEARANCE_FRACTIONS
+            .iter()
+            .map(|fraction| constraints.clearance * fraction)
+            .filter(|&clearance| clearance <= room || clearance == 0.0)
+            .collect();
+        clearances.dedup();
+        let relaxed = |clearance: f64| Constraints {
+            clearance,
+            ..*constraints
+        };
+        let Some((&last, first)) = clearances.split_last() else {
+            return self.plan(area, from, recovery_route, constraints, rng);
+        };
+        for &clearance in first {
+            match self.plan(area, from, recovery_route, &relaxed(clearance), rng) {
+                Err(error) if a_smaller_clearance_may_help(&error) => {}
+                result => return result,
+            }
+        }
+        self.plan(area, from, recovery_route, &relaxed(last), rng)
+    }
+
     /// Checks that the constants make sense.
     pub fn check(&self) -> Result<(), RecoveryError> {
         let positive = |v: f64| v.is_finite() && v > 0.0;
@@ -321,6 +374,7 @@ impl PlanConfig {
                 ..quality
             },
             planner: self.planner,
+            clearance: scene.constraints.clearance,
         }
     }
 }
@@ -352,6 +406,15 @@ fn measure(
         total_ratio: total_length / total_lower_bound.max(f64::MIN_POSITIVE),
         tried,
     }
+}
+
+/// Whether `error` may go away with a smaller clearance: no route found, or nothing of the
+/// recovery route joinable with this one.
+fn a_smaller_clearance_may_help(error: &RecoveryError) -> bool {
+    matches!(
+        error,
+        RecoveryError::NoRoute { .. } | RecoveryError::InvalidRecoveryRoute { .. }
+    )
 }
 
 fn check_constraints(c: &Constraints) -> Result<(), RecoveryError> {

@@ -353,3 +353,143 @@ fn the_earliest_join_policy_joins_where_the_reference_planner_does() {
         );
     }
 }
+
+/// A 20 m square with a straight recovery route across its middle.
+fn open_square() -> (Area, Vec<Point>) {
+    let fence = Polygon::new(vec![
+        Point::new(0.0, 0.0),
+        Point::new(20.0, 0.0),
+        Point::new(20.0, 20.0),
+        Point::new(0.0, 20.0),
+    ])
+    .unwrap();
+    let recovery = (0..5)
+        .map(|i| Point::new(6.0 + 2.0 * f64::from(i), 10.0))
+        .collect();
+    (Area::new(fence, vec![]).unwrap(), recovery)
+}
+
+#[test]
+fn inside_the_clearance_band_the_fallback_keeps_the_largest_clearance_it_can() {
+    let (area, recovery) = open_square();
+    let c = Constraints {
+        clearance: 0.5,
+        ..Constraints::default()
+    };
+    let config = PlanConfig::default();
+    // (distance from the south fence, heading along it) → the clearance the route keeps.
+    for (room, expected) in [(2.0, 0.5), (0.3, 0.25), (0.2, 0.0)] {
+        let from = Pose::new(Point::new(10.0, room), 0.0);
+        let mut rng = Pcg64Mcg::seed_from_u64(1);
+        let route = config
+            .plan_with_fallback(&area, from, &recovery, &c, &mut rng)
+            .unwrap_or_else(|e| panic!("{room} m from the fence: {e}"));
+        assert_eq!(route.clearance, expected, "{room} m from the fence");
+        assert_eq!(route.points[0], from.position);
+        let kept = Constraints {
+            clearance: route.clearance,
+            ..c
+        };
+        assert_eq!(
+            check_route(&area, &route.checked_points(), &kept, Some(from.heading)),
+            Ok(()),
+            "{room} m from the fence"
+        );
+        let plain = config.plan(&area, from, &recovery, &c, &mut Pcg64Mcg::seed_from_u64(1));
+        if expected == c.clearance {
+            // Outside the band the fallback is the plain plan.
+            assert_eq!(plain, Ok(route));
+        } else {
+            // Inside it no route can start with the full clearance.
+            assert!(
+                matches!(plain, Err(RecoveryError::NoRoute { .. })),
+                "{room} m from the fence: {plain:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn the_fallback_does_not_retry_errors_a_smaller_clearance_cannot_cure() {
+    let (area, recovery) = open_square();
+    let c = Constraints {
+        clearance: 0.5,
+        ..Constraints::default()
+    };
+    let mut rng = Pcg64Mcg::seed_from_u64(1);
+    let config = PlanConfig::default();
+    let outside = Pose::new(Point::new(30.0, 5.0), 0.0);
+    assert_eq!(
+        config.plan_with_fallback(&area, outside, &recovery, &c, &mut rng),
+        Err(RecoveryError::PoseOutside { x: 30.0, y: 5.0 })
+    );
+    let from = Pose::new(Point::new(10.0, 0.2), 0.0);
+    let negative = Constraints {
+        clearance: -1.0,
+        ..c
+    };
+    assert!(matches!(
+        config.plan_with_fallback(&area, from, &recovery, &negative, &mut rng),
+        Err(RecoveryError::InvalidConstraints { .. })
+    ));
+    // Facing the fence 0.2 m away: not even without clearance is there a way out.
+    let boxed_in = Pose::new(Point::new(10.0, 0.2), -std::f64::consts::FRAC_PI_2);
+    assert!(matches!(
+        config.plan_with_fallback(&area, boxed_in, &recovery, &c, &mut rng),
+        Err(RecoveryError::NoRoute { .. })
+    ));
+}
+
+/// A uniformly random pose inside the area closer than `band` metres to an edge, random
+/// heading, from which the car can turn around without clearance.
+fn band_pose(area: &Area, band: f64, rng: &mut Pcg64Mcg) -> Pose {
+    let bbox = area.bbox();
+    loop {
+        let p = Point::new(
+            rng.random_range(bbox.min.x..bbox.max.x),
+            rng.random_range(bbox.min.y..bbox.max.y),
+        );
+        let heading = rng.random_range(-std::f64::consts::PI..std::f64::consts::PI);
+        let pose = Pose::new(p, heading);
+        if area.contains_point(p)
+            && area.boundary_distance(p) < band
+            && can_turn_around(area, pose, &Constraints::default())
+        {
+            return pose;
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig {
+        failure_persistence: None,
+        ..ProptestConfig::with_cases(24)
+    })]
+
+    /// From any pose inside the 0.5 m clearance band of a real area where the car can turn
+    /// around, the fallback finds a route; it keeps a clearance no larger than the car's distance
+    /// to the nearest edge and passes the check end to end with it.
+    #[test]
+    fn the_fallback_gets_the_car_home_from_inside_the_clearance_band(
+        area in 0..REAL_AREAS.len(),
+        seed in any::<u64>(),
+    ) {
+        let real = &REAL_AREAS[area];
+        let area = area_of(real);
+        let recovery = points(real.recovery_route);
+        let c = Constraints { clearance: 0.5, ..Constraints::default() };
+        let mut rng = Pcg64Mcg::seed_from_u64(seed);
+        let from = band_pose(&area, c.clearance, &mut rng);
+        let route = PlanConfig::default()
+            .plan_with_fallback(&area, from, &recovery, &c, &mut rng)
+            .map_err(|e| TestCaseError::fail(format!("{} from {from:?}: {e}", real.name)))?;
+        prop_assert!(route.clearance < c.clearance);
+        prop_assert!(route.clearance <= area.boundary_distance(from.position));
+        let kept = Constraints { clearance: route.clearance, ..c };
+        prop_assert_eq!(
+            check_route(&area, &route.checked_points(), &kept, Some(from.heading)),
+            Ok(()),
+            "{} from {:?}", real.name, from
+        );
+    }
+}

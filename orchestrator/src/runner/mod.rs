@@ -421,6 +421,8 @@ async fn run_test(
             speed,
         })
         .collect();
+    case.return_clearance_m =
+        (reset.clearance_m < ctx.scenario.generator.clearance_m).then_some(reset.clearance_m);
     let outcome = drive::drive(ctx, telemetry, plan, reset.standing, generation).await;
     outcome.record(case);
     match outcome.stop {

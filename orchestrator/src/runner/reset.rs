@@ -6,6 +6,12 @@
 //! same known state. A car the safety monitor braked just outside the drivable region is first
 //! driven back in ([`reentry`]).
 //!
+//! The return route keeps the scenario's clearance from every edge when it can. A car that stopped
+//! inside the clearance band (nearer an edge than the clearance: it cuts corners, and braking
+//! carries it on) cannot start a route that keeps it, so the route is then planned with half the
+//! clearance, or none ([`recovery::PlanConfig::plan_with_fallback`]); [`ResetDone::clearance_m`]
+//! says which one it keeps.
+//!
 //! Recorded: the return route as planned, every command (between tests: without a test index)
 //! with its answer, and every state sample.
 
@@ -43,6 +49,9 @@ pub struct ResetDone {
     pub return_route: Vec<(Point, f64)>,
     /// Where the car stands, stopped, with UWB equal to RTK.
     pub standing: Point,
+    /// The clearance from every edge the return route keeps, metres: the scenario's, or less when
+    /// the car stood inside the clearance band (see the module doc).
+    pub clearance_m: f64,
 }
 
 /// How braking ended.
@@ -142,6 +151,7 @@ pub(crate) async fn reset(
     Ok(ResetDone {
         return_route: std::mem::take(&mut return_route),
         standing: Point::new(standing.state.px, standing.state.py),
+        clearance_m: route.clearance,
     })
 }
 
@@ -183,6 +193,8 @@ pub fn reentry(area: &Area, car: Pose) -> Option<Pose> {
         .then(|| Pose::new(entry, inward.heading()))
 }
 
+/// The return route from `from`, keeping the scenario's clearance or, from inside the clearance
+/// band, the largest fallback clearance that gives a route (see the module doc).
 fn plan_return(ctx: &Context<'_>, from: Pose, test_index: usize) -> Result<ReturnRoute, Stopped> {
     let scenario = ctx.scenario;
     let seed = crate::model::test_rng_seed(ctx.config.campaign.seed, test_index);
@@ -190,7 +202,7 @@ fn plan_return(ctx: &Context<'_>, from: Pose, test_index: usize) -> Result<Retur
     first.copy_from_slice(&seed[..8]);
     let mut rng = crate::seed::rng(u64::from_le_bytes(first));
     PlanConfig::default()
-        .plan(
+        .plan_with_fallback(
             &scenario.area,
             from,
             &scenario.recovery_route.positions(),
