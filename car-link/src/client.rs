@@ -1,13 +1,15 @@
 //! The async client: a [`Car`] handle over any [`Link`].
 //!
 //! On start it performs the version handshake (GET_STATE, then every layout and id from the reported firmware
-//! version), starts a dispatcher that matches replies to requests by (car id, command), and a keepalive that feeds
-//! the car's 2 s communication watchdog. Every timer is tokio's, so the client runs in virtual time too.
+//! version), starts a dispatcher that matches replies to requests by (car id, command) — GET_STATE, which may have
+//! several requests in flight, first in first out — and a keepalive that feeds the car's 2 s communication
+//! watchdog. Every timer is tokio's, so the client runs in virtual time too.
 //!
 //! Invariant: a lost link is an error ([`CarError::LinkLost`], [`LinkEvent::Lost`]), never a zero state.
 
 mod session;
 
+use std::collections::VecDeque;
 use std::io;
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
@@ -30,7 +32,7 @@ use crate::message::{
 };
 use crate::transport::{Link, PC_BYTE_TIMEOUT};
 use crate::version::{CommandId, FirmwareVersion};
-use session::{RouteMemory, Shared, keep_alive, lock, supervise};
+use session::{RouteMemory, Shared, StateOutcome, StateTicket, keep_alive, lock, supervise};
 
 /// Two route packets whose first points are closer than this (in x and y) count as one for the firmware.
 pub const DUPLICATE_POINT_THRESHOLD: f64 = 1e-4;
@@ -162,7 +164,8 @@ pub struct StateSample {
     pub state: CarState,
     /// The car id that answered.
     pub car_id: u8,
-    /// When the request was sent (tokio clock).
+    /// When the request was sent (tokio clock). With several GET_STATE requests in flight, the request this
+    /// reply was paired with: the oldest one waiting (see [`Car::poll_states`]).
     pub requested_at: Instant,
     /// When the reply arrived (tokio clock).
     pub received_at: Instant,
@@ -178,6 +181,107 @@ impl StateSample {
     /// The car's clock: ms since UTC midnight, −1 until known.
     pub fn ms_today(&self) -> i32 {
         self.state.ms_today
+    }
+}
+
+/// The shortest polling period [`Car::poll_states`] uses (a shorter one is raised to it).
+pub const MIN_STATE_PERIOD: Duration = Duration::from_millis(1);
+/// The most GET_STATE requests [`StatePolling::new`] lets be in flight (the link queues 64 payloads).
+pub const MAX_STATES_IN_FLIGHT: usize = 32;
+
+/// How [`Car::poll_states`] polls GET_STATE.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StatePolling {
+    /// Time between requests (at least [`MIN_STATE_PERIOD`]).
+    pub period: Duration,
+    /// How long a request waits for its reply before it counts as lost.
+    pub timeout: Duration,
+    /// Requests in flight at most (at least 1); at the cap the next request waits until the oldest is answered
+    /// or lost.
+    pub max_in_flight: usize,
+}
+
+impl StatePolling {
+    /// A request every `period`, each lost after `timeout`, with as many in flight as the timeout needs:
+    /// `ceil(timeout / period)`, between 1 and [`MAX_STATES_IN_FLIGHT`]. So a sample comes every `period` on
+    /// any link whose round trip stays below `timeout`.
+    pub fn new(period: Duration, timeout: Duration) -> Self {
+        let period = period.max(MIN_STATE_PERIOD);
+        let needed = timeout.as_nanos().div_ceil(period.as_nanos());
+        let max_in_flight = usize::try_from(needed)
+            .unwrap_or(usize::MAX)
+            .clamp(1, MAX_STATES_IN_FLIGHT);
+        StatePolling {
+            period,
+            timeout,
+            max_in_flight,
+        }
+    }
+}
+
+/// The state behind [`Car::poll_states`]: the ticker and the requests in flight, oldest first.
+struct StatePoller {
+    car: Car,
+    polling: StatePolling,
+    ticker: tokio::time::Interval,
+    in_flight: VecDeque<StateTicket>,
+}
+
+/// What woke the poller.
+enum PollStep {
+    /// Time to send the next request.
+    Tick,
+    /// The oldest request in flight ended.
+    Oldest(StateOutcome),
+}
+
+impl StatePoller {
+    /// The next item: sends requests on every tick meanwhile.
+    async fn next(&mut self) -> Result<StateSample, CarError> {
+        loop {
+            let room = self.in_flight.len() < self.polling.max_in_flight.max(1);
+            let oldest = self.in_flight.front_mut();
+            let step = tokio::select! {
+                biased;
+                _ = self.ticker.tick(), if room => PollStep::Tick,
+                outcome = async {
+                    match oldest {
+                        Some(ticket) => ticket.outcome().await,
+                        None => std::future::pending().await,
+                    }
+                } => PollStep::Oldest(outcome),
+            };
+            let shared = self.car.shared();
+            match step {
+                PollStep::Tick => {
+                    let ticket = shared.send_state_request(self.polling.timeout).await?;
+                    self.in_flight.push_back(ticket);
+                }
+                PollStep::Oldest(outcome) => {
+                    let Some(ticket) = self.in_flight.pop_front() else {
+                        continue;
+                    };
+                    return match outcome {
+                        StateOutcome::Answered(answer) => {
+                            shared.accept_state(*answer, ticket.sent_at)
+                        }
+                        StateOutcome::Expired => {
+                            shared.note_timeout(CommandId::GetState);
+                            Err(CarError::NoReply {
+                                command: CommandId::GetState,
+                                tries: 1,
+                                per_try: self.polling.timeout,
+                            })
+                        }
+                        StateOutcome::LinkLost => {
+                            // Every request in flight went down with the link: one error for all of them.
+                            self.in_flight.clear();
+                            Err(CarError::LinkLost)
+                        }
+                    };
+                }
+            }
+        }
     }
 }
 
@@ -335,26 +439,54 @@ impl Car {
     /// Reads the car state (GET_STATE).
     ///
     /// Timeout: one try of `request_timeout`, then [`CarError::NoReply`]. A lost link gives
-    /// [`CarError::LinkLost`]; never a default state. Cancellation: safe; a late reply is discarded as stray.
+    /// [`CarError::LinkLost`]; never a default state. Cancellation: safe; a late reply is discarded as stray,
+    /// or answers another GET_STATE request still waiting (all are alike: see [`Car::poll_states`]).
     pub async fn state(&self) -> Result<StateSample, CarError> {
         self.shared().state(1).await
     }
 
-    /// A stream of states polled at `period` (GET_STATE each tick; a late tick is delayed, not bunched up).
-    /// Failures are items too (`Err`), so that a lost link is seen as such; the stream itself never ends. It
-    /// holds a clone of the handle, which keeps the link and the keepalive alive while it exists.
+    /// A stream of states polled at `period`, pipelined: [`Car::poll_states`] with
+    /// [`StatePolling::new`]`(period, request_timeout)`, so that on a link whose round trip is longer than
+    /// `period` a sample still comes every `period`.
     ///
-    /// Timeout: each item is bounded like [`Car::state`]. Cancellation: dropping the stream stops the polling.
+    /// Timeout, cancellation and pairing: as [`Car::poll_states`].
     pub fn state_stream(
         &self,
         period: Duration,
     ) -> impl Stream<Item = Result<StateSample, CarError>> + Send + 'static {
-        let mut ticker = tokio::time::interval(period);
+        self.poll_states(StatePolling::new(period, self.config().request_timeout))
+    }
+
+    /// A stream of states: a GET_STATE request every `polling.period` without waiting for the replies (a late
+    /// tick is delayed, not bunched up), with at most `polling.max_in_flight` unanswered at once. Items come
+    /// in the order the requests were sent. Failures are items too (`Err`), so that a lost link is seen as such;
+    /// the stream itself never ends. It holds a clone of the handle, which keeps the link and the keepalive
+    /// alive while it exists.
+    ///
+    /// Pairing: GET_STATE replies carry no request id, so a reply answers the oldest GET_STATE request still
+    /// waiting (the car answers in arrival order). A sample's `received_at` is exact; its `requested_at` is the
+    /// send time of the request it was paired with, which after a lost request or reply may be up to the
+    /// timeout too early (see the module `session`), so round trips may read long, never short, on a lossy
+    /// link until the lost request's deadline.
+    ///
+    /// Timeout: a request without a reply within `polling.timeout` gives a [`CarError::NoReply`] item (and
+    /// counts as a timeout in [`Car::health`]); a lost link gives [`CarError::LinkLost`] items. Cancellation:
+    /// dropping the stream stops the polling; replies still in flight are then counted as stray.
+    pub fn poll_states(
+        &self,
+        polling: StatePolling,
+    ) -> impl Stream<Item = Result<StateSample, CarError>> + Send + 'static {
+        let mut ticker = tokio::time::interval(polling.period.max(MIN_STATE_PERIOD));
         ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-        futures::stream::unfold((self.clone(), ticker), |(car, mut ticker)| async move {
-            ticker.tick().await;
-            let item = car.state().await;
-            Some((item, (car, ticker)))
+        let poller = StatePoller {
+            car: self.clone(),
+            polling,
+            ticker,
+            in_flight: VecDeque::new(),
+        };
+        futures::stream::unfold(poller, |mut poller| async move {
+            let item = poller.next().await;
+            Some((item, poller))
         })
     }
 

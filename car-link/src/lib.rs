@@ -42,7 +42,7 @@ pub mod transport;
 pub mod version;
 
 pub use address::CarAddress;
-pub use client::{Car, CarConfig, CarError, LinkEvent, StateSample};
+pub use client::{Car, CarConfig, CarError, LinkEvent, StatePolling, StateSample};
 pub use fault::{FaultKind, Probe};
 pub use message::{CarState, Reply, Request, RoutePoint};
 pub use version::{CommandId, FirmwareVersion};

@@ -1,8 +1,15 @@
 //! The state behind a [`super::Car`]: the link's sender, the requests waiting for replies, the dispatcher that
 //! matches replies to them by (car id, command), and the background tasks (link supervision with reconnection,
 //! watchdog keepalive).
+//!
+//! GET_STATE is matched differently from every other command, because several GET_STATE requests may be in
+//! flight at once (the pipelined state stream, the keepalive, single reads) and its reply carries no request id.
+//! All GET_STATE requests are identical and idempotent, and the car answers in arrival order (protocol §2.3, on
+//! an ordered link), so a reply answers the **oldest** GET_STATE request of that car still waiting (first in,
+//! first out). A request whose reply has not come by its deadline counts as lost and is never paired afterwards;
+//! a reply with no request waiting is stray. See [`Shared::dispatch_state`] for what this means for the stamps.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
@@ -29,6 +36,50 @@ pub(super) struct Identity {
 /// Waiting requests are keyed by (car id or any, wire command id).
 type Key = (Option<u8>, u8);
 
+/// A GET_STATE request waiting for its reply, in the order sent.
+#[derive(Debug)]
+pub(super) struct StateWaiter {
+    /// The car it was sent to (`None`: broadcast, any car answers).
+    car: Option<u8>,
+    /// After this it counts as lost: a later reply answers a later request.
+    deadline: Instant,
+    tx: oneshot::Sender<Answer>,
+}
+
+/// The requester's side of a GET_STATE request in flight.
+#[derive(Debug)]
+pub(super) struct StateTicket {
+    /// When the request was handed to the link.
+    pub(super) sent_at: Instant,
+    /// When it counts as lost.
+    pub(super) deadline: Instant,
+    rx: oneshot::Receiver<Answer>,
+}
+
+/// How a GET_STATE request ended.
+#[derive(Debug)]
+pub(super) enum StateOutcome {
+    /// Its reply (the oldest waiting request takes the next reply).
+    Answered(Box<Answer>),
+    /// No reply by its deadline.
+    Expired,
+    /// The link went down while it waited.
+    LinkLost,
+}
+
+impl StateTicket {
+    /// Waits for the outcome. Cancel-safe: the ticket can be waited on again.
+    pub(super) async fn outcome(&mut self) -> StateOutcome {
+        match tokio::time::timeout_at(self.deadline, &mut self.rx).await {
+            Ok(Ok(answer)) => StateOutcome::Answered(Box::new(answer)),
+            // The dispatcher forgets a request past its deadline; before it, only a lost link drops it.
+            Ok(Err(_)) if Instant::now() >= self.deadline => StateOutcome::Expired,
+            Ok(Err(_)) => StateOutcome::LinkLost,
+            Err(_) => StateOutcome::Expired,
+        }
+    }
+}
+
 /// A reply delivered to a waiting request.
 #[derive(Debug)]
 pub(super) struct Answer {
@@ -51,6 +102,8 @@ pub(super) struct Shared {
     pub(super) identity: Mutex<Identity>,
     pub(super) outgoing: Mutex<Option<mpsc::Sender<Bytes>>>,
     pub(super) waiters: Mutex<HashMap<Key, oneshot::Sender<Answer>>>,
+    /// GET_STATE requests in flight, oldest first.
+    pub(super) state_waiters: Mutex<VecDeque<StateWaiter>>,
     pub(super) lanes: Mutex<HashMap<u8, Arc<tokio::sync::Mutex<()>>>>,
     pub(super) printf: broadcast::Sender<String>,
     pub(super) events: broadcast::Sender<LinkEvent>,
@@ -94,6 +147,7 @@ impl Shared {
             config,
             outgoing: Mutex::new(None),
             waiters: Mutex::new(HashMap::new()),
+            state_waiters: Mutex::new(VecDeque::new()),
             lanes: Mutex::new(HashMap::new()),
             printf: broadcast::channel(256).0,
             events: broadcast::channel(64).0,
@@ -124,6 +178,7 @@ impl Shared {
         self.losses.fetch_add(1, Ordering::SeqCst);
         // Dropping the senders wakes every waiting request with LinkLost.
         lock(&self.waiters).clear();
+        lock(&self.state_waiters).clear();
         lock(&self.health).figures.link_up = false;
         tracing::warn!(%reason, "link to the car lost");
         let _ = self.events.send(LinkEvent::Lost { reason });
@@ -147,22 +202,115 @@ impl Shared {
             return;
         }
         let code = payload[1];
+        let answer = Answer {
+            car,
+            reply,
+            received_at: Instant::now(),
+        };
+        if Some(code) == CommandId::GetState.code(identity.version) {
+            if !self.dispatch_state(answer) {
+                tracing::debug!(car, "stray state reply ignored");
+                lock(&self.health).figures.stray_replies += 1;
+            }
+            return;
+        }
         let waiter = {
             let mut waiters = lock(&self.waiters);
             waiters
                 .remove(&(Some(car), code))
                 .or_else(|| waiters.remove(&(None, code)))
         };
-        let answer = Answer {
-            car,
-            reply,
-            received_at: Instant::now(),
-        };
         let delivered = waiter.is_some_and(|tx| tx.send(answer).is_ok());
         if !delivered {
             tracing::debug!(car, code, "stray reply ignored");
             lock(&self.health).figures.stray_replies += 1;
         }
+    }
+
+    /// Hands a GET_STATE reply to the oldest GET_STATE request of that car still waiting; `false` if there is
+    /// none (a stray: a duplicate, another car's, or the late reply of a request already counted as lost).
+    ///
+    /// Requests past their deadline, and those nobody waits for any more, are forgotten first. Since requests
+    /// are identical, a lost request or reply cannot be told from a slow one: until the lost request's deadline,
+    /// later replies are each paired with the request before their own, so their round trip reads one period
+    /// long (never more than the deadline allows: the error is bounded by the timeout, and always on the long
+    /// side, the safe side for lead times). A reply later than its deadline shifts the pairing the other way
+    /// until a loss or a quiet moment realigns it. The receive time of every sample is exact either way.
+    fn dispatch_state(&self, answer: Answer) -> bool {
+        let now = answer.received_at;
+        let mut queue = lock(&self.state_waiters);
+        queue.retain(|w| !w.tx.is_closed() && w.deadline > now);
+        let Some(index) = queue
+            .iter()
+            .position(|w| w.car.is_none_or(|car| car == answer.car))
+        else {
+            return false;
+        };
+        queue
+            .remove(index)
+            .is_some_and(|waiter| waiter.tx.send(answer).is_ok())
+    }
+
+    /// Sends one GET_STATE request that counts as lost after `timeout`; the reply is taken with
+    /// [`StateTicket::outcome`]. Never waits for a reply, so that several can be in flight.
+    pub(super) async fn send_state_request(
+        &self,
+        timeout: Duration,
+    ) -> Result<StateTicket, CarError> {
+        let (payload, identity, command) = self.encode(&Request::GetState)?;
+        let (tx, rx) = oneshot::channel();
+        // Registered before sending, so that even an instant reply finds it.
+        let deadline = Instant::now() + timeout;
+        {
+            let mut queue = lock(&self.state_waiters);
+            // Requests nobody waits for any more go now, so that a silent car does not grow the queue.
+            queue.retain(|w| !w.tx.is_closed());
+            queue.push_back(StateWaiter {
+                car: (identity.car_id != ID_ALL).then_some(identity.car_id),
+                deadline,
+                tx,
+            });
+        }
+        let sent_at = self.send(payload, command).await?;
+        // The same deadline as the waiter's: past it the dispatcher forgets the waiter, and the ticket must
+        // then read "expired", not "link lost".
+        Ok(StateTicket {
+            sent_at,
+            deadline,
+            rx,
+        })
+    }
+
+    /// Counts a try that got no reply in time and reports it as an event.
+    pub(super) fn note_timeout(&self, command: CommandId) {
+        lock(&self.health).figures.timeouts += 1;
+        let _ = self.events.send(LinkEvent::Timeout { command });
+    }
+
+    /// Turns the answer to a GET_STATE request sent at `requested_at` into a sample: records the round trip,
+    /// follows the reported firmware version and publishes the sample as the latest.
+    pub(super) fn accept_state(
+        &self,
+        answer: Answer,
+        requested_at: Instant,
+    ) -> Result<StateSample, CarError> {
+        lock(&self.health).record_rtt(answer.received_at.saturating_duration_since(requested_at));
+        let Reply::State(state) = answer.reply else {
+            let reply = format!("{:?}", answer.reply);
+            return Err(CarError::UnexpectedReply {
+                command: CommandId::GetState,
+                reply,
+            });
+        };
+        let sample = StateSample {
+            state,
+            car_id: answer.car,
+            requested_at,
+            received_at: answer.received_at,
+        };
+        self.follow_version(state.version);
+        self.latest.send_replace(Some(sample));
+        Ok(sample)
     }
 
     /// Sends a payload; notes the watchdog feed.
@@ -188,7 +336,8 @@ impl Shared {
         self.send(payload, command).await.map(|_| ())
     }
 
-    /// Sends `request` and waits for the reply with the same (car, command), retrying on timeouts.
+    /// Sends `request` and waits for the reply with the same (car, command), retrying on timeouts. Not for
+    /// GET_STATE, whose replies go to the first-in-first-out queue: use [`Shared::state`].
     pub(super) async fn exchange(
         &self,
         request: &Request,
@@ -213,10 +362,7 @@ impl Shared {
                     return Ok((answer, sent_at));
                 }
                 Ok(Err(_)) => return Err(CarError::LinkLost),
-                Err(_) => {
-                    lock(&self.health).figures.timeouts += 1;
-                    let _ = self.events.send(LinkEvent::Timeout { command });
-                }
+                Err(_) => self.note_timeout(command),
             }
         }
         Err(CarError::NoReply {
@@ -242,26 +388,34 @@ impl Shared {
         }
     }
 
+    /// Reads the state with up to `tries` GET_STATE requests of `request_timeout` each, one after another.
+    ///
+    /// Single reads (this one, the keepalive's) wait for each other, as every other command does, so that
+    /// without a state stream running only one GET_STATE is in flight and its round trip is unambiguous (what
+    /// a round-trip measurement needs); a stream's requests do not wait for them.
     pub(super) async fn state(&self, tries: u32) -> Result<StateSample, CarError> {
-        let (answer, requested_at) = self
-            .exchange(&Request::GetState, self.config.request_timeout, tries)
-            .await?;
-        let Reply::State(state) = answer.reply else {
-            let reply = format!("{:?}", answer.reply);
-            return Err(CarError::UnexpectedReply {
-                command: CommandId::GetState,
-                reply,
-            });
-        };
-        let sample = StateSample {
-            state,
-            car_id: answer.car,
-            requested_at,
-            received_at: answer.received_at,
-        };
-        self.follow_version(state.version);
-        self.latest.send_replace(Some(sample));
-        Ok(sample)
+        let per_try = self.config.request_timeout;
+        let lane = self.lane(
+            CommandId::GetState
+                .code(self.identity().version)
+                .unwrap_or(120),
+        );
+        let _one_read_at_a_time = lane.lock().await;
+        for _ in 0..tries.max(1) {
+            let mut ticket = self.send_state_request(per_try).await?;
+            match ticket.outcome().await {
+                StateOutcome::Answered(answer) => {
+                    return self.accept_state(*answer, ticket.sent_at);
+                }
+                StateOutcome::LinkLost => return Err(CarError::LinkLost),
+                StateOutcome::Expired => self.note_timeout(CommandId::GetState),
+            }
+        }
+        Err(CarError::NoReply {
+            command: CommandId::GetState,
+            tries: tries.max(1),
+            per_try,
+        })
     }
 
     /// Layouts and ids follow the version the car reports, also if it changes (a reflashed car behind the

@@ -11,7 +11,9 @@ use car_link::frame::FrameCodec;
 use car_link::message::{CarState, Dialect, EnuRef, Reply, Request, RoutePart};
 use car_link::version::{CommandId, FirmwareVersion};
 use futures::{SinkExt, StreamExt};
-use tokio::io::{AsyncRead, AsyncWrite};
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, DuplexStream};
+use tokio::sync::mpsc;
+use tokio::time::{Duration, Instant};
 use tokio_util::codec::Framed;
 
 /// How the fake car behaves.
@@ -33,6 +35,8 @@ pub struct Behaviour {
     pub hang_up_after: Option<usize>,
     /// Before each terminal reply, send an unrelated debug PRINTF.
     pub debug_noise: bool,
+    /// Lose the reply to every n-th GET_STATE (the handshake's is the first).
+    pub lose_every_nth_state: Option<usize>,
 }
 
 impl Default for Behaviour {
@@ -46,6 +50,7 @@ impl Default for Behaviour {
             silent_after: None,
             hang_up_after: None,
             debug_noise: false,
+            lose_every_nth_state: None,
         }
     }
 }
@@ -163,6 +168,7 @@ where
     let mut config = MainConfig::factory_default(behaviour.version, behaviour.id);
     let mut dropped_acks = 0;
     let mut answered = 0usize;
+    let mut states = 0usize;
     while let Some(Ok(item)) = framed.next().await {
         let Ok(frame) = item else { continue };
         let Ok((id, request)) = Request::decode(&frame.payload, behaviour.version) else {
@@ -184,7 +190,14 @@ where
         let reply_id = if id == 254 { 254 } else { behaviour.id };
         let replies: Vec<Reply> = match &request {
             Request::GetState => {
+                states += 1;
                 let mut replies = Vec::new();
+                if behaviour
+                    .lose_every_nth_state
+                    .is_some_and(|n| states.is_multiple_of(n))
+                {
+                    continue;
+                }
                 if behaviour.stray_replies {
                     replies.push(Reply::Ack(CommandId::ApAddPoints));
                 }
@@ -243,4 +256,46 @@ where
             }
         }
     }
+}
+
+/// A long link in process: two pipes joined by relays that hold every chunk of bytes for `one_way` in each
+/// direction (order kept, nothing lost), so that a round trip takes `2 × one_way`. Works in virtual time.
+/// Returns the host end (for the client) and the car end (for [`serve`]).
+pub fn slow_pipe(one_way: Duration) -> (DuplexStream, DuplexStream) {
+    let near = car_link::transport::sim_pipe();
+    let far = car_link::transport::sim_pipe();
+    let (near_read, near_write) = tokio::io::split(near.car);
+    let (far_read, far_write) = tokio::io::split(far.host);
+    tokio::spawn(relay(near_read, far_write, one_way));
+    tokio::spawn(relay(far_read, near_write, one_way));
+    (near.host, far.car)
+}
+
+/// Copies `from` to `to`, each chunk `delay` after it was read.
+async fn relay<R, W>(mut from: R, mut to: W, delay: Duration)
+where
+    R: AsyncRead + Unpin + Send + 'static,
+    W: AsyncWrite + Unpin + Send + 'static,
+{
+    let (tx, mut rx) = mpsc::unbounded_channel::<(Instant, Vec<u8>)>();
+    let writer = tokio::spawn(async move {
+        while let Some((due, bytes)) = rx.recv().await {
+            tokio::time::sleep_until(due).await;
+            if to.write_all(&bytes).await.is_err() {
+                return;
+            }
+        }
+    });
+    let mut buffer = vec![0u8; 4096];
+    while let Ok(n) = from.read(&mut buffer).await {
+        if n == 0
+            || tx
+                .send((Instant::now() + delay, buffer[..n].to_vec()))
+                .is_err()
+        {
+            break;
+        }
+    }
+    drop(tx);
+    let _ = writer.await;
 }

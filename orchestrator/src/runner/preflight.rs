@@ -7,6 +7,12 @@
 //! with every slot cleared; the car inside the fence; the UWB estimate reset to the RTK one; and
 //! the round trip of GET_STATE measured over a few requests. The fault-injection and UWB
 //! commands and the state samples are recorded in the campaign's journal.
+//!
+//! The round trip sets the limits the link needs: how long a state request may stay unanswered,
+//! and whether the stale-telemetry limit must be raised. The telemetry keeps several GET_STATE
+//! requests in flight (see `telemetry`), so on a long but steady link a sample still comes every
+//! state period: what spaces samples further apart is the round trip's jitter and lost samples,
+//! not the round trip itself.
 
 use std::time::Duration;
 
@@ -25,6 +31,8 @@ use crate::safety::SafetyConfig;
 const RTT_PROBES: usize = 20;
 /// The car's watchdog brakes after 2 s without commands: staleness must be noticed before.
 const MAX_STALE: Duration = Duration::from_millis(1900);
+/// Samples lost in a row (a request or its reply) that the stale-telemetry limit tolerates.
+const LOST_IN_A_ROW: u32 = 2;
 
 /// What preflight learned about the car and its link.
 #[derive(Debug, Clone, PartialEq)]
@@ -34,13 +42,15 @@ pub struct Preflight {
     pub switched_off: Vec<String>,
     /// The 99th-percentile GET_STATE round trip measured.
     pub rtt_p99: Duration,
+    /// The median GET_STATE round trip measured.
+    pub rtt_p50: Duration,
     /// How long one state request may take before the next tick asks again:
     /// `max(150 ms, rtt_p99 + 100 ms)` (a lost request is asked again soon, so that a few losses
     /// in a row stay within the stale-telemetry limit).
     pub sample_timeout: Duration,
-    /// The safety limits in force: the configured ones, with the stale-telemetry limit raised to
-    /// `state period + 5 × rtt_p99` (at most 1.9 s) on a slow link, since samples cannot come
-    /// faster than one per round trip.
+    /// The safety limits in force: the configured ones, with the stale-telemetry limit raised, if
+    /// it is shorter, to what the link's jitter and losses need: `3 × state period + 2 ×
+    /// (rtt_p99 − rtt_p50)`, at most 1.9 s.
     pub safety: SafetyConfig,
     /// The fault probes' call rates of this firmware with the scenario's anchors.
     pub rates: ProbeRates,
@@ -83,30 +93,67 @@ impl Preflight {
         retried(|| journal.call(None, CarCommand::ResetUwbPos, car.reset_uwb_pos()))
             .await
             .map_err(|e| RunError::car("resetting the UWB position", e))?;
-        let rtt_p99 = measure_round_trip(car, journal).await?;
-        Ok(Self::from_round_trip(rtt_p99, config, rates, switched_off))
+        let (rtt_p50, rtt_p99) = measure_round_trip(car, journal).await?;
+        Ok(Self::from_round_trip(
+            rtt_p50,
+            rtt_p99,
+            config,
+            rates,
+            switched_off,
+        ))
     }
 
     fn from_round_trip(
+        rtt_p50: Duration,
         rtt_p99: Duration,
         config: &RunConfig,
         rates: ProbeRates,
         switched_off: Vec<String>,
     ) -> Self {
         let sample_timeout = Duration::from_millis(150).max(rtt_p99 + Duration::from_millis(100));
-        let link_stale = (config.state_period + rtt_p99 * 5).min(MAX_STALE);
         let safety = SafetyConfig {
-            stale_after: config.safety.stale_after.max(link_stale),
+            stale_after: stale_limit(
+                config.safety.stale_after,
+                config.state_period,
+                rtt_p50,
+                rtt_p99,
+            ),
             ..config.safety
         };
         Self {
             switched_off,
             rtt_p99,
+            rtt_p50,
             sample_timeout,
             safety,
             rates,
         }
     }
+}
+
+/// The stale-telemetry limit in force: the configured one, raised if the link needs more, to
+/// `(1 + 2) × state period + 2 × (rtt_p99 − rtt_p50)` at most 1.9 s (the car's watchdog brakes at
+/// 2 s), but never lowered.
+///
+/// With GET_STATE pipelined, a sample comes every state period after a constant delay, so the
+/// round trip itself does not space samples apart. Two things do: the jitter, which can move two
+/// consecutive replies apart by up to the spread of the round trip (taken as `2 × (rtt_p99 −
+/// rtt_p50)`: the median is not thrown off by one odd sample as the minimum is), and
+/// lost requests or replies, each of which leaves out one sample; the limit tolerates
+/// [`LOST_IN_A_ROW`] of them in a row. On the 4G-like link drivecheck is tested against (150 ms
+/// + up to 40 ms each way, 2 % loss) this is about 230 ms, so the default 250 ms holds.
+pub(crate) fn stale_limit(
+    configured: Duration,
+    state_period: Duration,
+    rtt_p50: Duration,
+    rtt_p99: Duration,
+) -> Duration {
+    let jitter = rtt_p99.saturating_sub(rtt_p50).saturating_mul(2);
+    let needed = state_period
+        .saturating_mul(1 + LOST_IN_A_ROW)
+        .saturating_add(jitter)
+        .min(MAX_STALE);
+    configured.max(needed)
 }
 
 async fn prepare_configuration(car: &Car) -> Result<Vec<String>, RunError> {
@@ -166,7 +213,11 @@ async fn check_inside_fence(
     Ok(())
 }
 
-async fn measure_round_trip(car: &Car, journal: &Journal<'_>) -> Result<Duration, RunError> {
+/// The median and the 99th-percentile round trip of GET_STATE, one request at a time.
+async fn measure_round_trip(
+    car: &Car,
+    journal: &Journal<'_>,
+) -> Result<(Duration, Duration), RunError> {
     let mut rtts = Vec::with_capacity(RTT_PROBES);
     for _ in 0..RTT_PROBES {
         let sample = retried(|| car.state())
@@ -177,5 +228,33 @@ async fn measure_round_trip(car: &Car, journal: &Journal<'_>) -> Result<Duration
     }
     rtts.sort_unstable();
     let rank = (rtts.len() * 99).div_ceil(100).clamp(1, rtts.len());
-    Ok(rtts[rank - 1])
+    let median = (rtts.len() * 50).div_ceil(100).clamp(1, rtts.len());
+    Ok((rtts[median - 1], rtts[rank - 1]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const PERIOD: Duration = Duration::from_millis(50);
+    const DEFAULT: Duration = Duration::from_millis(250);
+
+    fn ms(ms: u64) -> Duration {
+        Duration::from_millis(ms)
+    }
+
+    #[test]
+    fn a_long_steady_link_keeps_the_default_stale_limit() {
+        // 150 ms + 0–40 ms each way: round trips of 300–380 ms, samples still every 50 ms.
+        assert_eq!(stale_limit(DEFAULT, PERIOD, ms(340), ms(380)), DEFAULT);
+        assert_eq!(stale_limit(DEFAULT, PERIOD, ms(2), ms(5)), DEFAULT);
+    }
+
+    #[test]
+    fn jitter_raises_the_stale_limit_up_to_below_the_watchdog() {
+        assert_eq!(stale_limit(DEFAULT, PERIOD, ms(250), ms(400)), ms(450));
+        assert_eq!(stale_limit(DEFAULT, PERIOD, ms(100), ms(5000)), MAX_STALE);
+        // A longer limit configured is kept.
+        assert_eq!(stale_limit(ms(2500), PERIOD, ms(340), ms(380)), ms(2500));
+    }
 }

@@ -1,9 +1,17 @@
 //! State samples at a fixed rate, polled by a task of their own so that a slow command never
 //! delays them.
 //!
-//! GET_STATE requests are one at a time on the link (replies carry no request id), so a sample
-//! cannot come faster than one round trip. A request without a reply within the sample timeout
-//! is dropped (car-link discards its late reply as stray) and the next tick asks again.
+//! The task runs car-link's pipelined state stream ([`Car::poll_states`]): a GET_STATE request
+//! every state period without waiting for the replies, as many in flight as the sample timeout
+//! needs, so that on a link whose round trip is longer than the period a sample still comes
+//! every period. A request without a reply within the sample timeout counts as unanswered (a
+//! sign of a lossy link); the requests after it are not held up.
+//!
+//! The task polls all the time, also while nobody listens (between the drive loops): when a loop
+//! starts, and its safety monitor starts counting staleness, samples are then already coming
+//! every period, instead of one round trip after the first request. Samples wait in the channel
+//! (up to [`BUFFERED`] of them) until a loop takes them or [`Telemetry::drain`] records and
+//! discards them; only a channel full for that long pauses the polling.
 //!
 //! Every sample taken from the channel (also one thrown away by [`Telemetry::drain`]) is
 //! recorded in the campaign's journal.
@@ -12,12 +20,15 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
-use car_link::{Car, CarError, StateSample};
+use car_link::{Car, CarError, StatePolling, StateSample};
+use futures::StreamExt;
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
-use tokio::time::MissedTickBehavior;
 
 use super::journal::Journal;
+
+/// How much telemetry waits in the channel while nobody listens before the polling pauses.
+const BUFFERED: Duration = Duration::from_secs(60);
 
 /// One item of the telemetry.
 #[derive(Debug, Clone)]
@@ -37,9 +48,12 @@ pub(crate) struct Telemetry {
 }
 
 impl Telemetry {
-    /// Starts polling `car` every `period`, each request bounded by `timeout`.
+    /// Starts polling `car` every `period`, each request bounded by `timeout` (with up to
+    /// `ceil(timeout / period)` requests in flight).
     pub(crate) fn start(car: &Car, period: Duration, timeout: Duration) -> Self {
-        let (tx, rx) = mpsc::channel(1);
+        let capacity = BUFFERED.as_nanos() / period.max(Duration::from_millis(1)).as_nanos();
+        let capacity = usize::try_from(capacity).unwrap_or(4096).clamp(16, 4096);
+        let (tx, rx) = mpsc::channel(capacity);
         let unanswered = Arc::new(AtomicU64::new(0));
         let task = tokio::spawn(poll(car.clone(), period, timeout, tx, unanswered.clone()));
         Self {
@@ -64,7 +78,7 @@ impl Telemetry {
         sample
     }
 
-    /// Throws away (after recording it in `journal`) a sample that waited while nobody
+    /// Throws away (after recording them in `journal`) the samples that waited while nobody
     /// listened (call before a drive loop).
     pub(crate) fn drain(&mut self, journal: &Journal<'_>) {
         while let Ok(sample) = self.rx.try_recv() {
@@ -88,14 +102,13 @@ async fn poll(
     tx: mpsc::Sender<Sample>,
     unanswered: Arc<AtomicU64>,
 ) {
-    let mut ticker = tokio::time::interval(period);
-    ticker.set_missed_tick_behavior(MissedTickBehavior::Delay);
-    loop {
-        ticker.tick().await;
-        let sample = match tokio::time::timeout(timeout, car.state()).await {
-            Ok(Ok(state)) => Sample::State(Box::new(state)),
-            Ok(Err(CarError::LinkLost)) => Sample::LinkLost,
-            Ok(Err(_)) | Err(_) => {
+    let states = car.poll_states(StatePolling::new(period, timeout));
+    futures::pin_mut!(states);
+    while let Some(item) = states.next().await {
+        let sample = match item {
+            Ok(state) => Sample::State(Box::new(state)),
+            Err(CarError::LinkLost) => Sample::LinkLost,
+            Err(_) => {
                 unanswered.fetch_add(1, Ordering::Relaxed);
                 continue;
             }
