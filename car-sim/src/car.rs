@@ -513,7 +513,6 @@ impl Car {
             address,
             self.antenna_position(),
             &self.options.radio,
-            self.options.seed,
             &mut self.uwb_noise,
         );
         self.record(DebugEvent::Range {

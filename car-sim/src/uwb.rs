@@ -55,6 +55,10 @@ pub struct RadioModel {
     /// Each physical anchor has a constant range bias (antenna-delay calibration error) drawn
     /// uniformly from this interval, m.
     pub anchor_bias_m: (f64, f64),
+    /// Which bias each anchor id has: a property of the hardware, so it stays the same whatever
+    /// the simulation's seed (which draws the noise): runs with other seeds are the same car and
+    /// anchors with other noise.
+    pub anchor_bias_seed: u64,
     /// Height of the car's UWB antenna above ground, m.
     pub antenna_height_m: f64,
     /// Beyond this slant range no exchange succeeds, m.
@@ -68,6 +72,7 @@ impl Default for RadioModel {
             nlos_extra_sigma_m: 0.10,
             exchange_drop_probability: 0.002,
             anchor_bias_m: (0.0, 0.25),
+            anchor_bias_seed: 0,
             antenna_height_m: 1.0,
             max_range_m: 150.0,
         }
@@ -114,10 +119,9 @@ pub fn measure_range(
     address: u8,
     antenna: Point,
     radio: &RadioModel,
-    seed: u64,
     noise: &mut Noise,
 ) -> RangeMeasurement {
-    let Some(responder) = responder(world, fallback, address, radio, seed) else {
+    let Some(responder) = responder(world, fallback, address, radio) else {
         return RangeMeasurement {
             address,
             path: None,
@@ -146,9 +150,8 @@ fn responder(
     fallback: Option<&FwAnchor>,
     address: u8,
     radio: &RadioModel,
-    seed: u64,
 ) -> Option<Responder> {
-    let bias = Noise::stream(seed, 0x0A0C_0000 + u64::from(address))
+    let bias = Noise::stream(radio.anchor_bias_seed, 0x0A0C_0000 + u64::from(address))
         .uniform_in(radio.anchor_bias_m.0, radio.anchor_bias_m.1);
     if let Some(a) = world.anchor(address) {
         return Some(Responder {
@@ -743,15 +746,7 @@ mod tests {
         let n = 400;
         let mut sum = 0.0;
         for _ in 0..n {
-            let m = measure_range(
-                &world,
-                None,
-                50,
-                Point::new(0.0, 0.0),
-                &radio,
-                1,
-                &mut noise,
-            );
+            let m = measure_range(&world, None, 50, Point::new(0.0, 0.0), &radio, &mut noise);
             match m.result {
                 RangeResult::Measured(r) => sum += f64::from(r),
                 other => panic!("{other:?}"),
@@ -764,15 +759,48 @@ mod tests {
             "{}",
             sum / n as f64
         );
-        let none = measure_range(
-            &world,
-            None,
-            51,
-            Point::new(0.0, 0.0),
-            &radio,
-            1,
-            &mut noise,
-        );
+        let none = measure_range(&world, None, 51, Point::new(0.0, 0.0), &radio, &mut noise);
         assert_eq!(none.result, RangeResult::NoResponder);
+    }
+
+    /// The mean of many ranges to anchor 50 at 10 m with noise stream `stream`, minus the range.
+    fn mean_error(radio: &RadioModel, stream: u64) -> f64 {
+        let world = World {
+            anchors: vec![WorldAnchor {
+                id: 50,
+                position: Point::new(10.0, 0.0),
+                height: radio.antenna_height_m,
+            }],
+            ..World::default()
+        };
+        let mut noise = Noise::stream(stream, 1);
+        let n = 2000;
+        let sum: f64 = (0..n)
+            .filter_map(|_| {
+                match measure_range(&world, None, 50, Point::new(0.0, 0.0), radio, &mut noise)
+                    .result
+                {
+                    RangeResult::Measured(r) => Some(f64::from(r)),
+                    _ => None,
+                }
+            })
+            .sum();
+        sum / f64::from(n) - 10.0
+    }
+
+    #[test]
+    fn an_anchor_keeps_its_bias_whatever_the_noise_and_another_hardware_seed_changes_it() {
+        let radio = RadioModel {
+            exchange_drop_probability: 0.0,
+            anchor_bias_m: (0.0, 1.0),
+            ..RadioModel::default()
+        };
+        let bias = mean_error(&radio, 1);
+        assert!((mean_error(&radio, 2) - bias).abs() < 0.02);
+        let other = RadioModel {
+            anchor_bias_seed: 7,
+            ..radio
+        };
+        assert!((mean_error(&other, 1) - bias).abs() > 0.05);
     }
 }
