@@ -70,6 +70,10 @@ pub(crate) fn next_command(
     state: &ReferenceState,
 ) -> BoxedStrategy<Command> {
     let weights = ctx.settings.weights;
+    if state.segments == 0 {
+        // Every test first drives a segment (see `Preconditions::fault_fits`).
+        return segment(ctx, state.tail);
+    }
     let mut options = vec![(weights.run_segments, segment(ctx, state.tail))];
     if let Some(strategy) = anchor_fault(ctx, state) {
         options.push((weights.anchor_range_fault, strategy));

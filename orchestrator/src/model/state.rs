@@ -93,6 +93,8 @@ pub struct ReferenceState {
     pub slots: FaultSlots,
     /// Commands applied so far.
     pub commands: usize,
+    /// `RunSegments` commands applied so far.
+    pub segments: usize,
 }
 
 impl ReferenceState {
@@ -103,13 +105,17 @@ impl ReferenceState {
             faults: Vec::new(),
             slots: FaultSlots::new(),
             commands: 0,
+            segments: 0,
         }
     }
 
     /// The state after `command` (which must satisfy the preconditions).
     pub fn apply(mut self, command: &Command) -> Self {
         match command {
-            Command::RunSegments(segment) => self.tail = self.tail.advanced(&segment.points),
+            Command::RunSegments(segment) => {
+                self.tail = self.tail.advanced(&segment.points);
+                self.segments += 1;
+            }
             Command::AddFault(fault) => {
                 // The precondition guarantees a free slot; a full probe leaves the slots as they are.
                 let _ = self.slots.take(fault.probe);
@@ -170,10 +176,11 @@ impl Preconditions {
         check_route(&self.area, &route, &self.constraints, Some(tail.heading)).is_ok()
     }
 
-    /// A fault may be added when its probe has a free slot, its anchor exists and its parameter
-    /// is finite.
+    /// A fault may be added once the test drives a generated segment (so every test has a
+    /// segment for the oracle to judge, and no fault is spent on the start route), when its probe
+    /// has a free slot, its anchor exists and its parameter is finite.
     pub fn fault_fits(&self, state: &ReferenceState, fault: &Fault) -> bool {
-        if !fault.param.is_finite() || fault.duration == 0 {
+        if state.segments == 0 || !fault.param.is_finite() || fault.duration == 0 {
             return false;
         }
         if let Probe::UwbRange { anchor } = fault.probe

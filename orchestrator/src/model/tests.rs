@@ -176,6 +176,21 @@ fn fault_parameters_stay_in_the_scenario_ranges() {
 }
 
 #[test]
+fn every_test_drives_a_segment_before_its_first_fault() {
+    let s = parking_lot();
+    for seed in 0..20 {
+        for index in [0, 4, 9] {
+            let plan = plan(&s, seed, index);
+            assert!(
+                matches!(plan.commands.first(), Some(Command::RunSegments(_))),
+                "seed {seed} test {index}: {:?}",
+                plan.commands.first()
+            );
+        }
+    }
+}
+
+#[test]
 fn segment_intents_follow_the_settings() {
     let s = parking_lot();
     let c = &s.campaign;
