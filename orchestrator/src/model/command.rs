@@ -10,7 +10,7 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
-use trajgen::Point;
+use trajgen::{Point, RouteTail};
 
 /// One step of a test.
 #[derive(Debug, Clone, PartialEq)]
@@ -89,6 +89,25 @@ impl Segment {
         }
     }
 
+    /// The segment the generator produced for `intent` from `tail`: every point at the intent's
+    /// speed, except where the route turns so tightly that this speed would ask more than
+    /// [`MAX_LATERAL_ACCEL_MPS2`] of the car: there the points are slowed to `√(a·R)`, `R` the
+    /// radius of the turn (see [`capped_speeds`]).
+    pub fn generated_from(
+        tail: &RouteTail,
+        intent: SegmentIntent,
+        points: Vec<Point>,
+        margin: Vec<Point>,
+    ) -> Self {
+        let speeds = capped_speeds(tail, &points, margin.first().copied(), intent.speed_mps);
+        Self {
+            intent: Some(intent),
+            speeds,
+            points,
+            margin,
+        }
+    }
+
     /// The points with their speeds (a missing speed repeats the last one).
     pub fn waypoints(&self) -> impl Iterator<Item = (Point, f64)> + '_ {
         let last = self.speeds.last().copied().unwrap_or(0.0);
@@ -108,6 +127,53 @@ impl Segment {
         }
         length
     }
+}
+
+/// The largest lateral acceleration a generated segment asks of the car, m/s². The generator's
+/// tightest loops (30° turns every 0.6 m: a radius of 1.16 m) are tighter than the autopilot's
+/// look-ahead circle; driven at up to 12 km/h the car runs wide of them by up to a metre, which
+/// can take it out of the area. Below this limit (√(4 · 1.16) = 2.15 m/s there) it follows them;
+/// turns wider than 2.8 m keep the drawn speed up to 12 km/h.
+pub const MAX_LATERAL_ACCEL_MPS2: f64 = 4.0;
+
+/// The speed towards each of `points` (continuing `tail`, followed by `next` when known): `speed`
+/// capped at `√(MAX_LATERAL_ACCEL_MPS2 · R)` for the turns at both ends of the leg towards the
+/// point, `R = L / (2 sin(θ / 2))` for a turn `θ` between legs, `L` the shorter leg.
+pub fn capped_speeds(
+    tail: &RouteTail,
+    points: &[Point],
+    next: Option<Point>,
+    speed: f64,
+) -> Vec<f64> {
+    let route: Vec<Point> = std::iter::once(tail.end)
+        .chain(points.iter().copied())
+        .chain(next)
+        .collect();
+    let heading = |a: Point, b: Point| (b.y - a.y).atan2(b.x - a.x);
+    // The cap at vertex `k` of `route` (k = 0 is the tail's end, entered along its heading).
+    let cap = |k: usize| -> f64 {
+        let Some(&out_to) = route.get(k + 1) else {
+            return f64::INFINITY;
+        };
+        let at = route[k];
+        let out_len = at.dist(out_to);
+        let (in_heading, in_len) = match k.checked_sub(1) {
+            Some(prev) => (heading(route[prev], at), route[prev].dist(at)),
+            None => (tail.heading, out_len),
+        };
+        let turn = heading(at, out_to) - in_heading;
+        let turn =
+            (turn + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+        let half = (turn.abs() / 2.0).sin();
+        if half <= 1e-9 {
+            return f64::INFINITY;
+        }
+        let radius = in_len.min(out_len) / (2.0 * half);
+        (MAX_LATERAL_ACCEL_MPS2 * radius).sqrt()
+    };
+    (0..points.len())
+        .map(|j| speed.min(cap(j)).min(cap(j + 1)))
+        .collect()
 }
 
 /// A probe of the firmware's fault injection: the site where a fault alters a value
@@ -261,6 +327,33 @@ mod tests {
         ] {
             assert!(name.parse::<Probe>().is_err(), "{name}");
         }
+    }
+
+    #[test]
+    fn tight_turns_are_slowed_and_straight_legs_keep_their_speed() {
+        let tail = RouteTail {
+            end: Point::new(0.0, 0.0),
+            heading: 0.0,
+        };
+        // 30° turns every 0.6 m (the generator's tightest loop), then straight on.
+        let mut points = Vec::new();
+        let (mut p, mut h) = (tail.end, 0.0f64);
+        for _ in 0..4 {
+            h += 30f64.to_radians();
+            p = p + Point::from_heading(h) * 0.6;
+            points.push(p);
+        }
+        for _ in 0..3 {
+            p = p + Point::from_heading(h) * 2.0;
+            points.push(p);
+        }
+        let speeds = capped_speeds(&tail, &points, None, 3.3);
+        let tight = (MAX_LATERAL_ACCEL_MPS2 * 0.6 / (2.0 * 15f64.to_radians().sin())).sqrt();
+        assert!((speeds[1] - tight).abs() < 1e-9, "{speeds:?}");
+        assert!((tight - 2.15).abs() < 0.01);
+        assert_eq!(speeds[6], 3.3);
+        assert!(speeds.iter().all(|&v| v <= 3.3 && v > 2.0));
+        assert_eq!(capped_speeds(&tail, &points[4..], None, 1.0), vec![1.0; 3]);
     }
 
     #[test]

@@ -42,7 +42,8 @@ impl PlanContext {
         let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(intent.seed);
         let area = &self.preconditions.area;
         let extension = self.generator.extend(area, tail, intent.points, &mut rng)?;
-        Ok(Segment::generated(
+        Ok(Segment::generated_from(
+            tail,
             intent,
             extension.points,
             extension.margin,

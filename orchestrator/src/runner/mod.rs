@@ -322,6 +322,13 @@ async fn run_tests(run: &Run<'_>, dir: &mut RunDirectory) -> Result<(), RunError
     let planner = Planner::new(scenario)?;
     let start_tail = crate::model::start_tail(scenario)?;
     let mut telemetry = Telemetry::start(car, config.state_period, ctx.sample_timeout);
+    // The first sample comes a round trip after polling starts: wait for it (or for the link's
+    // end), so that no safety monitor is armed before samples flow.
+    let _ = tokio::time::timeout(
+        preflight.safety.stale_after + ctx.sample_timeout,
+        telemetry.next(journal),
+    )
+    .await;
     progress.set_length(config.campaign.tests as u64);
     for test_index in 0..config.campaign.tests {
         if cancel.is_cancelled() {
