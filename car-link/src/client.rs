@@ -823,6 +823,23 @@ impl Car {
         Ok(fault::parse_add_fault_reply(&lines, probe)?)
     }
 
+    /// The faults added since the last clear, as the car lists them (`fi_print_faults`); expired
+    /// faults are listed too (they keep their slot). Idempotent: this is how a caller finds out
+    /// whether an [`Car::add_fault`] whose reply was lost took effect.
+    ///
+    /// Timeout and cancellation: as [`Car::terminal`]; no reply at all is [`FaultError::NoReply`].
+    pub async fn list_faults(&self) -> Result<Vec<fault::ListedFault>, CarError> {
+        let lines = self
+            .shared()
+            .terminal_lines(
+                fault::PRINT_FAULTS_COMMAND,
+                fault::is_print_faults_reply,
+                fault::print_faults_complete,
+            )
+            .await?;
+        Ok(fault::parse_print_faults_reply(&lines)?)
+    }
+
     /// Frees every probe and fault slot and zeroes the counters (`fi_clear_faults`).
     ///
     /// Timeout and cancellation: as [`Car::terminal`].

@@ -197,6 +197,73 @@ pub fn parse_add_fault_reply(lines: &[String], probe: &Probe) -> Result<(), Faul
     outcome(lines, |l| l.contains(&expected))
 }
 
+/// The terminal command listing the faults added since the last clear.
+pub const PRINT_FAULTS_COMMAND: &str = "fi_print_faults";
+
+/// A fault as `fi_print_faults` lists it (expired faults included: they keep their slot).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ListedFault {
+    /// The probe id (`uwb_range_50`, `uwb_yaw`, …).
+    pub probe: String,
+    /// The probe's iteration counter now.
+    pub iteration: i64,
+    /// The fault type as printed (`OFFSET`, …).
+    pub kind: String,
+    /// The parameter, as printed with two decimals.
+    pub param: f32,
+    /// The absolute iteration it starts at.
+    pub start: i64,
+    /// Iterations it applies for.
+    pub duration: i64,
+}
+
+/// Whether a PRINTF line belongs to the reply of `fi_print_faults`.
+pub fn is_print_faults_reply(line: &str) -> bool {
+    line.starts_with("Currently active faults:") || line.starts_with("\nProbe") || line == " "
+}
+
+/// Whether the reply lines of `fi_print_faults` are complete (the header, then the final space).
+pub fn print_faults_complete(lines: &[String]) -> bool {
+    lines
+        .first()
+        .is_some_and(|l| l.starts_with("Currently active faults:"))
+        && lines.last().is_some_and(|l| l == " ")
+}
+
+/// Parses the reply lines of `fi_print_faults`: one block per fault
+/// (`\nProbe   : <id>\nIT now  : <n>\nType    : <TYPE>\nParam   : <p>\nStart   : <it>\nDuration: <n>`).
+pub fn parse_print_faults_reply(lines: &[String]) -> Result<Vec<ListedFault>, FaultError> {
+    if lines.is_empty() {
+        return Err(FaultError::NoReply);
+    }
+    if !print_faults_complete(lines) {
+        return Err(FaultError::Unexpected(lines.concat()));
+    }
+    lines[1..lines.len() - 1]
+        .iter()
+        .map(|block| parse_listed_fault(block).ok_or_else(|| FaultError::Unexpected(block.clone())))
+        .collect()
+}
+
+fn parse_listed_fault(block: &str) -> Option<ListedFault> {
+    let mut fields = block
+        .split('\n')
+        .filter(|l| !l.is_empty())
+        .map(|l| l.split_once(':').map(|(k, v)| (k.trim(), v.trim())));
+    let mut next = |key: &str| match fields.next() {
+        Some(Some((k, v))) if k == key => Some(v.to_string()),
+        _ => None,
+    };
+    Some(ListedFault {
+        probe: next("Probe")?,
+        iteration: next("IT now")?.parse().ok()?,
+        kind: next("Type")?,
+        param: next("Param")?.parse().ok()?,
+        start: next("Start")?.parse().ok()?,
+        duration: next("Duration")?.parse().ok()?,
+    })
+}
+
 /// Parses the reply lines of `fi_set_enabled`.
 pub fn parse_set_enabled_reply(lines: &[String], enabled: bool) -> Result<(), FaultError> {
     let expected = if enabled {
@@ -273,6 +340,38 @@ mod tests {
             )]))
         );
         assert_eq!(parse_clear_faults_reply(&[]), Err(FaultError::NoReply));
+    }
+
+    #[test]
+    fn the_fault_list_parses_block_by_block() {
+        let lines: Vec<String> = [
+            "Currently active faults:",
+            "\nProbe   : uwb_range_50\nIT now  : 12\nType    : OFFSET\nParam   : 4.00\nStart   : 20\nDuration: 8",
+            "\nProbe   : uwb_yaw\nIT now  : 400\nType    : AMPLIFICATION\nParam   : -1.50\nStart   : 405\nDuration: 3",
+            " ",
+        ]
+        .map(String::from)
+        .to_vec();
+        assert!(lines.iter().all(|l| is_print_faults_reply(l)));
+        let faults = parse_print_faults_reply(&lines).unwrap();
+        assert_eq!(faults.len(), 2);
+        assert_eq!(faults[0].probe, "uwb_range_50");
+        assert_eq!(faults[1].kind, "AMPLIFICATION");
+        assert_eq!(faults[1].param, -1.5);
+        assert_eq!(
+            (faults[1].iteration, faults[1].start, faults[1].duration),
+            (400, 405, 3)
+        );
+        let empty: Vec<String> = ["Currently active faults:", " "].map(String::from).to_vec();
+        assert_eq!(parse_print_faults_reply(&empty), Ok(vec![]));
+        assert_eq!(parse_print_faults_reply(&[]), Err(FaultError::NoReply));
+        assert!(parse_print_faults_reply(&lines[..2]).is_err());
+        let mut garbled = lines.clone();
+        garbled[1] = "\nProbe   : uwb_yaw\nIT now  : x".to_string();
+        assert!(matches!(
+            parse_print_faults_reply(&garbled),
+            Err(FaultError::Unexpected(_))
+        ));
     }
 
     #[test]

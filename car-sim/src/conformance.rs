@@ -277,7 +277,18 @@ async fn every_command_through_the_car_link_client_in_virtual_time() {
         car.add_fault(&Probe::Px, FaultKind::Offset, 0.5, 0, 1)
             .await
             .expect("fault");
+        car.add_fault(&Probe::UwbYaw, FaultKind::Amplification, -1.5, 20, 3)
+            .await
+            .expect("fault");
+        let listed = car.list_faults().await.expect("list");
+        let probes: Vec<&str> = listed.iter().map(|f| f.probe.as_str()).collect();
+        assert_eq!(probes, ["px", "uwb_yaw"]);
+        assert_eq!(
+            (listed[1].kind.as_str(), listed[1].param, listed[1].duration),
+            ("AMPLIFICATION", -1.5, 3)
+        );
         car.clear_faults().await.expect("clear");
+        assert!(car.list_faults().await.expect("list").is_empty());
         car.set_pos(Pose {
             x: 0.0,
             y: 0.0,

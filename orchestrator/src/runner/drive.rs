@@ -18,8 +18,9 @@ use std::future::Future;
 use std::pin::Pin;
 use std::time::Duration;
 
+use car_link::fault::FaultError;
 use car_link::message::POINTS_PER_PACKET;
-use car_link::{CarError, RoutePoint, StateSample};
+use car_link::{Car, CarError, RoutePoint, StateSample};
 use tokio::time::{Instant, MissedTickBehavior};
 use trajgen::{Point, RouteTail};
 
@@ -517,18 +518,17 @@ impl<'c, 'a> Drive<'c, 'a> {
         let sent = FaultRecord::sent(self.plan.test_index, command, &fault);
         self.ctx.journal.write(&sent);
         let car = self.ctx.car.clone();
-        let probe = link_probe(fault.probe);
-        let kind = link_kind(fault.kind);
-        let future = async move {
-            car.add_fault(
-                &probe,
-                kind,
-                fault.param as f32,
-                i32::try_from(fault.start).unwrap_or(i32::MAX),
-                i32::try_from(fault.duration).unwrap_or(i32::MAX),
-            )
-            .await
-        };
+        // Faults on this probe the car confirmed in this test (the reset cleared the others).
+        let before = self
+            .faults
+            .iter()
+            .filter(|(i, _)| {
+                self.plan.commands[*i]
+                    .fault()
+                    .is_some_and(|f| f.probe == fault.probe)
+            })
+            .count();
+        let future = async move { add_fault_once(&car, fault, before).await };
         (OpKind::Fault { command }, Box::pin(future))
     }
 
@@ -808,6 +808,44 @@ fn stop_seed(campaign_seed: u64, test_index: usize) -> u64 {
     let mut last = [0u8; 8];
     last.copy_from_slice(&seed[24..]);
     u64::from_le_bytes(last)
+}
+
+/// Tries of a fault command whose reply was lost.
+const FAULT_TRIES: u32 = 3;
+
+/// Adds `fault` to the car, which holds `before` faults on its probe. When the reply is lost,
+/// asks the car for its faults (`fi_print_faults`): a fault more on the probe means the command
+/// took effect; otherwise it is sent again (up to [`FAULT_TRIES`] times in all). So a lost reply
+/// neither aborts the test nor adds the fault twice.
+///
+/// Timeout: each try as `Car::add_fault` and `Car::list_faults`. Cancellation: safe between
+/// tries; a fault command cancelled in flight may or may not have taken effect.
+async fn add_fault_once(car: &Car, fault: Fault, before: usize) -> Result<(), CarError> {
+    let probe = link_probe(fault.probe);
+    let kind = link_kind(fault.kind);
+    let mut tries = 1;
+    loop {
+        let result = car
+            .add_fault(
+                &probe,
+                kind,
+                fault.param as f32,
+                i32::try_from(fault.start).unwrap_or(i32::MAX),
+                i32::try_from(fault.duration).unwrap_or(i32::MAX),
+            )
+            .await;
+        match result {
+            Err(CarError::Fault(FaultError::NoReply)) if tries < FAULT_TRIES => {
+                let listed = super::retried(|| car.list_faults()).await?;
+                let id = probe.to_string();
+                if listed.iter().filter(|f| f.probe == id).count() > before {
+                    return Ok(());
+                }
+                tries += 1;
+            }
+            result => return result,
+        }
+    }
 }
 
 fn link_probe(probe: crate::model::Probe) -> car_link::Probe {
