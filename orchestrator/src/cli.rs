@@ -63,9 +63,22 @@ pub struct RunArgs {
     /// Run the embedded simulated car against the wall clock instead of in virtual time.
     #[arg(long)]
     pub realtime: bool,
+    /// After a segment fails the oracle: `stop` the test there (safe stop, then the next test) or
+    /// `continue` driving it and record every segment.
+    #[arg(long, value_enum, default_value_t = OnFailure::Stop)]
+    pub on_failure: OnFailure,
     /// The run directory (default `runs/<UTC timestamp>-<scenario>-<seed>/`).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+}
+
+/// What a campaign does after a failing segment.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum OnFailure {
+    /// Stop the test at the failing segment (the method's default).
+    Stop,
+    /// Drive the rest of the test and record every segment.
+    Continue,
 }
 
 /// Options of `drivecheck replay`.

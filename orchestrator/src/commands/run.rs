@@ -11,9 +11,9 @@ use indicatif::{ProgressBar, ProgressStyle};
 use scenarios::Scenario;
 use tokio_util::sync::CancellationToken;
 
-use crate::cli::RunArgs;
+use crate::cli::{OnFailure, RunArgs};
 use crate::model::Campaign;
-use crate::oracle::Verdict;
+use crate::oracle::{FailurePolicy, Verdict};
 use crate::runner::{CampaignReport, RunConfig, RunError, run_campaign, run_dir_name};
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::choose_seed;
@@ -38,7 +38,11 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("runs").join(run_dir_name(&scenario.name, seed)));
-    let config = RunConfig::new(campaign, out, args.car.clone());
+    let mut config = RunConfig::new(campaign, out, args.car.clone());
+    config.policy = match args.on_failure {
+        OnFailure::Stop => FailurePolicy::StopAtFailingSegment,
+        OnFailure::Continue => FailurePolicy::ContinueAndRecord,
+    };
     let virtual_time = address == CarAddress::Sim && !args.realtime;
     eprintln!(
         "seed {seed}: {} tests on {} with car {}{}, writing {}",
