@@ -1,7 +1,8 @@
 //! Campaigns end to end on the embedded simulated car, in virtual time: a campaign writes a run
 //! directory whose files parse and validate, the same seed gives identical case files, faults on
 //! the two-anchor parking lot find failures that the same campaign without faults does not, and
-//! a lost link or an interrupt ends the campaign as an error with a complete run directory.
+//! a lossy slow link ends no test early, and a lost link or an interrupt ends the campaign as an
+//! error with a complete run directory.
 
 use std::path::Path;
 use std::time::Duration;
@@ -156,6 +157,58 @@ async fn a_campaign_without_faults_keeps_the_car_inside_the_fence() {
         (3, 0, 0),
         "{summary:?}"
     );
+}
+
+/// Over a 4G-like link (150 ± 40 ms each way, 5 % of payloads lost) every test runs to a verdict
+/// of the oracle: lost state replies do not starve the monitor, lost route packets are retried,
+/// and a fault command whose reply was lost is resolved by listing the car's faults instead of
+/// aborting the test (with one try per fault command, test 1 aborts: "no reply to the
+/// fault-injection command").
+#[tokio::test(start_paused = true)]
+async fn a_lossy_slow_link_ends_no_test_early() {
+    let scenario = scenario();
+    let sim_config = SimConfig {
+        seed: 5,
+        link: car_sim::LinkImpairment {
+            latency: Duration::from_millis(150),
+            jitter: Duration::from_millis(40),
+            loss: 0.05,
+            ..car_sim::LinkImpairment::default()
+        },
+        ..SimConfig::from_scenario(&scenario)
+    };
+    let (stream, sim) = car_sim::spawn_in_process(&sim_config);
+    let car_config = CarConfig {
+        request_timeout: Duration::from_secs(1),
+        terminal_timeout: Duration::from_secs(2),
+        ..CarConfig::default()
+    };
+    let car = Car::over_stream(stream, car_config).await.unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let report = run_campaign(
+        &car,
+        &scenario,
+        &config(5, 4, false, dir.path()),
+        Some(&sim),
+        &CancellationToken::new(),
+        &ProgressBar::hidden(),
+    )
+    .await
+    .unwrap();
+    for test in &report.tests {
+        assert_ne!(test.verdict, Some(Verdict::Aborted), "{test:?}");
+        assert_eq!(test.starvations, 0, "{test:?}");
+    }
+    let faults: usize = (0..4)
+        .map(|i| {
+            read_case(dir.path(), i)
+                .commands
+                .iter()
+                .filter(|c| matches!(c, orchestrator::case::CommandRecord::AddFault { .. }))
+                .count()
+        })
+        .sum();
+    assert!(faults > 0);
 }
 
 #[tokio::test(start_paused = true)]
