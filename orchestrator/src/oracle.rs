@@ -94,14 +94,15 @@ pub fn stats(deviations: &[f64]) -> Option<DeviationStats> {
         samples: n,
         max_m: sorted[n - 1],
         rms_m: mean_square.sqrt(),
-        p95_m: nearest_rank(&sorted, 0.95),
+        p95_m: nearest_rank(&sorted, 0.95).unwrap_or(sorted[n - 1]),
     })
 }
 
-/// The nearest-rank percentile `q` (0..=1) of ascending, non-empty `sorted`.
-fn nearest_rank(sorted: &[f64], q: f64) -> f64 {
+/// The nearest-rank percentile `q` (0..=1) of ascending `sorted`: the smallest value that at
+/// least `q` of the values do not exceed; `None` when empty.
+pub(crate) fn nearest_rank<T: Copy>(sorted: &[T], q: f64) -> Option<T> {
     let rank = (q * sorted.len() as f64).ceil() as usize;
-    sorted[rank.clamp(1, sorted.len()) - 1]
+    sorted.get(rank.clamp(1, sorted.len().max(1)) - 1).copied()
 }
 
 /// Collects one segment's samples and judges it.

@@ -105,13 +105,9 @@ fn measure(scenario: &Scenario, strategy: Strategy, args: &BenchGeneratorArgs) -
     })
 }
 
-/// The `q`-quantile of sorted durations (nearest rank).
+/// The `q`-quantile of sorted durations (nearest rank); zero for none.
 pub(super) fn percentile(sorted: &[Duration], q: f64) -> Duration {
-    if sorted.is_empty() {
-        return Duration::ZERO;
-    }
-    let rank = ((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
-    sorted[rank - 1]
+    crate::oracle::nearest_rank(sorted, q).unwrap_or_default()
 }
 
 fn print_row(row: &Row) {
