@@ -161,12 +161,8 @@ fn remaining_stretches(route: &[Waypoint], progress: Progress) -> Vec<(f64, f64)
 /// The nearest-rank 99th percentile of `values`; `None` for none.
 pub fn p99(values: &VecDeque<Duration>) -> Option<Duration> {
     let mut sorted: Vec<Duration> = values.iter().copied().collect();
-    if sorted.is_empty() {
-        return None;
-    }
     sorted.sort_unstable();
-    let rank = (0.99 * sorted.len() as f64).ceil() as usize;
-    Some(sorted[rank.clamp(1, sorted.len()) - 1])
+    crate::oracle::nearest_rank(&sorted, 0.99)
 }
 
 /// Measured link round trips and generation times (the most recent `window` of each).
