@@ -24,9 +24,9 @@ const MAX_DRAWS_PER_POSE: usize = 10_000;
 /// Runs the benchmark and prints a Markdown table.
 pub fn run(args: &BenchRecoveryArgs) -> Result<ExitCode> {
     println!(
-        "| area | planner | success | p50 | p99 | max | mean length before → after shortening | mean ratio before → after | mean total ratio |"
+        "| area | planner | success | success where the car can turn | p50 | p99 | max | mean length before → after shortening | mean ratio before → after | mean total ratio |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|");
     for name in scenarios::bundled::names() {
         let scenario = scenarios::bundled::load(name)?.scenario;
         let poses = random_poses(&scenario, args, &mut rng(args.seed))?;
@@ -74,6 +74,10 @@ fn random_poses(
 struct Figures {
     tried: usize,
     planned: usize,
+    /// Poses from which the car can turn around within the constraints
+    /// (`recovery::can_turn_around`), and routes planned from them.
+    turnable: usize,
+    planned_turnable: usize,
     times: Vec<Duration>,
     length_before: f64,
     length: f64,
@@ -99,8 +103,11 @@ fn measure(scenario: &Scenario, planner: Planner, poses: &[Pose], seed: u64) -> 
         );
         figures.times.push(started.elapsed());
         figures.tried += 1;
+        let turnable = recovery::can_turn_around(&scenario.area, pose, &constraints);
+        figures.turnable += usize::from(turnable);
         if let Ok(route) = result {
             figures.planned += 1;
+            figures.planned_turnable += usize::from(turnable);
             figures.length_before += route.quality.length_before_shortening;
             figures.length += route.quality.length;
             figures.ratio_before +=
@@ -117,10 +124,13 @@ fn print_row(area: &str, planner: Planner, f: &Figures) {
     let ms = |d: Duration| format!("{:.2} ms", d.as_secs_f64() * 1e3);
     let mean = |sum: f64| sum / f.planned.max(1) as f64;
     println!(
-        "| {area} | {planner} | {}/{} ({:.1} %) | {} | {} | {} | {:.2} → {:.2} m | {:.3} → {:.3} | {:.3} |",
+        "| {area} | {planner} | {}/{} ({:.1} %) | {}/{} ({:.1} %) | {} | {} | {} | {:.2} → {:.2} m | {:.3} → {:.3} | {:.3} |",
         f.planned,
         f.tried,
         100.0 * f.planned as f64 / f.tried.max(1) as f64,
+        f.planned_turnable,
+        f.turnable,
+        100.0 * f.planned_turnable as f64 / f.turnable.max(1) as f64,
         ms(percentile(&f.times, 0.5)),
         ms(percentile(&f.times, 0.99)),
         ms(f.times.last().copied().unwrap_or_default()),
