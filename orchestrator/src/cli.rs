@@ -63,6 +63,11 @@ pub struct RunArgs {
     /// Run the embedded simulated car against the wall clock instead of in virtual time.
     #[arg(long)]
     pub realtime: bool,
+    /// The safety monitor brakes when no state sample came for this long (raised further when
+    /// the measured link jitter demands it; at most 1.9 s, under the car's 2 s watchdog). Raise
+    /// it on lossy links.
+    #[arg(long, value_name = "DURATION", default_value = "250ms", value_parser = humantime::parse_duration)]
+    pub stale_after: std::time::Duration,
     /// After a segment fails the oracle: `stop` the test there (safe stop, then the next test) or
     /// `continue` driving it and record every segment.
     #[arg(long, value_enum, default_value_t = OnFailure::Stop)]

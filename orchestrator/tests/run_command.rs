@@ -81,3 +81,26 @@ fn continuing_after_a_failure_drives_and_records_every_segment() {
         assert_eq!(case.segments.len(), segments, "{:?}", case.reason);
     }
 }
+
+#[test]
+fn a_stale_limit_beyond_the_watchdog_is_refused_and_a_valid_one_is_recorded() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run(&["--stale-after", "3s"], dir.path());
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--stale-after 3s"));
+    let out = run(
+        &[
+            "--seed",
+            "2",
+            "--tests",
+            "1",
+            "--no-faults",
+            "--stale-after",
+            "400ms",
+        ],
+        dir.path(),
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let record = std::fs::read_to_string(dir.path().join("campaign.json")).unwrap();
+    assert!(record.contains("\"stale_after\": 400"), "{record}");
+}

@@ -39,6 +39,14 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         .clone()
         .unwrap_or_else(|| PathBuf::from("runs").join(run_dir_name(&scenario.name, seed)));
     let mut config = RunConfig::new(campaign, out, args.car.clone());
+    if args.stale_after.is_zero() || args.stale_after > Duration::from_millis(1900) {
+        anyhow::bail!(
+            "--stale-after {}: must be above 0 and at most 1.9 s (the car's watchdog brakes after 2 s \
+             without commands)",
+            humantime::format_duration(args.stale_after)
+        );
+    }
+    config.safety.stale_after = args.stale_after;
     config.policy = match args.on_failure {
         OnFailure::Stop => FailurePolicy::StopAtFailingSegment,
         OnFailure::Continue => FailurePolicy::ContinueAndRecord,
