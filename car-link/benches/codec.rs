@@ -5,39 +5,17 @@ use std::hint::black_box;
 use std::time::Duration;
 
 use car_link::frame::{FrameDecoder, FrameEncoder};
-use car_link::message::{CarState, Dialect, Reply, Request, RoutePoint};
+use car_link::message::{Dialect, Reply, Request, RoutePoint};
 use car_link::version::FirmwareVersion;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 
+#[path = "../tests/support/mod.rs"]
+mod support;
+
+use support::sample_state;
+
 const VERSION: FirmwareVersion = FirmwareVersion::V12_3;
 const FRAMES: usize = 1000;
-
-fn state() -> CarState {
-    CarState {
-        version: VERSION,
-        roll: 0.5,
-        pitch: -0.25,
-        yaw: 45.0,
-        accel: [0.01, -0.02, 1.0],
-        gyro: [0.0, 0.0, 0.1],
-        mag: [10.0, -20.0, 30.0],
-        px: 12.3456,
-        py: -7.5,
-        speed: 1.5,
-        v_in: 39.0,
-        temp_mos: 25.0,
-        mc_fault: 0,
-        px_gps: 12.34,
-        py_gps: -7.49,
-        ap_goal_px: 13.0,
-        ap_goal_py: -6.8,
-        ap_rad: 0.8,
-        ms_today: 45_296_789,
-        ap_route_left: 7,
-        px_uwb: 12.2,
-        py_uwb: -7.6,
-    }
-}
 
 fn points() -> Vec<RoutePoint> {
     (0..5)
@@ -59,7 +37,7 @@ fn stream_of(payload: &[u8]) -> Vec<u8> {
 }
 
 fn get_state_reply(c: &mut Criterion) {
-    let reply = Reply::State(state());
+    let reply = Reply::State(sample_state(VERSION));
     let dialect = Dialect::firmware(VERSION);
     let encoder = FrameEncoder::to_firmware();
     let payload = reply.encode(1, dialect).expect("encodes");

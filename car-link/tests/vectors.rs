@@ -5,6 +5,10 @@ use car_link::frame::{FrameDecoder, FrameEncoder};
 use car_link::message::{Anchor, CarState, Dialect, RcControl, RcMode, Reply, Request, RoutePoint};
 use car_link::version::{CommandId, FirmwareVersion};
 
+mod support;
+
+use support::sample_state;
+
 fn hex(text: &str) -> Vec<u8> {
     text.split_whitespace()
         .filter(|t| !t.ends_with(':'))
@@ -153,33 +157,6 @@ const STATE_FRAME: &str = "
 080: FE DB 6C 00 01 FB D0 FF FE F6 60 00 0C 35 00 02
 096: B3 2C 95 00 07 00 01 DC 90 FF FE D7 20 BB 97 03";
 
-fn vector_state(version: FirmwareVersion) -> CarState {
-    CarState {
-        version,
-        roll: 0.5,
-        pitch: -0.25,
-        yaw: 45.0,
-        accel: [0.01, -0.02, 1.0],
-        gyro: [0.0, 0.0, 0.1],
-        mag: [10.0, -20.0, 30.0],
-        px: 12.3456,
-        py: -7.5,
-        speed: 1.5,
-        v_in: 39.0,
-        temp_mos: 25.0,
-        mc_fault: 0,
-        px_gps: 12.34,
-        py_gps: -7.49,
-        ap_goal_px: 13.0,
-        ap_goal_py: -6.8,
-        ap_rad: 0.8,
-        ms_today: 45_296_789,
-        ap_route_left: 7,
-        px_uwb: 12.2,
-        py_uwb: -7.6,
-    }
-}
-
 #[test]
 fn get_state_reply_13_5() {
     let wire = hex(STATE_FRAME);
@@ -192,7 +169,7 @@ fn get_state_reply_13_5() {
     assert_eq!(&payload[97..99], &[0x00, 0x07]);
     assert_eq!(&payload[99..103], &[0x00, 0x01, 0xDC, 0x90]);
 
-    let state = vector_state(V12);
+    let state = sample_state(V12);
     assert_eq!(Reply::decode(&payload, V12), Ok((1, Reply::State(state))));
     // The truncating firmware encoder and the rounding control-station encoder agree on these values.
     for dialect in [Dialect::firmware(V12), Dialect::host(V12)] {
@@ -206,7 +183,7 @@ fn get_state_reply_13_5() {
 
 #[test]
 fn get_state_reply_from_10_1_13_5() {
-    let state = vector_state(FirmwareVersion::V10_1);
+    let state = sample_state(FirmwareVersion::V10_1);
     let payload = Reply::State(state)
         .encode(1, Dialect::firmware(V10))
         .unwrap_or_default();
@@ -220,7 +197,7 @@ fn get_state_reply_from_10_1_13_5() {
 fn inactive_autopilot_radius_13_5() {
     let state = CarState {
         ap_rad: -1.0,
-        ..vector_state(V12)
+        ..sample_state(V12)
     };
     let payload = Reply::State(state)
         .encode(1, Dialect::firmware(V12))

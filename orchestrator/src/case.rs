@@ -588,9 +588,7 @@ impl Case {
     /// Checks that every segment (with its margin, when recorded) continues the route drivably
     /// from the end of `scenario`'s start route.
     pub fn check_route(&self, scenario: &Scenario) -> Result<(), CaseError> {
-        let start = scenario.start_route.positions();
-        let mut tail = RouteTail::from_points(&start)
-            .map_err(|e| invalid("scenario.start_route", e.to_string()))?;
+        let mut tail = start_tail(scenario)?;
         let constraints = scenario.constraints();
         for (command, record) in self.commands.iter().enumerate() {
             let CommandRecord::RunSegments { points, margin, .. } = record else {
@@ -636,9 +634,7 @@ impl Case {
         {
             return Err(invalid("commands", "no run_segments command to drive"));
         }
-        let start = scenario.start_route.positions();
-        let start_tail = RouteTail::from_points(&start)
-            .map_err(|e| invalid("scenario.start_route", e.to_string()))?;
+        let start_tail = start_tail(scenario)?;
         let commands = case
             .commands
             .iter()
@@ -663,9 +659,7 @@ impl Case {
         generator: &Generator,
         seed: u64,
     ) -> Result<Case, CaseError> {
-        let start = scenario.start_route.positions();
-        let mut tail = RouteTail::from_points(&start)
-            .map_err(|e| invalid("scenario.start_route", e.to_string()))?;
+        let mut tail = start_tail(scenario)?;
         let mut rng = crate::seed::rng(seed);
         let mut case = self.clone();
         for (command, record) in case.commands.iter_mut().enumerate() {
@@ -689,6 +683,12 @@ impl Case {
         }
         Ok(case)
     }
+}
+
+/// Where a case's first segment starts: the end of `scenario`'s start route.
+fn start_tail(scenario: &Scenario) -> Result<RouteTail, CaseError> {
+    RouteTail::from_points(&scenario.start_route.positions())
+        .map_err(|e| invalid("scenario.start_route", e.to_string()))
 }
 
 fn check_command(i: usize, command: &CommandRecord) -> Result<(), CaseError> {

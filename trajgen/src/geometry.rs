@@ -602,13 +602,7 @@ mod tests {
     use super::*;
 
     fn square(x0: f64, y0: f64, side: f64) -> Polygon {
-        Polygon::new(vec![
-            Point::new(x0, y0),
-            Point::new(x0 + side, y0),
-            Point::new(x0 + side, y0 + side),
-            Point::new(x0, y0 + side),
-        ])
-        .unwrap()
+        crate::test_support::rect(x0, y0, x0 + side, y0 + side)
     }
 
     #[test]

@@ -25,7 +25,7 @@ use crate::cli::ReplayArgs;
 use crate::model::{Campaign, TestPlan};
 use crate::oracle::Verdict;
 use crate::replay::{Comparison, REPLAY_FILE, ReplayRun};
-use crate::runner::{ReplaySource, RunConfig, rfc3339_now, run_campaign};
+use crate::runner::{ReplaySource, RunConfig, TestSummary, rfc3339_now, run_campaign};
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::choose_seed;
 
@@ -277,10 +277,5 @@ fn read_case(dir: &Path) -> Option<Case> {
 
 /// The worst deviation of a run, for messages.
 fn worst(case: &Case) -> String {
-    metres(
-        case.segments
-            .iter()
-            .filter_map(|s| s.oracle.stats.map(|stats| stats.max_m))
-            .max_by(f64::total_cmp),
-    )
+    metres(TestSummary::of(0, String::new(), case).worst_deviation_m)
 }

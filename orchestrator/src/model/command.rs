@@ -79,16 +79,6 @@ pub struct Segment {
 }
 
 impl Segment {
-    /// The segment the generator produced for `intent`: every point at the intent's speed.
-    pub fn generated(intent: SegmentIntent, points: Vec<Point>, margin: Vec<Point>) -> Self {
-        Self {
-            intent: Some(intent),
-            speeds: vec![intent.speed_mps; points.len()],
-            points,
-            margin,
-        }
-    }
-
     /// The segment the generator produced for `intent` from `tail`: every point at the intent's
     /// speed, except where the route turns so tightly that this speed would ask more than
     /// [`MAX_LATERAL_ACCEL_MPS2`] of the car: there the points are slowed to `√(a·R)`, `R` the
@@ -358,7 +348,12 @@ mod tests {
 
     #[test]
     fn a_segment_measures_its_length_from_the_route_end() {
-        let segment = Segment::generated(
+        let tail = RouteTail {
+            end: Point::new(0.0, 0.0),
+            heading: 0.0,
+        };
+        let segment = Segment::generated_from(
+            &tail,
             SegmentIntent {
                 seed: 0,
                 points: 2,

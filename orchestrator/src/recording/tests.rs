@@ -87,7 +87,12 @@ fn fault() -> Fault {
 }
 
 fn segment() -> Segment {
-    Segment::generated(
+    let tail = trajgen::RouteTail {
+        end: trajgen::Point::new(0.0, 0.0),
+        heading: 0.0,
+    };
+    Segment::generated_from(
+        &tail,
         SegmentIntent {
             seed: 7,
             points: 2,
