@@ -34,7 +34,10 @@ pub(crate) fn piece_is_valid(
 /// the caller's business).
 pub(crate) fn segment_is_clear(area: &Area, c: &Constraints, a: Point, b: Point) -> bool {
     area.contains_segment(a, b)
-        && (c.clearance <= 0.0 || area.segment_boundary_distance(a, b) >= c.clearance)
+        && (c.clearance <= 0.0
+            || area
+                .segment_boundary_distance_below(a, b, c.clearance)
+                .is_none())
 }
 
 /// The points strictly between `a` and `b` that split the straight `a → b` into the fewest equal

@@ -199,15 +199,14 @@ fn segment_violations(
     if area.segment_meets_boundary(a, b) {
         return Some(Violation::LeavesArea { index });
     }
-    if constraints.clearance > 0.0 {
-        let distance = area.segment_boundary_distance(a, b);
-        if distance < constraints.clearance {
-            return Some(Violation::TooCloseToEdge {
-                index,
-                distance,
-                clearance: constraints.clearance,
-            });
-        }
+    if constraints.clearance > 0.0
+        && let Some(distance) = area.segment_boundary_distance_below(a, b, constraints.clearance)
+    {
+        return Some(Violation::TooCloseToEdge {
+            index,
+            distance,
+            clearance: constraints.clearance,
+        });
     }
     None
 }

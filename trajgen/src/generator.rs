@@ -525,7 +525,10 @@ impl Generator {
         if area.segment_meets_boundary(p, q) {
             return false;
         }
-        c.clearance <= 0.0 || area.segment_boundary_distance(p, q) >= c.clearance
+        c.clearance <= 0.0
+            || area
+                .segment_boundary_distance_below(p, q, c.clearance)
+                .is_none()
     }
 
     /// The reference search: restart the whole extension on a dead end. On failure returns the

@@ -588,6 +588,26 @@ impl Area {
             .map(|e| segment_segment_distance(a, b, e.a, e.b))
             .fold(f64::INFINITY, f64::min)
     }
+
+    /// The distance from the segment `a–b` to the nearest boundary edge when it is less than
+    /// `limit`, or `None` when every edge keeps at least `limit` away: the clearance check.
+    ///
+    /// Same answer as comparing [`Self::segment_boundary_distance`] with `limit`, but edges
+    /// whose bounding box lies farther than `limit` from the segment's are skipped (they cannot
+    /// be nearer), so the hot loop measures only the few edges close by.
+    pub fn segment_boundary_distance_below(&self, a: Point, b: Point, limit: f64) -> Option<f64> {
+        let near = BBox {
+            min: Point::new(a.x.min(b.x) - limit, a.y.min(b.y) - limit),
+            max: Point::new(a.x.max(b.x) + limit, a.y.max(b.y) + limit),
+        };
+        let nearest = self
+            .edges
+            .iter()
+            .filter(|e| e.bbox.overlaps(&near))
+            .map(|e| segment_segment_distance(a, b, e.a, e.b))
+            .fold(f64::INFINITY, f64::min);
+        (nearest < limit).then_some(nearest)
+    }
 }
 
 /// Whether any edge of `p` meets any edge of `q`.

@@ -138,4 +138,27 @@ proptest! {
         };
         prop_assert_eq!(run(), run());
     }
+
+    /// The clearance check's fast path (edges far from the segment skipped) answers exactly as
+    /// the distance to every edge does.
+    #[test]
+    fn the_clearance_check_agrees_with_the_distance_to_every_edge(
+        area in 0..7usize,
+        (u, v) in (0.0..1.0f64, 0.0..1.0f64),
+        (heading, length) in (-4.0..4.0f64, 0.0..3.0f64),
+        limit in 0.0..3.0f64,
+    ) {
+        let area = &fixtures()[area].area;
+        let bbox = area.bbox();
+        let a = Point::new(
+            bbox.min.x + u * (bbox.max.x - bbox.min.x),
+            bbox.min.y + v * (bbox.max.y - bbox.min.y),
+        );
+        let b = a + Point::from_heading(heading) * length;
+        let distance = area.segment_boundary_distance(a, b);
+        prop_assert_eq!(
+            area.segment_boundary_distance_below(a, b, limit),
+            (distance < limit).then_some(distance)
+        );
+    }
 }

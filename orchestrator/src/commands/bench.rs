@@ -8,7 +8,7 @@
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-use anyhow::Result;
+use anyhow::{Result, ensure};
 use rand::RngExt;
 use scenarios::Scenario;
 use trajgen::{Generator, RouteTail, Strategy, ValidationConfig, validate_area};
@@ -33,13 +33,22 @@ struct Row {
 
 /// Runs the benchmark and prints a Markdown table.
 pub fn generator(args: &BenchGeneratorArgs) -> Result<ExitCode> {
+    if let Some(clearance) = args.clearance {
+        ensure!(
+            clearance.is_finite() && clearance >= 0.0,
+            "--clearance must be a distance of 0 m or more, not {clearance}"
+        );
+    }
     println!(
         "| area | strategy | p50 | p99 | max | mean outer tries | max outer tries | failures | {} km validation | verdict |",
         args.km
     );
     println!("|---|---|---|---|---|---|---|---|---|---|");
     for name in scenarios::bundled::names() {
-        let scenario = scenarios::bundled::load(name)?.scenario;
+        let mut scenario = scenarios::bundled::load(name)?.scenario;
+        if let Some(clearance) = args.clearance {
+            scenario.generator.clearance_m = clearance;
+        }
         for strategy in [Strategy::Reference, Strategy::Wedge] {
             let row = measure(&scenario, strategy, args)?;
             print_row(&row);

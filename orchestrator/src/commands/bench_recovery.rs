@@ -3,7 +3,10 @@
 //! Poses are drawn uniformly in the fence's bounding box, kept when they are drivable and at least
 //! `--clearance` from every edge, with a uniform heading. For each planner: success rate, plan
 //! time p50/p99/max, mean length before and after shortening, and the mean ratio to the lower
-//! bound. Run it in release mode.
+//! bound. Success is also counted among the poses from which the car can turn around where it
+//! stands, and as the runner plans: with the clearance relaxed when the scenario's finds nothing
+//! (`PlanConfig::plan_with_fallback`); the poses left without a route are listed after the table.
+//! Run it in release mode.
 
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
@@ -24,17 +27,34 @@ const MAX_DRAWS_PER_POSE: usize = 10_000;
 /// Runs the benchmark and prints a Markdown table.
 pub fn run(args: &BenchRecoveryArgs) -> Result<ExitCode> {
     println!(
-        "| area | planner | success | success where the car can turn | p50 | p99 | max | mean length before → after shortening | mean ratio before → after | mean total ratio |"
+        "| area | planner | success | success where the car can turn | success with clearance fallback | p50 | p99 | max | mean length before → after shortening | mean ratio before → after | mean total ratio |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    let mut stranded = Vec::new();
     for name in scenarios::bundled::names() {
         let scenario = scenarios::bundled::load(name)?.scenario;
         let poses = random_poses(&scenario, args, &mut rng(args.seed))?;
         for planner in Planner::ALL {
-            print_row(
-                &scenario.name,
-                planner,
-                &measure(&scenario, planner, &poses, args.seed),
+            let figures = measure(&scenario, planner, &poses, args.seed);
+            print_row(&scenario.name, planner, &figures);
+            stranded.extend(
+                figures
+                    .stranded
+                    .iter()
+                    .map(|&(pose, room)| (name, planner, pose, room)),
+            );
+        }
+    }
+    if !stranded.is_empty() {
+        println!(
+            "\nPoses without a route even with the clearance relaxed (heading counter-clockwise from east):"
+        );
+        for (area, planner, pose, room) in stranded {
+            println!(
+                "- {area}, {planner}: ({:.2}, {:.2}) heading {:.1}°, {room:.2} m from the nearest edge",
+                pose.position.x,
+                pose.position.y,
+                pose.heading.to_degrees(),
             );
         }
     }
@@ -78,6 +98,12 @@ struct Figures {
     /// (`recovery::can_turn_around`), and routes planned from them.
     turnable: usize,
     planned_turnable: usize,
+    /// Routes planned as the runner plans them: with the clearance relaxed when the full one
+    /// finds nothing (`PlanConfig::plan_with_fallback`).
+    planned_with_fallback: usize,
+    /// Poses from which not even the fallback found a route, with their distance to the
+    /// nearest edge.
+    stranded: Vec<(Pose, f64)>,
     times: Vec<Duration>,
     length_before: f64,
     length: f64,
@@ -105,6 +131,22 @@ fn measure(scenario: &Scenario, planner: Planner, poses: &[Pose], seed: u64) -> 
         figures.tried += 1;
         let turnable = recovery::can_turn_around(&scenario.area, pose, &constraints);
         figures.turnable += usize::from(turnable);
+        let rescued = result.is_err()
+            && config
+                .plan_with_fallback(
+                    &scenario.area,
+                    pose,
+                    &recovery_route,
+                    &constraints,
+                    &mut rng,
+                )
+                .is_ok();
+        figures.planned_with_fallback += usize::from(result.is_ok() || rescued);
+        if result.is_err() && !rescued {
+            figures
+                .stranded
+                .push((pose, scenario.area.boundary_distance(pose.position)));
+        }
         if let Ok(route) = result {
             figures.planned += 1;
             figures.planned_turnable += usize::from(turnable);
@@ -124,13 +166,16 @@ fn print_row(area: &str, planner: Planner, f: &Figures) {
     let ms = |d: Duration| format!("{:.2} ms", d.as_secs_f64() * 1e3);
     let mean = |sum: f64| sum / f.planned.max(1) as f64;
     println!(
-        "| {area} | {planner} | {}/{} ({:.1} %) | {}/{} ({:.1} %) | {} | {} | {} | {:.2} → {:.2} m | {:.3} → {:.3} | {:.3} |",
+        "| {area} | {planner} | {}/{} ({:.1} %) | {}/{} ({:.1} %) | {}/{} ({:.1} %) | {} | {} | {} | {:.2} → {:.2} m | {:.3} → {:.3} | {:.3} |",
         f.planned,
         f.tried,
         100.0 * f.planned as f64 / f.tried.max(1) as f64,
         f.planned_turnable,
         f.turnable,
         100.0 * f.planned_turnable as f64 / f.turnable.max(1) as f64,
+        f.planned_with_fallback,
+        f.tried,
+        100.0 * f.planned_with_fallback as f64 / f.tried.max(1) as f64,
         ms(percentile(&f.times, 0.5)),
         ms(percentile(&f.times, 0.99)),
         ms(f.times.last().copied().unwrap_or_default()),
