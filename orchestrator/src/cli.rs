@@ -309,13 +309,16 @@ pub struct ReturnArgs {
 pub struct GenerateArgs {
     /// Scenario: a bundled name, a .toml file or a reference .xml.
     pub scenario: String,
-    /// How many points to generate after the start route.
+    /// How many points to generate after the start route. They come in extensions of the
+    /// scenario's segment size (4–7 by default), every one within it whenever the number allows
+    /// (with 4–7, any number of at least 4); fewer than 4 are one short extension.
     #[arg(long)]
     pub points: usize,
     /// Seed of the random route (printed when not given).
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Speed of the generated points, m/s (default: the scenario's lowest campaign speed).
+    /// Speed of the generated points, m/s, at most the autopilot's top speed of 8.33 m/s
+    /// (default: the scenario's lowest campaign speed).
     #[arg(long, value_name = "M/S")]
     pub speed: Option<f64>,
     /// Print the route as JSON on standard output.

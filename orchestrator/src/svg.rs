@@ -47,10 +47,26 @@ impl Frame {
     }
 }
 
+/// What the picture must hold: the area, and the anchors, obstacles and walls, which may lie
+/// outside the fence.
+fn picture_bbox(scenario: &Scenario) -> BBox {
+    let anchors = scenario.anchors.iter().map(|a| Point::new(a.x, a.y));
+    let environment = &scenario.environment;
+    let obstacles = environment
+        .obstacles
+        .iter()
+        .flat_map(|o| o.polygon.vertices().iter().copied());
+    let walls = environment.walls.iter().flat_map(|w| [w.a, w.b]);
+    anchors
+        .chain(obstacles)
+        .chain(walls)
+        .fold(scenario.area.bbox(), BBox::including)
+}
+
 /// The validation picture: the area, the coverage heat map, a sample of the trajectory and the
 /// numbered hot spots.
 pub fn area_picture(scenario: &Scenario, report: &ValidationReport) -> String {
-    let frame = Frame::new(scenario.area.bbox());
+    let frame = Frame::new(picture_bbox(scenario));
     let mut svg = String::new();
     let legend_px = 60.0;
     let _ = writeln!(
@@ -210,4 +226,29 @@ fn xml_escape(text: &str) -> String {
         .replace('<', "&lt;")
         .replace('>', "&gt;")
         .replace('"', "&quot;")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_picture_holds_anchors_and_environment_outside_the_fence() {
+        let scenario = scenarios::bundled::load("parking-lot-rock")
+            .unwrap()
+            .scenario;
+        let fence = scenario.area.bbox();
+        let wall = &scenario.environment.walls[0];
+        let anchors = scenario.anchors.iter().map(|a| Point::new(a.x, a.y));
+        let outside: Vec<Point> = anchors
+            .chain([wall.a, wall.b])
+            .filter(|&p| !fence.contains(p))
+            .collect();
+        assert!(
+            !outside.is_empty(),
+            "the rock lot's wall or anchors lie outside the fence"
+        );
+        let picture = picture_bbox(&scenario);
+        assert!(outside.iter().all(|&p| picture.contains(p)), "{outside:?}");
+    }
 }

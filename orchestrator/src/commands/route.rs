@@ -4,6 +4,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, ensure};
 use rand::RngExt;
+use scenarios::Interval;
 use serde::Serialize;
 use trajgen::{ExtensionStats, Generator, Point, RouteTail};
 
@@ -54,9 +55,11 @@ pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
     let seed = choose_seed(args.seed);
     eprintln!("seed {seed}");
     let speed_mps = args.speed.unwrap_or(scenario.campaign.speed_kmh.min / 3.6);
+    let top_mps = scenarios::MAX_SPEED_KMH / 3.6;
     ensure!(
-        speed_mps.is_finite() && speed_mps > 0.0,
-        "--speed must be a positive number of m/s, got {speed_mps}"
+        speed_mps.is_finite() && speed_mps > 0.0 && speed_mps <= top_mps,
+        "--speed must be more than 0 and at most {top_mps:.2} m/s (the autopilot's top speed), \
+         got {speed_mps}"
     );
     let generator = Generator::new(scenario.generator.generator_config(args.strategy.into()))?;
     let start_route = scenario.start_route.positions();
@@ -67,9 +70,7 @@ pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
     let mut points: Vec<Point> = Vec::with_capacity(args.points);
     let mut stats = RouteStats::default();
     while points.len() < args.points {
-        let n = rng
-            .random_range(sizes.min..=sizes.max)
-            .min(args.points - points.len());
+        let n = extension_size(args.points - points.len(), sizes, &mut rng);
         let extension = generator
             .extend(&scenario.area, &tail, n, &mut rng)
             .with_context(|| format!("extension {} failed", stats.extensions + 1))?;
@@ -93,6 +94,26 @@ pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// The size of the next extension when `remaining` points are still to come: drawn within
+/// `sizes`, but never leaving fewer than `sizes.min` for the last one, so that every extension
+/// is within `sizes` whenever the total can be split that way (with the default 4–7, any total
+/// of at least 4). A total below `sizes.min` is one short extension.
+fn extension_size<R: rand::Rng + ?Sized>(
+    remaining: usize,
+    sizes: Interval<usize>,
+    rng: &mut R,
+) -> usize {
+    if remaining <= sizes.max {
+        return remaining;
+    }
+    let highest = sizes.max.min(remaining - sizes.min);
+    if highest < sizes.min {
+        // No split keeps every extension within the sizes: the last one comes out short.
+        return sizes.max;
+    }
+    rng.random_range(sizes.min..=highest)
+}
+
 fn print_route(route: &GeneratedRoute) {
     println!(
         "{}: {} points after the {}-point start route, {} extensions, speed {:.2} m/s",
@@ -112,4 +133,39 @@ fn print_route(route: &GeneratedRoute) {
         route.stats.inner_tries,
         route.stats.backtracks
     );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::seed::rng;
+
+    fn split(total: usize, min: usize, max: usize, seed: u64) -> Vec<usize> {
+        let (mut rng, mut left, mut sizes) = (rng(seed), total, Vec::new());
+        while left > 0 {
+            let n = extension_size(left, Interval { min, max }, &mut rng);
+            sizes.push(n);
+            left -= n;
+        }
+        sizes
+    }
+
+    #[test]
+    fn every_extension_has_4_to_7_points_for_any_total_of_at_least_4() {
+        for total in 4..200 {
+            for seed in 0..20 {
+                let sizes = split(total, 4, 7, seed);
+                assert_eq!(sizes.iter().sum::<usize>(), total);
+                assert!(
+                    sizes.iter().all(|n| (4..=7).contains(n)),
+                    "{total}: {sizes:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_total_below_the_smallest_size_is_one_extension() {
+        assert_eq!(split(3, 4, 7, 1), vec![3]);
+    }
 }
