@@ -34,6 +34,10 @@ use crate::transport::{Link, PC_BYTE_TIMEOUT};
 use crate::version::{CommandId, FirmwareVersion};
 use session::{RouteMemory, Shared, StateOutcome, StateTicket, keep_alive, lock, supervise};
 
+/// How closely a point read back from the car must match the point sent, metres: far above the
+/// float32_auto rounding of the wire (under 0.1 mm at a kilometre), far below any real difference.
+const STORED_POINT_TOLERANCE_M: f64 = 1e-3;
+
 /// Two route packets whose first points are closer than this (in x and y) count as one for the firmware.
 pub const DUPLICATE_POINT_THRESHOLD: f64 = 1e-4;
 /// The firmware's communication watchdog.
@@ -155,6 +159,33 @@ pub enum CarError {
     /// An argument the car would not answer or would misread.
     #[error("invalid argument: {0}")]
     InvalidArgument(String),
+    /// Read back after an upload with retries, the car's route does not end with the points sent: a late
+    /// ack was taken for the answer to a later packet, which the car never got.
+    #[error(
+        "the car did not store route point {index} as sent: ({sent_x:.3}, {sent_y:.3}) sent, \
+         ({stored_x:.3}, {stored_y:.3}) stored"
+    )]
+    RouteNotStored {
+        /// Index of the point in the list passed in (of the last upload).
+        index: usize,
+        /// The point sent, m.
+        sent_x: f64,
+        /// The point sent, m.
+        sent_y: f64,
+        /// What the car holds in its place, m.
+        stored_x: f64,
+        /// What the car holds in its place, m.
+        stored_y: f64,
+    },
+    /// Read back after an upload with retries, the car holds another number of route points than were sent
+    /// since the route was last emptied: a packet was lost although an ack seemed to answer it.
+    #[error("the car holds {held} route points, but {sent} were sent since the route was emptied")]
+    RouteLength {
+        /// Points the car reports (its route length).
+        held: usize,
+        /// Points sent since the route was emptied.
+        sent: usize,
+    },
 }
 
 /// One GET_STATE answer, stamped with host monotonic time.
@@ -496,8 +527,17 @@ impl Car {
     /// previous packet's first point would be dropped silently by the car: such an upload is refused with
     /// [`CarError::DuplicateFirstPoint`] before anything is sent. Uploads from several tasks are serialised.
     ///
-    /// Timeout: at most `tries` × `request_timeout` per packet. Cancellation: packets already acked stay on
-    /// the car; the route is then incomplete, so clear or replace it.
+    /// Acks carry nothing but the command, so after a retry the ack taken may be the late one of an earlier
+    /// try, and the real one may then be taken for the next packet's, which the car may never have got. An
+    /// upload in which any packet needed more than one try is therefore read back (AP_GET_ROUTE_PART, 20
+    /// points per request): the car's route must hold as many points as were sent since this client last
+    /// emptied it ([`CarError::RouteLength`]), and end with the points sent ([`CarError::RouteNotStored`]).
+    /// Without an emptied route to count from, or once the car's ring may have wrapped, only what can be
+    /// read in one piece is compared (a skipped check is logged).
+    ///
+    /// Timeout: at most `tries` × `request_timeout` per packet, and as much again per 20 points read back.
+    /// Cancellation: packets already acked stay on the car; the route is then incomplete, so clear or
+    /// replace it.
     pub async fn add_points(&self, points: &[RoutePoint]) -> Result<(), CarError> {
         self.send_route(points, false).await
     }
@@ -518,6 +558,10 @@ impl Car {
             if !route.active {
                 // Inactive: the car clears the route, and with it its duplicate memory, before storing the new one.
                 route.last_first = None;
+                route.sent_since_empty = Some(0);
+            } else {
+                // Active: the car cuts the route back to where it is driving; the count is lost.
+                route.sent_since_empty = None;
             }
         }
         self.send_route(points, true).await
@@ -527,16 +571,67 @@ impl Car {
         let shared = self.shared();
         let _one_upload_at_a_time = shared.uploads.lock().await;
         shared.check_packet_starts(points)?;
+        let mut retried = false;
         for (n, packet) in points.chunks(POINTS_PER_PACKET).enumerate() {
             let request = if replace_first && n == 0 {
                 Request::ReplaceRoute(packet.to_vec())
             } else {
                 Request::AddPoints(packet.to_vec())
             };
-            shared
-                .acked(&request, shared.config.request_timeout)
+            let tries = shared
+                .acked_after(&request, shared.config.request_timeout)
                 .await?;
+            retried |= tries > 1;
             shared.remember_first_point(&packet[0]);
+            let mut route = lock(&shared.route);
+            route.sent_since_empty = route.sent_since_empty.map(|sent| sent + packet.len());
+        }
+        if retried {
+            self.check_route_ends_with(points).await?;
+        }
+        Ok(())
+    }
+
+    /// Reads the last `points.len()` points of the car's route and compares their (x, y) with `points`;
+    /// when this client knows how many points the car should hold, checks the route's length too.
+    async fn check_route_ends_with(&self, points: &[RoutePoint]) -> Result<(), CarError> {
+        let route_len = self.route_part(0, 0).await?.route_len;
+        let held = usize::try_from(route_len).unwrap_or(0);
+        let expected = lock(&self.shared().route)
+            .sent_since_empty
+            .filter(|&sent| sent <= self.version().route_capacity());
+        if let Some(sent) = expected
+            && held != sent
+        {
+            return Err(CarError::RouteLength { held, sent });
+        }
+        let Some(first) = held.checked_sub(points.len()) else {
+            tracing::warn!(
+                route_len,
+                sent = points.len(),
+                "the car's route ring may have wrapped: the upload cannot be read back"
+            );
+            return Ok(());
+        };
+        for (k, chunk) in points.chunks(usize::from(MAX_ROUTE_PART)).enumerate() {
+            let offset = k * usize::from(MAX_ROUTE_PART);
+            let at = i32::try_from(first + offset).unwrap_or(i32::MAX);
+            let count = u8::try_from(chunk.len()).unwrap_or(MAX_ROUTE_PART);
+            let stored = self.route_part(at, count).await?.points;
+            for (i, sent) in chunk.iter().enumerate() {
+                let held = stored.get(i).copied().unwrap_or_default();
+                let same = (held.px - sent.px).abs() < STORED_POINT_TOLERANCE_M
+                    && (held.py - sent.py).abs() < STORED_POINT_TOLERANCE_M;
+                if !same {
+                    return Err(CarError::RouteNotStored {
+                        index: offset + i,
+                        sent_x: sent.px,
+                        sent_y: sent.py,
+                        stored_x: held.px,
+                        stored_y: held.py,
+                    });
+                }
+            }
         }
         Ok(())
     }
@@ -549,7 +644,10 @@ impl Car {
         shared
             .acked(&Request::ClearPoints, shared.config.request_timeout)
             .await?;
-        *lock(&shared.route) = RouteMemory::default();
+        *lock(&shared.route) = RouteMemory {
+            sent_since_empty: Some(0),
+            ..RouteMemory::default()
+        };
         Ok(())
     }
 

@@ -36,6 +36,12 @@ impl FirmwareVersion {
         if self.major >= 12 { 24 } else { 16 }
     }
 
+    /// Points in the car's route ring (protocol §6.5): 1000 from 12.0, 500 before. Writing past it
+    /// overwrites points not yet driven.
+    pub fn route_capacity(self) -> usize {
+        if self.major >= 12 { 1000 } else { 500 }
+    }
+
     /// Whether ids 76–89 use the new numbering (12.1 and later).
     pub fn new_command_ids(self) -> bool {
         self >= FirmwareVersion::V12_1

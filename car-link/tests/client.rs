@@ -152,6 +152,51 @@ async fn add_points_retries_when_an_ack_is_dropped() {
     // 12 points in packets of 5: the first packet three times (two lost acks), then 5 and 2.
     assert_eq!(sent, vec![5, 5, 5, 5, 2]);
     assert_eq!(car.health().timeouts, 2);
+    // After the retries the upload was read back: the route's length, then its last 12 points.
+    let read_back: Vec<(i32, u8)> = requests(&log)
+        .iter()
+        .filter_map(|r| match r {
+            Request::GetRoutePart { first, num } => Some((*first, *num)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(read_back, vec![(0, 0), (0, 12)]);
+}
+
+#[tokio::test(start_paused = true)]
+async fn an_upload_without_retries_is_not_read_back() {
+    let (car, log) = pipe_car(Behaviour::default(), no_keepalive()).await;
+    let car = car.expect("handshake");
+    let points: Vec<RoutePoint> = (0..12)
+        .map(|i| RoutePoint::at(f64::from(i), 0.0, 1.0))
+        .collect();
+    car.add_points(&points).await.expect("acked");
+    let reads = requests(&log)
+        .iter()
+        .filter(|r| matches!(r, Request::GetRoutePart { .. }))
+        .count();
+    assert_eq!(reads, 0);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_late_ack_taken_for_a_lost_packet_is_caught_by_reading_the_route_back() {
+    let behaviour = Behaviour {
+        late_ack_then_lost_packet: true,
+        ..Behaviour::default()
+    };
+    let (car, _) = pipe_car(behaviour, no_keepalive()).await;
+    let car = car.expect("handshake");
+    car.clear_route().await.expect("cleared");
+    let points: Vec<RoutePoint> = (0..12)
+        .map(|i| RoutePoint::at(f64::from(i), 0.0, 1.0))
+        .collect();
+    // The first packet's retry is answered, then the late ack of its first try answers the second
+    // packet, which the car never got: every packet looks acked, but points 5–9 are missing.
+    let result = car.add_points(&points).await;
+    assert!(
+        matches!(result, Err(CarError::RouteLength { held: 7, sent: 12 })),
+        "{result:?}"
+    );
 }
 
 #[tokio::test(start_paused = true)]

@@ -162,7 +162,10 @@ fn every_pose_without_a_return_route_is_boxed_in() {
         let s = scenario(name);
         let start = s.start_route.positions();
         let open = Pose::new(start[0], (start[1] - start[0]).heading());
-        assert!(escapes(&s, open), "{name}: the search finds the way out of the start");
+        assert!(
+            escapes(&s, open),
+            "{name}: the search finds the way out of the start"
+        );
         let mut rng = Pcg64Mcg::seed_from_u64(1);
         let b = s.area.bbox();
         let mut poses = 0;

@@ -94,6 +94,9 @@ pub(super) struct RouteMemory {
     pub(super) last_first: Option<(f64, f64)>,
     /// Whether the autopilot was last switched on by this client.
     pub(super) active: bool,
+    /// Points sent since the route was last emptied by this client (clear, or replace while inactive):
+    /// what the car's route length reads while the ring has not wrapped. `None` until then.
+    pub(super) sent_since_empty: Option<usize>,
 }
 
 #[derive(Debug)]
@@ -336,21 +339,26 @@ impl Shared {
         self.send(payload, command).await.map(|_| ())
     }
 
-    /// Sends `request` and waits for the reply with the same (car, command), retrying on timeouts. Not for
-    /// GET_STATE, whose replies go to the first-in-first-out queue: use [`Shared::state`].
+    /// Sends `request` and waits for the reply with the same (car, command), retrying on timeouts; returns
+    /// the answer, when the answered try was sent, and how many tries were sent. Not for GET_STATE, whose
+    /// replies go to the first-in-first-out queue: use [`Shared::state`].
+    ///
+    /// After a retry the answer may be the late reply to an earlier try of the same request, and the reply
+    /// to the answered try may still come: a caller sending several requests of one command in a row (a
+    /// route upload) must check the outcome another way (see `Car::add_points`).
     pub(super) async fn exchange(
         &self,
         request: &Request,
         per_try: Duration,
         tries: u32,
-    ) -> Result<(Answer, Instant), CarError> {
+    ) -> Result<(Answer, Instant, u32), CarError> {
         let (payload, identity, command) = self.encode(request)?;
         let command = command.unwrap_or(CommandId::GetState);
         let code = payload[1];
         let lane = self.lane(code);
         let _one_at_a_time = lane.lock().await;
         let key = ((identity.car_id != ID_ALL).then_some(identity.car_id), code);
-        for _ in 0..tries.max(1) {
+        for sent in 1..=tries.max(1) {
             let (tx, rx) = oneshot::channel();
             lock(&self.waiters).insert(key, tx);
             let _waiter = WaiterGuard { shared: self, key };
@@ -359,7 +367,7 @@ impl Shared {
                 Ok(Ok(answer)) => {
                     lock(&self.health)
                         .record_rtt(answer.received_at.saturating_duration_since(sent_at));
-                    return Ok((answer, sent_at));
+                    return Ok((answer, sent_at, sent));
                 }
                 Ok(Err(_)) => return Err(CarError::LinkLost),
                 Err(_) => self.note_timeout(command),
@@ -373,14 +381,19 @@ impl Shared {
     }
 
     pub(super) async fn acked(&self, request: &Request, per_try: Duration) -> Result<(), CarError> {
-        let reply = self
-            .exchange(request, per_try, self.config.tries)
-            .await?
-            .0
-            .reply;
+        self.acked_after(request, per_try).await.map(|_tries| ())
+    }
+
+    /// [`Shared::acked`], returning how many tries were sent.
+    pub(super) async fn acked_after(
+        &self,
+        request: &Request,
+        per_try: Duration,
+    ) -> Result<u32, CarError> {
+        let (answer, _, tries) = self.exchange(request, per_try, self.config.tries).await?;
         let command = request.command(self.identity().version);
-        match reply {
-            Reply::Ack(acked) if Some(acked) == command => Ok(()),
+        match answer.reply {
+            Reply::Ack(acked) if Some(acked) == command => Ok(tries),
             other => Err(CarError::UnexpectedReply {
                 command: command.unwrap_or(CommandId::GetState),
                 reply: format!("{other:?}"),

@@ -8,7 +8,7 @@ use std::sync::{Arc, Mutex};
 
 use car_link::config::MainConfig;
 use car_link::frame::FrameCodec;
-use car_link::message::{CarState, Dialect, EnuRef, Reply, Request, RoutePart};
+use car_link::message::{CarState, Dialect, EnuRef, Reply, Request, RoutePart, RoutePoint};
 use car_link::version::{CommandId, FirmwareVersion};
 use futures::{SinkExt, StreamExt};
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, DuplexStream};
@@ -37,6 +37,9 @@ pub struct Behaviour {
     pub debug_noise: bool,
     /// Lose the reply to every n-th GET_STATE (the handshake's is the first).
     pub lose_every_nth_state: Option<usize>,
+    /// Store the first AP_ADD_POINTS but hold its ack; ack the client's retry; then lose the next packet
+    /// and send the held ack instead: a late ack that arrives while the next packet is waiting.
+    pub late_ack_then_lost_packet: bool,
 }
 
 impl Default for Behaviour {
@@ -51,6 +54,7 @@ impl Default for Behaviour {
             hang_up_after: None,
             debug_noise: false,
             lose_every_nth_state: None,
+            late_ack_then_lost_packet: false,
         }
     }
 }
@@ -156,6 +160,41 @@ pub fn sample_state(version: FirmwareVersion) -> CarState {
     }
 }
 
+/// The stored route, with the firmware's duplicate-packet rule (autopilot inactive throughout).
+#[derive(Debug, Default)]
+struct Route {
+    points: Vec<RoutePoint>,
+    last_first: Option<(f64, f64)>,
+}
+
+impl Route {
+    fn add(&mut self, packet: &[RoutePoint]) {
+        let Some(first) = packet.first() else { return };
+        let duplicate = self
+            .last_first
+            .is_some_and(|(x, y)| (x - first.px).abs() < 1e-4 && (y - first.py).abs() < 1e-4);
+        if !duplicate {
+            self.last_first = Some((first.px, first.py));
+            self.points.extend_from_slice(packet);
+        }
+    }
+
+    fn part(&self, first: i32, num: u8) -> RoutePart {
+        let points = (0..i64::from(num))
+            .map(|k| {
+                usize::try_from(i64::from(first) + k)
+                    .ok()
+                    .and_then(|i| self.points.get(i).copied())
+                    .unwrap_or_default()
+            })
+            .collect();
+        RoutePart {
+            route_len: i32::try_from(self.points.len()).unwrap_or(i32::MAX),
+            points,
+        }
+    }
+}
+
 /// Serves one stream until it closes (or the behaviour says to hang up).
 pub async fn serve<S>(stream: S, behaviour: Behaviour, log: Arc<Mutex<Log>>)
 where
@@ -167,6 +206,8 @@ where
     let mut enu = EnuRef::default();
     let mut config = MainConfig::factory_default(behaviour.version, behaviour.id);
     let mut dropped_acks = 0;
+    let mut route = Route::default();
+    let mut add_points_seen = 0usize;
     let mut answered = 0usize;
     let mut states = 0usize;
     while let Some(Ok(item)) = framed.next().await {
@@ -212,9 +253,32 @@ where
                 lines.extend(faults.command(text));
                 lines.into_iter().map(Reply::Printf).collect()
             }
-            Request::AddPoints(_) if dropped_acks < behaviour.drop_add_point_acks => {
-                dropped_acks += 1;
-                Vec::new()
+            Request::AddPoints(points) => {
+                add_points_seen += 1;
+                let late = behaviour.late_ack_then_lost_packet;
+                if late && add_points_seen == 3 {
+                    // This packet is lost; the ack held from the first try arrives now.
+                    vec![Reply::Ack(CommandId::ApAddPoints)]
+                } else {
+                    route.add(points);
+                    if late && add_points_seen == 1 {
+                        Vec::new()
+                    } else if dropped_acks < behaviour.drop_add_point_acks {
+                        dropped_acks += 1;
+                        Vec::new()
+                    } else {
+                        vec![Reply::Ack(CommandId::ApAddPoints)]
+                    }
+                }
+            }
+            Request::ReplaceRoute(points) => {
+                route = Route::default();
+                route.add(points);
+                vec![Reply::Ack(CommandId::ApReplaceRoute)]
+            }
+            Request::ClearPoints => {
+                route = Route::default();
+                vec![Reply::Ack(CommandId::ApClearPoints)]
             }
             Request::SetEnuRef(reference) => {
                 enu = *reference;
@@ -229,11 +293,8 @@ where
                 config = record.clone();
                 vec![Reply::Ack(CommandId::SetMainConfig)]
             }
-            Request::GetRoutePart { num, .. } if *num <= 20 => {
-                vec![Reply::RoutePart(RoutePart {
-                    route_len: 0,
-                    points: vec![Default::default(); usize::from(*num)],
-                })]
+            Request::GetRoutePart { first, num } if *num <= 20 => {
+                vec![Reply::RoutePart(route.part(*first, *num))]
             }
             other => match other.command(behaviour.version) {
                 Some(command) if car_link::message::is_acked(command) => vec![Reply::Ack(command)],
