@@ -48,7 +48,9 @@ pub const WATCHDOG: Duration = Duration::from_millis(2000);
 pub struct CarConfig {
     /// The id requests are sent to before the handshake; 255 (broadcast) learns the car's own id from its reply.
     pub car_id: u8,
-    /// Time allowed for each try of a request (MAVLink mission style: about 250 ms per item).
+    /// Time allowed for each try of a request (MAVLink mission style: about 250 ms per item). It also bounds
+    /// the wait for room in the send queue, which is full only when the link stopped taking bytes: such a
+    /// call ends with [`CarError::SendStalled`] after at most this long on top of its documented timeout.
     pub request_timeout: Duration,
     /// Tries of an acked request before giving up (5).
     pub tries: u32,
@@ -56,7 +58,8 @@ pub struct CarConfig {
     pub main_config_timeout: Duration,
     /// How long a terminal command waits for its first PRINTF line (1 s).
     pub terminal_timeout: Duration,
-    /// After a PRINTF line, how long without another one ends the reply (100 ms).
+    /// After a PRINTF line, how long without another one ends the reply (100 ms); a reply ends at twice
+    /// `terminal_timeout` however long it is.
     pub terminal_quiet: Duration,
     /// The keepalive sends GET_STATE whenever nothing that feeds the watchdog was sent for this long (250 ms;
     /// the protocol asks for at least every 500 ms; longer periods are refused). `None` disables the keepalive
@@ -176,6 +179,12 @@ pub enum CarError {
         stored_x: f64,
         /// What the car holds in its place, m.
         stored_y: f64,
+    },
+    /// The link's send queue stayed full: the transport stopped taking bytes (a stalled connection).
+    #[error("the link took no bytes for {waited:?}: the send queue is full")]
+    SendStalled {
+        /// How long the request waited for room.
+        waited: Duration,
     },
     /// Read back after an upload with retries, the car holds another number of route points than were sent
     /// since the route was last emptied: a packet was lost although an ack seemed to answer it.
@@ -685,7 +694,8 @@ impl Car {
     /// autopilot. The reference safe stop is 50 A, then polling until the speed is below 0.1 m/s. RC_CONTROL has
     /// no reply: success means "sent"; watch the speed in the state.
     ///
-    /// Timeout: none beyond queueing. Cancellation: the command may or may not be sent.
+    /// Timeout: only the wait for room in the send queue, at most `request_timeout`
+    /// ([`CarError::SendStalled`]). Cancellation: the command may or may not be sent.
     pub async fn brake(&self, current_a: f64) -> Result<(), CarError> {
         let rc = RcControl {
             mode: RcMode::CurrentBrake,
@@ -697,7 +707,8 @@ impl Car {
 
     /// Manual control (RC_CONTROL); no reply. It deactivates the autopilot.
     ///
-    /// Timeout: none beyond queueing. Cancellation: the command may or may not be sent.
+    /// Timeout: only the wait for room in the send queue, at most `request_timeout`
+    /// ([`CarError::SendStalled`]). Cancellation: the command may or may not be sent.
     pub async fn rc_control(&self, rc: RcControl) -> Result<(), CarError> {
         self.shared().fire(&Request::RcControl(rc)).await
     }
@@ -879,7 +890,8 @@ impl Car {
     /// A command with no output (e.g. `set_id_quiet`) returns an empty string.
     ///
     /// Timeout: waits up to `terminal_timeout` for the first line, then until `terminal_quiet` passes without
-    /// one. A lost link gives [`CarError::LinkLost`]. Cancellation: safe; the command may already have run.
+    /// one, and never more than twice `terminal_timeout` in all (a car printing without pause). A lost link
+    /// gives [`CarError::LinkLost`]. Cancellation: safe; the command may already have run.
     pub async fn terminal(&self, command: &str) -> Result<String, CarError> {
         Ok(self
             .shared()

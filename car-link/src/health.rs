@@ -3,6 +3,8 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
+use tokio::time::Instant;
+
 /// Round trips kept for the percentiles.
 const RTT_WINDOW: usize = 1024;
 
@@ -27,6 +29,10 @@ pub struct LinkHealth {
     pub dropped_frames: u64,
     /// Valid frames whose payload did not decode.
     pub undecodable: u64,
+    /// Time since the car last sent a valid frame (`None` before the first). Over UDP, or a TCP connection
+    /// whose far end vanished without closing it, a dead car shows here and in the timeouts, since no
+    /// connection closes to report it lost.
+    pub silent_for: Option<Duration>,
 }
 
 /// Accumulates health figures; snapshots are taken with [`HealthRecorder::snapshot`].
@@ -34,6 +40,8 @@ pub struct LinkHealth {
 pub(crate) struct HealthRecorder {
     rtts: VecDeque<Duration>,
     pub(crate) figures: LinkHealth,
+    /// When the car last sent a valid frame.
+    pub(crate) last_heard: Option<Instant>,
 }
 
 impl HealthRecorder {
@@ -51,6 +59,7 @@ impl HealthRecorder {
         LinkHealth {
             rtt_p50: percentile(&sorted, 50),
             rtt_p99: percentile(&sorted, 99),
+            silent_for: self.last_heard.map(|heard| heard.elapsed()),
             ..self.figures.clone()
         }
     }

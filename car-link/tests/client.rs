@@ -97,6 +97,51 @@ async fn a_silent_car_times_out_instead_of_answering_zeros() {
         "{result:?}"
     );
     assert_eq!(car.health().timeouts, 6);
+    // Nothing came since the handshake's reply: one state try and five clear tries ago.
+    let silent = car.health().silent_for.expect("heard once");
+    assert!(silent >= Duration::from_millis(1500), "{silent:?}");
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_link_that_stops_taking_bytes_stalls_the_call_instead_of_blocking_it() {
+    let behaviour = Behaviour {
+        stop_reading_after: Some(1),
+        ..Behaviour::default()
+    };
+    let (car, _) = pipe_car(behaviour, no_keepalive()).await;
+    let car = car.expect("handshake");
+    // Commands without a reply fill the pipe, then the send queue; then one waits its request timeout.
+    let mut sent = 0;
+    let error = loop {
+        match car.brake(50.0).await {
+            Ok(()) => sent += 1,
+            Err(error) => break error,
+        }
+        assert!(sent < 100_000, "the link never backed up");
+    };
+    assert!(
+        matches!(error, CarError::SendStalled { waited } if waited == Duration::from_millis(250)),
+        "{error:?} after {sent} commands"
+    );
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_car_that_never_stops_printing_ends_the_terminal_reply_at_twice_the_timeout() {
+    let behaviour = Behaviour {
+        chatty_terminal: Some(200),
+        ..Behaviour::default()
+    };
+    let (car, _) = pipe_car(behaviour, no_keepalive()).await;
+    let car = car.expect("handshake");
+    let started = tokio::time::Instant::now();
+    let text = car.terminal("ping").await.expect("a reply");
+    // Lines come every 50 ms for 10 s; the reply ends after 2 s with about 40 of them.
+    assert!(
+        started.elapsed() <= Duration::from_millis(2001),
+        "{:?}",
+        started.elapsed()
+    );
+    assert!(text.lines().count() >= 30, "{text}");
 }
 
 #[tokio::test(start_paused = true)]

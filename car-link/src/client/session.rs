@@ -316,10 +316,16 @@ impl Shared {
         Ok(sample)
     }
 
-    /// Sends a payload; notes the watchdog feed.
+    /// Sends a payload; notes the watchdog feed. Waits at most `request_timeout` for room in the send queue
+    /// (full only when the link stopped taking bytes).
     async fn send(&self, payload: Bytes, command: Option<CommandId>) -> Result<Instant, CarError> {
         let sender = lock(&self.outgoing).clone().ok_or(CarError::LinkLost)?;
-        sender.send(payload).await.map_err(|_| CarError::LinkLost)?;
+        let waited = self.config.request_timeout;
+        match tokio::time::timeout(waited, sender.send(payload)).await {
+            Ok(Ok(())) => {}
+            Ok(Err(_)) => return Err(CarError::LinkLost),
+            Err(_) => return Err(CarError::SendStalled { waited }),
+        }
         let now = Instant::now();
         if command.is_some_and(CommandId::resets_watchdog) {
             *lock(&self.last_feed) = Some(now);
@@ -458,13 +464,15 @@ impl Shared {
         let losses = self.losses.load(Ordering::SeqCst);
         self.send(payload, cmd).await?;
         let first_deadline = Instant::now() + self.config.terminal_timeout;
+        // However often the car keeps printing, the reply ends here.
+        let last_deadline = first_deadline + self.config.terminal_timeout;
         let mut lines: Vec<String> = Vec::new();
         let mut deadline = first_deadline;
         while !done(&lines) {
             match tokio::time::timeout_at(deadline, printf.recv()).await {
                 Ok(Ok(text)) if relevant(&text) => {
                     lines.push(text);
-                    deadline = Instant::now() + self.config.terminal_quiet;
+                    deadline = (Instant::now() + self.config.terminal_quiet).min(last_deadline);
                 }
                 Ok(Ok(_)) | Ok(Err(broadcast::error::RecvError::Lagged(_))) => {}
                 Ok(Err(broadcast::error::RecvError::Closed)) | Err(_) => break,
@@ -515,7 +523,10 @@ pub(super) async fn supervise(
                 incoming = link.recv() => incoming,
             };
             match incoming {
-                Some(Incoming::Payload(payload)) => shared.dispatch(&payload),
+                Some(Incoming::Payload(payload)) => {
+                    lock(&shared.health).last_heard = Some(Instant::now());
+                    shared.dispatch(&payload);
+                }
                 Some(Incoming::Dropped(error)) => {
                     tracing::debug!(%error, "frame dropped");
                     lock(&shared.health).figures.dropped_frames += 1;

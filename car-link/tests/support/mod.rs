@@ -40,6 +40,10 @@ pub struct Behaviour {
     /// Store the first AP_ADD_POINTS but hold its ack; ack the client's retry; then lose the next packet
     /// and send the held ack instead: a late ack that arrives while the next packet is waiting.
     pub late_ack_then_lost_packet: bool,
+    /// Answer this many requests, then stop reading the stream (keep it open): the host's writes back up.
+    pub stop_reading_after: Option<usize>,
+    /// Answer a terminal command with this many lines, 50 ms apart (a car printing without pause).
+    pub chatty_terminal: Option<usize>,
 }
 
 impl Default for Behaviour {
@@ -55,6 +59,8 @@ impl Default for Behaviour {
             debug_noise: false,
             lose_every_nth_state: None,
             late_ack_then_lost_packet: false,
+            stop_reading_after: None,
+            chatty_terminal: None,
         }
     }
 }
@@ -227,6 +233,9 @@ where
         if behaviour.silent_after.is_some_and(|n| answered >= n) {
             continue;
         }
+        if behaviour.stop_reading_after.is_some_and(|n| answered >= n) {
+            std::future::pending::<()>().await;
+        }
         answered += 1;
         let reply_id = if id == 254 { 254 } else { behaviour.id };
         let replies: Vec<Reply> = match &request {
@@ -244,6 +253,19 @@ where
                 }
                 replies.push(Reply::State(sample_state(behaviour.version)));
                 replies
+            }
+            Request::TerminalCmd(_) if behaviour.chatty_terminal.is_some() => {
+                for k in 0..behaviour.chatty_terminal.unwrap_or(0) {
+                    let line = Reply::Printf(format!("debug line {k}\n"));
+                    let Ok(payload) = line.encode(reply_id, dialect) else {
+                        continue;
+                    };
+                    if framed.send(payload).await.is_err() {
+                        return;
+                    }
+                    tokio::time::sleep(Duration::from_millis(50)).await;
+                }
+                Vec::new()
             }
             Request::TerminalCmd(text) => {
                 let mut lines = Vec::new();
