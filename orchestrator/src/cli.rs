@@ -279,7 +279,8 @@ pub enum RouteCommand {
     /// size (4–7 points by default), each proven drivable by the ahead margin.
     Generate(GenerateArgs),
     /// Plan the return route from a pose to the scenario's recovery route (what the car drives
-    /// between tests), with its length, a lower bound and their ratio.
+    /// between tests), with its length, a lower bound and their ratio. Exit status: 0 a route,
+    /// 1 no route found, 2 error (a pose outside the area, a bad argument).
     Return(ReturnArgs),
 }
 

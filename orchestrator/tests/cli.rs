@@ -286,3 +286,20 @@ fn route_return_refuses_a_pose_outside_the_area() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("X,Y,HEADING_DEG"));
 }
+
+#[test]
+fn route_return_exits_one_when_the_car_is_boxed_in() {
+    // In the courtyard's narrow southern pocket, 1.2 m from its edge ahead: turning either way
+    // meets an edge or the pocket's narrowing tip.
+    let out = drivecheck(&[
+        "route",
+        "return",
+        "courtyard",
+        "--from",
+        "0,-11.73,135.8",
+        "--seed",
+        "1",
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("moved by hand"));
+}

@@ -4,7 +4,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use recovery::{PlanConfig, ReturnRoute};
+use recovery::{PlanConfig, RecoveryError, ReturnRoute};
 use serde::Serialize;
 use trajgen::{Point, Pose};
 
@@ -70,15 +70,28 @@ pub fn plan(args: &ReturnArgs) -> Result<ExitCode> {
     let started = Instant::now();
     // From inside the clearance band no route can keep the clearance: relax it as the runner
     // does, and say so.
-    let route = config
-        .plan_with_fallback(
-            &scenario.area,
-            from,
-            &recovery_route,
-            &scenario.constraints(),
-            &mut rng(seed),
-        )
-        .with_context(|| format!("no return route from {}", args.from))?;
+    let planned = config.plan_with_fallback(
+        &scenario.area,
+        from,
+        &recovery_route,
+        &scenario.constraints(),
+        &mut rng(seed),
+    );
+    let route = match planned {
+        Ok(route) => route,
+        // A finding about the pose, not a usage error: exit 1, as an unsafe area does.
+        Err(error @ RecoveryError::NoRoute { .. }) => {
+            eprintln!(
+                "no return route from {}: {error}; a car this boxed in (too close to an edge \
+                 ahead to turn away) must be moved by hand",
+                args.from
+            );
+            return Ok(ExitCode::from(1));
+        }
+        Err(error) => {
+            return Err(error).with_context(|| format!("no return route from {}", args.from));
+        }
+    };
     let plan_ms = started.elapsed().as_secs_f64() * 1e3;
     let summary = summarise(&scenario.name, seed, &route, plan_ms);
     if args.json {
