@@ -28,6 +28,7 @@ pub mod error;
 pub mod model;
 pub mod settings;
 
+mod locate;
 mod raw;
 mod validate;
 mod write;
@@ -108,18 +109,32 @@ pub fn load(path: impl AsRef<Path>) -> Result<Loaded, ScenarioError> {
 /// no `name`, gives the name: its file stem).
 pub fn from_toml_str(text: &str, source_name: &str) -> Result<Loaded, ScenarioError> {
     let raw = raw::parse_toml(text, source_name)?;
-    finish(raw, source_name)
+    finish(raw, source_name, |field| locate::in_toml(text, field))
 }
 
 /// Parses and validates a scenario in the reference route XML, naming it `name`.
 pub fn from_xml_str(text: &str, source_name: &str, name: &str) -> Result<Loaded, ScenarioError> {
-    let raw = xml::parse_xml(text, source_name, name)?;
-    finish(raw, source_name)
+    let (raw, index) = xml::parse_xml(text, source_name, name)?;
+    finish(raw, source_name, |field| index.locate(text, field))
 }
 
-fn finish(raw: raw::RawScenario, source_name: &str) -> Result<Loaded, ScenarioError> {
-    let scenario = raw::build(raw, source_name)?;
-    let warnings = scenario.validate(source_name)?;
+/// Builds and validates the scenario; an error in a field gets the line and column where the
+/// field is written (`locate`), when the parser did not give one.
+fn finish(
+    raw: raw::RawScenario,
+    source_name: &str,
+    locate: impl Fn(&str) -> Option<Location>,
+) -> Result<Loaded, ScenarioError> {
+    let located = |mut error: ScenarioError| {
+        if error.place.location.is_none()
+            && let Some(field) = &error.place.field
+        {
+            error.place.location = locate(field);
+        }
+        error
+    };
+    let scenario = raw::build(raw, source_name).map_err(located)?;
+    let warnings = scenario.validate(source_name).map_err(located)?;
     Ok(Loaded {
         scenario,
         warnings,

@@ -11,6 +11,7 @@ use quick_xml::events::Event;
 use serde::Deserialize;
 
 use crate::error::{Location, Problem, ScenarioError};
+use crate::locate::XmlIndex;
 use crate::raw::{RawAnchor, RawPoint, RawRoutePoint, RawScenario};
 
 #[derive(Debug, Deserialize)]
@@ -79,23 +80,45 @@ fn role(id: u8) -> Option<Role> {
 }
 
 /// Parses reference XML into the file form of a scenario named `name`.
+/// Also returns where each element starts, so that problems found later name a line.
 pub(crate) fn parse_xml(
     text: &str,
     source_name: &str,
     name: &str,
-) -> Result<RawScenario, ScenarioError> {
-    check_well_formed(text, source_name)?;
+) -> Result<(RawScenario, XmlIndex), ScenarioError> {
+    let mut index = check_well_formed(text, source_name)?;
     let routes: XmlRoutes = quick_xml::de::from_str(text).map_err(|e| {
         ScenarioError::in_source(source_name, None, Problem::XmlSyntax(e.to_string()))
     })?;
-    let err = |field: String, problem| ScenarioError::in_field(source_name, field, problem);
+    let by_role = assign_roles(&routes.routes);
+    if let Ok(by_role) = &by_role {
+        let mut cutouts = 0;
+        for &(role, at, _) in by_role {
+            let field = match role {
+                Role::Start => "start_route".to_owned(),
+                Role::Recovery => "recovery_route".to_owned(),
+                Role::Fence => "fence".to_owned(),
+                Role::Cutout(_) => {
+                    cutouts += 1;
+                    format!("cutouts[{}]", cutouts - 1)
+                }
+                Role::Ignored => continue,
+            };
+            index.role(field, at);
+        }
+    }
+    let err = |field: String, problem| {
+        let mut error = ScenarioError::in_field(source_name, field.clone(), problem);
+        error.place.location = index.locate(text, &field);
+        error
+    };
     let anchors = routes
         .anchors
         .map(|a| anchors(&a.anchors))
         .transpose()
         .map_err(|(f, p)| err(f, p))?
         .unwrap_or_default();
-    let by_role = assign_roles(&routes.routes).map_err(|(f, p)| err(f, p))?;
+    let by_role = by_role.map_err(|(f, p)| err(f, p))?;
     let mut scenario = RawScenario {
         name: Some(name.to_owned()),
         description: None,
@@ -115,7 +138,7 @@ pub(crate) fn parse_xml(
         (1, "recovery route", Role::Recovery),
         (2, "fence", Role::Fence),
     ] {
-        if !by_role.iter().any(|(r, _)| *r == needed) {
+        if !by_role.iter().any(|(r, _, _)| *r == needed) {
             return Err(ScenarioError::in_source(
                 source_name,
                 None,
@@ -123,23 +146,27 @@ pub(crate) fn parse_xml(
             ));
         }
     }
-    for (role, route) in by_role {
+    for (role, _, route) in by_role {
         fill(&mut scenario, role, route).map_err(|(f, p)| err(f, p))?;
     }
-    Ok(scenario)
+    Ok((scenario, index))
 }
 
-/// Reads every event once so that syntax errors carry a line and column, and checks the root.
-fn check_well_formed(text: &str, source_name: &str) -> Result<(), ScenarioError> {
+/// Reads every event once so that syntax errors carry a line and column, checks the root, and
+/// notes where each element starts.
+fn check_well_formed(text: &str, source_name: &str) -> Result<XmlIndex, ScenarioError> {
     let mut reader = Reader::from_str(text);
     let mut root_seen = false;
+    let mut index = XmlIndex::default();
+    let mut open: Vec<String> = Vec::new();
     loop {
+        let starts_at = usize::try_from(reader.buffer_position()).unwrap_or(usize::MAX);
         let event = reader.read_event().map_err(|e| {
             let offset = usize::try_from(reader.error_position()).unwrap_or(usize::MAX);
             let location = Some(Location::of_offset(text, offset));
             ScenarioError::in_source(source_name, location, Problem::XmlSyntax(e.to_string()))
         })?;
-        match event {
+        match &event {
             Event::Start(start) | Event::Empty(start) if !root_seen => {
                 root_seen = true;
                 if start.name().0 != "routes" {
@@ -154,12 +181,23 @@ fn check_well_formed(text: &str, source_name: &str) -> Result<(), ScenarioError>
                     ));
                 }
             }
+            _ => {}
+        }
+        match event {
+            Event::Start(start) => {
+                index.element(&open, &start, starts_at);
+                open.push(start.name().0.to_owned());
+            }
+            Event::Empty(start) => index.element(&open, &start, starts_at),
+            Event::End(_) => {
+                open.pop();
+            }
             Event::Eof => break,
             _ => {}
         }
     }
     if root_seen {
-        Ok(())
+        Ok(index)
     } else {
         Err(ScenarioError::in_source(
             source_name,
@@ -196,8 +234,9 @@ fn anchors(list: &[XmlAnchor]) -> Result<Vec<RawAnchor>, FieldProblem> {
         .collect()
 }
 
-/// Each route with its role, cutouts in id order; ignored routes dropped.
-fn assign_roles(routes: &[XmlRoute]) -> Result<Vec<(Role, &XmlRoute)>, FieldProblem> {
+/// Each route with its role and its index in the document, cutouts in id order; ignored routes
+/// dropped.
+fn assign_roles(routes: &[XmlRoute]) -> Result<Vec<(Role, usize, &XmlRoute)>, FieldProblem> {
     let mut seen: Vec<u8> = Vec::new();
     let mut assigned = Vec::new();
     for (i, route) in routes.iter().enumerate() {
@@ -212,10 +251,10 @@ fn assign_roles(routes: &[XmlRoute]) -> Result<Vec<(Role, &XmlRoute)>, FieldProb
         }
         seen.push(id);
         if role != Role::Ignored {
-            assigned.push((role, route));
+            assigned.push((role, i, route));
         }
     }
-    assigned.sort_by_key(|(role, _)| match role {
+    assigned.sort_by_key(|(role, _, _)| match role {
         Role::Cutout(k) => *k,
         _ => 0,
     });
@@ -328,6 +367,36 @@ mod tests {
             error.to_string().contains("unknown field `colour`"),
             "{error}"
         );
+    }
+
+    #[test]
+    fn problems_found_after_parsing_name_the_line_of_the_element() {
+        let text = square("").replace("><", ">\n<");
+        let line_of = |needle: &str, nth: usize| {
+            text.lines()
+                .enumerate()
+                .filter(|(_, l)| l.contains(needle))
+                .nth(nth)
+                .map(|(i, _)| i + 1)
+        };
+        // The fence is route 2, the first route; its second point's x.
+        let bad = text.replacen("<x>10</x>", "<x>ten</x>", 1);
+        let error = from_xml_str(&bad, "s.xml", "s").unwrap_err();
+        assert_eq!(error.field(), Some("fence[1].x"));
+        assert_eq!(
+            error.place.location.map(|l| l.line),
+            line_of("<x>10</x>", 0)
+        );
+        // A problem of the whole fence (found by validation) points at its <route>.
+        let crossing = text.replacen("<x>10</x>", "<x>-10</x>", 1);
+        let error = from_xml_str(&crossing, "s.xml", "s").unwrap_err();
+        assert_eq!(error.field(), Some("fence"));
+        assert_eq!(error.place.location.map(|l| l.line), line_of("<route>", 0));
+        // An anchor's field.
+        let anchor = text.replace("<height>1</height>", "<height>high</height>");
+        let error = from_xml_str(&anchor, "s.xml", "s").unwrap_err();
+        assert_eq!(error.field(), Some("anchors[0].height"));
+        assert_eq!(error.place.location.map(|l| l.line), line_of("<height>", 0));
     }
 
     #[test]

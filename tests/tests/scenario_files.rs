@@ -36,74 +36,74 @@ const MALFORMED: &[(&str, &str)] = &[
     ),
     (
         "fence-two-vertices.toml",
-        ": fence: a polygon needs at least 3 vertices, found 2",
+        ":4:9: fence: a polygon needs at least 3 vertices, found 2",
     ),
     (
         "fence-self-intersecting.toml",
-        ": fence: edge 0 (from vertex 0) crosses edge 2 (from vertex 2)",
+        ":4:9: fence: edge 0 (from vertex 0) crosses edge 2 (from vertex 2)",
     ),
-    ("fence-not-finite.toml", ": fence[5].x: not a finite number"),
+    ("fence-not-finite.toml", ":10:11: fence[5].x: not a finite number"),
     (
         "cutout-outside-fence.toml",
-        ": cutouts[1]: not entirely inside the fence",
+        ":22:5: cutouts[1]: not entirely inside the fence",
     ),
-    ("cutouts-overlap.toml", ": cutouts[1]: overlaps cutouts[0]"),
+    ("cutouts-overlap.toml", ":22:5: cutouts[1]: overlaps cutouts[0]"),
     (
         "cutout-self-intersecting.toml",
-        ": cutouts[0]: edge 0 (from vertex 0) crosses edge 2 (from vertex 2)",
+        ":21:5: cutouts[0]: edge 0 (from vertex 0) crosses edge 2 (from vertex 2)",
     ),
     (
         "start-route-outside.toml",
-        ": start_route[2]: point (11.000, 2.000) is outside the area",
+        ":13:5: start_route[2]: point (11.000, 2.000) is outside the area",
     ),
     (
         "recovery-route-leaves-area.toml",
-        ": recovery_route[1]: segment 1 leaves the area (it meets the fence or a cutout)",
+        ":17:5: recovery_route[1]: segment 1 leaves the area (it meets the fence or a cutout)",
     ),
     (
         "recovery-far-from-start.toml",
-        ": recovery_route: the recovery route ends 7.07 m from start_route[0]; it must end \
+        ":15:18: recovery_route: the recovery route ends 7.07 m from start_route[0]; it must end \
          within 3.00 m (1.5 × generator.segment_max_m)",
     ),
     (
         "route-one-point.toml",
-        ": start_route: a route needs at least 2 points, found 1",
+        ":10:15: start_route: a route needs at least 2 points, found 1",
     ),
     (
         "route-zero-speed.toml",
-        ": start_route[1].speed: must be greater than 0, found 0",
+        ":12:33: start_route[1].speed: must be greater than 0, found 0",
     ),
     (
         "anchor-duplicate-id.toml",
-        ": anchors[2].id: duplicate id 50 (also anchors[0])",
+        ":34:6: anchors[2].id: duplicate id 50 (also anchors[0])",
     ),
     (
         "anchor-id-out-of-range.toml",
-        ": anchors[1].id: 300 is outside 0–255 (the firmware addresses the UWB module by one byte)",
+        ":28:6: anchors[1].id: 300 is outside 0–255 (the firmware addresses the UWB module by one byte)",
     ),
     (
         "too-many-anchors.toml",
-        ": anchors: 21 anchors; the firmware keeps at most 20",
+        ":21:1: anchors: 21 anchors; the firmware keeps at most 20",
     ),
     (
         "segment-min-above-max.toml",
-        ": generator.segment_min_m: min 2.5 is greater than max 2",
+        ":22:17: generator.segment_min_m: min 2.5 is greater than max 2",
     ),
     (
         "zero-outer-tries.toml",
-        ": generator.outer_tries: must be greater than 0, found 0",
+        ":22:15: generator.outer_tries: must be greater than 0, found 0",
     ),
     (
         "speed-range-reversed.toml",
-        ": campaign.speed_kmh: min 12 is greater than max 3",
+        ":22:13: campaign.speed_kmh: min 12 is greater than max 3",
     ),
     (
         "run-segments-weight-zero.toml",
-        ": campaign.weights.run_segments: must be greater than 0, found 0",
+        ":22:16: campaign.weights.run_segments: must be greater than 0, found 0",
     ),
     (
         "fault-kind-twice.toml",
-        ": campaign.faults.anchor_range.kinds[1]: `offset` is listed twice",
+        ":22:20: campaign.faults.anchor_range.kinds[1]: `offset` is listed twice",
     ),
     (
         "fault-kind-unknown.toml",
@@ -112,11 +112,11 @@ const MALFORMED: &[(&str, &str)] = &[
     ),
     (
         "wall-without-length.toml",
-        ": environment.walls[0]: the wall's ends a and b coincide",
+        ":21:1: environment.walls[0]: the wall's ends a and b coincide",
     ),
     (
         "xml-unknown-route-id.xml",
-        ": route[3].id: unknown route id 9: expected 0 (start route), 1 (recovery route), \
+        ":16:5: route[3].id: unknown route id 9: expected 0 (start route), 1 (recovery route), \
          2 (fence), 3 (ignored) or 4–7 (cutouts)",
     ),
     (
@@ -125,7 +125,7 @@ const MALFORMED: &[(&str, &str)] = &[
     ),
     (
         "xml-not-a-number.xml",
-        ": fence[2].x: `ten` is not a number",
+        ":13:139: fence[2].x: `ten` is not a number",
     ),
     (
         "xml-syntax-error.xml",
