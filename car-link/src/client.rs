@@ -3,7 +3,10 @@
 //! On start it performs the version handshake (GET_STATE, then every layout and id from the reported firmware
 //! version), starts a dispatcher that matches replies to requests by (car id, command) — GET_STATE, which may have
 //! several requests in flight, first in first out — and a keepalive that feeds the car's 2 s communication
-//! watchdog. Every timer is tokio's, so the client runs in virtual time too.
+//! watchdog. Every timer is tokio's, so the client runs in virtual time too. A reply with the (car id, command)
+//! of a waiting request whose payload does not decode is kept as that request's cause of failure: if no reply
+//! that decodes comes within its tries, it fails with [`CarError::UndecodableReply`] rather than
+//! [`CarError::NoReply`] (GET_STATE excepted: such a reply is only counted in [`LinkHealth::undecodable`]).
 //!
 //! Invariant: a lost link is an error ([`CarError::LinkLost`], [`LinkEvent::Lost`]), never a zero state.
 
@@ -27,7 +30,7 @@ use crate::config::{ConfigError, ConfigField, MainConfig};
 use crate::fault::{self, FaultError, FaultKind, MAX_PROBE_ID, Probe};
 use crate::health::LinkHealth;
 use crate::message::{
-    Anchor, CarState, EncodeError, EnuRef, ID_ALL, ID_CAR_CLIENT, MAX_ROUTE_PART,
+    Anchor, CarState, DecodeError, EncodeError, EnuRef, ID_ALL, ID_CAR_CLIENT, MAX_ROUTE_PART,
     POINTS_PER_PACKET, Pose, RcControl, RcMode, Reply, Request, RoutePart, RoutePoint, SyncPoint,
 };
 use crate::transport::{Link, PC_BYTE_TIMEOUT};
@@ -138,6 +141,15 @@ pub enum CarError {
         command: CommandId,
         /// The reply, as debug text.
         reply: String,
+    },
+    /// Every try of a request ended without a reply that decodes, but a payload with the right (car, command)
+    /// came that does not (another record layout, a truncated or garbled body): the last one's cause.
+    #[error("no reply that decodes to {command:?}: {source}")]
+    UndecodableReply {
+        /// The command.
+        command: CommandId,
+        /// Why the payload does not decode.
+        source: DecodeError,
     },
     /// The request cannot be encoded for this firmware.
     #[error(transparent)]

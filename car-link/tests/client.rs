@@ -7,9 +7,9 @@ use std::time::Duration;
 
 use car_link::client::{Car, CarConfig, CarError, LinkEvent};
 use car_link::fault::{FaultError, FaultKind, FaultRejection, Probe};
-use car_link::message::{Anchor, EnuRef, Request, RoutePoint};
+use car_link::message::{Anchor, DecodeError, EnuRef, Request, RoutePoint};
 use car_link::transport::sim_pipe;
-use car_link::version::FirmwareVersion;
+use car_link::version::{CommandId, FirmwareVersion};
 use futures::StreamExt;
 use support::{Behaviour, Log, sample_state, serve};
 
@@ -170,6 +170,81 @@ async fn stray_and_duplicate_replies_are_not_taken_for_answers() {
         .expect("points acked");
     let health = car.health();
     assert!(health.stray_replies >= 10, "{health:?}");
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_request_answered_only_by_undecodable_replies_fails_with_their_cause() {
+    let garbling = |command| Behaviour {
+        garble_reply_to: Some(command),
+        ..Behaviour::default()
+    };
+    let (car, _) = pipe_car(garbling(CommandId::GetEnuRef), no_keepalive()).await;
+    let car = car.expect("handshake");
+    let error = car.enu_ref().await.expect_err("a garbled reply");
+    assert!(
+        matches!(
+            error,
+            CarError::UndecodableReply {
+                command: CommandId::GetEnuRef,
+                source: DecodeError::Length { found: 10, .. },
+            }
+        ),
+        "{error:?}"
+    );
+    assert_eq!(
+        error.to_string(),
+        "no reply that decodes to GetEnuRef: GetEnuRef: 10 data bytes, expected 20"
+    );
+    // A truncated main-configuration record, and an ack with a stray byte.
+    let (car, _) = pipe_car(garbling(CommandId::GetMainConfig), no_keepalive()).await;
+    let car = car.expect("handshake");
+    let result = car.main_config().await;
+    assert!(
+        matches!(
+            result,
+            Err(CarError::UndecodableReply {
+                command: CommandId::GetMainConfig,
+                source: DecodeError::Config { .. },
+            })
+        ),
+        "{result:?}"
+    );
+    let (car, _) = pipe_car(garbling(CommandId::ApClearPoints), no_keepalive()).await;
+    let car = car.expect("handshake");
+    let result = car.clear_route().await;
+    assert!(
+        matches!(
+            result,
+            Err(CarError::UndecodableReply {
+                command: CommandId::ApClearPoints,
+                ..
+            })
+        ),
+        "{result:?}"
+    );
+    // Every try got its garbled answer and then timed out waiting for one that decodes.
+    let health = car.health();
+    assert_eq!((health.undecodable, health.timeouts), (5, 5), "{health:?}");
+    // The link carries on.
+    assert!(car.state().await.is_ok());
+}
+
+#[tokio::test(start_paused = true)]
+async fn an_undecodable_payload_before_the_reply_does_not_end_the_try() {
+    // As on a link that echoes requests: the echo has the request's header and does not decode as a reply.
+    let behaviour = Behaviour {
+        garble_then_answer: true,
+        garble_reply_to: Some(CommandId::GetEnuRef),
+        ..Behaviour::default()
+    };
+    let (car, _) = pipe_car(behaviour, no_keepalive()).await;
+    let car = car.expect("handshake");
+    let started = tokio::time::Instant::now();
+    car.enu_ref()
+        .await
+        .expect("the reply after the garbled payload");
+    assert!(started.elapsed() < CarConfig::default().request_timeout);
+    assert_eq!(car.health().undecodable, 1);
 }
 
 #[tokio::test(start_paused = true)]

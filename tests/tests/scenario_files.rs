@@ -42,12 +42,18 @@ const MALFORMED: &[(&str, &str)] = &[
         "fence-self-intersecting.toml",
         ":4:9: fence: edge 0 (from vertex 0) crosses edge 2 (from vertex 2)",
     ),
-    ("fence-not-finite.toml", ":10:11: fence[5].x: not a finite number"),
+    (
+        "fence-not-finite.toml",
+        ":10:11: fence[5].x: not a finite number",
+    ),
     (
         "cutout-outside-fence.toml",
         ":22:5: cutouts[1]: not entirely inside the fence",
     ),
-    ("cutouts-overlap.toml", ":22:5: cutouts[1]: overlaps cutouts[0]"),
+    (
+        "cutouts-overlap.toml",
+        ":22:5: cutouts[1]: overlaps cutouts[0]",
+    ),
     (
         "cutout-self-intersecting.toml",
         ":21:5: cutouts[0]: edge 0 (from vertex 0) crosses edge 2 (from vertex 2)",

@@ -8,6 +8,10 @@
 //! an ordered link), so a reply answers the **oldest** GET_STATE request of that car still waiting (first in,
 //! first out). A request whose reply has not come by its deadline counts as lost and is never paired afterwards;
 //! a reply with no request waiting is stray. See [`Shared::dispatch_state`] for what this means for the stamps.
+//!
+//! A reply whose payload does not decode, but whose header names the (car, command) of a waiting request (not
+//! GET_STATE), is handed to that request: if no reply that decodes comes, the request fails with
+//! [`CarError::UndecodableReply`] and its cause rather than a bare "no reply".
 
 use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -22,7 +26,7 @@ use tokio_util::sync::CancellationToken;
 use super::{CarConfig, CarError, LinkEvent, StateSample};
 use crate::address::CarAddress;
 use crate::health::HealthRecorder;
-use crate::message::{Dialect, ID_ALL, POINTS_PER_PACKET, Reply, Request, RoutePoint};
+use crate::message::{DecodeError, Dialect, ID_ALL, POINTS_PER_PACKET, Reply, Request, RoutePoint};
 use crate::transport::{Incoming, Link, PC_BYTE_TIMEOUT};
 use crate::version::{CommandId, FirmwareVersion};
 
@@ -105,6 +109,8 @@ pub(super) struct Shared {
     pub(super) identity: Mutex<Identity>,
     pub(super) outgoing: Mutex<Option<mpsc::Sender<Bytes>>>,
     pub(super) waiters: Mutex<HashMap<Key, oneshot::Sender<Answer>>>,
+    /// For a waiting request, why the last payload with its header did not decode.
+    pub(super) garbled: Mutex<HashMap<Key, DecodeError>>,
     /// GET_STATE requests in flight, oldest first.
     pub(super) state_waiters: Mutex<VecDeque<StateWaiter>>,
     pub(super) lanes: Mutex<HashMap<u8, Arc<tokio::sync::Mutex<()>>>>,
@@ -150,6 +156,7 @@ impl Shared {
             config,
             outgoing: Mutex::new(None),
             waiters: Mutex::new(HashMap::new()),
+            garbled: Mutex::new(HashMap::new()),
             state_waiters: Mutex::new(VecDeque::new()),
             lanes: Mutex::new(HashMap::new()),
             printf: broadcast::channel(256).0,
@@ -194,6 +201,7 @@ impl Shared {
             Err(error) => {
                 tracing::debug!(%error, "undecodable payload from the car");
                 lock(&self.health).figures.undecodable += 1;
+                self.dispatch_undecodable(payload, error, identity.version);
                 return;
             }
         };
@@ -204,7 +212,10 @@ impl Shared {
             }
             return;
         }
-        let code = payload[1];
+        // A decoded payload has its [id][cmd] header.
+        let Some(&code) = payload.get(1) else {
+            return;
+        };
         let answer = Answer {
             car,
             reply,
@@ -217,16 +228,49 @@ impl Shared {
             }
             return;
         }
-        let waiter = {
-            let mut waiters = lock(&self.waiters);
-            waiters
-                .remove(&(Some(car), code))
-                .or_else(|| waiters.remove(&(None, code)))
-        };
-        let delivered = waiter.is_some_and(|tx| tx.send(answer).is_ok());
+        let delivered = self
+            .take_waiter(car, code)
+            .is_some_and(|tx| tx.send(answer).is_ok());
         if !delivered {
             tracing::debug!(car, code, "stray reply ignored");
             lock(&self.health).figures.stray_replies += 1;
+        }
+    }
+
+    /// The request waiting for a reply of car `car` to command `code`: one sent to that car, else a broadcast.
+    fn take_waiter(&self, car: u8, code: u8) -> Option<oneshot::Sender<Answer>> {
+        let mut waiters = lock(&self.waiters);
+        waiters
+            .remove(&(Some(car), code))
+            .or_else(|| waiters.remove(&(None, code)))
+    }
+
+    /// Notes why a payload with an `[id][cmd]` header did not decode, for the request waiting for that
+    /// (car, command): it reports it ([`CarError::UndecodableReply`]) if no reply that decodes comes. The
+    /// request keeps waiting (a link may echo requests, and the real reply may follow at once).
+    ///
+    /// GET_STATE is left out: its replies answer the oldest request first in first out, with nothing to tell
+    /// a garbled reply from an echoed GET_STATE request (which does not decode either), so such a payload is
+    /// only counted, and the request it may have answered expires as lost.
+    fn dispatch_undecodable(&self, payload: &[u8], error: DecodeError, version: FirmwareVersion) {
+        // An RTCM3 stream is no reply: its first byte, 0xD3, is no car id.
+        if matches!(error, DecodeError::Rtcm) {
+            return;
+        }
+        let [car, code, ..] = *payload else {
+            return;
+        };
+        if Some(code) == CommandId::GetState.code(version) {
+            return;
+        }
+        let key = {
+            let waiters = lock(&self.waiters);
+            [(Some(car), code), (None, code)]
+                .into_iter()
+                .find(|key| waiters.contains_key(key))
+        };
+        if let Some(key) = key {
+            lock(&self.garbled).insert(key, error);
         }
     }
 
@@ -346,8 +390,11 @@ impl Shared {
     }
 
     /// Sends `request` and waits for the reply with the same (car, command), retrying on timeouts; returns
-    /// the answer, when the answered try was sent, and how many tries were sent. Not for GET_STATE, whose
-    /// replies go to the first-in-first-out queue: use [`Shared::state`].
+    /// the answer, when the answered try was sent, and how many tries were sent. A payload with that header
+    /// that does not decode does not end a try (a link may echo requests), but when every try fails the
+    /// error is [`CarError::UndecodableReply`] with the last such payload's cause rather than
+    /// [`CarError::NoReply`]. Not for GET_STATE, whose replies go to the first-in-first-out queue: use
+    /// [`Shared::state`].
     ///
     /// After a retry the answer may be the late reply to an earlier try of the same request, and the reply
     /// to the answered try may still come: a caller sending several requests of one command in a row (a
@@ -364,6 +411,7 @@ impl Shared {
         let lane = self.lane(code);
         let _one_at_a_time = lane.lock().await;
         let key = ((identity.car_id != ID_ALL).then_some(identity.car_id), code);
+        lock(&self.garbled).remove(&key);
         for sent in 1..=tries.max(1) {
             let (tx, rx) = oneshot::channel();
             lock(&self.waiters).insert(key, tx);
@@ -379,10 +427,15 @@ impl Shared {
                 Err(_) => self.note_timeout(command),
             }
         }
-        Err(CarError::NoReply {
-            command,
-            tries: tries.max(1),
-            per_try,
+        // Payloads with this header that did not decode (garbled, or echoes of the request on a link that
+        // echoes) did not end a try; the last one's cause explains the failure.
+        Err(match lock(&self.garbled).remove(&key) {
+            Some(source) => CarError::UndecodableReply { command, source },
+            None => CarError::NoReply {
+                command,
+                tries: tries.max(1),
+                per_try,
+            },
         })
     }
 

@@ -44,6 +44,11 @@ pub struct Behaviour {
     pub stop_reading_after: Option<usize>,
     /// Answer a terminal command with this many lines, 50 ms apart (a car printing without pause).
     pub chatty_terminal: Option<usize>,
+    /// Answer this command with its reply's header and a garbled body that does not decode: the first half of
+    /// the data, or a stray byte after a bare ack.
+    pub garble_reply_to: Option<CommandId>,
+    /// With `garble_reply_to`: send the garbled payload, then the real reply.
+    pub garble_then_answer: bool,
 }
 
 impl Default for Behaviour {
@@ -61,6 +66,8 @@ impl Default for Behaviour {
             late_ack_then_lost_packet: false,
             stop_reading_after: None,
             chatty_terminal: None,
+            garble_reply_to: None,
+            garble_then_answer: false,
         }
     }
 }
@@ -323,7 +330,20 @@ where
                 _ => Vec::new(),
             },
         };
+        let garble = behaviour.garble_reply_to.is_some()
+            && request.command(behaviour.version) == behaviour.garble_reply_to;
         for reply in replies {
+            if garble {
+                let Ok(payload) = reply.encode(reply_id, dialect) else {
+                    continue;
+                };
+                if framed.send(garbled(&payload)).await.is_err() {
+                    return;
+                }
+                if !behaviour.garble_then_answer {
+                    continue;
+                }
+            }
             let copies = if behaviour.duplicate_replies { 2 } else { 1 };
             for _ in 0..copies {
                 if behaviour.stray_replies && matches!(reply, Reply::State(_)) {
@@ -339,6 +359,18 @@ where
             }
         }
     }
+}
+
+/// `[id][cmd]` followed by the first half of the data, or by one byte where there is no data.
+fn garbled(payload: &[u8]) -> Vec<u8> {
+    let (header, data) = payload.split_at(2.min(payload.len()));
+    let mut out = header.to_vec();
+    if data.is_empty() {
+        out.push(0xFF);
+    } else {
+        out.extend_from_slice(&data[..data.len() / 2]);
+    }
+    out
 }
 
 /// A long link in process: two pipes joined by relays that hold every chunk of bytes for `one_way` in each
