@@ -286,6 +286,14 @@ pub struct MainConfig {
 }
 
 impl MainConfig {
+    /// The named fields of this record's layout (its firmware version's), in record order.
+    pub fn fields(&self) -> Vec<ConfigField> {
+        layout(self.version)
+            .into_iter()
+            .map(|(field, _)| field)
+            .collect()
+    }
+
     /// Wraps a record, checking that every named field of `version` is present.
     pub fn from_record(version: FirmwareVersion, record: Vec<u8>) -> Result<Self, ConfigError> {
         let config = MainConfig { version, record };
