@@ -303,3 +303,28 @@ fn route_return_exits_one_when_the_car_is_boxed_in() {
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("moved by hand"));
 }
+
+#[test]
+fn a_reader_that_goes_away_ends_the_command_quietly_like_a_unix_tool() {
+    use std::process::{Command, Stdio};
+    // 5000 points are far more than a pipe holds: writing goes on after the reader has gone.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
+        .args([
+            "route",
+            "generate",
+            "courtyard",
+            "--points",
+            "5000",
+            "--seed",
+            "1",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(141), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
