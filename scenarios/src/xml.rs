@@ -92,19 +92,8 @@ pub(crate) fn parse_xml(
     })?;
     let by_role = assign_roles(&routes.routes);
     if let Ok(by_role) = &by_role {
-        let mut cutouts = 0;
-        for &(role, at, _) in by_role {
-            let field = match role {
-                Role::Start => "start_route".to_owned(),
-                Role::Recovery => "recovery_route".to_owned(),
-                Role::Fence => "fence".to_owned(),
-                Role::Cutout(_) => {
-                    cutouts += 1;
-                    format!("cutouts[{}]", cutouts - 1)
-                }
-                Role::Ignored => continue,
-            };
-            index.role(field, at);
+        for routed in by_role {
+            index.role(routed.field.clone(), routed.at);
         }
     }
     let err = |field: String, problem| {
@@ -138,7 +127,7 @@ pub(crate) fn parse_xml(
         (1, "recovery route", Role::Recovery),
         (2, "fence", Role::Fence),
     ] {
-        if !by_role.iter().any(|(r, _, _)| *r == needed) {
+        if !by_role.iter().any(|routed| routed.role == needed) {
             return Err(ScenarioError::in_source(
                 source_name,
                 None,
@@ -146,8 +135,8 @@ pub(crate) fn parse_xml(
             ));
         }
     }
-    for (role, _, route) in by_role {
-        fill(&mut scenario, role, route).map_err(|(f, p)| err(f, p))?;
+    for routed in by_role {
+        fill(&mut scenario, &routed).map_err(|(f, p)| err(f, p))?;
     }
     Ok((scenario, index))
 }
@@ -234,9 +223,18 @@ fn anchors(list: &[XmlAnchor]) -> Result<Vec<RawAnchor>, FieldProblem> {
         .collect()
 }
 
-/// Each route with its role and its index in the document, cutouts in id order; ignored routes
-/// dropped.
-fn assign_roles(routes: &[XmlRoute]) -> Result<Vec<(Role, usize, &XmlRoute)>, FieldProblem> {
+/// A route with its role, the scenario field it becomes (`fence`, `cutouts[1]`) and its index in
+/// the document.
+struct Routed<'a> {
+    role: Role,
+    field: String,
+    at: usize,
+    route: &'a XmlRoute,
+}
+
+/// Each route with its role, field and index in the document, cutouts in id order; ignored
+/// routes dropped.
+fn assign_roles(routes: &[XmlRoute]) -> Result<Vec<Routed<'_>>, FieldProblem> {
     let mut seen: Vec<u8> = Vec::new();
     let mut assigned = Vec::new();
     for (i, route) in routes.iter().enumerate() {
@@ -258,18 +256,37 @@ fn assign_roles(routes: &[XmlRoute]) -> Result<Vec<(Role, usize, &XmlRoute)>, Fi
         Role::Cutout(k) => *k,
         _ => 0,
     });
-    Ok(assigned)
+    let mut cutouts = 0;
+    Ok(assigned
+        .into_iter()
+        .map(|(role, at, route)| {
+            let field = match role {
+                Role::Start => "start_route".to_owned(),
+                Role::Recovery => "recovery_route".to_owned(),
+                Role::Fence => "fence".to_owned(),
+                // Ignored routes were dropped above.
+                Role::Cutout(_) | Role::Ignored => {
+                    cutouts += 1;
+                    format!("cutouts[{}]", cutouts - 1)
+                }
+            };
+            Routed {
+                role,
+                field,
+                at,
+                route,
+            }
+        })
+        .collect())
 }
 
-fn fill(scenario: &mut RawScenario, role: Role, route: &XmlRoute) -> Result<(), FieldProblem> {
-    match role {
-        Role::Start => scenario.start_route = route_points(route, "start_route")?,
-        Role::Recovery => scenario.recovery_route = route_points(route, "recovery_route")?,
-        Role::Fence => scenario.fence = polygon(route, "fence")?,
-        Role::Cutout(_) => {
-            let field = format!("cutouts[{}]", scenario.cutouts.len());
-            scenario.cutouts.push(polygon(route, &field)?);
-        }
+fn fill(scenario: &mut RawScenario, routed: &Routed<'_>) -> Result<(), FieldProblem> {
+    let (route, field) = (routed.route, routed.field.as_str());
+    match routed.role {
+        Role::Start => scenario.start_route = route_points(route, field)?,
+        Role::Recovery => scenario.recovery_route = route_points(route, field)?,
+        Role::Fence => scenario.fence = polygon(route, field)?,
+        Role::Cutout(_) => scenario.cutouts.push(polygon(route, field)?),
         Role::Ignored => {}
     }
     Ok(())

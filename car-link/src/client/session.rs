@@ -240,9 +240,8 @@ impl Shared {
     /// The request waiting for a reply of car `car` to command `code`: one sent to that car, else a broadcast.
     fn take_waiter(&self, car: u8, code: u8) -> Option<oneshot::Sender<Answer>> {
         let mut waiters = lock(&self.waiters);
-        waiters
-            .remove(&(Some(car), code))
-            .or_else(|| waiters.remove(&(None, code)))
+        let key = waiting_key(&waiters, car, code)?;
+        waiters.remove(&key)
     }
 
     /// Notes why a payload with an `[id][cmd]` header did not decode, for the request waiting for that
@@ -263,12 +262,7 @@ impl Shared {
         if Some(code) == CommandId::GetState.code(version) {
             return;
         }
-        let key = {
-            let waiters = lock(&self.waiters);
-            [(Some(car), code), (None, code)]
-                .into_iter()
-                .find(|key| waiters.contains_key(key))
-        };
+        let key = waiting_key(&lock(&self.waiters), car, code);
         if let Some(key) = key {
             lock(&self.garbled).insert(key, error);
         }
@@ -559,6 +553,14 @@ impl Shared {
     pub(super) fn remember_first_point(&self, first: &RoutePoint) {
         lock(&self.route).last_first = Some((first.px, first.py));
     }
+}
+
+/// The key of the request waiting for a reply of car `car` to command `code`: one sent to that car,
+/// else a broadcast.
+fn waiting_key<V>(waiters: &HashMap<Key, V>, car: u8, code: u8) -> Option<Key> {
+    [(Some(car), code), (None, code)]
+        .into_iter()
+        .find(|key| waiters.contains_key(key))
 }
 
 /// Reads the link until it closes; reconnects if an address is known. Ends when cancelled.
