@@ -43,8 +43,7 @@ const STORED_POINT_TOLERANCE_M: f64 = 1e-3;
 
 /// Two route packets whose first points are closer than this (in x and y) count as one for the firmware.
 pub const DUPLICATE_POINT_THRESHOLD: f64 = 1e-4;
-/// The firmware's communication watchdog.
-pub const WATCHDOG: Duration = Duration::from_millis(2000);
+use crate::firmware::WATCHDOG;
 
 /// How a [`Car`] talks to the car. Built with [`CarConfig::default`] and changed field by field.
 #[derive(Debug, Clone, PartialEq)]

@@ -9,8 +9,14 @@ use thiserror::Error;
 /// The longest probe id the firmware stores.
 pub const MAX_PROBE_ID: usize = 20;
 
-/// A fault-injection probe: a place in the firmware where a value can be disturbed.
-#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+/// A fault-injection probe: a place in the firmware where a value can be disturbed, named by its
+/// probe id (`uwb_range_50`). With the `serde` feature it is written as that id.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(try_from = "String", into = "String")
+)]
 pub enum Probe {
     /// The fused `px` packed into the GET_STATE reply (once per GET_STATE).
     Px,
@@ -46,17 +52,39 @@ impl FromStr for Probe {
             "px" => Ok(Probe::Px),
             "uwb_travel_dist" => Ok(Probe::UwbTravelDist),
             "uwb_yaw" => Ok(Probe::UwbYaw),
+            // The firmware compares probe ids as text: only the id's canonical decimal
+            // (`uwb_range_7`, not `uwb_range_07` or `uwb_range_+7`) names the probe it calls.
             _ => s
                 .strip_prefix("uwb_range_")
-                .and_then(|id| id.parse().ok())
+                .and_then(|id| id.parse::<u16>().ok().filter(|n| n.to_string() == id))
                 .map(Probe::UwbRange)
                 .ok_or_else(|| UnknownProbe(s.into())),
         }
     }
 }
 
-/// What a fault does to the probed value.
+impl From<Probe> for String {
+    fn from(probe: Probe) -> Self {
+        probe.to_string()
+    }
+}
+
+impl TryFrom<String> for Probe {
+    type Error = UnknownProbe;
+
+    fn try_from(s: String) -> Result<Self, Self::Error> {
+        s.parse()
+    }
+}
+
+/// What a fault does to the probed value. With the `serde` feature it is written in snake case
+/// (`bitflip`, `offset`, `amplification`, `set_to`, `none`), as in case files.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(rename_all = "snake_case")
+)]
 pub enum FaultKind {
     /// Nothing, but it occupies a slot.
     None,
@@ -290,6 +318,36 @@ mod tests {
 
     fn lines(texts: &[&str]) -> Vec<String> {
         texts.iter().map(|t| t.to_string()).collect()
+    }
+
+    #[test]
+    fn probes_print_and_parse_as_the_firmware_names_them() {
+        for probe in [
+            Probe::Px,
+            Probe::UwbRange(0),
+            Probe::UwbRange(255),
+            Probe::UwbRange(u16::MAX),
+            Probe::UwbTravelDist,
+            Probe::UwbYaw,
+        ] {
+            assert_eq!(probe.to_string().parse::<Probe>(), Ok(probe));
+        }
+        assert_eq!(Probe::UwbRange(7).to_string(), "uwb_range_7");
+    }
+
+    #[test]
+    fn only_the_canonical_probe_id_parses() {
+        // The firmware compares ids as text: `uwb_range_07` is not the probe of anchor 7.
+        for name in [
+            "uwb_range_",
+            "uwb_range_65536",
+            "uwb_range_+1",
+            "uwb_range_07",
+            "UWB_YAW",
+            "uwb_yaw ",
+        ] {
+            assert!(name.parse::<Probe>().is_err(), "{name}");
+        }
     }
 
     #[test]

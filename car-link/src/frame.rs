@@ -637,12 +637,14 @@ impl FrameDecoder {
 
 /// A [`tokio_util::codec`] codec: encodes payloads into frames and decodes frames, yielding dropped candidates as
 /// `Err` items so that a [`tokio_util::codec::FramedRead`] keeps going after garbage.
+#[cfg(feature = "client")]
 #[derive(Debug, Default)]
 pub struct FrameCodec {
     encoder: FrameEncoder,
     scanner: Scanner,
 }
 
+#[cfg(feature = "client")]
 impl FrameCodec {
     /// A codec with the given encoder and decoder limits.
     pub fn new(encoder: FrameEncoder, limits: DecoderLimits) -> Self {
@@ -663,6 +665,7 @@ impl FrameCodec {
     }
 }
 
+#[cfg(feature = "client")]
 impl tokio_util::codec::Decoder for FrameCodec {
     type Item = Result<Frame, FrameError>;
     type Error = std::io::Error;
@@ -679,6 +682,7 @@ impl tokio_util::codec::Decoder for FrameCodec {
     }
 }
 
+#[cfg(feature = "client")]
 impl<T: AsRef<[u8]>> tokio_util::codec::Encoder<T> for FrameCodec {
     type Error = std::io::Error;
 

@@ -30,18 +30,23 @@
 //! car says, and says when the link is lost instead of inventing a state.
 
 pub mod address;
+#[cfg(feature = "client")]
 pub mod client;
 pub mod config;
 pub mod crc;
 pub mod encoding;
 pub mod fault;
+pub mod firmware;
 pub mod frame;
+#[cfg(feature = "client")]
 pub mod health;
 pub mod message;
+#[cfg(feature = "client")]
 pub mod transport;
 pub mod version;
 
 pub use address::CarAddress;
+#[cfg(feature = "client")]
 pub use client::{Car, CarConfig, CarError, LinkEvent, StatePolling, StateSample};
 pub use fault::{FaultKind, Probe};
 pub use message::{CarState, Reply, Request, RoutePoint};

@@ -23,15 +23,15 @@ use crate::uwb::{
 use crate::world::World;
 
 /// The base tick of the simulation, ms.
-pub const TICK_MS: u64 = 10;
+pub const TICK_MS: u64 = car_link::firmware::TICK.as_millis() as u64;
 /// The communication watchdog's limit, ms.
-pub const WATCHDOG_MS: u64 = 2000;
+pub const WATCHDOG_MS: u64 = car_link::firmware::WATCHDOG.as_millis() as u64;
 /// Watchdog brake current, A.
 const WATCHDOG_BRAKE_A: f32 = 40.0;
 /// 12.2+ watchdog brakes only above this speed (2 km/h), m/s.
 const WATCHDOG_BRAKE_MIN_SPEED: f32 = 2.0 / 3.6;
 /// UWB scheduling period, ms.
-const UWB_PERIOD_MS: u64 = 100;
+const UWB_PERIOD_MS: u64 = car_link::firmware::RANGING_SLOT.as_millis() as u64;
 /// Delay between a range request and its reply, ms (the exchanges take a few ms).
 const UWB_REPLY_DELAY_MS: u64 = 10;
 /// Odometry runs on every 10th IMU sample in both generations.

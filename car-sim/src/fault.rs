@@ -2,12 +2,8 @@
 
 use crate::terminal::{scan_f32, scan_i32};
 
-/// Number of probes.
-pub const PROBES: usize = 5;
-/// Fault slots per probe.
-pub const SLOTS_PER_PROBE: usize = 5;
-/// Longest probe id.
-pub const MAX_ID_LEN: usize = 20;
+pub use car_link::fault::MAX_PROBE_ID as MAX_ID_LEN;
+pub use car_link::firmware::{FAULT_PROBES as PROBES, FAULTS_PER_PROBE as SLOTS_PER_PROBE};
 
 /// The fault types, as the wire protocol names them (shared with the orchestrator's client).
 pub use car_link::FaultKind;

@@ -10,7 +10,7 @@ use crate::positioning::wrap180;
 use crate::world::{RadioPath, World};
 
 /// Most anchors the firmware stores.
-pub const MAX_ANCHORS: usize = 20;
+pub use car_link::firmware::MAX_ANCHORS;
 /// Anchors further than this from the UWB estimate are not ranged, m.
 pub const RANGING_GATE_M: f32 = 80.0;
 /// Distance of the UWB antenna ahead of the reference point, m.

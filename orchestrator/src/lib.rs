@@ -9,16 +9,10 @@
 //! Not here: geometry and generation (`trajgen`), scenario files (`scenarios`), the wire protocol
 //! (`car-link`).
 
-pub mod case;
 pub mod cli;
 pub mod commands;
-pub mod model;
-pub mod oracle;
 pub mod recording;
-pub mod replay;
 pub mod runner;
-pub mod safety;
 mod scenario_arg;
 mod seed;
-pub mod streaming;
 mod svg;

@@ -6,9 +6,9 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use orchestrator::case::{CampaignRecord, Case};
-use orchestrator::oracle::Verdict;
-use orchestrator::replay::Comparison;
+use campaign::case::{CampaignRecord, Case};
+use campaign::oracle::Verdict;
+use campaign::replay::Comparison;
 
 fn drivecheck(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_drivecheck"))
@@ -142,7 +142,7 @@ fn a_failing_case_replays_the_same_way_and_passes_without_its_faults() {
         replayed
             .commands
             .iter()
-            .all(|c| matches!(c, orchestrator::case::CommandRecord::RunSegments { .. }))
+            .all(|c| matches!(c, campaign::case::CommandRecord::RunSegments { .. }))
     );
 
     // `runs` lists the campaign and the replays; `runs show` shows each kind.
@@ -240,7 +240,7 @@ fn the_documented_hand_written_case_replays() {
 fn a_case_that_leaves_the_area_is_refused_before_driving() {
     let example = hand_written_example();
     let mut case = Case::from_json(example).unwrap();
-    if let orchestrator::case::CommandRecord::RunSegments { points, .. } = &mut case.commands[3] {
+    if let campaign::case::CommandRecord::RunSegments { points, .. } = &mut case.commands[3] {
         points[3].x = 500.0;
     }
     let tmp = tempfile::tempdir().unwrap();

@@ -62,20 +62,20 @@ fn continuing_after_a_failure_drives_and_records_every_segment() {
     assert_eq!(out.status.code(), Some(1), "{}", text(&out));
     let record = std::fs::read_to_string(dir.path().join("campaign.json")).unwrap();
     assert!(record.contains("\"failure_policy\": \"continue_and_record\""));
-    let failed: Vec<orchestrator::case::Case> = (0..4)
+    let failed: Vec<campaign::case::Case> = (0..4)
         .map(|i| {
             let text =
                 std::fs::read_to_string(dir.path().join(format!("case-{i:03}.json"))).unwrap();
-            orchestrator::case::Case::from_json(&text).unwrap()
+            campaign::case::Case::from_json(&text).unwrap()
         })
-        .filter(|c| c.verdict == Some(orchestrator::oracle::Verdict::Failed))
+        .filter(|c| c.verdict == Some(campaign::oracle::Verdict::Failed))
         .collect();
     assert!(!failed.is_empty());
     for case in failed {
         let segments = case
             .commands
             .iter()
-            .filter(|c| matches!(c, orchestrator::case::CommandRecord::RunSegments { .. }))
+            .filter(|c| matches!(c, campaign::case::CommandRecord::RunSegments { .. }))
             .count();
         // Every segment was driven and judged, not only those up to the first failure.
         assert_eq!(case.segments.len(), segments, "{:?}", case.reason);

@@ -16,11 +16,7 @@ use crate::error::{Problem, ScenarioError, Warning, WarningKind};
 use crate::model::{Route, RoutePoint, Scenario};
 use crate::settings::{CampaignSettings, GeneratorSettings, Interval, Vehicle};
 
-/// The firmware keeps at most this many anchors.
-pub const MAX_ANCHORS: usize = 20;
-
-/// The autopilot's top speed in the reference firmware, km/h (8.333 m/s).
-pub const MAX_SPEED_KMH: f64 = 30.0;
+pub use car_link::firmware::{MAX_ANCHORS, MAX_SPEED_KMH};
 
 /// A failed check: the field path and the problem.
 type Check = Result<(), (String, Problem)>;

@@ -7,12 +7,12 @@
 use std::path::Path;
 use std::time::Duration;
 
+use campaign::case::{CampaignRecord, Case};
+use campaign::model::Campaign;
+use campaign::oracle::{SegmentVerdict, Verdict};
 use car_link::{Car, CarConfig};
 use car_sim::{SimConfig, SimHandle};
 use indicatif::ProgressBar;
-use orchestrator::case::{CampaignRecord, Case};
-use orchestrator::model::Campaign;
-use orchestrator::oracle::{SegmentVerdict, Verdict};
 use orchestrator::runner::{CampaignReport, RunConfig, RunError, run_campaign};
 use scenarios::Scenario;
 use tokio_util::sync::CancellationToken;
@@ -204,7 +204,7 @@ async fn a_lossy_slow_link_ends_no_test_early() {
             read_case(dir.path(), i)
                 .commands
                 .iter()
-                .filter(|c| matches!(c, orchestrator::case::CommandRecord::AddFault { .. }))
+                .filter(|c| matches!(c, campaign::case::CommandRecord::AddFault { .. }))
                 .count()
         })
         .sum();

@@ -7,11 +7,11 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Duration;
 
+use campaign::case::{Case, CommandRecord};
+use campaign::model::Campaign;
 use car_link::CarConfig;
 use car_sim::SimConfig;
 use indicatif::ProgressBar;
-use orchestrator::case::{Case, CommandRecord};
-use orchestrator::model::Campaign;
 use orchestrator::recording::{
     AckOutcome, CarCommand, CarStateRecord, CommandAck, CommandSent, FaultRecord, FaultStatus,
     OracleRecord, Recording, TestEvent, TestEventKind, Topic, TruthRecord,
@@ -289,6 +289,6 @@ async fn a_recording_that_cannot_be_written_ends_the_campaign_as_an_error() {
     assert!(error.to_string().contains("campaign.mcap"), "{error}");
     // The run directory is still complete.
     let text = std::fs::read_to_string(dir.path().join("campaign.json")).unwrap();
-    let record = orchestrator::case::CampaignRecord::from_json(&text).unwrap();
+    let record = campaign::case::CampaignRecord::from_json(&text).unwrap();
     assert!(record.ended_at.is_some());
 }

@@ -6,7 +6,7 @@
 //! embedded simulated car every run gets a fresh simulator seeded alike, so in virtual time
 //! with one seed the runs are identical (`--vary-seed` varies the sensor noise instead); a real
 //! car is connected once and reset before each run. The comparison (`replay.json`, see
-//! [`crate::replay`]) is written and printed at the end, also when a run ended the replay early.
+//! [`campaign::replay`]) is written and printed at the end, also when a run ended the replay early.
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -20,14 +20,14 @@ use tokio_util::sync::CancellationToken;
 use trajgen::{Generator, Strategy};
 
 use super::run::{CampaignFailed, cancel_on_ctrl_c, connect, metres, runtime};
-use crate::case::{Case, ReplayOf, ScenarioRef};
 use crate::cli::ReplayArgs;
-use crate::model::{Campaign, TestPlan};
-use crate::oracle::Verdict;
-use crate::replay::{Comparison, REPLAY_FILE, ReplayRun};
 use crate::runner::{ReplaySource, RunConfig, TestSummary, rfc3339_now, run_campaign};
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::choose_seed;
+use campaign::case::{Case, ReplayOf, ScenarioRef};
+use campaign::model::{Campaign, TestPlan};
+use campaign::oracle::Verdict;
+use campaign::replay::{Comparison, REPLAY_FILE, ReplayRun};
 
 /// Replays the case and prints the comparison. Exit status: 0 every run passed, 1 a run failed
 /// or was aborted, 2 an error (the case refused, the link lost, interrupted, …).
@@ -175,7 +175,7 @@ struct Job<'a> {
     of: &'a ReplayOf,
     seed: u64,
     out: &'a Path,
-    policy: Option<crate::oracle::FailurePolicy>,
+    policy: Option<campaign::oracle::FailurePolicy>,
 }
 
 impl Job<'_> {

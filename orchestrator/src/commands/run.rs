@@ -6,17 +6,18 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
+use car_link::firmware::{MAX_STALE_LIMIT, WATCHDOG};
 use car_link::{Car, CarAddress, CarConfig};
 use indicatif::{ProgressBar, ProgressStyle};
 use scenarios::Scenario;
 use tokio_util::sync::CancellationToken;
 
 use crate::cli::{OnFailure, RunArgs};
-use crate::model::Campaign;
-use crate::oracle::{FailurePolicy, Verdict};
 use crate::runner::{CampaignReport, RunConfig, RunError, run_campaign, run_dir_name};
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::choose_seed;
+use campaign::model::Campaign;
+use campaign::oracle::{FailurePolicy, Verdict};
 
 /// Runs the campaign and prints the final table. Exit status: 0 every test passed, 1 a test
 /// failed or was aborted, 2 an error (preflight refused, link lost, interrupted, …).
@@ -39,11 +40,13 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         .clone()
         .unwrap_or_else(|| PathBuf::from("runs").join(run_dir_name(&scenario.name, seed)));
     let mut config = RunConfig::new(campaign, out, args.car.clone());
-    if args.stale_after.is_zero() || args.stale_after > Duration::from_millis(1900) {
+    if args.stale_after.is_zero() || args.stale_after > MAX_STALE_LIMIT {
         anyhow::bail!(
-            "--stale-after {}: must be above 0 and at most 1.9 s (the car's watchdog brakes after 2 s \
+            "--stale-after {}: must be above 0 and at most {} (the car's watchdog brakes after {} \
              without commands)",
-            humantime::format_duration(args.stale_after)
+            humantime::format_duration(args.stale_after),
+            humantime::format_duration(MAX_STALE_LIMIT),
+            humantime::format_duration(WATCHDOG),
         );
     }
     config.safety.stale_after = args.stale_after;

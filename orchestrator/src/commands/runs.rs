@@ -8,10 +8,10 @@ use std::process::ExitCode;
 use anyhow::{Context, Result, bail};
 
 use super::run::{metres, print_report};
-use crate::case::{CampaignRecord, Case};
 use crate::cli::{RunsArgs, RunsCommand};
-use crate::replay::{Comparison, REPLAY_FILE};
 use crate::runner::{CampaignReport, TestSummary};
+use campaign::case::{CampaignRecord, Case};
+use campaign::replay::{Comparison, REPLAY_FILE};
 
 /// The campaign record's file name in a run directory.
 const CAMPAIGN_FILE: &str = "campaign.json";
@@ -136,7 +136,7 @@ fn row(entry: &Entry) -> String {
         }
         Entry::Replay(c) => {
             let count = |v| c.runs.iter().filter(|r| r.verdict == Some(v)).count();
-            use crate::oracle::Verdict;
+            use campaign::oracle::Verdict;
             let worst = c
                 .segments
                 .iter()
@@ -191,7 +191,7 @@ fn show(dir: &Path) -> Result<ExitCode> {
                     run.dir,
                     run.seed,
                     run.verdict
-                        .map_or("not run", crate::oracle::Verdict::as_str),
+                        .map_or("not run", campaign::oracle::Verdict::as_str),
                     run.reason
                         .as_deref()
                         .map_or_else(String::new, |r| format!(" ({r})"))

@@ -87,7 +87,7 @@ pub enum RecordingError {
     },
     /// The campaign record could not be written as JSON.
     #[error("cannot encode the campaign record: {0}")]
-    Campaign(#[source] crate::case::CaseError),
+    Campaign(#[source] campaign::case::CaseError),
     /// The bytes do not start like an MCAP file.
     #[error("not an MCAP file: {0}")]
     NotMcap(#[source] mcap::McapError),

@@ -11,10 +11,10 @@ use serde::{Deserialize, Deserializer, Serialize};
 use tokio::time::Instant;
 
 use super::topic::{Record, Topic};
-use crate::case::{IntentRecord, PointRecord, RoutePointRecord, SegmentResult};
-use crate::model::{Fault, FaultKind, Probe, Segment};
-use crate::oracle::{Verdict, deviation};
-use crate::safety::Abort;
+use campaign::case::{IntentRecord, PointRecord, RoutePointRecord, SegmentResult};
+use campaign::model::{Fault, FaultKind, Probe, Segment};
+use campaign::oracle::{Verdict, deviation};
+use campaign::safety::Abort;
 
 /// Reads `null` (a non-finite number when written) as NaN.
 fn nan_if_null<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {

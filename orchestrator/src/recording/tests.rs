@@ -11,13 +11,13 @@ use serde_json::Value;
 use tokio::time::{Instant, advance};
 
 use super::*;
-use crate::case::{
+use campaign::case::{
     CAMPAIGN_FORMAT, CampaignRecord, RoutePointRecord, SCHEMA_VERSION, ScenarioRef, SegmentResult,
     Settings, tool_version,
 };
-use crate::model::{Fault, FaultKind, Probe, Segment, SegmentIntent};
-use crate::oracle::{FailurePolicy, SegmentOracle, Verdict};
-use crate::safety::{Abort, AbortReason};
+use campaign::model::{Fault, FaultKind, Probe, Segment, SegmentIntent};
+use campaign::oracle::{FailurePolicy, SegmentOracle, Verdict};
+use campaign::safety::{Abort, AbortReason};
 
 fn scenario() -> Scenario {
     scenarios::bundled::load("parking-lot-2anchors")
@@ -78,7 +78,7 @@ fn sample(at: Instant, x: f64) -> StateSample {
 
 fn fault() -> Fault {
     Fault {
-        probe: Probe::UwbRange { anchor: 3 },
+        probe: Probe::UwbRange(3),
         kind: FaultKind::Offset,
         param: 1.5,
         start: 2,

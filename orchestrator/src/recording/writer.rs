@@ -25,7 +25,7 @@ use super::records::{
 };
 use super::topic::{Record, Topic};
 use super::{RECORDING_FORMAT, RECORDING_VERSION, RecordingError, schema};
-use crate::case::{CampaignRecord, tool_version};
+use campaign::case::{CampaignRecord, tool_version};
 
 /// The default [`RecordingStart::chunk_interval`]: at most one second of messages is lost when the
 /// process is killed while messages flow.

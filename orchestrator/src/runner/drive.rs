@@ -30,12 +30,12 @@ use super::{
     BRAKE_CURRENT_A, BRAKE_TIMEOUT, Context, RunError, SAFE_STOP_SPEED_MPS, STOPPED_SPEED_MPS,
     Stopped,
 };
-use crate::case::{Case, SegmentResult, StreamingRecord};
-use crate::model::{Command, Fault, FaultWindow, Segment, TestPlan};
-use crate::oracle::{JudgedSegment, SegmentOracle, SegmentOutcome, test_verdict};
 use crate::recording::{CarCommand, FaultRecord, SafetyRecord};
-use crate::safety::{Abort, AbortReason, CarSample, SafetyMonitor};
-use crate::streaming::{Decision, Streamer, Waypoint};
+use campaign::case::{Case, SegmentResult, StreamingRecord};
+use campaign::model::{Command, Fault, FaultWindow, Segment, TestPlan};
+use campaign::oracle::{JudgedSegment, SegmentOracle, SegmentOutcome, test_verdict};
+use campaign::safety::{Abort, AbortReason, CarSample, SafetyMonitor};
+use campaign::streaming::{Decision, Streamer, Waypoint};
 
 /// In the safe stop, brake once the car needs less than this to reach its stopping point.
 const ROLL_END: Duration = Duration::from_millis(500);
@@ -427,8 +427,8 @@ impl<'c, 'a> Drive<'c, 'a> {
             return;
         }
         match abort.action {
-            crate::safety::StopAction::SafeStop => self.begin_stop(),
-            crate::safety::StopAction::Brake => self.begin_braking(),
+            campaign::safety::StopAction::SafeStop => self.begin_stop(),
+            campaign::safety::StopAction::Brake => self.begin_braking(),
         }
     }
 
@@ -709,7 +709,7 @@ impl<'c, 'a> Drive<'c, 'a> {
         }
     }
 
-    fn judge(&mut self, j: usize, now: Duration) -> crate::oracle::SegmentVerdict {
+    fn judge(&mut self, j: usize, now: Duration) -> campaign::oracle::SegmentVerdict {
         let threshold = self.ctx.scenario.campaign.oracle_threshold_m;
         let run = &mut self.runs[j];
         run.left = Some(now);
@@ -804,7 +804,7 @@ async fn wait_op(op: &mut Option<InFlight>) -> (OpKind, Result<(), CarError>) {
 
 /// The seed of test `test_index`'s safe stop extension.
 fn stop_seed(campaign_seed: u64, test_index: usize) -> u64 {
-    let seed = crate::model::test_rng_seed(campaign_seed, test_index);
+    let seed = campaign::model::test_rng_seed(campaign_seed, test_index);
     let mut last = [0u8; 8];
     last.copy_from_slice(&seed[24..]);
     u64::from_le_bytes(last)
@@ -821,8 +821,7 @@ const FAULT_TRIES: u32 = 3;
 /// Timeout: each try as `Car::add_fault` and `Car::list_faults`. Cancellation: safe between
 /// tries; a fault command cancelled in flight may or may not have taken effect.
 async fn add_fault_once(car: &Car, fault: Fault, before: usize) -> Result<(), CarError> {
-    let probe = link_probe(fault.probe);
-    let kind = link_kind(fault.kind);
+    let (probe, kind) = (fault.probe, fault.kind);
     let mut tries = 1;
     loop {
         let result = car
@@ -845,24 +844,5 @@ async fn add_fault_once(car: &Car, fault: Fault, before: usize) -> Result<(), Ca
             }
             result => return result,
         }
-    }
-}
-
-fn link_probe(probe: crate::model::Probe) -> car_link::Probe {
-    match probe {
-        crate::model::Probe::UwbRange { anchor } => car_link::Probe::UwbRange(u16::from(anchor)),
-        crate::model::Probe::UwbTravelDist => car_link::Probe::UwbTravelDist,
-        crate::model::Probe::UwbYaw => car_link::Probe::UwbYaw,
-    }
-}
-
-fn link_kind(kind: crate::model::FaultKind) -> car_link::FaultKind {
-    use crate::model::FaultKind as K;
-    match kind {
-        K::BitFlip => car_link::FaultKind::Bitflip,
-        K::Offset => car_link::FaultKind::Offset,
-        K::Amplification => car_link::FaultKind::Amplification,
-        K::SetTo => car_link::FaultKind::SetTo,
-        K::None => car_link::FaultKind::None,
     }
 }

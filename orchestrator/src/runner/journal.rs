@@ -13,8 +13,8 @@ use car_link::{CarError, StateSample};
 use car_sim::SimHandle;
 
 use super::RunError;
-use crate::case::CampaignRecord;
 use crate::recording::{CarCommand, Record, Recorder, RecordingError};
+use campaign::case::CampaignRecord;
 
 /// The recorder and the first error it returned.
 #[derive(Debug)]

@@ -18,7 +18,7 @@
 //!    extension generated with the ahead margin, then braking until the speed is below 0.1 m/s
 //!    (or braking at once when the monitor demands it).
 //! 4. The **record** ([`record`]): `campaign.json` (written at the start and again at the end)
-//!    and one case file per test, in the formats of [`crate::case`]; and all along, the
+//!    and one case file per test, in the formats of [`campaign::case`]; and all along, the
 //!    telemetry recording `campaign.mcap` ([`crate::recording`], written through a journal):
 //!    every state sample, every command sent with its answer, the planned segments and return
 //!    routes, the fault commands, the oracle results, the safety stops, each test's start and
@@ -30,8 +30,8 @@
 //! and a recording whose messages are identical (its log time is tokio's clock); a recording
 //! error ends the campaign as an error after the running test.
 //!
-//! Not here: planning the tests (`crate::model`), judging samples (`crate::oracle`), the safety
-//! and streaming rules (`crate::safety`, `crate::streaming`), the wire protocol (`car-link`).
+//! Not here: planning the tests (`campaign::model`), judging samples (`campaign::oracle`), the safety
+//! and streaming rules (`campaign::safety`, `campaign::streaming`), the wire protocol (`car-link`).
 
 pub mod drive;
 mod journal;
@@ -51,15 +51,15 @@ use thiserror::Error;
 use tokio_util::sync::CancellationToken;
 use trajgen::{GenerationError, Generator, Strategy};
 
-use crate::case::{Case, CaseError, ReplayOf, RoutePointRecord, Settings};
-use crate::model::{Campaign, ModelError, Planner, ProbeRates, TestPlan};
-use crate::oracle::{FailurePolicy, Verdict};
 use crate::recording::{
     DEFAULT_CHUNK_INTERVAL, OracleRecord, PlannedSegment, Recorder, RecordingError, RecordingStart,
     SafetyRecord, TestEvent, TestEventKind,
 };
-use crate::safety::{Abort, AbortReason, SafetyConfig};
-use crate::streaming::StreamingConfig;
+use campaign::case::{Case, CaseError, ReplayOf, RoutePointRecord, Settings};
+use campaign::model::{Campaign, ModelError, Planner, ProbeRates, TestPlan};
+use campaign::oracle::{FailurePolicy, Verdict};
+use campaign::safety::{Abort, AbortReason, SafetyConfig};
+use campaign::streaming::StreamingConfig;
 
 pub use preflight::Preflight;
 pub use record::{
@@ -320,7 +320,7 @@ async fn run_tests(run: &Run<'_>, dir: &mut RunDirectory) -> Result<(), RunError
         journal,
     };
     let planner = Planner::new(scenario)?;
-    let start_tail = crate::model::start_tail(scenario)?;
+    let start_tail = campaign::model::start_tail(scenario)?;
     let mut telemetry = Telemetry::start(car, config.state_period, ctx.sample_timeout);
     // The first sample comes a round trip after polling starts: wait for it (or for the link's
     // end), so that no safety monitor is armed before samples flow.

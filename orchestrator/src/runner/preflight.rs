@@ -23,14 +23,13 @@ use trajgen::Point;
 
 use super::journal::Journal;
 use super::{RunConfig, RunError, retried};
-use crate::model::ProbeRates;
 use crate::recording::CarCommand;
-use crate::safety::SafetyConfig;
+use campaign::model::ProbeRates;
+use campaign::safety::SafetyConfig;
+use car_link::firmware::MAX_STALE_LIMIT;
 
 /// GET_STATE requests the round trip is measured over.
 const RTT_PROBES: usize = 20;
-/// The car's watchdog brakes after 2 s without commands: staleness must be noticed before.
-const MAX_STALE: Duration = Duration::from_millis(1900);
 /// Samples lost in a row (a request or its reply) that the stale-telemetry limit tolerates.
 const LOST_IN_A_ROW: u32 = 2;
 
@@ -68,15 +67,12 @@ impl Preflight {
         journal: &Journal<'_>,
     ) -> Result<Self, RunError> {
         let version = car.version();
-        let rates = match version.major {
-            10 => ProbeRates::firmware_10(scenario.anchors.len()),
-            12 => ProbeRates::firmware_12(scenario.anchors.len()),
-            _ => {
-                return Err(RunError::Preflight(format!(
-                    "firmware {version}: the method knows 10.x and 12.x only"
-                )));
-            }
-        };
+        if !matches!(version.major, 10 | 12) {
+            return Err(RunError::Preflight(format!(
+                "firmware {version}: the method knows 10.x and 12.x only"
+            )));
+        }
+        let rates = ProbeRates::for_major(version.major, scenario.anchors.len());
         let switched_off = prepare_configuration(car).await?;
         let anchors = anchors(scenario);
         retried(|| car.upload_anchors(&anchors))
@@ -152,7 +148,7 @@ pub(crate) fn stale_limit(
     let needed = state_period
         .saturating_mul(1 + LOST_IN_A_ROW)
         .saturating_add(jitter)
-        .min(MAX_STALE);
+        .min(MAX_STALE_LIMIT);
     configured.max(needed)
 }
 
@@ -253,7 +249,10 @@ mod tests {
     #[test]
     fn jitter_raises_the_stale_limit_up_to_below_the_watchdog() {
         assert_eq!(stale_limit(DEFAULT, PERIOD, ms(250), ms(400)), ms(450));
-        assert_eq!(stale_limit(DEFAULT, PERIOD, ms(100), ms(5000)), MAX_STALE);
+        assert_eq!(
+            stale_limit(DEFAULT, PERIOD, ms(100), ms(5000)),
+            MAX_STALE_LIMIT
+        );
         // A longer limit configured is kept.
         assert_eq!(stale_limit(ms(2500), PERIOD, ms(340), ms(380)), ms(2500));
     }

@@ -1,6 +1,6 @@
 //! The run directory: `campaign.json` (written when the campaign starts, and again with its end
 //! time and summary when it ends, however it ends), one case file per test,
-//! `case-000.json`, `case-001.json`, … in the formats of [`crate::case`], and the recording
+//! `case-000.json`, `case-001.json`, … in the formats of [`campaign::case`], and the recording
 //! `campaign.mcap` (written by [`crate::recording::Recorder`], see `docs/recording.md`).
 
 use std::path::{Path, PathBuf};
@@ -9,13 +9,13 @@ use std::time::{SystemTime, UNIX_EPOCH};
 use scenarios::Scenario;
 
 use super::{RunConfig, RunError};
-use crate::case::{
+use campaign::case::{
     CAMPAIGN_FORMAT, CampaignRecord, CampaignSummary, Case, SCHEMA_VERSION, ScenarioRef, Settings,
     tool_version,
 };
-use crate::oracle::Verdict;
-use crate::safety::SafetyConfig;
-use crate::streaming::StreamingConfig;
+use campaign::oracle::Verdict;
+use campaign::safety::SafetyConfig;
+use campaign::streaming::StreamingConfig;
 
 /// The file name of the campaign record in a run directory.
 pub const CAMPAIGN_FILE: &str = "campaign.json";

@@ -27,10 +27,10 @@ use super::telemetry::{Sample, Telemetry};
 use super::{
     BRAKE_CURRENT_A, BRAKE_TIMEOUT, Context, RunError, STOPPED_SPEED_MPS, Stopped, retried,
 };
-use crate::case::RoutePointRecord;
 use crate::recording::{CarCommand, PlannedReturnRoute, Pose as RecordedPose};
-use crate::safety::{Abort, AbortReason, CarSample, SafetyConfig, SafetyMonitor};
-use crate::streaming::{Streamer, Waypoint};
+use campaign::case::RoutePointRecord;
+use campaign::safety::{Abort, AbortReason, CarSample, SafetyConfig, SafetyMonitor};
+use campaign::streaming::{Streamer, Waypoint};
 
 /// Slack on top of the time a reset drive needs at its speeds.
 const RESET_SLACK: Duration = Duration::from_secs(60);
@@ -197,7 +197,7 @@ pub fn reentry(area: &Area, car: Pose) -> Option<Pose> {
 /// band, the largest fallback clearance that gives a route (see the module doc).
 fn plan_return(ctx: &Context<'_>, from: Pose, test_index: usize) -> Result<ReturnRoute, Stopped> {
     let scenario = ctx.scenario;
-    let seed = crate::model::test_rng_seed(ctx.config.campaign.seed, test_index);
+    let seed = campaign::model::test_rng_seed(ctx.config.campaign.seed, test_index);
     let mut first = [0u8; 8];
     first.copy_from_slice(&seed[..8]);
     let mut rng = crate::seed::rng(u64::from_le_bytes(first));

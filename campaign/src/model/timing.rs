@@ -10,47 +10,9 @@
 
 use std::time::Duration;
 
-use super::command::{Fault, Probe};
+pub use car_link::firmware::ProbeRates;
 
-/// How often the probes are called.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct ProbeRates {
-    /// One odometry tick (10 ms in 10.x, 20 ms in 12.x).
-    pub odometry_tick: Duration,
-    /// One ranging slot of the round robin (100 ms).
-    pub ranging_slot: Duration,
-    /// Anchors in range (the round robin's length; at least 1 is assumed).
-    pub anchors_in_range: usize,
-}
-
-impl ProbeRates {
-    /// Firmware 10.x rates with `anchors` anchors in range.
-    pub fn firmware_10(anchors: usize) -> Self {
-        Self {
-            odometry_tick: Duration::from_millis(10),
-            ranging_slot: Duration::from_millis(100),
-            anchors_in_range: anchors,
-        }
-    }
-
-    /// Firmware 12.x rates (default board) with `anchors` anchors in range.
-    pub fn firmware_12(anchors: usize) -> Self {
-        Self {
-            odometry_tick: Duration::from_millis(20),
-            ..Self::firmware_10(anchors)
-        }
-    }
-
-    /// The time between two calls of `probe`.
-    pub fn iteration(&self, probe: Probe) -> Duration {
-        match probe {
-            Probe::UwbRange { .. } => self
-                .ranging_slot
-                .saturating_mul(u32::try_from(self.anchors_in_range.max(1)).unwrap_or(u32::MAX)),
-            Probe::UwbTravelDist | Probe::UwbYaw => self.odometry_tick,
-        }
-    }
-}
+use super::command::Fault;
 
 /// The estimated time a fault applies: from `from` to `to`, on the clock `added_at` was given on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -80,6 +42,7 @@ impl FaultWindow {
 mod tests {
     use super::*;
     use crate::model::FaultKind;
+    use crate::model::Probe;
 
     fn fault(probe: Probe, start: u32, duration: u32) -> Fault {
         Fault {
@@ -96,7 +59,7 @@ mod tests {
         // Two anchors at 10.x rates: one range of an anchor every 200 ms.
         let rates = ProbeRates::firmware_10(2);
         let window = FaultWindow::of(
-            &fault(Probe::UwbRange { anchor: 50 }, 100, 8),
+            &fault(Probe::UwbRange(50), 100, 8),
             Duration::from_secs(3),
             &rates,
         );

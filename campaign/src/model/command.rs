@@ -5,11 +5,7 @@
 //! that proved a continuation exists), a [`Fault`] carries the exact firmware parameters. A
 //! command is what the runner sends and what a replay re-sends.
 
-use std::fmt;
-use std::str::FromStr;
-
-use serde::{Deserialize, Serialize};
-use thiserror::Error;
+pub use car_link::fault::{FaultKind, Probe, UnknownProbe};
 use trajgen::{Point, RouteTail};
 
 /// One step of a test.
@@ -166,115 +162,18 @@ pub fn capped_speeds(
         .collect()
 }
 
-/// A probe of the firmware's fault injection: the site where a fault alters a value
-/// (`firmware-behaviour` §8.5). Serialized as the firmware's probe id.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
-#[serde(try_from = "String", into = "String")]
-pub enum Probe {
-    /// The measured range to one anchor, metres (`uwb_range_<anchor id>`).
-    UwbRange {
-        /// The anchor's UWB id.
-        anchor: u8,
-    },
-    /// The odometry distance step fed to UWB dead reckoning (`uwb_travel_dist`).
-    UwbTravelDist,
-    /// The yaw fed to UWB dead reckoning, degrees (`uwb_yaw`).
-    UwbYaw,
-}
-
-const RANGE_PREFIX: &str = "uwb_range_";
-const TRAVEL_DIST: &str = "uwb_travel_dist";
-const YAW: &str = "uwb_yaw";
-
-impl fmt::Display for Probe {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Self::UwbRange { anchor } => write!(f, "{RANGE_PREFIX}{anchor}"),
-            Self::UwbTravelDist => f.write_str(TRAVEL_DIST),
-            Self::UwbYaw => f.write_str(YAW),
-        }
-    }
-}
-
-/// A probe id that is not one drivecheck injects faults into.
-#[derive(Debug, Clone, PartialEq, Eq, Error)]
-#[error("unknown probe `{0}` (expected uwb_range_<anchor id 0-255>, uwb_travel_dist or uwb_yaw)")]
-pub struct UnknownProbe(pub String);
-
-impl From<Probe> for String {
-    fn from(probe: Probe) -> Self {
-        probe.to_string()
-    }
-}
-
-impl TryFrom<String> for Probe {
-    type Error = UnknownProbe;
-
-    fn try_from(s: String) -> Result<Self, Self::Error> {
-        s.parse()
-    }
-}
-
-impl FromStr for Probe {
-    type Err = UnknownProbe;
-
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s {
-            TRAVEL_DIST => Ok(Self::UwbTravelDist),
-            YAW => Ok(Self::UwbYaw),
-            _ => s
-                .strip_prefix(RANGE_PREFIX)
-                .filter(|id| !id.starts_with('+'))
-                .and_then(|id| id.parse::<u8>().ok())
-                .map(|anchor| Self::UwbRange { anchor })
-                .ok_or_else(|| UnknownProbe(s.to_owned())),
-        }
-    }
-}
-
-/// The firmware's fault types (`firmware-behaviour` §8.4).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum FaultKind {
-    /// XOR bit `trunc(param)` (0–31) of the value's binary32 pattern.
-    #[serde(rename = "bitflip")]
-    BitFlip,
-    /// `x += param`.
-    Offset,
-    /// `x *= param`.
-    Amplification,
-    /// `x = param`.
-    SetTo,
-    /// Nothing, but it occupies a slot.
-    None,
-}
-
-impl FaultKind {
-    /// The name in case files (`bitflip`, `offset`, `amplification`, `set_to`, `none`).
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::BitFlip => "bitflip",
-            Self::Offset => "offset",
-            Self::Amplification => "amplification",
-            Self::SetTo => "set_to",
-            Self::None => "none",
-        }
-    }
-}
-
-impl From<scenarios::RangeFaultKind> for FaultKind {
-    fn from(kind: scenarios::RangeFaultKind) -> Self {
-        match kind {
-            scenarios::RangeFaultKind::Offset => Self::Offset,
-            scenarios::RangeFaultKind::Amplification => Self::Amplification,
-        }
+/// The firmware's fault kind for a scenario's kind of range fault.
+pub fn range_fault_kind(kind: scenarios::RangeFaultKind) -> FaultKind {
+    match kind {
+        scenarios::RangeFaultKind::Offset => FaultKind::Offset,
+        scenarios::RangeFaultKind::Amplification => FaultKind::Amplification,
     }
 }
 
 /// One fault to inject: `fi_add_fault <probe> <kind> <param> <start> <duration>`.
 ///
 /// `start` and `duration` count iterations of the probe, not seconds: the fault applies on calls
-/// `start + 1 … start + duration` of the probe after it is added (`firmware-behaviour` §8.3).
+/// `start + 1 … start + duration` of the probe after it is added (`docs/firmware.md`, fault injection).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Fault {
     /// Where the fault applies.
@@ -292,32 +191,6 @@ pub struct Fault {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn probes_print_and_parse_as_the_firmware_names_them() {
-        for probe in [
-            Probe::UwbRange { anchor: 0 },
-            Probe::UwbRange { anchor: 255 },
-            Probe::UwbTravelDist,
-            Probe::UwbYaw,
-        ] {
-            assert_eq!(probe.to_string().parse::<Probe>(), Ok(probe));
-        }
-        assert_eq!(Probe::UwbRange { anchor: 7 }.to_string(), "uwb_range_7");
-    }
-
-    #[test]
-    fn unknown_probe_names_are_rejected() {
-        for name in [
-            "px",
-            "uwb_range_",
-            "uwb_range_256",
-            "uwb_range_+1",
-            "UWB_YAW",
-        ] {
-            assert!(name.parse::<Probe>().is_err(), "{name}");
-        }
-    }
 
     #[test]
     fn tight_turns_are_slowed_and_straight_legs_keep_their_speed() {

@@ -62,10 +62,10 @@ use scenarios::{CampaignSettings, Interval, Scenario};
 use thiserror::Error;
 use trajgen::{GenerationError, Generator, RouteTail, Strategy};
 
-pub use command::{Command, Fault, FaultKind, Probe, Segment, SegmentIntent, UnknownProbe};
-pub use state::{
-    FaultInFlight, FaultSlots, PROBES, Preconditions, ReferenceState, SLOTS_PER_PROBE, SlotError,
+pub use command::{
+    Command, Fault, FaultKind, Probe, Segment, SegmentIntent, UnknownProbe, range_fault_kind,
 };
+pub use state::{FaultInFlight, FaultSlots, Preconditions, ReferenceState, SlotError};
 pub use timing::{FaultWindow, ProbeRates};
 
 use generate::PlanContext;

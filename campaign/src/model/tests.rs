@@ -7,6 +7,7 @@ use scenarios::Scenario;
 use trajgen::{Point, check_route};
 
 use super::*;
+use car_link::firmware::{FAULT_PROBES, FAULTS_PER_PROBE};
 
 fn scenario(name: &str) -> Scenario {
     scenarios::bundled::load(name)
@@ -57,8 +58,8 @@ fn assert_slots_respected(plan: &TestPlan) {
     for (_, fault) in plan.faults() {
         *per_probe.entry(fault.probe).or_default() += 1;
     }
-    assert!(per_probe.len() <= PROBES);
-    assert!(per_probe.values().all(|&n| n <= SLOTS_PER_PROBE));
+    assert!(per_probe.len() <= FAULT_PROBES);
+    assert!(per_probe.values().all(|&n| n <= FAULTS_PER_PROBE));
 }
 
 #[test]
@@ -139,7 +140,7 @@ fn an_area_without_anchors_gets_no_anchor_faults() {
         assert_drivable(&s, &plan);
         assert!(
             plan.faults()
-                .all(|(_, f)| !matches!(f.probe, Probe::UwbRange { .. }))
+                .all(|(_, f)| !matches!(f.probe, Probe::UwbRange(_)))
         );
     }
 }
@@ -153,8 +154,8 @@ fn fault_parameters_stay_in_the_scenario_ranges() {
             let within = |i: Interval<f64>, v: f64| i.min <= v && v <= i.max;
             let within_u = |i: Interval<u32>, v: u32| i.min <= v && v <= i.max;
             let ok = match fault.probe {
-                Probe::UwbRange { anchor } => {
-                    s.anchors.iter().any(|a| a.id == anchor)
+                Probe::UwbRange(anchor) => {
+                    s.anchors.iter().any(|a| u16::from(a.id) == anchor)
                         && within(f.anchor_range.param, fault.param)
                         && within_u(f.anchor_range.start, fault.start)
                         && within_u(f.anchor_range.duration, fault.duration)
@@ -169,6 +170,7 @@ fn fault_parameters_stay_in_the_scenario_ranges() {
                         && within(f.yaw.offset_deg, fault.param)
                         && within_u(f.yaw.duration, fault.duration)
                 }
+                Probe::Px => false,
             };
             assert!(ok, "{fault:?}");
         }
@@ -212,9 +214,10 @@ fn weights_are_roughly_respected_over_many_plans() {
             let slot = match command {
                 Command::RunSegments(_) => 0,
                 Command::AddFault(f) => match f.probe {
-                    Probe::UwbRange { .. } => 1,
+                    Probe::UwbRange(_) => 1,
                     Probe::UwbTravelDist => 2,
                     Probe::UwbYaw => 3,
+                    Probe::Px => unreachable!("px is never generated"),
                 },
             };
             counts[slot] += 1;

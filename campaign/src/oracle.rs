@@ -100,7 +100,7 @@ pub fn stats(deviations: &[f64]) -> Option<DeviationStats> {
 
 /// The nearest-rank percentile `q` (0..=1) of ascending `sorted`: the smallest value that at
 /// least `q` of the values do not exceed; `None` when empty.
-pub(crate) fn nearest_rank<T: Copy>(sorted: &[T], q: f64) -> Option<T> {
+pub fn nearest_rank<T: Copy>(sorted: &[T], q: f64) -> Option<T> {
     let rank = (q * sorted.len() as f64).ceil() as usize;
     sorted.get(rank.clamp(1, sorted.len().max(1)) - 1).copied()
 }

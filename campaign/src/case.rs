@@ -12,7 +12,8 @@
 //! [`Case::check`] checks the values (finite coordinates, positive speeds, counts that agree)
 //! and [`Case::check_route`] checks the geometry against a scenario.
 
-use scenarios::{CampaignSettings, Interval, RangeFaultKind, Scenario};
+use car_link::firmware::MAX_RANGED_ANCHOR_ID;
+use scenarios::{CampaignSettings, Interval, Scenario};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 use trajgen::{GenerationError, Generator, Point, RouteTail, check_route};
@@ -236,7 +237,7 @@ impl Settings {
                     .anchor_range
                     .kinds
                     .iter()
-                    .map(|&k| range_kind(k))
+                    .map(|&k| crate::model::range_fault_kind(k))
                     .collect(),
                 anchor_range_param: f.anchor_range.param.into(),
                 anchor_range_start: f.anchor_range.start.into(),
@@ -261,10 +262,6 @@ impl Settings {
             ..self
         }
     }
-}
-
-fn range_kind(kind: RangeFaultKind) -> FaultKind {
-    kind.into()
 }
 
 /// A point of a route with the speed the car drives towards it.
@@ -695,8 +692,30 @@ fn check_command(i: usize, command: &CommandRecord) -> Result<(), CaseError> {
     let path = format!("commands[{i}]");
     match command {
         CommandRecord::AddFault {
-            param, duration, ..
+            probe,
+            param,
+            duration,
+            ..
         } => {
+            match probe {
+                Probe::Px => {
+                    return Err(invalid(
+                        format!("{path}.probe"),
+                        "px alters the position the car reports, which the safety monitor relies \
+                         on: drivecheck injects faults into UWB probes only",
+                    ));
+                }
+                Probe::UwbRange(id) if *id > MAX_RANGED_ANCHOR_ID => {
+                    return Err(invalid(
+                        format!("{path}.probe"),
+                        format!(
+                            "anchor {id} is never ranged: the firmware sends an anchor id's low byte, \
+                             so ids above {MAX_RANGED_ANCHOR_ID} never answer"
+                        ),
+                    ));
+                }
+                _ => {}
+            }
             if !param.is_finite() {
                 return Err(invalid(format!("{path}.param"), "must be finite"));
             }

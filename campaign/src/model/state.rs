@@ -9,21 +9,18 @@
 use thiserror::Error;
 use trajgen::{Area, Constraints, Point, RouteTail, check_route};
 
-use super::command::{Command, Fault, Probe, Segment};
+use car_link::firmware::{FAULT_PROBES, FAULTS_PER_PROBE};
 
-/// Probes the firmware can hold at once.
-pub const PROBES: usize = 5;
-/// Fault slots per probe.
-pub const SLOTS_PER_PROBE: usize = 5;
+use super::command::{Command, Fault, Probe, Segment};
 
 /// Why a fault cannot be added.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Error)]
 pub enum SlotError {
     /// All five slots of the probe hold a fault (expired faults keep theirs).
-    #[error("all {SLOTS_PER_PROBE} fault slots of probe {0} are taken")]
+    #[error("all {FAULTS_PER_PROBE} fault slots of probe {0} are taken")]
     ProbeFull(Probe),
     /// Five other probes are in use.
-    #[error("no free probe for {0}: {PROBES} probes are in use")]
+    #[error("no free probe for {0}: {FAULT_PROBES} probes are in use")]
     NoFreeProbe(Probe),
 }
 
@@ -50,9 +47,9 @@ impl FaultSlots {
     /// Whether a fault on `probe` would find a free slot.
     pub fn check(&self, probe: Probe) -> Result<(), SlotError> {
         match self.used.iter().find(|(p, _)| *p == probe) {
-            Some((_, n)) if *n >= SLOTS_PER_PROBE => Err(SlotError::ProbeFull(probe)),
+            Some((_, n)) if *n >= FAULTS_PER_PROBE => Err(SlotError::ProbeFull(probe)),
             Some(_) => Ok(()),
-            None if self.used.len() >= PROBES => Err(SlotError::NoFreeProbe(probe)),
+            None if self.used.len() >= FAULT_PROBES => Err(SlotError::NoFreeProbe(probe)),
             None => Ok(()),
         }
     }
@@ -183,8 +180,8 @@ impl Preconditions {
         if state.segments == 0 || !fault.param.is_finite() || fault.duration == 0 {
             return false;
         }
-        if let Probe::UwbRange { anchor } = fault.probe
-            && !self.anchors.contains(&anchor)
+        if let Probe::UwbRange(anchor) = fault.probe
+            && !self.anchors.iter().any(|&a| u16::from(a) == anchor)
         {
             return false;
         }
@@ -199,7 +196,7 @@ mod tests {
     #[test]
     fn a_probe_holds_five_faults_and_never_frees_them() {
         let mut slots = FaultSlots::new();
-        for _ in 0..SLOTS_PER_PROBE {
+        for _ in 0..FAULTS_PER_PROBE {
             assert_eq!(slots.take(Probe::UwbYaw), Ok(()));
         }
         assert_eq!(
@@ -214,13 +211,13 @@ mod tests {
     #[test]
     fn a_sixth_probe_finds_no_room() {
         let mut slots = FaultSlots::new();
-        for anchor in 0..PROBES as u8 {
-            assert_eq!(slots.take(Probe::UwbRange { anchor }), Ok(()));
+        for anchor in 0..FAULT_PROBES as u16 {
+            assert_eq!(slots.take(Probe::UwbRange(anchor)), Ok(()));
         }
         assert_eq!(
             slots.check(Probe::UwbYaw),
             Err(SlotError::NoFreeProbe(Probe::UwbYaw))
         );
-        assert_eq!(slots.check(Probe::UwbRange { anchor: 0 }), Ok(()));
+        assert_eq!(slots.check(Probe::UwbRange(0)), Ok(()));
     }
 }

@@ -16,7 +16,7 @@ use rand::SeedableRng;
 use scenarios::{CampaignSettings, Interval};
 use trajgen::{GenerationError, Generator, RouteTail};
 
-use super::command::{Command, Fault, FaultKind, Probe, Segment, SegmentIntent};
+use super::command::{Command, Fault, FaultKind, Probe, Segment, SegmentIntent, range_fault_kind};
 use super::state::{Preconditions, ReferenceState};
 
 /// Kilometres per hour in one metre per second.
@@ -115,10 +115,14 @@ fn anchor_fault(ctx: &PlanContext, state: &ReferenceState) -> Option<BoxedStrate
         .preconditions
         .anchors
         .iter()
-        .map(|&anchor| Probe::UwbRange { anchor })
+        .map(|&anchor| Probe::UwbRange(u16::from(anchor)))
         .filter(|&probe| state.slots.check(probe).is_ok())
         .collect();
-    let kinds: Vec<FaultKind> = settings.kinds.iter().map(|&k| k.into()).collect();
+    let kinds: Vec<FaultKind> = settings
+        .kinds
+        .iter()
+        .map(|&k| range_fault_kind(k))
+        .collect();
     if probes.is_empty() || kinds.is_empty() {
         return None;
     }

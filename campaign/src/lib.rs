@@ -1,0 +1,23 @@
+//! The campaign core of drivecheck: what a campaign decides, with no I/O, no clock and no async
+//! runtime. Time comes in as a `Duration` since the test began; the car's answers come in as
+//! events. The orchestrator around it talks to the car, writes files and shows progress.
+//!
+//! - [`model`]: the abstract model of the car on `proptest` and the deterministic test planner
+//!   (scenario, campaign seed, test index → a concrete test).
+//! - [`oracle`]: |UWB − RTK| per sample, per segment, and the verdicts.
+//! - [`safety`]: the runtime safety monitor (fence, cutouts, cross-track, stale telemetry).
+//! - [`streaming`]: when to append the next segment so the car never reaches its route's end.
+//! - [`case`]: the versioned case-file and `campaign.json` formats, and replay planning.
+//! - [`replay`]: the comparison of a replay's runs.
+//! - [`seed`]: the one random number generator of every run.
+//!
+//! Not here: the wire protocol and the client (`car-link`; only its protocol layer and firmware
+//! facts are used here), the run directory, the recording and the command line (`orchestrator`).
+
+pub mod case;
+pub mod model;
+pub mod oracle;
+pub mod replay;
+pub mod safety;
+pub mod seed;
+pub mod streaming;
