@@ -233,12 +233,7 @@ impl Settings {
                 yaw_fault: c.weights.yaw_fault,
             },
             faults: FaultRanges {
-                anchor_range_kinds: f
-                    .anchor_range
-                    .kinds
-                    .iter()
-                    .map(|&k| crate::model::range_fault_kind(k))
-                    .collect(),
+                anchor_range_kinds: f.anchor_range.kinds.clone(),
                 anchor_range_param: f.anchor_range.param.into(),
                 anchor_range_start: f.anchor_range.start.into(),
                 anchor_range_duration: f.anchor_range.duration.into(),

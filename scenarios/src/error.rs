@@ -230,6 +230,9 @@ pub enum Problem {
     /// A fault kind listed twice.
     #[error("`{0}` is listed twice")]
     DuplicateKind(&'static str),
+    /// The fault kind `none` among the kinds to generate.
+    #[error("`none` does nothing (it only occupies a fault slot): leave it out")]
+    NoneKind,
     /// No bundled scenario has this name.
     #[error("no bundled scenario `{name}` (known: {known})")]
     UnknownBundled {

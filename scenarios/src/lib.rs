@@ -39,8 +39,8 @@ use std::path::Path;
 pub use error::{Location, Place, Problem, ScenarioError, Warning, WarningKind};
 pub use model::{Anchor, EnuOrigin, Environment, Obstacle, Route, RoutePoint, Scenario, Wall};
 pub use settings::{
-    AnchorRangeFault, CampaignSettings, CommandWeights, FaultSettings, GeneratorSettings, Interval,
-    RangeFaultKind, Vehicle, WheelSlipFault, YawFault,
+    AnchorRangeFault, CampaignSettings, CommandWeights, DEFAULT_BITFLIP_BITS, FaultKind,
+    FaultSettings, GeneratorSettings, Interval, Vehicle, WheelSlipFault, YawFault, fault_kind_name,
 };
 /// The area geometry of [`trajgen`], re-exported for crates that see scenarios but not the generator.
 pub use trajgen::geometry;

@@ -196,23 +196,23 @@ pub struct FaultSettings {
     pub yaw: YawFault,
 }
 
-/// The firmware's fault types a range fault may use.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum RangeFaultKind {
-    /// Adds the parameter to the range, metres.
-    Offset,
-    /// Multiplies the range by the parameter.
-    Amplification,
-}
+/// The firmware's fault types (`offset`, `amplification`, `set_to`, `bitflip`; `none` is refused
+/// in scenarios: it does nothing), as car-link names them.
+pub use car_link::fault::FaultKind;
 
-impl RangeFaultKind {
-    /// The name used in scenario files.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::Offset => "offset",
-            Self::Amplification => "amplification",
-        }
+/// The bits a generated `bitflip` flips by default: the top of the mantissa (18–22: the value
+/// changes by 3–50 %), the exponent (23–30: it is halved or doubled up to a blow-up to ±inf or
+/// near 0) and the sign (31).
+pub const DEFAULT_BITFLIP_BITS: Interval<u32> = Interval::new(18, 31);
+
+/// The name of a fault kind in scenario and case files.
+pub fn fault_kind_name(kind: FaultKind) -> &'static str {
+    match kind {
+        FaultKind::None => "none",
+        FaultKind::Bitflip => "bitflip",
+        FaultKind::Offset => "offset",
+        FaultKind::Amplification => "amplification",
+        FaultKind::SetTo => "set_to",
     }
 }
 
@@ -220,10 +220,15 @@ impl RangeFaultKind {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct AnchorRangeFault {
-    /// Fault types to choose from (offset, amplification).
-    pub kinds: Vec<RangeFaultKind>,
-    /// The fault's parameter (0–5).
+    /// Fault types to choose from (offset and amplification by default; set_to and bitflip when
+    /// listed).
+    pub kinds: Vec<FaultKind>,
+    /// The parameter of an offset (metres) or an amplification (a factor) (0–5).
     pub param: Interval<f64>,
+    /// The range a `set_to` fault reports, metres (0–20).
+    pub set_to_m: Interval<f64>,
+    /// The bit a `bitflip` fault flips (18–31, see [`DEFAULT_BITFLIP_BITS`]).
+    pub bitflip_bits: Interval<u32>,
     /// Probe iteration at which the fault starts (0–100).
     pub start: Interval<u32>,
     /// Probe iterations it lasts (1–8).
@@ -233,20 +238,31 @@ pub struct AnchorRangeFault {
 impl Default for AnchorRangeFault {
     fn default() -> Self {
         Self {
-            kinds: vec![RangeFaultKind::Offset, RangeFaultKind::Amplification],
+            kinds: vec![FaultKind::Offset, FaultKind::Amplification],
             param: Interval::new(0.0, 5.0),
+            set_to_m: Interval::new(0.0, 20.0),
+            bitflip_bits: DEFAULT_BITFLIP_BITS,
             start: Interval::new(0, 100),
             duration: Interval::new(1, 8),
         }
     }
 }
 
-/// Ranges of the wheel slip fault (an amplification of the travelled distance).
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+/// Ranges of the wheel slip fault (by default an amplification of the travelled distance). One
+/// call of the probe is one odometry step: 1–3 cm at test speeds.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct WheelSlipFault {
+    /// Fault types to choose from (amplification by default).
+    pub kinds: Vec<FaultKind>,
     /// Amplification factor (1.0–5.0).
     pub amplification: Interval<f64>,
+    /// The distance an `offset` fault adds to one odometry step, metres (0–0.05).
+    pub offset_m: Interval<f64>,
+    /// The distance a `set_to` fault reports for one odometry step, metres (0–0.05).
+    pub set_to_m: Interval<f64>,
+    /// The bit a `bitflip` fault flips (18–31).
+    pub bitflip_bits: Interval<u32>,
     /// Probe iteration at which the fault starts (0–100).
     pub start: Interval<u32>,
     /// Probe iterations it lasts (1–10).
@@ -256,19 +272,32 @@ pub struct WheelSlipFault {
 impl Default for WheelSlipFault {
     fn default() -> Self {
         Self {
+            kinds: vec![FaultKind::Amplification],
             amplification: Interval::new(1.0, 5.0),
+            offset_m: Interval::new(0.0, 0.05),
+            set_to_m: Interval::new(0.0, 0.05),
+            bitflip_bits: DEFAULT_BITFLIP_BITS,
             start: Interval::new(0, 100),
             duration: Interval::new(1, 10),
         }
     }
 }
 
-/// Ranges of the yaw fault (an offset on the heading).
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+/// Ranges of the yaw fault (by default an offset on the heading fed to the UWB estimator,
+/// degrees).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct YawFault {
+    /// Fault types to choose from (offset by default).
+    pub kinds: Vec<FaultKind>,
     /// Offset, degrees (−20..20).
     pub offset_deg: Interval<f64>,
+    /// Amplification factor (0.5–1.5).
+    pub amplification: Interval<f64>,
+    /// The heading a `set_to` fault reports, degrees (−180..180).
+    pub set_to_deg: Interval<f64>,
+    /// The bit a `bitflip` fault flips (18–31).
+    pub bitflip_bits: Interval<u32>,
     /// Probe iteration at which the fault starts (0–100).
     pub start: Interval<u32>,
     /// Probe iterations it lasts (1–10).
@@ -278,7 +307,11 @@ pub struct YawFault {
 impl Default for YawFault {
     fn default() -> Self {
         Self {
+            kinds: vec![FaultKind::Offset],
             offset_deg: Interval::new(-20.0, 20.0),
+            amplification: Interval::new(0.5, 1.5),
+            set_to_deg: Interval::new(-180.0, 180.0),
+            bitflip_bits: DEFAULT_BITFLIP_BITS,
             start: Interval::new(0, 100),
             duration: Interval::new(1, 10),
         }

@@ -14,7 +14,9 @@ use trajgen::{Area, Point};
 
 use crate::error::{Problem, ScenarioError, Warning, WarningKind};
 use crate::model::{Route, RoutePoint, Scenario};
-use crate::settings::{CampaignSettings, GeneratorSettings, Interval, Vehicle};
+use crate::settings::{
+    CampaignSettings, FaultKind, GeneratorSettings, Interval, Vehicle, fault_kind_name,
+};
 
 pub use car_link::firmware::{MAX_ANCHORS, MAX_SPEED_KMH};
 
@@ -178,28 +180,54 @@ fn check_campaign(c: &CampaignSettings) -> Check {
     check_faults(c)
 }
 
-fn check_faults(c: &CampaignSettings) -> Check {
-    let range = &c.faults.anchor_range;
-    let field = "campaign.faults.anchor_range";
-    if range.kinds.is_empty() {
+/// A probe's list of fault kinds: not empty, no kind twice, no `none` (it does nothing).
+fn fault_kinds(kinds: &[FaultKind], field: &str) -> Check {
+    if kinds.is_empty() {
         return Err((format!("{field}.kinds"), Problem::Empty));
     }
-    for (i, kind) in range.kinds.iter().enumerate() {
-        if range.kinds[..i].contains(kind) {
+    for (i, &kind) in kinds.iter().enumerate() {
+        if kind == FaultKind::None {
+            return Err((format!("{field}.kinds[{i}]"), Problem::NoneKind));
+        }
+        if kinds[..i].contains(&kind) {
             return Err((
                 format!("{field}.kinds[{i}]"),
-                Problem::DuplicateKind(kind.as_str()),
+                Problem::DuplicateKind(fault_kind_name(kind)),
             ));
         }
     }
+    Ok(())
+}
+
+/// The bits a `bitflip` may flip: an ordered range within 0–31 (a binary32 value's bits).
+fn bitflip_bits(bits: Interval<u32>, field: &str) -> Check {
+    let field = format!("{field}.bitflip_bits");
+    ordered(as_f64(bits), &field)?;
+    within(f64::from(bits.max), 0.0, 31.0, &format!("{field}.max"))
+}
+
+fn check_faults(c: &CampaignSettings) -> Check {
+    let range = &c.faults.anchor_range;
+    let field = "campaign.faults.anchor_range";
+    fault_kinds(&range.kinds, field)?;
     ordered(range.param, &format!("{field}.param"))?;
+    ordered(range.set_to_m, &format!("{field}.set_to_m"))?;
+    bitflip_bits(range.bitflip_bits, field)?;
     probe_window(range.start, range.duration, field)?;
     let slip = &c.faults.wheel_slip;
     let field = "campaign.faults.wheel_slip";
+    fault_kinds(&slip.kinds, field)?;
     ordered(slip.amplification, &format!("{field}.amplification"))?;
+    ordered(slip.offset_m, &format!("{field}.offset_m"))?;
+    ordered(slip.set_to_m, &format!("{field}.set_to_m"))?;
+    bitflip_bits(slip.bitflip_bits, field)?;
     probe_window(slip.start, slip.duration, field)?;
     let yaw = &c.faults.yaw;
     let field = "campaign.faults.yaw";
+    fault_kinds(&yaw.kinds, field)?;
+    ordered(yaw.amplification, &format!("{field}.amplification"))?;
+    ordered(yaw.set_to_deg, &format!("{field}.set_to_deg"))?;
+    bitflip_bits(yaw.bitflip_bits, field)?;
     ordered(yaw.offset_deg, &format!("{field}.offset_deg"))?;
     within(
         yaw.offset_deg.min,
@@ -580,6 +608,18 @@ mod tests {
             (
                 "[campaign.faults.anchor_range]\nkinds = []",
                 "campaign.faults.anchor_range.kinds: must not be empty",
+            ),
+            (
+                "[campaign.faults.wheel_slip]\nkinds = [\"amplification\", \"none\"]",
+                "campaign.faults.wheel_slip.kinds[1]: `none` does nothing (it only occupies a fault slot): leave it out",
+            ),
+            (
+                "[campaign.faults.yaw]\nkinds = [\"set_to\", \"set_to\"]",
+                "campaign.faults.yaw.kinds[1]: `set_to` is listed twice",
+            ),
+            (
+                "[campaign.faults.anchor_range]\nkinds = [\"bitflip\"]\nbitflip_bits = { min = 20, max = 32 }",
+                "campaign.faults.anchor_range.bitflip_bits.max: 32 is outside 0..=31",
             ),
             (
                 "[[environment.obstacles]]\nname = \" \"\npolygon = [{ x = 0.0, y = -1.0 }, { x = 1.0, y = -1.0 }, { x = 1.0, y = -2.0 }]",

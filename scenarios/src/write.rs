@@ -9,8 +9,8 @@ use trajgen::Point;
 
 use crate::model::{Anchor, Obstacle, Route, Scenario, Wall};
 use crate::settings::{
-    AnchorRangeFault, CampaignSettings, GeneratorSettings, Interval, Vehicle, WheelSlipFault,
-    YawFault,
+    AnchorRangeFault, CampaignSettings, FaultKind, GeneratorSettings, Interval, Vehicle,
+    WheelSlipFault, YawFault, fault_kind_name,
 };
 
 /// The scenario in canonical TOML.
@@ -193,25 +193,65 @@ fn campaign(out: &mut String, c: &CampaignSettings) {
     yaw(out, &c.faults.yaw);
 }
 
+// The canonical form writes a kind's range only when the kind is listed (and a probe's kinds only
+// when they are not its default), so that adding a kind to the format leaves the hash of every
+// scenario that does not use it unchanged.
+
+fn kinds(out: &mut String, kinds: &[FaultKind]) {
+    let names: Vec<String> = kinds.iter().map(|&k| string(fault_kind_name(k))).collect();
+    line(out, "kinds", &format!("[{}]", names.join(", ")));
+}
+
+fn kind_range(out: &mut String, f: &[FaultKind], kind: FaultKind, key: &str, range: Interval<f64>) {
+    if f.contains(&kind) {
+        line(out, key, &floats(range));
+    }
+}
+
+fn bitflip_bits(out: &mut String, f: &[FaultKind], bits: Interval<u32>) {
+    if f.contains(&FaultKind::Bitflip) {
+        line(out, "bitflip_bits", &ints(bits));
+    }
+}
+
 fn anchor_range(out: &mut String, f: &AnchorRangeFault) {
     out.push_str("\n[campaign.faults.anchor_range]\n");
-    let kinds: Vec<String> = f.kinds.iter().map(|k| string(k.as_str())).collect();
-    line(out, "kinds", &format!("[{}]", kinds.join(", ")));
+    kinds(out, &f.kinds);
     line(out, "param", &floats(f.param));
+    kind_range(out, &f.kinds, FaultKind::SetTo, "set_to_m", f.set_to_m);
+    bitflip_bits(out, &f.kinds, f.bitflip_bits);
     line(out, "start", &ints(f.start));
     line(out, "duration", &ints(f.duration));
 }
 
 fn wheel_slip(out: &mut String, f: &WheelSlipFault) {
     out.push_str("\n[campaign.faults.wheel_slip]\n");
+    if f.kinds != WheelSlipFault::default().kinds {
+        kinds(out, &f.kinds);
+    }
     line(out, "amplification", &floats(f.amplification));
+    kind_range(out, &f.kinds, FaultKind::Offset, "offset_m", f.offset_m);
+    kind_range(out, &f.kinds, FaultKind::SetTo, "set_to_m", f.set_to_m);
+    bitflip_bits(out, &f.kinds, f.bitflip_bits);
     line(out, "start", &ints(f.start));
     line(out, "duration", &ints(f.duration));
 }
 
 fn yaw(out: &mut String, f: &YawFault) {
     out.push_str("\n[campaign.faults.yaw]\n");
+    if f.kinds != YawFault::default().kinds {
+        kinds(out, &f.kinds);
+    }
     line(out, "offset_deg", &floats(f.offset_deg));
+    kind_range(
+        out,
+        &f.kinds,
+        FaultKind::Amplification,
+        "amplification",
+        f.amplification,
+    );
+    kind_range(out, &f.kinds, FaultKind::SetTo, "set_to_deg", f.set_to_deg);
+    bitflip_bits(out, &f.kinds, f.bitflip_bits);
     line(out, "start", &ints(f.start));
     line(out, "duration", &ints(f.duration));
 }

@@ -162,14 +162,6 @@ pub fn capped_speeds(
         .collect()
 }
 
-/// The firmware's fault kind for a scenario's kind of range fault.
-pub fn range_fault_kind(kind: scenarios::RangeFaultKind) -> FaultKind {
-    match kind {
-        scenarios::RangeFaultKind::Offset => FaultKind::Offset,
-        scenarios::RangeFaultKind::Amplification => FaultKind::Amplification,
-    }
-}
-
 /// One fault to inject: `fi_add_fault <probe> <kind> <param> <start> <duration>`.
 ///
 /// `start` and `duration` count iterations of the probe, not seconds: the fault applies on calls

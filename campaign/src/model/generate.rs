@@ -16,7 +16,7 @@ use rand::SeedableRng;
 use scenarios::{CampaignSettings, Interval};
 use trajgen::{GenerationError, Generator, RouteTail};
 
-use super::command::{Command, Fault, FaultKind, Probe, Segment, SegmentIntent, range_fault_kind};
+use super::command::{Command, Fault, FaultKind, Probe, Segment, SegmentIntent};
 use super::state::{Preconditions, ReferenceState};
 
 /// Kilometres per hour in one metre per second.
@@ -118,22 +118,22 @@ fn anchor_fault(ctx: &PlanContext, state: &ReferenceState) -> Option<BoxedStrate
         .map(|&anchor| Probe::UwbRange(u16::from(anchor)))
         .filter(|&probe| state.slots.check(probe).is_ok())
         .collect();
-    let kinds: Vec<FaultKind> = settings
-        .kinds
-        .iter()
-        .map(|&k| range_fault_kind(k))
-        .collect();
-    if probes.is_empty() || kinds.is_empty() {
+    if probes.is_empty() || settings.kinds.is_empty() {
         return None;
     }
+    let ranges = KindRanges {
+        offset: settings.param,
+        amplification: settings.param,
+        set_to: settings.set_to_m,
+        bitflip_bits: settings.bitflip_bits,
+    };
     let strategy = (
         select(probes),
-        select(kinds),
-        range_f64(settings.param),
+        kind_and_param(&settings.kinds, ranges),
         range_u32(settings.start),
         range_u32(settings.duration),
     )
-        .prop_map(|(probe, kind, param, start, duration)| {
+        .prop_map(|(probe, (kind, param), start, duration)| {
             Command::AddFault(Fault {
                 probe,
                 kind,
@@ -146,36 +146,95 @@ fn anchor_fault(ctx: &PlanContext, state: &ReferenceState) -> Option<BoxedStrate
 }
 
 fn wheel_slip_fault(settings: &CampaignSettings) -> BoxedStrategy<Command> {
-    let slip = settings.faults.wheel_slip;
-    simple_fault(
+    let slip = &settings.faults.wheel_slip;
+    let ranges = KindRanges {
+        offset: slip.offset_m,
+        amplification: slip.amplification,
+        set_to: slip.set_to_m,
+        bitflip_bits: slip.bitflip_bits,
+    };
+    probe_fault(
         Probe::UwbTravelDist,
-        FaultKind::Amplification,
-        slip.amplification,
+        kind_and_param(&slip.kinds, ranges),
         slip.start,
         slip.duration,
     )
 }
 
 fn yaw_fault(settings: &CampaignSettings) -> BoxedStrategy<Command> {
-    let yaw = settings.faults.yaw;
-    simple_fault(
+    let yaw = &settings.faults.yaw;
+    let ranges = KindRanges {
+        offset: yaw.offset_deg,
+        amplification: yaw.amplification,
+        set_to: yaw.set_to_deg,
+        bitflip_bits: yaw.bitflip_bits,
+    };
+    probe_fault(
         Probe::UwbYaw,
-        FaultKind::Offset,
-        yaw.offset_deg,
+        kind_and_param(&yaw.kinds, ranges),
         yaw.start,
         yaw.duration,
     )
 }
 
-fn simple_fault(
+/// The parameter range of each fault kind on one probe.
+#[derive(Debug, Clone, Copy)]
+struct KindRanges {
+    offset: Interval<f64>,
+    amplification: Interval<f64>,
+    set_to: Interval<f64>,
+    bitflip_bits: Interval<u32>,
+}
+
+impl KindRanges {
+    /// The parameter of a `kind` fault: a value of its range; for a bitflip, the bit's number.
+    fn param(self, kind: FaultKind) -> BoxedStrategy<f64> {
+        match kind {
+            FaultKind::Offset => range_f64(self.offset).boxed(),
+            FaultKind::Amplification => range_f64(self.amplification).boxed(),
+            FaultKind::SetTo => range_f64(self.set_to).boxed(),
+            FaultKind::Bitflip => range_u32(self.bitflip_bits).prop_map(f64::from).boxed(),
+            FaultKind::None => Just(0.0).boxed(),
+        }
+    }
+}
+
+/// A kind among `kinds` (the scenario's validation keeps the list non-empty) and its parameter.
+/// A probe with one kind draws no kind, and kinds that share one parameter range (an anchor's
+/// offset and amplification) draw the kind and the parameter independently, so the method's
+/// default tests are drawn exactly as before the other kinds existed.
+fn kind_and_param(kinds: &[FaultKind], ranges: KindRanges) -> BoxedStrategy<(FaultKind, f64)> {
+    let shared = |range: Interval<f64>| {
+        kinds.iter().all(|&kind| match kind {
+            FaultKind::Offset => ranges.offset == range,
+            FaultKind::Amplification => ranges.amplification == range,
+            FaultKind::SetTo => ranges.set_to == range,
+            FaultKind::Bitflip | FaultKind::None => false,
+        })
+    };
+    match kinds {
+        [kind] => {
+            let kind = *kind;
+            ranges
+                .param(kind)
+                .prop_map(move |param| (kind, param))
+                .boxed()
+        }
+        _ if shared(ranges.offset) => (select(kinds.to_vec()), range_f64(ranges.offset)).boxed(),
+        _ => select(kinds.to_vec())
+            .prop_flat_map(move |kind| ranges.param(kind).prop_map(move |param| (kind, param)))
+            .boxed(),
+    }
+}
+
+fn probe_fault(
     probe: Probe,
-    kind: FaultKind,
-    param: Interval<f64>,
+    kind_and_param: BoxedStrategy<(FaultKind, f64)>,
     start: Interval<u32>,
     duration: Interval<u32>,
 ) -> BoxedStrategy<Command> {
-    (range_f64(param), range_u32(start), range_u32(duration))
-        .prop_map(move |(param, start, duration)| {
+    (kind_and_param, range_u32(start), range_u32(duration))
+        .prop_map(move |((kind, param), start, duration)| {
             Command::AddFault(Fault {
                 probe,
                 kind,

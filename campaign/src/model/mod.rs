@@ -62,9 +62,7 @@ use scenarios::{CampaignSettings, Interval, Scenario};
 use thiserror::Error;
 use trajgen::{GenerationError, Generator, RouteTail, Strategy};
 
-pub use command::{
-    Command, Fault, FaultKind, Probe, Segment, SegmentIntent, UnknownProbe, range_fault_kind,
-};
+pub use command::{Command, Fault, FaultKind, Probe, Segment, SegmentIntent, UnknownProbe};
 pub use state::{FaultInFlight, FaultSlots, Preconditions, ReferenceState, SlotError};
 pub use timing::{FaultWindow, ProbeRates};
 

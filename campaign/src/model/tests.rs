@@ -351,3 +351,95 @@ proptest! {
         }
     }
 }
+
+/// The parking lot with every fault kind of the firmware enabled on every probe.
+fn all_kinds() -> Scenario {
+    let mut s = parking_lot();
+    let all = vec![
+        FaultKind::Offset,
+        FaultKind::Amplification,
+        FaultKind::SetTo,
+        FaultKind::Bitflip,
+    ];
+    s.campaign.faults.anchor_range.kinds = all.clone();
+    s.campaign.faults.wheel_slip.kinds = all.clone();
+    s.campaign.faults.yaw.kinds = all;
+    s
+}
+
+#[test]
+fn every_fault_kind_is_generated_within_its_range_when_the_scenario_asks() {
+    let s = all_kinds();
+    let f = &s.campaign.faults;
+    let mut seen = HashMap::new();
+    for index in 0..40 {
+        for (_, fault) in plan(&s, 5, index).faults() {
+            *seen
+                .entry((fault.probe.to_string(), fault.kind))
+                .or_insert(0) += 1;
+            let (range, bits) = match (fault.probe, fault.kind) {
+                (Probe::UwbRange(_), FaultKind::Offset | FaultKind::Amplification) => {
+                    (Some(f.anchor_range.param), None)
+                }
+                (Probe::UwbRange(_), FaultKind::SetTo) => (Some(f.anchor_range.set_to_m), None),
+                (Probe::UwbRange(_), FaultKind::Bitflip) => {
+                    (None, Some(f.anchor_range.bitflip_bits))
+                }
+                (Probe::UwbTravelDist, FaultKind::Offset) => (Some(f.wheel_slip.offset_m), None),
+                (Probe::UwbTravelDist, FaultKind::Amplification) => {
+                    (Some(f.wheel_slip.amplification), None)
+                }
+                (Probe::UwbTravelDist, FaultKind::SetTo) => (Some(f.wheel_slip.set_to_m), None),
+                (Probe::UwbTravelDist, FaultKind::Bitflip) => {
+                    (None, Some(f.wheel_slip.bitflip_bits))
+                }
+                (Probe::UwbYaw, FaultKind::Offset) => (Some(f.yaw.offset_deg), None),
+                (Probe::UwbYaw, FaultKind::Amplification) => (Some(f.yaw.amplification), None),
+                (Probe::UwbYaw, FaultKind::SetTo) => (Some(f.yaw.set_to_deg), None),
+                (Probe::UwbYaw, FaultKind::Bitflip) => (None, Some(f.yaw.bitflip_bits)),
+                other => panic!("not generated: {other:?}"),
+            };
+            if let Some(r) = range {
+                assert!(r.min <= fault.param && fault.param <= r.max, "{fault:?}");
+            }
+            if let Some(b) = bits {
+                assert_eq!(fault.param.fract(), 0.0, "{fault:?}");
+                assert!(f64::from(b.min) <= fault.param && fault.param <= f64::from(b.max));
+            }
+        }
+    }
+    for kind in [
+        FaultKind::Offset,
+        FaultKind::Amplification,
+        FaultKind::SetTo,
+        FaultKind::Bitflip,
+    ] {
+        for probe in ["uwb_travel_dist", "uwb_yaw"] {
+            assert!(
+                seen.contains_key(&(probe.to_owned(), kind)),
+                "{probe} {kind}: {seen:?}"
+            );
+        }
+        assert!(
+            seen.keys()
+                .any(|(p, k)| p.starts_with("uwb_range_") && *k == kind),
+            "range {kind}: {seen:?}"
+        );
+    }
+}
+
+#[test]
+fn the_default_kinds_are_the_methods() {
+    let s = parking_lot();
+    for index in 0..10 {
+        for (_, fault) in plan(&s, 9, index).faults() {
+            let expected: &[FaultKind] = match fault.probe {
+                Probe::UwbRange(_) => &[FaultKind::Offset, FaultKind::Amplification],
+                Probe::UwbTravelDist => &[FaultKind::Amplification],
+                Probe::UwbYaw => &[FaultKind::Offset],
+                Probe::Px => &[],
+            };
+            assert!(expected.contains(&fault.kind), "{fault:?}");
+        }
+    }
+}
