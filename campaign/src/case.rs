@@ -18,7 +18,9 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 use trajgen::{GenerationError, Generator, Point, RouteTail, check_route};
 
-use crate::model::{Command, Fault, FaultKind, Probe, Segment, SegmentIntent, TestPlan};
+use crate::model::{
+    Command, Fault, FaultKind, FaultPlace, Probe, Segment, SegmentIntent, TestPlan,
+};
 use crate::oracle::{FailurePolicy, SegmentOutcome, Verdict};
 use crate::safety::{Abort, SafetyConfig};
 use crate::streaming::{Append, StreamingConfig};
@@ -27,8 +29,12 @@ use crate::streaming::{Append, StreamingConfig};
 pub const CASE_FORMAT: &str = "drivecheck-case";
 /// The `format` of a campaign record.
 pub const CAMPAIGN_FORMAT: &str = "drivecheck-campaign";
-/// The schema version this build writes and reads.
+/// The schema version of campaign records (`campaign.json`) and replay comparisons this build
+/// writes and reads.
 pub const SCHEMA_VERSION: u32 = 1;
+/// The schema version of case files this build writes: 2 gives every fault its place on the
+/// route. Version 1 is still read; its faults have no place.
+pub const CASE_SCHEMA_VERSION: u32 = 2;
 
 /// Why a case file or campaign record was refused.
 #[derive(Debug, Error)]
@@ -50,10 +56,12 @@ pub enum CaseError {
         expected: &'static str,
     },
     /// Written by a newer drivecheck (or an unknown version).
-    #[error("schema_version {found} is not supported (this drivecheck reads {SCHEMA_VERSION})")]
+    #[error("schema_version {found} is not supported (this drivecheck reads {supported})")]
     UnsupportedVersion {
         /// What the file says.
         found: u32,
+        /// What this build reads, in words.
+        supported: &'static str,
     },
     /// A value is unusable; `path` names it.
     #[error("{path}: {message}")]
@@ -340,7 +348,39 @@ pub enum CommandRecord {
         start: u32,
         /// Probe iterations it applies for.
         duration: u32,
+        /// Where on the route it is sent; absent in version-1 cases and in hand-written cases
+        /// that leave it to the earlier tool's rule.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        at: Option<PlaceRecord>,
     },
+}
+
+/// A fault's place on the route in a case file: `{"segment_index": k, "along_m": d}`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlaceRecord {
+    /// The segment (among the case's segments, from 0) on which the fault is sent.
+    pub segment_index: usize,
+    /// Metres along that segment from its start.
+    pub along_m: f64,
+}
+
+impl From<FaultPlace> for PlaceRecord {
+    fn from(p: FaultPlace) -> Self {
+        Self {
+            segment_index: p.segment_index,
+            along_m: p.along_m,
+        }
+    }
+}
+
+impl From<PlaceRecord> for FaultPlace {
+    fn from(p: PlaceRecord) -> Self {
+        Self {
+            segment_index: p.segment_index,
+            along_m: p.along_m,
+        }
+    }
 }
 
 impl From<&Command> for CommandRecord {
@@ -353,6 +393,7 @@ impl From<&Command> for CommandRecord {
                 param: f.param,
                 start: f.start,
                 duration: f.duration,
+                at: f.at.map(PlaceRecord::from),
             },
         }
     }
@@ -394,12 +435,14 @@ impl CommandRecord {
                 param,
                 start,
                 duration,
+                at,
             } => Command::AddFault(Fault {
                 probe: *probe,
                 kind: *kind,
                 param: *param,
                 start: *start,
                 duration: *duration,
+                at: at.map(FaultPlace::from),
             }),
             Self::RunSegments {
                 intent,
@@ -513,7 +556,7 @@ impl Case {
     ) -> Self {
         Self {
             format: CASE_FORMAT.to_owned(),
-            schema_version: SCHEMA_VERSION,
+            schema_version: CASE_SCHEMA_VERSION,
             tool_version: Some(tool_version().to_owned()),
             campaign_seed: Some(campaign_seed),
             test_index: Some(plan.test_index),
@@ -546,8 +589,14 @@ impl Case {
     /// Checks the values: finite coordinates, positive finite speeds, non-empty segments whose
     /// intent agrees with their points, finite fault parameters, result indices in range.
     pub fn check(&self) -> Result<(), CaseError> {
+        let mut segments = 0;
         for (i, command) in self.commands.iter().enumerate() {
             check_command(i, command)?;
+            match command {
+                CommandRecord::RunSegments { .. } => segments += 1,
+                CommandRecord::AddFault { at: Some(at), .. } => check_place(i, at, segments)?,
+                CommandRecord::AddFault { at: None, .. } => {}
+            }
         }
         check_route_points("return_route", &self.return_route)?;
         if let Some(clearance) = self.return_clearance_m
@@ -747,6 +796,29 @@ fn check_command(i: usize, command: &CommandRecord) -> Result<(), CaseError> {
     }
 }
 
+/// A fault's place lies on a segment driven before the fault command (`segments` of them), at a
+/// finite, non-negative distance along it (how far it may be is checked against the segment's
+/// length when the case is planned for driving).
+fn check_place(i: usize, at: &PlaceRecord, segments: usize) -> Result<(), CaseError> {
+    let path = format!("commands[{i}].at");
+    if at.segment_index >= segments {
+        return Err(invalid(
+            format!("{path}.segment_index"),
+            format!(
+                "segment {} is not driven before this fault (only {segments} segment(s) precede it)",
+                at.segment_index
+            ),
+        ));
+    }
+    if !(at.along_m.is_finite() && at.along_m >= 0.0) {
+        return Err(invalid(
+            format!("{path}.along_m"),
+            "must be finite and non-negative",
+        ));
+    }
+    Ok(())
+}
+
 fn check_route_points(path: &str, points: &[RoutePointRecord]) -> Result<(), CaseError> {
     for (j, p) in points.iter().enumerate() {
         if !p.position().is_finite() {
@@ -873,8 +945,16 @@ fn check_header(format: &str, expected: &'static str, version: u32) -> Result<()
             expected,
         });
     }
-    if version != SCHEMA_VERSION {
-        return Err(CaseError::UnsupportedVersion { found: version });
+    let (known, supported): (&[u32], _) = if expected == CASE_FORMAT {
+        (&[1, CASE_SCHEMA_VERSION], "1 and 2")
+    } else {
+        (&[SCHEMA_VERSION], "1")
+    };
+    if !known.contains(&version) {
+        return Err(CaseError::UnsupportedVersion {
+            found: version,
+            supported,
+        });
     }
     Ok(())
 }
@@ -1053,9 +1133,12 @@ mod tests {
         let error = Case::from_json(&other.to_json().unwrap()).unwrap_err();
         assert!(matches!(error, CaseError::WrongFormat { .. }));
         let mut newer = case;
-        newer.schema_version = 2;
+        newer.schema_version = 3;
         let error = Case::from_json(&newer.to_json().unwrap()).unwrap_err();
-        assert!(matches!(error, CaseError::UnsupportedVersion { found: 2 }));
+        assert!(matches!(
+            error,
+            CaseError::UnsupportedVersion { found: 3, .. }
+        ));
     }
 
     #[test]
@@ -1134,6 +1217,7 @@ mod tests {
             param: 3.0,
             start: 0,
             duration: 0,
+            at: None,
         });
         assert!(permanent.check().is_err());
         let mut dangling = base(CommandRecord::AddFault {
@@ -1142,6 +1226,7 @@ mod tests {
             param: 3.0,
             start: 0,
             duration: 2,
+            at: None,
         });
         dangling.segments.push(SegmentResult {
             segment_index: 0,

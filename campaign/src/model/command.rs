@@ -162,6 +162,18 @@ pub fn capped_speeds(
         .collect()
 }
 
+/// Where on the test route a fault is sent: a place, not a time, so that a case is the same test
+/// on any link. The firmware counts a fault's `start` and `duration` from the moment the fault is
+/// added; sending it when the car reaches a place on the route makes where it acts independent of
+/// the link's latency.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FaultPlace {
+    /// The segment (its index among the test's segments, from 0) on which the fault is sent.
+    pub segment_index: usize,
+    /// How far along that segment, metres from its start (the end of the route before it).
+    pub along_m: f64,
+}
+
 /// One fault to inject: `fi_add_fault <probe> <kind> <param> <start> <duration>`.
 ///
 /// `start` and `duration` count iterations of the probe, not seconds: the fault applies on calls
@@ -178,6 +190,11 @@ pub struct Fault {
     pub start: u32,
     /// Probe iterations it applies for (0 would be permanent; generated faults are never 0).
     pub duration: u32,
+    /// Where on the route it is sent (not part of the firmware's command). `None` for a fault of
+    /// a hand-written or version-1 case without a place: it is sent as the earlier tool sent
+    /// faults, once the preceding segment is appended and the car has 4 or fewer route points
+    /// left.
+    pub at: Option<FaultPlace>,
 }
 
 #[cfg(test)]

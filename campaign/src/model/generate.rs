@@ -16,7 +16,7 @@ use rand::SeedableRng;
 use scenarios::{CampaignSettings, Interval};
 use trajgen::{GenerationError, Generator, RouteTail};
 
-use super::command::{Command, Fault, FaultKind, Probe, Segment, SegmentIntent};
+use super::command::{Command, Fault, FaultKind, FaultPlace, Probe, Segment, SegmentIntent};
 use super::state::{Preconditions, ReferenceState};
 
 /// Kilometres per hour in one metre per second.
@@ -77,13 +77,14 @@ pub(crate) fn next_command(
     }
     let mut options = vec![(weights.run_segments, segment(ctx, state.tail))];
     if let Some(strategy) = anchor_fault(ctx, state) {
-        options.push((weights.anchor_range_fault, strategy));
+        options.push((weights.anchor_range_fault, placed(strategy, state)));
     }
     if state.slots.check(Probe::UwbTravelDist).is_ok() {
-        options.push((weights.wheel_slip_fault, wheel_slip_fault(&ctx.settings)));
+        let strategy = wheel_slip_fault(&ctx.settings);
+        options.push((weights.wheel_slip_fault, placed(strategy, state)));
     }
     if state.slots.check(Probe::UwbYaw).is_ok() {
-        options.push((weights.yaw_fault, yaw_fault(&ctx.settings)));
+        options.push((weights.yaw_fault, placed(yaw_fault(&ctx.settings), state)));
     }
     options.retain(|(weight, _)| *weight > 0);
     Union::new_weighted(options).boxed()
@@ -105,6 +106,26 @@ fn segment(ctx: &Arc<PlanContext>, tail: RouteTail) -> BoxedStrategy<Command> {
                 .map_err(|error| ctx.remember(error))
                 .ok()
                 .map(Command::RunSegments)
+        })
+        .boxed()
+}
+
+/// A fault command placed on the segment just planned: anywhere along it, drawn as the share of
+/// the segment left before its end, so that a place shrinks towards the segment's end (where the
+/// earlier tool sent faults). Written to the millimetre.
+fn placed(fault: BoxedStrategy<Command>, state: &ReferenceState) -> BoxedStrategy<Command> {
+    let segment_index = state.segments.saturating_sub(1);
+    let length = state.last_segment_m;
+    (fault, 0.0..=1.0f64)
+        .prop_map(move |(mut command, left)| {
+            if let Command::AddFault(fault) = &mut command {
+                let along_m = (length * (1.0 - left) * 1000.0).round() / 1000.0;
+                fault.at = Some(FaultPlace {
+                    segment_index,
+                    along_m: along_m.min((length * 1000.0).floor() / 1000.0),
+                });
+            }
+            command
         })
         .boxed()
 }
@@ -140,6 +161,7 @@ fn anchor_fault(ctx: &PlanContext, state: &ReferenceState) -> Option<BoxedStrate
                 param,
                 start,
                 duration,
+                at: None,
             })
         });
     Some(strategy.boxed())
@@ -241,6 +263,7 @@ fn probe_fault(
                 param,
                 start,
                 duration,
+                at: None,
             })
         })
         .boxed()

@@ -62,7 +62,9 @@ use scenarios::{CampaignSettings, Interval, Scenario};
 use thiserror::Error;
 use trajgen::{GenerationError, Generator, RouteTail, Strategy};
 
-pub use command::{Command, Fault, FaultKind, Probe, Segment, SegmentIntent, UnknownProbe};
+pub use command::{
+    Command, Fault, FaultKind, FaultPlace, Probe, Segment, SegmentIntent, UnknownProbe,
+};
 pub use state::{FaultInFlight, FaultSlots, Preconditions, ReferenceState, SlotError};
 pub use timing::{FaultWindow, ProbeRates};
 

@@ -13,6 +13,9 @@ use car_link::firmware::{FAULT_PROBES, FAULTS_PER_PROBE};
 
 use super::command::{Command, Fault, Probe, Segment};
 
+/// How far past a segment's computed length a place may lie (rounding of the written place).
+const PLACE_TOLERANCE_M: f64 = 1e-3;
+
 /// Why a fault cannot be added.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Error)]
 pub enum SlotError {
@@ -92,6 +95,8 @@ pub struct ReferenceState {
     pub commands: usize,
     /// `RunSegments` commands applied so far.
     pub segments: usize,
+    /// Length of the last segment applied, metres (0 before the first).
+    pub last_segment_m: f64,
 }
 
 impl ReferenceState {
@@ -103,6 +108,7 @@ impl ReferenceState {
             slots: FaultSlots::new(),
             commands: 0,
             segments: 0,
+            last_segment_m: 0.0,
         }
     }
 
@@ -110,6 +116,7 @@ impl ReferenceState {
     pub fn apply(mut self, command: &Command) -> Self {
         match command {
             Command::RunSegments(segment) => {
+                self.last_segment_m = segment.length_from(self.tail.end);
                 self.tail = self.tail.advanced(&segment.points);
                 self.segments += 1;
             }
@@ -182,6 +189,13 @@ impl Preconditions {
         }
         if let Probe::UwbRange(anchor) = fault.probe
             && !self.anchors.iter().any(|&a| u16::from(a) == anchor)
+        {
+            return false;
+        }
+        // A generated fault is sent on the segment just planned, somewhere along it.
+        if let Some(at) = fault.at
+            && (at.segment_index + 1 != state.segments
+                || !(0.0..=state.last_segment_m + PLACE_TOLERANCE_M).contains(&at.along_m))
         {
             return false;
         }

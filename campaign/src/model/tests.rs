@@ -443,3 +443,34 @@ fn the_default_kinds_are_the_methods() {
         }
     }
 }
+
+#[test]
+fn every_generated_fault_is_placed_along_the_segment_before_it() {
+    let s = parking_lot();
+    let mut placed = 0;
+    for index in 0..20 {
+        let plan = plan(&s, 13, index);
+        let mut tail = plan.start_tail;
+        let mut segments = 0;
+        let mut last_length = 0.0;
+        for command in &plan.commands {
+            match command {
+                Command::RunSegments(segment) => {
+                    last_length = segment.length_from(tail.end);
+                    tail = tail.advanced(&segment.points);
+                    segments += 1;
+                }
+                Command::AddFault(fault) => {
+                    let at = fault.at.expect("a generated fault has a place");
+                    assert_eq!(at.segment_index + 1, segments, "{fault:?}");
+                    assert!(
+                        (0.0..=last_length).contains(&at.along_m),
+                        "{fault:?} {last_length}"
+                    );
+                    placed += 1;
+                }
+            }
+        }
+    }
+    assert!(placed > 20, "{placed}");
+}

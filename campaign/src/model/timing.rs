@@ -51,6 +51,7 @@ mod tests {
             param: 1.0,
             start,
             duration,
+            at: None,
         }
     }
 
