@@ -83,6 +83,7 @@ fn fault() -> Fault {
         param: 1.5,
         start: 2,
         duration: 10,
+        at: None,
     }
 }
 
