@@ -3,13 +3,13 @@
 //!
 //! One loop waits for whichever comes first: the operator's interrupt, the reply to the command
 //! in flight (one at a time, in plan order), a state sample, or the monitor's tick. Commands run
-//! as the method says (§6): a `RunSegments` is appended when the time the car needs to reach its
-//! stopping point falls to the lead time, and it is done when that happens again for the next
-//! command (the car is almost at the segment's end); the fault commands after it are sent then,
-//! each confirmed by its reply, and the lead time grows by a round trip for each of them and for
-//! each extra packet of the next segment. Samples are assigned to the segment the car drives
-//! (from where the streamer locates it on the route); a segment is judged when the car leaves
-//! it. The first failing segment ends the test under the default policy.
+//! as the method says (`docs/method.md#streaming`): a `RunSegments` is appended when the time the
+//! car needs to reach its stopping point falls to the lead time, and it is done when that happens
+//! again for the next command (the car is almost at the segment's end); the fault commands after it
+//! are sent then, each confirmed by its reply, and the lead time grows by a round trip for each of
+//! them and for each extra packet of the next segment. Samples are assigned to the segment the car
+//! drives (from where the streamer locates it on the route); a segment is judged when the car
+//! leaves it. The first failing segment ends the test under the default policy.
 //!
 //! Recorded in the campaign's journal as they happen: every command with its answer (fault
 //! commands as sent and confirmed or refused), every state sample, and the first stop demanded.
@@ -374,7 +374,8 @@ impl<'c, 'a> Drive<'c, 'a> {
         let uwb = Point::new(s.px_uwb, s.py_uwb);
         self.speed = s.speed;
         self.streamer.delays_mut().round_trip(sample.rtt());
-        // GET_STATE carries no fix type (firmware §5): the fused position is the reference.
+        // GET_STATE carries no fix type (`docs/firmware.md#fused-position`): the fused position is
+        // the reference.
         let car = CarSample {
             position: rtk,
             rtk_fix: true,

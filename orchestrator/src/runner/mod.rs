@@ -1,5 +1,5 @@
 //! The campaign runner: drives planned tests against a car in real time (or in virtual time
-//! against the simulator) and writes the run directory (method §6, issue 6).
+//! against the simulator) and writes the run directory (`docs/method.md#a-test-step-by-step`).
 //!
 //! [`run_campaign`] performs, on tokio's clock:
 //! 1. **Preflight**, once: the firmware version, the configuration the method needs (routes not
@@ -69,7 +69,7 @@ pub use record::{
 use journal::Journal;
 use telemetry::Telemetry;
 
-/// Speed of the safe stop's extension, m/s (method §6).
+/// Speed of the safe stop's extension, m/s (`docs/method.md#a-test-step-by-step`).
 pub const SAFE_STOP_SPEED_MPS: f64 = 0.8;
 /// The car counts as stopped below this speed, m/s.
 pub const STOPPED_SPEED_MPS: f64 = 0.1;

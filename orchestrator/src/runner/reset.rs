@@ -1,10 +1,10 @@
-//! The reset before every test (method §6): clear the faults and the route, plan a return route
-//! from the car's RTK pose with the `recovery` crate, drive it and the rest of the recovery route
-//! to its end, brake to a stop, and set the UWB estimate to the RTK estimate (its position with
-//! `pos_uwb_reset_pos`, and from firmware 11.0 its heading too, with SET_POS). The test drive then
-//! starts from where the car stands, at the end of the recovery route: every test starts from the
-//! same known state. A car the safety monitor braked just outside the drivable region is first
-//! driven back in ([`reentry`]).
+//! The reset before every test (`docs/method.md#a-test-step-by-step`): clear the faults and the
+//! route, plan a return route from the car's RTK pose with the `recovery` crate, drive it and the
+//! rest of the recovery route to its end, brake to a stop, and set the UWB estimate to the RTK
+//! estimate (its position with `pos_uwb_reset_pos`, and from firmware 11.0 its heading too, with
+//! SET_POS). The test drive then starts from where the car stands, at the end of the recovery
+//! route: every test starts from the same known state. A car the safety monitor braked just outside
+//! the drivable region is first driven back in ([`reentry`]).
 //!
 //! The return route keeps the scenario's clearance from every edge when it can. A car that stopped
 //! inside the clearance band (nearer an edge than the clearance: it cuts corners, and braking
@@ -129,8 +129,9 @@ pub(crate) async fn reset(
         .map_err(|e| car_stop("reading the state", e))?;
     journal.state(&standing);
     if car.version().major >= 11 {
-        // From 11.0 `pos_uwb_reset_pos` resets the position only (firmware §7.5); SET_POS with
-        // the RTK pose also sets the UWB heading.
+        // From 11.0 `pos_uwb_reset_pos` resets the position only
+        // (`docs/firmware.md#resetting-the-estimate`); SET_POS with the RTK pose also sets the UWB
+        // heading.
         let s = &standing.state;
         let pose = car_link::message::Pose {
             x: s.px,
@@ -316,7 +317,8 @@ async fn watch_until_end(
                 let s = &sample.state;
                 let position = Point::new(s.px, s.py);
                 let now = t0.elapsed();
-                // GET_STATE carries no fix type (firmware §5): the fused position is the reference.
+                // GET_STATE carries no fix type (`docs/firmware.md#fused-position`): the fused
+                // position is the reference.
                 if let Some(abort) = safety.sample(now, CarSample { position, rtk_fix: true }) {
                     return Err(abort);
                 }
