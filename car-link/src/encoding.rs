@@ -21,7 +21,9 @@ pub enum Rounding {
     /// The PC side (control station, bridge): double precision, round half away from zero.
     #[default]
     HalfAwayFromZero,
-    /// The firmware: `trunc(f32(f32(x) · f32(s)))`, towards zero in single precision.
+    /// The firmware: `trunc(f32(f32(x) · f32(s)))`, towards zero in single precision; a value
+    /// beyond the integer's range saturates and NaN becomes 0, as the firmware's cast does on its
+    /// processor (so a simulated car reports a blown-up estimate instead of falling silent).
     FirmwareTruncate,
 }
 
@@ -55,13 +57,15 @@ pub fn scaled_i32(
     scale: f64,
     rounding: Rounding,
 ) -> Result<i32, NumberError> {
+    if rounding == Rounding::FirmwareTruncate {
+        // The firmware's `(int32_t)` cast on its Cortex-M4 (VCVT) saturates and makes NaN 0: a
+        // blown-up value (a fault's) is reported clamped, never refused. `as` does exactly that.
+        return Ok(((x as f32) * (scale as f32)).trunc() as i32);
+    }
     if !x.is_finite() {
         return Err(NumberError::NotFinite { field, value: x });
     }
-    let product = match rounding {
-        Rounding::HalfAwayFromZero => (x * scale).round(),
-        Rounding::FirmwareTruncate => f64::from(((x as f32) * (scale as f32)).trunc()),
-    };
+    let product = (x * scale).round();
     if product < f64::from(i32::MIN) || product > f64::from(i32::MAX) {
         return Err(NumberError::OutOfRange {
             field,
@@ -79,13 +83,14 @@ pub fn scaled_i64(
     scale: f64,
     rounding: Rounding,
 ) -> Result<i64, NumberError> {
+    if rounding == Rounding::FirmwareTruncate {
+        // As for `scaled_i32`: the firmware's conversion saturates and makes NaN 0.
+        return Ok((x * scale).trunc() as i64);
+    }
     if !x.is_finite() {
         return Err(NumberError::NotFinite { field, value: x });
     }
-    let product = match rounding {
-        Rounding::HalfAwayFromZero => (x * scale).round(),
-        Rounding::FirmwareTruncate => (x * scale).trunc(),
-    };
+    let product = (x * scale).round();
     // i64::MAX as f64 rounds up to 2^63, which is itself out of range.
     let limit = 2f64.powi(63);
     if !(-limit..limit).contains(&product) {
@@ -187,6 +192,29 @@ mod tests {
             scaled_i64("lat", 1e300, SCALE_LAT_LON, r),
             Err(NumberError::OutOfRange { .. })
         ));
+    }
+
+    #[test]
+    fn the_firmware_saturates_what_the_host_refuses() {
+        let t = Rounding::FirmwareTruncate;
+        assert_eq!(
+            scaled_i32("px_uwb", 2.6e36, SCALE_POSITION, t),
+            Ok(i32::MAX)
+        );
+        assert_eq!(
+            scaled_i32("px_uwb", -2.6e36, SCALE_POSITION, t),
+            Ok(i32::MIN)
+        );
+        assert_eq!(
+            scaled_i32("px_uwb", f64::INFINITY, SCALE_POSITION, t),
+            Ok(i32::MAX)
+        );
+        assert_eq!(scaled_i32("px_uwb", f64::NAN, SCALE_POSITION, t), Ok(0));
+        assert_eq!(
+            scaled_i64("lat", f64::NEG_INFINITY, SCALE_LAT_LON, t),
+            Ok(i64::MIN)
+        );
+        assert_eq!(scaled_i64("lat", f64::NAN, SCALE_LAT_LON, t), Ok(0));
     }
 
     #[test]

@@ -79,10 +79,15 @@ pub struct FusedPosition {
     py_gps: f32,
 }
 
-/// Wraps an angle in degrees to [−180, 180].
+/// Wraps an angle in degrees to [−180, 180]. A huge angle (a fault's blown-up yaw, where
+/// subtracting 360 no longer changes the value) is first reduced with `fmod`, as the firmware's
+/// angle normalisation does, so the car keeps running whatever value a fault produces.
 pub fn wrap180(mut a: f32) -> f32 {
     if !a.is_finite() {
         return a;
+    }
+    if a.abs() > 1.0e6 {
+        a %= 360.0;
     }
     while a > 180.0 {
         a -= 360.0;
@@ -322,6 +327,19 @@ mod tests {
 
     fn cfg() -> CarConfig {
         CarConfig::defaults(Firmware::V10_1)
+    }
+
+    #[test]
+    fn any_angle_wraps_into_a_half_turn_either_way() {
+        assert_eq!(wrap180(190.0), -170.0);
+        assert_eq!(wrap180(-540.0), -180.0);
+        // A blown-up angle (a bitflip in the exponent) ends instead of looping forever.
+        for a in [2.6e36f32, -1.0e30, 1.0e7 + 0.5, f32::MAX] {
+            let w = wrap180(a);
+            assert!((-180.0..=180.0).contains(&w), "{a} -> {w}");
+        }
+        assert!(wrap180(f32::INFINITY).is_infinite());
+        assert!(wrap180(f32::NAN).is_nan());
     }
 
     #[test]
