@@ -56,6 +56,7 @@ use crate::recording::{
     SafetyRecord, TestEvent, TestEventKind,
 };
 use campaign::case::{Case, CaseError, ReplayOf, RoutePointRecord, Settings};
+use campaign::drive::DriveSettings;
 use campaign::model::{Campaign, ModelError, Planner, ProbeRates, TestPlan};
 use campaign::oracle::{FailurePolicy, Verdict};
 use campaign::safety::{Abort, AbortReason, SafetyConfig};
@@ -69,14 +70,10 @@ pub use record::{
 use journal::Journal;
 use telemetry::Telemetry;
 
-/// Speed of the safe stop's extension, m/s (method §6).
-pub const SAFE_STOP_SPEED_MPS: f64 = 0.8;
-/// The car counts as stopped below this speed, m/s.
-pub const STOPPED_SPEED_MPS: f64 = 0.1;
+pub use campaign::drive::{BRAKE_TIMEOUT, SAFE_STOP_SPEED_MPS, STOPPED_SPEED_MPS};
+
 /// Brake current of the safe stop, amperes (the reference's 50 A).
 pub const BRAKE_CURRENT_A: f64 = 50.0;
-/// Longest the runner brakes waiting for the car to stop.
-pub const BRAKE_TIMEOUT: Duration = Duration::from_secs(5);
 
 /// How a campaign runs.
 #[derive(Debug, Clone, PartialEq)]
@@ -222,6 +219,23 @@ pub(crate) struct Context<'a> {
     pub(crate) rates: ProbeRates,
     pub(crate) cancel: &'a CancellationToken,
     pub(crate) journal: &'a Journal<'a>,
+}
+
+impl Context<'_> {
+    /// What the test drive's state machine needs of the campaign.
+    pub(crate) fn drive_settings(&self) -> DriveSettings<'_> {
+        DriveSettings {
+            area: &self.scenario.area,
+            generator: self.generator,
+            safety: self.safety,
+            streaming: self.config.streaming,
+            policy: self.config.policy,
+            oracle_threshold_m: self.scenario.campaign.oracle_threshold_m,
+            stop_points: self.scenario.campaign.points_per_segment.min,
+            rates: self.rates,
+            campaign_seed: self.config.campaign.seed,
+        }
+    }
 }
 
 /// Runs a campaign against `car` in `scenario` and writes its run directory, with its recording
@@ -430,9 +444,9 @@ async fn run_test(
         .collect();
     case.return_clearance_m =
         (reset.clearance_m < ctx.scenario.generator.clearance_m).then_some(reset.clearance_m);
-    let outcome = drive::drive(ctx, telemetry, plan, reset.standing, generation).await;
-    outcome.record(case);
-    match outcome.stop {
+    let (outcome, error) = drive::drive(ctx, telemetry, plan, reset.standing, generation).await;
+    outcome.write_into(case, error.as_ref().map(ToString::to_string).as_deref());
+    match error {
         Some(error) => TestEnd::Stop(error),
         None if outcome
             .abort
