@@ -26,7 +26,7 @@
 //!    end, and with the embedded simulator its truth and debug events.
 //!
 //! Progress reaches the caller through a [`CampaignObserver`], and the simulator's debug view
-//! reaches the journal through a [`SimulatorView`] ([`events`]): the runner knows neither the
+//! reaches the journal through a [`SimulatorView`] (`events`): the runner knows neither the
 //! terminal nor the simulator.
 //!
 //! Invariants: a lost link is never a pass (the test is `aborted` with reason `link lost` and the
@@ -40,7 +40,7 @@
 //! (`campaign::drive`), the wire protocol (`car-link`).
 
 mod drive;
-pub mod events;
+mod events;
 mod journal;
 mod preflight;
 mod reset;
