@@ -37,26 +37,26 @@ const RESET_SLACK: Duration = Duration::from_secs(60);
 /// Near the end of its route and slower than this, the car has stopped at the route end.
 const NEAR_END: Duration = Duration::from_secs(2);
 /// Largest distance outside the drivable region from which the reset drives the car back.
-pub const MAX_REENTRY_M: f64 = 1.5;
+pub(crate) const MAX_REENTRY_M: f64 = 1.5;
 /// How far inside the drivable region a re-entry aims.
-pub const REENTRY_INSIDE_M: f64 = 0.5;
+pub(crate) const REENTRY_INSIDE_M: f64 = 0.5;
 
 /// Where the reset left the car.
 #[derive(Debug, Clone, PartialEq)]
-pub struct ResetDone {
+pub(crate) struct ResetDone {
     /// The return route driven: from the car's position to the joint with the recovery route,
     /// with the speed of each point.
-    pub return_route: Vec<(Point, f64)>,
+    pub(crate) return_route: Vec<(Point, f64)>,
     /// Where the car stands, stopped, with UWB equal to RTK.
-    pub standing: Point,
+    pub(crate) standing: Point,
     /// The clearance from every edge the return route keeps, metres: the scenario's, or less when
     /// the car stood inside the clearance band (see the module doc).
-    pub clearance_m: f64,
+    pub(crate) clearance_m: f64,
 }
 
 /// How braking ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum BrakeEnd {
+pub(crate) enum BrakeEnd {
     /// The car is slower than 0.1 m/s.
     Stopped,
     /// It did not stop within [`BRAKE_TIMEOUT`].
@@ -165,7 +165,7 @@ pub(crate) fn car_stop(what: &str, error: CarError) -> Stopped {
 }
 
 /// The car's pose from a state: RTK position, heading from the clockwise yaw in degrees.
-pub fn pose_of(sample: &StateSample) -> Pose {
+pub(crate) fn pose_of(sample: &StateSample) -> Pose {
     let s = &sample.state;
     Pose::new(Point::new(s.px, s.py), (-s.yaw).to_radians())
 }
@@ -174,7 +174,7 @@ pub fn pose_of(sample: &StateSample) -> Pose {
 /// monitor braked it there) re-enters it: [`REENTRY_INSIDE_M`] inside the nearest boundary, on
 /// the line from the car through the nearest boundary point, heading that way. `None` when the
 /// car is inside (or too far out to drive back unattended).
-pub fn reentry(area: &Area, car: Pose) -> Option<Pose> {
+pub(crate) fn reentry(area: &Area, car: Pose) -> Option<Pose> {
     let p = car.position;
     if area.contains_point(p) || !p.is_finite() {
         return None;
