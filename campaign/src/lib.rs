@@ -7,6 +7,9 @@
 //! - [`oracle`]: |UWB − RTK| per sample, per segment, and the verdicts.
 //! - [`safety`]: the runtime safety monitor (fence, cutouts, cross-track, stale telemetry).
 //! - [`streaming`]: when to append the next segment so the car never reaches its route's end.
+//! - [`drive`]: the test drive as a state machine fed with events (samples, answers, ticks) and
+//!   returning actions (segments and faults to send, stops, brake): streaming, oracle bookkeeping,
+//!   safety decisions and the safe stop.
 //! - [`case`]: the versioned case-file and `campaign.json` formats, and replay planning.
 //! - [`replay`]: the comparison of a replay's runs.
 //! - [`seed`]: the one random number generator of every run.
@@ -15,6 +18,7 @@
 //! facts are used here), the run directory, the recording and the command line (`orchestrator`).
 
 pub mod case;
+pub mod drive;
 pub mod model;
 pub mod oracle;
 pub mod replay;

@@ -1,4 +1,4 @@
-//! The oracle (method §1, §6): the UWB position against the RTK-GNSS reference.
+//! The oracle (`docs/method.md#the-oracle`): the UWB position against the RTK-GNSS reference.
 //!
 //! Every state sample gives a deviation |UWB − RTK|. Per segment the oracle keeps every
 //! deviation and reports the maximum, the RMS, the 95th percentile and the sample count; a

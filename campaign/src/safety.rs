@@ -1,8 +1,9 @@
 //! The runtime safety monitor: a pure state machine fed with the car's state samples and the
 //! current time, which says when a test must stop and how.
 //!
-//! The reference orchestrator checked the fence only when planning (method §9). This monitor
-//! watches the car while it drives, at the state rate:
+//! The reference orchestrator checked the fence only when planning
+//! (`docs/method.md#what-the-reference-got-wrong`). This monitor watches the car while it drives,
+//! at the state rate:
 //! - the car's (RTK-fused) position outside the fence or inside a cutout by more than
 //!   [`SafetyConfig::area_margin_m`];
 //! - its cross-track error from the planned route above [`SafetyConfig::max_cross_track_m`];

@@ -3,7 +3,7 @@
 //!
 //! From the car's position along the route and the route's speeds the streamer computes the time
 //! the car still needs to reach the point where its autopilot would stop (the route end minus the
-//! look-ahead radius, `firmware-behaviour` §6.7). The next segment is appended when that time
+//! look-ahead radius, `docs/firmware.md#end-of-route`). The next segment is appended when that time
 //! falls to the **lead time**: the 99th percentile of the measured link round trips plus the
 //! 99th percentile of the measured generation times plus a safety margin (before any
 //! measurement, configured defaults stand in). At every append the streamer records the time

@@ -880,9 +880,10 @@ impl Car {
             .await
     }
 
-    /// Checklist step 2 of the protocol (§14): reads the main configuration and, if routes repeat (the factory
-    /// default), time mode is on, or (11.0+) the UWB position is reported in place of the fused one, switches
-    /// those off with a read-modify-write. Returns the fields that were changed, with their old values.
+    /// Step 2 of the client checklist (`docs/protocol.md#client-checklist`): reads the main configuration and, if
+    /// routes repeat (the factory default), time mode is on, or (11.0+) the UWB position is reported in place of the
+    /// fused one, switches those off with a read-modify-write. Returns the fields that were changed, with their old
+    /// values.
     ///
     /// Timeout: the read as [`Car::main_config`], the write as [`Car::set_main_config`]. Cancellation: the car
     /// may or may not have written the new record.

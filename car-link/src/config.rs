@@ -1,5 +1,6 @@
-//! The main-configuration record (protocol §6.13): positional, version-specific, with a NUL-terminated log name
-//! in the middle. Kept as the raw record so that a read-modify-write sends back every byte it did not change.
+//! The main-configuration record (`docs/protocol.md#main-configuration`): positional, version-specific, with a
+//! NUL-terminated log name in the middle. Kept as the raw record so that a read-modify-write sends back every byte it
+//! did not change.
 
 use std::fmt;
 
@@ -13,7 +14,7 @@ pub const MAX_LOG_NAME: usize = 20;
 
 /// A named field of the main-configuration record.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-#[allow(missing_docs)] // the names are the firmware's own; see the protocol's §6.13 table
+#[allow(missing_docs)] // the names are the firmware's own; see `docs/protocol.md#main-configuration`
 pub enum ConfigField {
     MagUse,
     MagComp,
@@ -216,7 +217,8 @@ fn layout(version: FirmwareVersion) -> Vec<(ConfigField, Kind)> {
 /// Bytes of the multirotor block that closes the record (35 `f32auto`, 7 `u8`, 2 `u16`).
 pub const MULTIROTOR_BLOCK_LEN: usize = 35 * 4 + 7 + 2 * 2;
 
-/// The factory default of a field (protocol §6.13 and behaviour §2), per version and car id.
+/// The factory default of a field (`docs/protocol.md#main-configuration`, `docs/firmware.md#vehicle-parameters`), per
+/// version and car id.
 fn factory_default(field: ConfigField, version: FirmwareVersion, car_id: u8) -> ConfigValue {
     use ConfigField::*;
     let modern = version.major >= 12;
@@ -313,8 +315,9 @@ impl MainConfig {
         MainConfig { version, record }
     }
 
-    /// Whether the record is safe for a test drive (protocol §14): routes not repeated, speed mode, and (11.0+)
-    /// the fused position reported, not the UWB one. Returns the fields that are not, with their values.
+    /// Whether the record is safe for a test drive (`docs/protocol.md#client-checklist`): routes not repeated, speed
+    /// mode, and (11.0+) the fused position reported, not the UWB one. Returns the fields that are not, with their
+    /// values.
     pub fn test_drive_deviations(&self) -> Result<Vec<(ConfigField, u8)>, ConfigError> {
         let mut deviations = Vec::new();
         for field in [

@@ -1,4 +1,4 @@
-//! The frame checksum: CRC-16/XMODEM over the payload bytes only (protocol §2.2).
+//! The frame checksum: CRC-16/XMODEM over the payload bytes only (`docs/protocol.md#crc`).
 
 use crc::{CRC_16_XMODEM, Crc};
 
@@ -18,7 +18,7 @@ pub fn checksum(payload: &[u8]) -> u16 {
 mod tests {
     use super::checksum;
 
-    // Protocol §13.1.
+    // The CRC test vectors (`docs/protocol.md#test-vectors`).
     #[test]
     fn check_value() {
         assert_eq!(checksum(b"123456789"), 0x31C3);

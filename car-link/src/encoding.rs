@@ -1,4 +1,5 @@
-//! The number encodings of the payloads (protocol §4): big-endian integers, scaled integers and `f32auto`.
+//! The number encodings of the payloads (`docs/protocol.md#numbers`): big-endian integers, scaled integers and
+//! `f32auto`.
 //!
 //! Scaled values are decoded to `f64` (`i32 / scale`). Encoding needs a [`Rounding`]: the firmware truncates
 //! towards zero after a single-precision product, the PC tools round half away from zero in double precision.

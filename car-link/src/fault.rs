@@ -1,5 +1,6 @@
-//! Fault injection through terminal commands (protocol §10, behaviour §8): probes, fault kinds, the command texts
-//! and the parsing of the firmware's PRINTF replies into typed outcomes.
+//! Fault injection through terminal commands (`docs/protocol.md#terminal-commands`,
+//! `docs/firmware.md#fault-injection`): probes, fault kinds, the command texts and the parsing of the firmware's PRINTF
+//! replies into typed outcomes.
 
 use std::fmt;
 use std::str::FromStr;

@@ -1,6 +1,7 @@
 //! What the reference firmware does that the rest of drivecheck relies on: its limits, its rates and
-//! its watchdog, in one place (`docs/firmware.md` explains each). The campaign model, the runner and
-//! the simulated car take these values from here, never from a literal of their own.
+//! its watchdog, in one place (`docs/firmware.md#where-the-code-keeps-these-facts` says where each
+//! is explained). The campaign model, the runner and the simulated car take these values from here,
+//! never from a literal of their own.
 
 use std::time::Duration;
 
@@ -69,7 +70,7 @@ impl ProbeRates {
         }
     }
 
-    /// The rates of firmware `major` (10 or earlier: 10.x; 11 and later: 12.x) with `anchors`
+    /// The rates of firmware `major` (12 and later: 12.x; anything earlier: 10.x) with `anchors`
     /// anchors in range.
     pub fn for_major(major: u8, anchors: usize) -> Self {
         if major >= 12 {

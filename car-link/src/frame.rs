@@ -1,5 +1,5 @@
-//! Framing (protocol §2): start byte, length, payload, CRC-16/XMODEM, end byte; and a streaming decoder that
-//! resynchronises after garbage without ever waiting on a bogus candidate.
+//! Framing (`docs/protocol.md#framing`): start byte, length, payload, CRC-16/XMODEM, end byte; and a streaming decoder
+//! that resynchronises after garbage without ever waiting on a bogus candidate.
 //!
 //! | Form | Bytes |
 //! |---|---|
@@ -201,7 +201,7 @@ impl FrameEncoder {
     }
 
     /// Reproduces the firmware's short-form bug: a 256-byte payload is sent with length byte `0x00`, which every
-    /// receiver drops (behaviour quirk 22). For simulators that want to be faithful.
+    /// receiver drops (`docs/protocol.md#frame-forms`). For simulators that want to be faithful.
     pub fn with_firmware_short_form_bug(self) -> Self {
         FrameEncoder {
             short_form_max: 256,

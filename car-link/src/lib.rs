@@ -26,8 +26,8 @@
 //! ```
 //!
 //! It is not a simulator (see `car-sim`), not a test orchestrator, and it does not speak the control station's
-//! XML interface (protocol §12). It does not decide whether a car behaves correctly: it only carries what the
-//! car says, and says when the link is lost instead of inventing a state.
+//! XML interface (`docs/protocol.md#what-car-link-does-not-speak`). It does not decide whether a car behaves correctly:
+//! it only carries what the car says, and says when the link is lost instead of inventing a state.
 
 pub mod address;
 #[cfg(feature = "client")]

@@ -1,10 +1,12 @@
-//! Typed payloads, `[id][cmd][data…]`, for both directions (protocol §3, §6, §7, §8).
+//! Typed payloads, `[id][cmd][data…]`, for both directions (`docs/protocol.md#payload-header`,
+//! `docs/protocol.md#commands-drivecheck-uses`, `docs/protocol.md#state-reply`, `docs/protocol.md#route-points`).
 //!
 //! [`Request`] is what a host sends to the car, [`Reply`] what the car sends back. A client encodes requests and
 //! decodes replies; a simulator decodes requests and encodes replies, with the same types. Layouts and ids come
 //! from the [`FirmwareVersion`]; the rounding of scaled numbers from the [`Dialect`].
 //!
-//! The car side, as a simulator would write it (the payload is the §13.3 AP_ADD_POINTS to car 1, 10.x layout):
+//! The car side, as a simulator would write it (the payload is the AP_ADD_POINTS test vector to car 1, 10.x layout:
+//! `docs/protocol.md#test-vectors`):
 //!
 //! ```
 //! use car_link::message::{Dialect, Reply, Request, RoutePoint};
@@ -103,7 +105,7 @@ pub struct EnuRef {
     pub height: f64,
 }
 
-/// A route point (§8). `pz` and `attributes` exist on the wire from 12.0 only.
+/// A route point (`docs/protocol.md#route-points`). `pz` and `attributes` exist on the wire from 12.0 only.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct RoutePoint {
     /// East, m.
@@ -132,7 +134,7 @@ impl RoutePoint {
     }
 }
 
-/// RC_CONTROL modes (§6.11).
+/// RC_CONTROL modes (`docs/protocol.md#braking`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum RcMode {
     /// Throttle is a motor current in A.
@@ -169,7 +171,7 @@ pub struct Anchor {
     pub height: f32,
 }
 
-/// AP_SYNC_POINT data (§6.10).
+/// AP_SYNC_POINT data (`docs/protocol.md#other-commands`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SyncPoint {
     /// Route index.
@@ -180,7 +182,7 @@ pub struct SyncPoint {
     pub min_diff_ms: i32,
 }
 
-/// The GET_STATE reply (§7), every field. Scaled values are decoded to `f64`.
+/// The GET_STATE reply (`docs/protocol.md#state-reply`), every field. Scaled values are decoded to `f64`.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct CarState {
     /// Firmware version (`fw_major`, `fw_minor`).
@@ -862,7 +864,8 @@ impl Request {
                 }
             }
             C::ApSetActive => {
-                // 12.3 with a single byte: the firmware reads a stale byte; treat it as 0 (behaviour quirk 23).
+                // 12.3 with a single byte: the firmware reads a stale byte; treat it
+                // as 0 (`docs/protocol.md#clearing-and-activating`).
                 if data.is_empty() || data.len() > 2 {
                     return Err(DecodeError::Length {
                         command,

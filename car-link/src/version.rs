@@ -1,4 +1,4 @@
-//! Firmware generations (protocol §0) and the command-id table (protocol §5).
+//! Firmware generations (`docs/protocol.md#versions`) and the command-id table (`docs/protocol.md#command-ids`).
 //!
 //! Everything version-dependent on the wire is decided here: the route-point size, the numbering of ids 76–89,
 //! the length of `AP_SET_ACTIVE` and the longest PRINTF.
@@ -36,8 +36,8 @@ impl FirmwareVersion {
         if self.major >= 12 { 24 } else { 16 }
     }
 
-    /// Points in the car's route ring (protocol §6.5): 1000 from 12.0, 500 before. Writing past it
-    /// overwrites points not yet driven.
+    /// Points in the car's route ring (`docs/firmware.md#route-ring-and-points-left`): 1000 from 12.0, 500 before.
+    /// Writing past it overwrites points not yet driven.
     pub fn route_capacity(self) -> usize {
         if self.major >= 12 { 1000 } else { 500 }
     }
@@ -82,7 +82,8 @@ impl fmt::Display for FirmwareVersion {
 
 macro_rules! commands {
     ($( $(#[$doc:meta])* $name:ident = $new:expr, $old:expr, $resets:expr; )*) => {
-        /// Every command of the protocol's id table (§5). Its wire id depends on the firmware version.
+        /// Every command of the protocol's id table (`docs/protocol.md#command-ids`). Its wire id depends on the
+        /// firmware version.
         #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
         pub enum CommandId {
             $( $(#[$doc])* $name, )*
@@ -99,7 +100,7 @@ macro_rules! commands {
                 }
             }
 
-            /// Whether the firmware's communication watchdog is reset by this command (§9).
+            /// Whether the firmware's communication watchdog is reset by this command (`docs/protocol.md#watchdog`).
             pub fn resets_watchdog(self) -> bool {
                 match self {
                     $( CommandId::$name => $resets, )*
@@ -202,7 +203,7 @@ commands! {
     HydraulicMove = Some(88), None, false;
     /// Sent by the control station, ignored by every firmware (new numbering only).
     Heartbeat = Some(89), None, false;
-    /// Reads the car state (§7).
+    /// Reads the car state (`docs/protocol.md#state-reply`).
     GetState = Some(120), Some(120), true;
     /// Manual throttle and steering; no reply.
     RcControl = Some(121), Some(121), true;

@@ -1,4 +1,4 @@
-//! Every test vector of the protocol's §13, encoded and decoded with the crate's own types.
+//! Every test vector of the protocol (`docs/protocol.md#test-vectors`), encoded and decoded with the crate's own types.
 
 use car_link::crc::checksum;
 use car_link::frame::{FrameDecoder, FrameEncoder};

@@ -1,5 +1,6 @@
-//! Acceptance tests of issue 4 on the model (no link): driving accuracy, UWB deviation, faults,
-//! determinism and the watchdog, with fixtures copied from the bundled two-anchor parking lot.
+//! Acceptance tests of the simulated car on the model (no link): driving accuracy, UWB deviation,
+//! faults, determinism and the watchdog, with fixtures copied from the bundled two-anchor parking
+//! lot.
 
 use std::collections::VecDeque;
 use std::f64::consts::PI;
@@ -172,7 +173,7 @@ impl Driver {
                 if self.queue.is_empty() && state.ap_route_left <= 3 && !self.stopped {
                     // The method's safe stop: brake with RC_CONTROL near the route's end (a 10.x
                     // car that overshoots its route-end circle at speed would otherwise follow
-                    // the wrapped window back towards route[0], quirk 8).
+                    // the wrapped window back towards route[0]: `docs/firmware.md#control-cycle`).
                     self.car.rc_control(RcMode::Brake, 50.0, 0.0);
                     self.stopped = true;
                 }
@@ -223,7 +224,8 @@ fn cross_track(route: &[Point], k: &mut usize, p: Point) -> f64 {
 /// How the car steers in a cross-track measurement.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Steering {
-    /// The documented firmware: §6.3 with the distance compensation dividing `R_pp`.
+    /// The documented firmware (`docs/firmware.md#steering-law`) with the distance compensation
+    /// dividing `R_pp`.
     Documented,
     /// The documented firmware with `ap_ang_dist_comp 0`.
     CompensationOff,
@@ -319,14 +321,15 @@ fn drive_and_measure(
     }
 }
 
-/// The issue asks for a cross-track p95 below 0.15 m. The documented autopilot with its default
-/// configuration cannot do that on the method's routes (turns up to 30° every 0.6–2 m) at 3 m/s:
-/// pure pursuit cuts the corners by an amount set by its look-ahead radius, 1.59 m for 10.1 there
-/// (p95 0.15–0.21 m over 1 km routes; 0.14–0.16 m with `ap_ang_dist_comp 0`) and 0.8 s · 3 m/s =
-/// 2.4 m for 12.3 (p95 0.28–0.53 m). Perfect sensing and an instant servo change nothing (the floor
-/// is the law's geometry), and the 2016 law that multiplied the angle is no better. The bounds below
-/// guard the measured behaviour of the faithful model; the figures are printed with `--nocapture`,
-/// and the ignored `cross_track_at_3_m_s_*` tests measure more.
+/// The simulator's acceptance criteria asked for a cross-track p95 below 0.15 m. The documented
+/// autopilot with its default configuration cannot do that on the method's routes (turns up to 30°
+/// every 0.6–2 m) at 3 m/s: pure pursuit cuts the corners by an amount set by its look-ahead
+/// radius, 1.59 m for 10.1 there (p95 0.15–0.21 m over 1 km routes; 0.14–0.16 m with
+/// `ap_ang_dist_comp 0`) and 0.8 s · 3 m/s = 2.4 m for 12.3 (p95 0.28–0.53 m). Perfect sensing and
+/// an instant servo change nothing (the floor is the law's geometry), and the 2016 law that
+/// multiplied the angle is no better. The bounds below guard the measured behaviour of the faithful
+/// model; the figures are printed with `--nocapture`, and the ignored `cross_track_at_3_m_s_*`
+/// tests measure more.
 #[test]
 fn drives_the_start_route_and_200_m_at_3_m_s_on_every_bundled_area_inside_the_fence() {
     for (k, name) in scenarios::bundled::names().iter().enumerate() {
@@ -356,10 +359,11 @@ fn drives_the_start_route_and_200_m_at_3_m_s_on_every_bundled_area_inside_the_fe
     }
 }
 
-/// The measurement behind issue 4's figure: cross-track p50/p95/max at 3 m/s over 1 km routes on
-/// every bundled area, seeds 1–5, both generations, for the documented steering law, without the
-/// distance compensation, with the 2016 law, and with the documented law on ideal sensors. Long:
-/// run it with `cargo test -p car-sim --release -- --ignored --nocapture cross_track_at_3`.
+/// The measurement behind the cross-track figures of the test above: cross-track p50/p95/max
+/// at 3 m/s over 1 km routes on every bundled area, seeds 1–5, both generations, for the documented
+/// steering law, without the distance compensation, with the 2016 law, and with the documented law
+/// on ideal sensors. Long: run it with
+/// `cargo test -p car-sim --release -- --ignored --nocapture cross_track_at_3`.
 #[test]
 #[ignore = "long measurement; run explicitly"]
 fn cross_track_at_3_m_s_per_firmware_area_seed_and_steering_law() {
@@ -964,11 +968,12 @@ fn the_illustrative_rock_shadows_a_minority_of_the_lot_with_a_deviation_of_about
     assert!(out95 < 0.6, "p95 deviation outside the shadow {out95:.2} m");
 }
 
-/// Item 3 of issue 4: the 12.3 UWB heading after SET_POS. The car stands 3 s after boot with its
-/// anchors (so the heading estimator's p_old is left near the boot estimate, (0, 0)), then the
-/// orchestrator's reset (`pos_uwb_reset_pos` + SET_POS with the RTK pose) and a drive. SET_POS
-/// sets the heading exactly; afterwards the documented estimator (stale p_old, kept drift, PI
-/// loop on the estimate's track) keeps it within a few degrees of the truth (3.5–6.6° measured).
+/// The 12.3 UWB heading after SET_POS (`docs/firmware.md#resetting-the-estimate`). The car
+/// stands 3 s after boot with its anchors (so the heading estimator's p_old is left near the boot
+/// estimate, (0, 0)), then the orchestrator's reset (`pos_uwb_reset_pos` + SET_POS with the RTK
+/// pose) and a drive. SET_POS sets the heading exactly; afterwards the documented estimator (stale
+/// p_old, kept drift, PI loop on the estimate's track) keeps it within a few degrees of the truth
+/// (3.5–6.6° measured).
 #[test]
 fn the_12_3_uwb_heading_after_set_pos_starts_exact_and_stays_within_ten_degrees() {
     let area = lot_area();

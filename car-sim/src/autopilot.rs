@@ -1,5 +1,5 @@
-//! The pure-pursuit autopilot (behaviour doc §6): route ring, window scan, steering law, speed,
-//! end of route, and the replace/clear/activate semantics of both firmware generations.
+//! The pure-pursuit autopilot (`docs/firmware.md#autopilot`): route ring, window scan, steering
+//! law, speed, end of route, and the replace/clear/activate semantics of both firmware generations.
 
 use crate::config::{ApTimeMode, CarConfig, VehicleParams};
 use crate::firmware::Firmware;
@@ -81,7 +81,7 @@ pub struct ApOutput {
     pub servo: Option<f32>,
     /// A motor command.
     pub motor: Option<MotorCommand>,
-    /// A zero-length segment was met in the window (quirk 9, guarded).
+    /// A zero-length segment was met in the window (guarded: `docs/firmware.md#uploading-points`).
     pub zero_length_segment: bool,
 }
 
@@ -842,7 +842,8 @@ fn closest_point_on_segment(p1: &RoutePoint, p2: &RoutePoint, car: FwPose) -> Ro
     }
 }
 
-/// The steering law of §6.3: pure pursuit with optional distance compensation.
+/// The steering law (`docs/firmware.md#steering-law`): pure pursuit with optional distance
+/// compensation.
 ///
 /// The distance compensation divides the pursuit radius, `R_pp ← R_pp / min(1 + 0.2·D, 5)`, before
 /// `δ = atan(L / R_pp)`: that is the documented law of both generations (the firmware that has the
@@ -961,8 +962,8 @@ mod tests {
         let right = steering_angle(car, 1.0, -1.0, 0.475, true);
         assert!(left > 0.0 && right < 0.0);
         assert_eq!(steering_angle(car, 2.0, 0.0, 0.475, true), 0.0);
-        // R_pp = 1 m for a goal at (1, 1); with compensation R = 1 / (1 + 0.2·√2) (§6.3 step 4
-        // divides the radius), not the 2016 law that multiplied the angle.
+        // R_pp = 1 m for a goal at (1, 1); with compensation R = 1 / (1 + 0.2·√2) (the documented
+        // law divides the radius), not the 2016 law that multiplied the angle.
         let correction = 1.0 + 0.2 * 2f32.sqrt();
         let expected = (0.475f32 / (1.0 / correction)).atan();
         assert!((left - expected).abs() < 1e-5);
@@ -1149,8 +1150,9 @@ mod tests {
 
     #[test]
     fn past_the_end_circle_the_scan_wraps_onto_the_segment_back_to_route_0() {
-        // Quirk 8: an L-shaped route; the car stands beyond the route-end circle, next to the
-        // wrapped segment from the last point back to route[0].
+        // The scan wraps past the route end (`docs/firmware.md#control-cycle`): an L-shaped route;
+        // the car stands beyond the route-end circle, next to the wrapped segment from the last
+        // point back to route[0].
         let c = cfg(Firmware::V10_1, false);
         let mut ap = Autopilot::new(Firmware::V10_1);
         let mut pts: Vec<RoutePoint> = (0..6).map(|i| RoutePoint::at(i as f32, 0.0, 1.0)).collect();

@@ -117,10 +117,10 @@ pub struct CarOptions {
     pub preload_anchors: bool,
     /// Record [`DebugEvent`]s (drain them with [`Car::drain_events`]).
     pub record_events: bool,
-    /// HIL-bench fidelity (quirk 30): the board lies on a desk, so the IMU never rotates and its
-    /// yaw stays at the boot heading whatever the simulated motion (default false: the IMU yaw
-    /// follows the simulated kinematics). Combine with `gnss.enabled = false` for a bench without
-    /// a receiver.
+    /// HIL-bench fidelity (`docs/firmware.md#odometry-and-yaw`): the board lies on a desk, so the
+    /// IMU never rotates and its yaw stays at the boot heading whatever the simulated motion
+    /// (default false: the IMU yaw follows the simulated kinematics). Combine with
+    /// `gnss.enabled = false` for a bench without a receiver.
     pub imu_on_bench: bool,
 }
 
@@ -173,7 +173,7 @@ impl RcMode {
     }
 }
 
-/// The values of a GET_STATE reply (car-protocol §7), as the firmware holds them.
+/// The values of a GET_STATE reply (`docs/protocol.md#state-reply`), as the firmware holds them.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StateReport {
     /// Car id.
@@ -668,7 +668,7 @@ impl Car {
         self.watchdog_expired
     }
 
-    // ----- commands (car-protocol §6); each says whether it resets the watchdog -----
+    // ----- commands (`docs/protocol.md#command-ids`); each says if it resets the watchdog -----
 
     /// GET_STATE. Resets the watchdog; passes px through the `px` probe.
     pub fn get_state(&mut self) -> StateReport {

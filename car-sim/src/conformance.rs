@@ -1,6 +1,6 @@
-//! Conformance of the protocol shell: the §13 frames over a raw TCP socket byte by byte, the
-//! `car-link` client against the in-process simulator in virtual time, UDP, impairment and the
-//! one-client rule.
+//! Conformance of the protocol shell: the protocol's test-vector frames
+//! (`docs/protocol.md#test-vectors`) over a raw TCP socket byte by byte, the `car-link` client
+//! against the in-process simulator in virtual time, UDP, impairment and the one-client rule.
 
 use std::net::SocketAddr;
 use std::time::Duration;
@@ -82,14 +82,14 @@ async fn the_section_13_frames_get_the_documented_replies_byte_by_byte() {
         let mut s = TcpStream::connect(sim.local_addr().expect("bound"))
             .await
             .expect("connect");
-        // §13.2 GET_STATE → a 112-byte short frame from car 1 with the firmware's version.
+        // GET_STATE → a 112-byte short frame from car 1 with the firmware's version.
         let state = exchange(&mut s, &hex("02 02 01 78 CC AE 03")).await;
         let (major, minor) = firmware.version();
         assert_eq!(state.len(), 112, "{firmware}");
         assert_eq!(&state[..6], &[0x02, 0x6B, 0x01, 0x78, major, minor]);
         let crc = checksum(&state[2..109]).to_be_bytes();
         assert_eq!(&state[109..], &[crc[0], crc[1], 0x03]);
-        // §13.3 AP_ADD_POINTS in the era's layout → the ack.
+        // AP_ADD_POINTS in the era's layout → the ack.
         let add = if firmware.is_12x() {
             ADD_POINTS_12X
         } else {
@@ -99,9 +99,9 @@ async fn the_section_13_frames_get_the_documented_replies_byte_by_byte() {
             exchange(&mut s, &hex(add)).await,
             hex("02 02 01 37 75 85 03")
         );
-        // §13.4 TERMINAL_CMD fi_add_fault → the PRINTF, byte for byte.
+        // TERMINAL_CMD fi_add_fault → the PRINTF, byte for byte.
         assert_eq!(exchange(&mut s, &hex(FI_ADD)).await, hex(FI_REPLY));
-        // §13.6 AP_SET_ACTIVE (two bytes for 12.3, one for 10.x) → the ack `01 3B`, CRC 0xB409.
+        // AP_SET_ACTIVE (two bytes for 12.3, one for 10.x) → the ack `01 3B`, CRC 0xB409.
         let active = if firmware.is_12x() {
             "02 04 01 3B 01 00 70 D1 03"
         } else {

@@ -73,22 +73,26 @@ pub enum DebugEvent {
         /// When, ms.
         at_ms: u64,
     },
-    /// The firmware's anchor walk would hang here (quirk 13, fixed: the round is skipped).
+    /// The firmware's anchor walk would hang here (`docs/firmware.md#ranging-schedule`; fixed: the
+    /// round is skipped).
     AnchorWalkWouldHang {
         /// When, ms.
         at_ms: u64,
     },
-    /// The autopilot window held a zero-length segment (quirk 9, guarded).
+    /// The autopilot window held a zero-length segment (guarded:
+    /// `docs/firmware.md#uploading-points`).
     ZeroLengthSegment {
         /// When, ms.
         at_ms: u64,
     },
-    /// The route ring overflowed (quirk 7: old points are overwritten).
+    /// The route ring overflowed (`docs/firmware.md#route-ring-and-points-left`: old points are
+    /// overwritten).
     RouteRingOverflow {
         /// When, ms.
         at_ms: u64,
     },
-    /// A route packet repeated the previous packet's first point and was dropped (quirk 6).
+    /// A route packet repeated the previous packet's first point and was dropped
+    /// (`docs/firmware.md#uploading-points`).
     DuplicatePacketDropped {
         /// When, ms.
         at_ms: u64,

@@ -1,4 +1,5 @@
-//! Fault injection (behaviour doc §8): 5 probes × 5 slots, never freed, evaluated in slot order.
+//! Fault injection (`docs/firmware.md#fault-injection`): 5 probes × 5 slots, never freed, evaluated
+//! in slot order.
 
 use crate::terminal::{scan_f32, scan_i32};
 

@@ -1,4 +1,5 @@
-//! The HIL motor simulator of the firmware (behaviour doc §3): ramps, friction, tachometer, timeout.
+//! The HIL motor simulator of the firmware (`docs/firmware.md#motor-simulator`): ramps, friction,
+//! tachometer, timeout.
 
 /// Simulation step, s.
 pub const MOTOR_DT: f32 = 0.01;

@@ -1,5 +1,6 @@
-//! The fused ("RTK") position of the firmware (behaviour doc §4–5): odometry dead reckoning along
-//! the IMU heading, corrected by GNSS fixes with latency compensation through a pose history.
+//! The fused ("RTK") position of the firmware (`docs/firmware.md#odometry-and-yaw`,
+//! `docs/firmware.md#fused-position`): odometry dead reckoning along the IMU heading, corrected by
+//! GNSS fixes with latency compensation through a pose history.
 
 use std::collections::VecDeque;
 

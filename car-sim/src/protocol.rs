@@ -1,5 +1,5 @@
 //! The firmware's packet handler: decodes a request payload with `car-link`, runs it on the
-//! [`Car`] and encodes the replies the firmware would send (car-protocol §3, §5–§10).
+//! [`Car`] and encodes the replies the firmware would send (`docs/protocol.md`).
 
 use std::time::Duration;
 

@@ -1,5 +1,6 @@
-//! UWB (behaviour doc §7): the firmware's anchor list and round-robin scheduler, the radio model of
-//! a DS-TWR exchange against the world, and the UWB position estimator of both firmware eras.
+//! UWB (`docs/firmware.md#uwb-positioning`): the firmware's anchor list and round-robin scheduler,
+//! the radio model of a DS-TWR exchange against the world, and the UWB position estimator of both
+//! firmware eras.
 
 use scenarios::geometry::Point;
 
@@ -213,8 +214,9 @@ pub enum Schedule {
     Range(usize),
     /// No anchor qualifies (one anchor only, or none within the gate).
     Idle,
-    /// The firmware would spin forever here (quirk 13: the list shrank below `last_used`); the
-    /// simulator skips the round instead.
+    /// The firmware would spin forever here (the anchor-walk hang,
+    /// `docs/firmware.md#ranging-schedule`: the list shrank below `last_used`); the simulator skips
+    /// the round instead.
     WalkWouldHang,
 }
 
@@ -477,7 +479,8 @@ impl UwbEstimator {
         true
     }
 
-    /// 12.x heading estimation from the track of the estimate (§7.5).
+    /// 12.x heading estimation from the track of the estimate
+    /// (`docs/firmware.md#uwb-estimator-12x`).
     fn estimate_yaw(&mut self) {
         let moved = if self.range_updates < 2 {
             self.p_old = (self.px, self.py);
@@ -698,7 +701,8 @@ mod tests {
         e.dead_reckon(0.01, 0.0, 0.5, 0.02, true);
         assert!((e.position().0 - 0.01).abs() < 1e-6, "dead reckons east");
         // The first correction measures the track from the stale p_old: the jump reads as motion
-        // to the north (§7.5 — SET_POS sets px, py and gyro_offset only).
+        // to the north (`docs/firmware.md#resetting-the-estimate`: SET_POS sets px, py and
+        // gyro_offset only).
         agreeing_range(&mut e, 0.0);
         assert_eq!(e.yaw_state(), (0.25, 3.5));
         // A second SET_POS restores the heading and keeps the drift.

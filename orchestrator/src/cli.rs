@@ -243,7 +243,8 @@ pub struct BenchGeneratorArgs {
 /// `drivecheck area …`
 #[derive(Debug, Subcommand)]
 pub enum AreaCommand {
-    /// Drive one long generated trajectory through the area and give a verdict (method §4).
+    /// Drive one long generated trajectory through the area and give a verdict (see
+    /// docs/method.md#validating-an-area).
     ///
     /// The area is `safe` when no extension failed and no extension needed more than half the
     /// generator's outer tries. Exit status: 0 safe, 1 unsafe, 2 error.

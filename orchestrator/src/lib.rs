@@ -1,12 +1,13 @@
 //! The drivecheck orchestrator: the command line and what it drives.
 //!
-//! It runs campaigns against a car ([`runner`]: preflight, reset with a return route, streamed
-//! segments, faults, the [`oracle`], the [`safety`] monitor, the run directory of [`case`] files),
-//! on top of a pure core ([`model`], [`streaming`]) and a [`recording`] format; it also validates
+//! It runs campaigns against a car ([`runner`]: preflight, reset with a return route, the test
+//! drive's loop, the run directory of case files) and writes a [`recording`]; it also validates
 //! test areas, generates routes and reads scenarios. The `drivecheck` binary in `src/main.rs` only
 //! parses the command line and calls [`commands::run`].
 //!
-//! Not here: geometry and generation (`trajgen`), scenario files (`scenarios`), the wire protocol
+//! Not here: what a campaign decides (the pure core [`campaign`]: the test model and planner, the
+//! oracle, the safety monitor, the streaming rule, the drive's state machine, the case format),
+//! geometry and generation (`trajgen`), scenario files (`scenarios`), the wire protocol
 //! (`car-link`).
 
 pub mod cli;

@@ -14,7 +14,7 @@ use crate::connect::{Connect, Scene};
 use crate::join::Target;
 use crate::polyline::{piece_is_valid, split_points};
 
-/// The arcs-and-line connector (method §5, step 1).
+/// The arcs-and-line connector (`docs/method.md#return-routes`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ArcConnector {
     /// Length of each arc segment, metres (0.7).

@@ -2,7 +2,8 @@
 //!
 //! After each test the car stands at some pose; before the next test it must drive back and join
 //! the recovery route (which leads into the start route) with the right heading, so that every
-//! test starts from the same state (method §5). [`plan`] computes such a route:
+//! test starts from the same state (`docs/method.md#return-routes`). [`plan`] computes such a
+//! route:
 //!
 //! - it starts at the car's position, its first segment within the turn limit of the car's
 //!   heading;

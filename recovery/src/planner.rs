@@ -42,9 +42,9 @@ pub enum Planner {
     /// bounded worst case). Uses no randomness.
     #[default]
     Dubins,
-    /// The reference method (§5): arcs and a line, random extensions, best of N attempts, then
-    /// the shortening pass with arc shortcuts; aims at the recovery route's earliest joinable
-    /// point.
+    /// The reference method (`docs/method.md#return-routes`): arcs and a line, random extensions,
+    /// best of N attempts, then the shortening pass with arc shortcuts; aims at the recovery
+    /// route's earliest joinable point.
     Reference,
 }
 

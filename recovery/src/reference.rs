@@ -1,5 +1,6 @@
-//! The reference planner (method §5): arcs and a line from the car, else random extensions from
-//! the car and arcs and a line from their end; best of N attempts with pruning.
+//! The reference planner (`docs/method.md#return-routes`): arcs and a line from the car, else
+//! random extensions from the car and arcs and a line from their end; best of N attempts with
+//! pruning.
 //!
 //! It aims at a single target, the earliest joinable point of the recovery route, as the method
 //! does (the car then drives the whole recovery route).

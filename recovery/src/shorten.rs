@@ -1,5 +1,5 @@
-//! The shortening pass (method §5, step 4): remove runs of points, interpolate, take shortcuts,
-//! repeat until no gain.
+//! The shortening pass (`docs/method.md#return-routes`): remove runs of points, interpolate, take
+//! shortcuts, repeat until no gain.
 //!
 //! Every change keeps the route drivable: each candidate is checked with
 //! [`trajgen::check_route`] on the changed piece together with its neighbours (the turn from the

@@ -20,7 +20,7 @@ impl<T> Interval<T> {
     }
 }
 
-/// The car's geometry (defaults: `firmware-behaviour` §2 of the reference firmware).
+/// The car's geometry (defaults: the reference firmware's, `docs/firmware.md#vehicle-parameters`).
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Vehicle {
@@ -50,7 +50,7 @@ impl Vehicle {
     }
 }
 
-/// The trajectory generator's constants (method §3).
+/// The trajectory generator's constants (`docs/method.md#drivable-trajectories`).
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct GeneratorSettings {
@@ -125,7 +125,7 @@ impl GeneratorSettings {
 /// The recovery route must end within this many longest segments of the start route's first point.
 pub const RECOVERY_JOIN_FACTOR: f64 = 1.5;
 
-/// Defaults for campaigns run in a scenario (method §6).
+/// Defaults for campaigns run in a scenario (`docs/method.md#the-model`).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct CampaignSettings {

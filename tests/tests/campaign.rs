@@ -12,8 +12,9 @@ use campaign::model::Campaign;
 use campaign::oracle::{SegmentVerdict, Verdict};
 use car_link::{Car, CarConfig};
 use car_sim::{SimConfig, SimHandle};
-use indicatif::ProgressBar;
-use orchestrator::runner::{CampaignReport, RunConfig, RunError, run_campaign};
+use orchestrator::runner::{
+    CampaignReport, RunConfig, RunError, Silent, SimulatorView, run_campaign,
+};
 use scenarios::Scenario;
 use tokio_util::sync::CancellationToken;
 
@@ -56,9 +57,9 @@ async fn campaign(seed: u64, tests: usize, no_faults: bool, out: &Path) -> Campa
         &car,
         &scenario,
         &config,
-        Some(&sim),
         &CancellationToken::new(),
-        &ProgressBar::hidden(),
+        &Silent,
+        Some(&sim as &dyn SimulatorView),
     )
     .await
     .unwrap()
@@ -86,8 +87,15 @@ async fn a_campaign_writes_a_run_directory_that_parses_and_validates() {
     assert_eq!(summary.tests, 3);
     assert_eq!(summary.passed + summary.failed + summary.aborted, 3);
     let s = scenario();
+    assert_eq!(report.cases.len(), 3);
     for test_index in 0..3 {
         let case = read_case(dir.path(), test_index);
+        let file = std::fs::read_to_string(dir.path().join(format!("case-{test_index:03}.json")));
+        assert_eq!(
+            format!("{}\n", report.cases[test_index].to_json().unwrap()),
+            file.unwrap(),
+            "the report's case is the one written"
+        );
         assert_eq!(case.check().map_err(|e| e.to_string()), Ok(()));
         assert_eq!(case.check_route(&s).map_err(|e| e.to_string()), Ok(()));
         assert!(case.verdict.is_some());
@@ -189,9 +197,9 @@ async fn a_lossy_slow_link_ends_no_test_early() {
         &car,
         &scenario,
         &config(5, 4, false, dir.path()),
-        Some(&sim),
         &CancellationToken::new(),
-        &ProgressBar::hidden(),
+        &Silent,
+        Some(&sim as &dyn SimulatorView),
     )
     .await
     .unwrap();
@@ -228,11 +236,12 @@ async fn killing_the_simulator_mid_test_aborts_the_test_and_the_campaign() {
         &car,
         &scenario,
         &config,
-        None,
         &CancellationToken::new(),
-        &ProgressBar::hidden(),
+        &Silent,
+        None,
     )
-    .await;
+    .await
+    .map_err(|failure| failure.error);
     assert!(
         matches!(result, Err(RunError::LinkLost { test_index: 0 })),
         "{result:?}"
@@ -261,15 +270,22 @@ async fn an_interrupt_stops_the_car_safely_and_completes_the_run_directory() {
         &car,
         &scenario,
         &config,
-        Some(&sim),
         &cancel,
-        &ProgressBar::hidden(),
+        &Silent,
+        Some(&sim as &dyn SimulatorView),
     )
     .await;
+    let Err(failure) = result else {
+        panic!("the interrupted campaign ended well: {result:?}");
+    };
     assert!(
-        matches!(result, Err(RunError::Interrupted { test_index: 0 })),
-        "{result:?}"
+        matches!(failure.error, RunError::Interrupted { test_index: 0 }),
+        "{failure:?}"
     );
+    // The failure carries the run directory's report, with the case written.
+    let report = failure.report.unwrap();
+    assert_eq!(report.cases.len(), 1);
+    assert_eq!(report.cases[0].reason.as_deref(), Some("interrupted"));
     assert!(sim.truth().speed.abs() < 0.1, "the car still moves");
     let case = read_case(dir.path(), 0);
     assert_eq!(case.verdict, Some(Verdict::Aborted));

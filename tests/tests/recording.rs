@@ -11,12 +11,13 @@ use campaign::case::{Case, CommandRecord};
 use campaign::model::Campaign;
 use car_link::CarConfig;
 use car_sim::SimConfig;
-use indicatif::ProgressBar;
 use orchestrator::recording::{
     AckOutcome, CarCommand, CarStateRecord, CommandAck, CommandSent, FaultRecord, FaultStatus,
     OracleRecord, Recording, TestEvent, TestEventKind, Topic, TruthRecord,
 };
-use orchestrator::runner::{RECORDING_FILE, RunConfig, RunError, run_campaign};
+use orchestrator::runner::{
+    RECORDING_FILE, RunConfig, RunError, Silent, SimulatorView, run_campaign,
+};
 use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 
@@ -54,12 +55,13 @@ async fn try_campaign(seed: u64, tests: usize, out: &Path) -> Result<(), RunErro
         &car,
         &scenario,
         &config,
-        Some(&sim),
         &CancellationToken::new(),
-        &ProgressBar::hidden(),
+        &Silent,
+        Some(&sim as &dyn SimulatorView),
     )
     .await
     .map(drop)
+    .map_err(|failure| failure.error)
 }
 
 fn read_case(dir: &Path, test_index: usize) -> Case {

@@ -113,8 +113,8 @@ const MALFORMED: &[(&str, &str)] = &[
     ),
     (
         "fault-kind-unknown.toml",
-        ":22:20: campaign.faults.anchor_range.kinds[1]: unknown variant `bitflip`, expected \
-         `offset` or `amplification`",
+        ":22:20: campaign.faults.anchor_range.kinds[1]: unknown variant `stuck`, expected one of \
+         `none`, `bitflip`, `offset`, `amplification`, `set_to`",
     ),
     (
         "wall-without-length.toml",

@@ -9,7 +9,8 @@ use thiserror::Error;
 
 use crate::geometry::{Area, Point, turn_angle};
 
-/// Limits on a trajectory's shape. The defaults are the method's (§3).
+/// Limits on a trajectory's shape. The defaults are the method's
+/// (`docs/method.md#drivable-trajectories`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Constraints {
     /// Shortest segment, metres (default 0.6).

@@ -1,4 +1,5 @@
-//! The random drivable trajectory generator of the method (§3), with the ahead margin.
+//! The random drivable trajectory generator of the method (`docs/method.md#drivable-trajectories`),
+//! with the ahead margin.
 //!
 //! A [`Generator`] extends a route (given by its [`RouteTail`]: the last point and the heading of
 //! the last segment, or a car's [`Pose`]) by `n` points. It generates `n + ahead_margin` points and
@@ -60,7 +61,8 @@ pub enum Strategy {
     Wedge,
 }
 
-/// The generator's named constants. The defaults are the method's (§3).
+/// The generator's named constants. The defaults are the method's
+/// (`docs/method.md#drivable-trajectories`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GeneratorConfig {
     /// Segment lengths, turn limit and clearance every generated segment respects.

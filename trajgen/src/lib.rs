@@ -5,8 +5,10 @@
 //!
 //! - [`geometry`]: points, closed polygons, the area (fence minus cutouts), exact predicates.
 //! - [`constraints`]: what makes a route drivable, and the check.
-//! - [`generator`]: extends a route by `n` points with the ahead margin (method §3).
-//! - [`validation`]: drives one long trajectory through an area and gives a verdict (method §4).
+//! - [`generator`]: extends a route by `n` points with the ahead margin
+//!   (`docs/method.md#ahead-margin`).
+//! - [`validation`]: drives one long trajectory through an area and gives a verdict
+//!   (`docs/method.md#validating-an-area`).
 //!
 //! ```
 //! use rand::SeedableRng;

@@ -1,4 +1,5 @@
-//! Area validation (method §4): drive one very long trajectory through an area and judge it.
+//! Area validation (`docs/method.md#validating-an-area`): drive one very long trajectory through an
+//! area and judge it.
 //!
 //! [`validate_area`] continues the start route with one continuous trajectory of
 //! [`ValidationConfig::km`] kilometres, in extensions of [`ValidationConfig::extension_points`]
@@ -385,7 +386,8 @@ impl Run<'_> {
     }
 }
 
-/// Validates `area` by one continuous trajectory continuing `start_route` (method §4).
+/// Validates `area` by one continuous trajectory continuing `start_route`
+/// (`docs/method.md#validating-an-area`).
 ///
 /// `progress` is called every [`ValidationConfig::progress_step_km`] and once at the end.
 pub fn validate_area<R: Rng + ?Sized>(

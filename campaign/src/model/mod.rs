@@ -1,4 +1,5 @@
-//! The abstract model of the car and the test generator (method §6), on `proptest`.
+//! The abstract model of the car and the test generator (`docs/method.md#the-model`), on
+//! `proptest`.
 //!
 //! A test is a sequence of [`Command`]s generated against a [`ReferenceState`]: the route tail
 //! the next segment must extend, the faults in flight and the firmware's fault slots. Commands are
@@ -37,16 +38,16 @@
 //!
 //! # Shrinking
 //!
-//! Off on hardware (method §7): [`Planner::plan_test`] takes the first value of the strategy and
-//! never shrinks. For simulation, [`Planner::plan_tree`] returns the proptest value tree
-//! ([`PlanTree`]): after a failing run call [`PlanTree::simplify`] with the number of commands
-//! that ran (the ones after the failure are dropped first) and run [`PlanTree::current`] again;
-//! call [`PlanTree::complicate`] when the simpler test passed. The `Sequential` tree then deletes
-//! commands from the back and shrinks single commands (a segment's intent shrinks towards fewer
-//! points and lower speeds and its points are regenerated from the tail it was planned on). A
-//! change is kept only when every later command's precondition still holds, so removing or
-//! changing a segment that later segments continue from is refused: the geometry stays drivable.
-//! Fault commands can always be dropped.
+//! Off on hardware (`docs/method.md#replay-and-shrinking`): [`Planner::plan_test`] takes the first
+//! value of the strategy and never shrinks. For simulation, [`Planner::plan_tree`] returns the
+//! proptest value tree ([`PlanTree`]): after a failing run call [`PlanTree::simplify`] with the
+//! number of commands that ran (the ones after the failure are dropped first) and run
+//! [`PlanTree::current`] again; call [`PlanTree::complicate`] when the simpler test passed. The
+//! `Sequential` tree then deletes commands from the back and shrinks single commands (a segment's
+//! intent shrinks towards fewer points and lower speeds and its points are regenerated from the
+//! tail it was planned on). A change is kept only when every later command's precondition still
+//! holds, so removing or changing a segment that later segments continue from is refused: the
+//! geometry stays drivable. Fault commands can always be dropped.
 
 mod command;
 mod generate;

@@ -1,10 +1,11 @@
 //! The reference state of the model: what the car has been told so far in a test.
 //!
 //! It holds the route tail the next segment must extend, the faults in flight, and the firmware's
-//! fault slots. The slots mirror the firmware exactly (`firmware-behaviour` §8.6): 5 probes of 5
-//! slots each, a slot is taken by every added fault and never freed except by clearing all faults,
-//! which every test's reset does. The preconditions keep generated tests inside those limits, so
-//! no fault is ever silently dropped by a full probe.
+//! fault slots. The slots mirror the firmware exactly
+//! (`docs/firmware.md#probes-and-slots`): 5 probes of 5 slots each, a slot is taken by every added
+//! fault and never freed except by clearing all faults, which every test's reset does. The
+//! preconditions keep generated tests inside those limits, so no fault is ever silently dropped by
+//! a full probe.
 
 use thiserror::Error;
 use trajgen::{Area, Constraints, Point, RouteTail, check_route};

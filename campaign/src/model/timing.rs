@@ -1,12 +1,12 @@
 //! When an injected fault applies, in time: probe iterations turned into durations.
 //!
-//! A fault's `start` and `duration` count calls of its probe (`firmware-behaviour` §8.3, §8.5):
-//! it applies on calls `start + 1 … start + duration` after it was added. One call of
-//! `uwb_travel_dist` or `uwb_yaw` is one odometry tick (10 ms in firmware 10.x, about 20 ms in
-//! 12.x); one call of `uwb_range_<id>` is one range measurement of that anchor, every
-//! `N × 100 ms` with `N` anchors in range. The car does not report its probe counters, so these
-//! windows are estimates: good enough to say which faults were probably applying during a
-//! segment, not to prove it.
+//! A fault's `start` and `duration` count calls of its probe
+//! (`docs/firmware.md#when-a-fault-applies`, `docs/firmware.md#probe-rates`): it applies on calls
+//! `start + 1 … start + duration` after it was added. One call of `uwb_travel_dist` or `uwb_yaw` is
+//! one odometry tick (10 ms in firmware 10.x, about 20 ms in 12.x); one call of `uwb_range_<id>` is
+//! one range measurement of that anchor, every `N × 100 ms` with `N` anchors in range. The car does
+//! not report its probe counters, so these windows are estimates: good enough to say which faults
+//! were probably applying during a segment, not to prove it.
 
 use std::time::Duration;
 

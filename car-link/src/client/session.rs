@@ -4,10 +4,11 @@
 //!
 //! GET_STATE is matched differently from every other command, because several GET_STATE requests may be in
 //! flight at once (the pipelined state stream, the keepalive, single reads) and its reply carries no request id.
-//! All GET_STATE requests are identical and idempotent, and the car answers in arrival order (protocol §2.3, on
-//! an ordered link), so a reply answers the **oldest** GET_STATE request of that car still waiting (first in,
-//! first out). A request whose reply has not come by its deadline counts as lost and is never paired afterwards;
-//! a reply with no request waiting is stray. See [`Shared::dispatch_state`] for what this means for the stamps.
+//! All GET_STATE requests are identical and idempotent, and the car answers in arrival order
+//! (`docs/protocol.md#receiving-frames`, on an ordered link), so a reply answers the **oldest** GET_STATE request of
+//! that car still waiting (first in, first out). A request whose reply has not come by its deadline counts as lost and
+//! is never paired afterwards; a reply with no request waiting is stray. See [`Shared::dispatch_state`] for what this
+//! means for the stamps.
 //!
 //! A reply whose payload does not decode, but whose header names the (car, command) of a waiting request (not
 //! GET_STATE), is handed to that request: if no reply that decodes comes, the request fails with

@@ -145,7 +145,7 @@ impl Faults {
     }
 }
 
-/// A plausible state, with the protocol's §13.5 values.
+/// A plausible state, with the values of the GET_STATE reply test vector (`docs/protocol.md#test-vectors`).
 pub fn sample_state(version: FirmwareVersion) -> CarState {
     CarState {
         version,

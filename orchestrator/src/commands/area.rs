@@ -13,7 +13,7 @@ use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::{choose_seed, rng};
 use crate::svg::area_picture;
 
-/// Points per extension during validation (method §4).
+/// Points per extension during validation (`docs/method.md#validating-an-area`).
 const VALIDATION_EXTENSION_POINTS: usize = 5;
 
 /// What `area validate --json` prints.

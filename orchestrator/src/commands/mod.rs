@@ -9,6 +9,7 @@ mod route_return;
 mod run;
 mod runs;
 mod scenario;
+mod shared;
 mod sim;
 
 use std::process::ExitCode;

@@ -14,14 +14,15 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use car_link::{Car, CarAddress};
-use indicatif::ProgressBar;
 use scenarios::Scenario;
 use tokio_util::sync::CancellationToken;
 use trajgen::{Generator, Strategy};
 
-use super::run::{CampaignFailed, cancel_on_ctrl_c, connect, metres, runtime};
+use super::shared::{CampaignFailed, cancel_on_ctrl_c, connect, metres, runtime, sim_view};
 use crate::cli::ReplayArgs;
-use crate::runner::{ReplaySource, RunConfig, TestSummary, rfc3339_now, run_campaign};
+use crate::runner::{
+    ReplaySource, RunConfig, Silent, TestSummary, rfc3339_now, run_campaign, run_dir_name,
+};
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::choose_seed;
 use campaign::case::{Case, ReplayOf, ScenarioRef};
@@ -52,10 +53,7 @@ pub fn replay(args: &ReplayArgs) -> Result<ExitCode> {
         .parse()
         .with_context(|| format!("--car {}", args.car))?;
     let out = args.out.clone().unwrap_or_else(|| {
-        PathBuf::from("runs").join(crate::runner::run_dir_name(
-            &format!("replay-{}", scenario.name),
-            seed,
-        ))
+        PathBuf::from("runs").join(run_dir_name(&format!("replay-{}", scenario.name), seed))
     });
     let of = ReplayOf {
         case: path.display().to_string(),
@@ -192,8 +190,7 @@ impl Job<'_> {
                 self.seed
             };
             let dir = format!("run-{}", k + 1);
-            let result = self.run_one(&mut shared, seed, &dir, &cancel).await;
-            let case = read_case(&self.out.join(&dir));
+            let (case, result) = self.run_one(&mut shared, seed, &dir, &cancel).await;
             let run = ReplayRun {
                 dir,
                 seed,
@@ -218,13 +215,14 @@ impl Job<'_> {
         (runs, None)
     }
 
+    /// Drives run `dir` with `seed`: the case it wrote (if it got that far), and how it ended.
     async fn run_one(
         &self,
         shared: &mut Option<Car>,
         seed: u64,
         dir: &str,
         cancel: &CancellationToken,
-    ) -> Result<()> {
+    ) -> (Option<Case>, Result<()>) {
         let mut config = RunConfig::new(
             Campaign {
                 seed,
@@ -243,36 +241,39 @@ impl Job<'_> {
         }
         let (car, sim) = match shared {
             Some(car) => (car.clone(), None),
-            None => {
-                let (car, sim) = connect(self.address, self.scenario, seed).await?;
-                if sim.is_none() {
-                    *shared = Some(car.clone());
+            None => match connect(self.address, self.scenario, seed).await {
+                Ok((car, sim)) => {
+                    if sim.is_none() {
+                        *shared = Some(car.clone());
+                    }
+                    (car, sim)
                 }
-                (car, sim)
-            }
+                Err(error) => return (None, Err(error)),
+            },
         };
         let result = run_campaign(
             &car,
             self.scenario,
             &config,
-            sim.as_ref(),
             cancel,
-            &ProgressBar::hidden(),
+            &Silent,
+            sim_view(&sim),
         )
         .await;
         if let Some(sim) = sim {
             sim.shutdown();
         }
-        result
-            .map(|_| ())
-            .map_err(|error| anyhow::Error::new(CampaignFailed::new(error, &config.out_dir)))
+        match result {
+            Ok(report) => (report.cases.into_iter().next(), Ok(())),
+            Err(failure) => (
+                failure.report.and_then(|r| r.cases.into_iter().next()),
+                Err(anyhow::Error::new(CampaignFailed::new(
+                    failure.error,
+                    &config.out_dir,
+                ))),
+            ),
+        }
     }
-}
-
-/// The case a run wrote, if any.
-fn read_case(dir: &Path) -> Option<Case> {
-    let text = std::fs::read_to_string(dir.join("case-000.json")).ok()?;
-    Case::from_json(&text).ok()
 }
 
 /// The worst deviation of a run, for messages.

@@ -6,18 +6,19 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
+use car_link::CarAddress;
 use car_link::firmware::{MAX_STALE_LIMIT, WATCHDOG};
-use car_link::{Car, CarAddress, CarConfig};
-use indicatif::{ProgressBar, ProgressStyle};
 use scenarios::Scenario;
-use tokio_util::sync::CancellationToken;
 
+use super::shared::{
+    CampaignFailed, Progress, cancel_on_ctrl_c, connect, print_report, runtime, sim_view,
+};
 use crate::cli::{OnFailure, RunArgs};
-use crate::runner::{CampaignReport, RunConfig, RunError, run_campaign, run_dir_name};
+use crate::runner::{CampaignReport, RunConfig, run_campaign, run_dir_name};
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::choose_seed;
 use campaign::model::Campaign;
-use campaign::oracle::{FailurePolicy, Verdict};
+use campaign::oracle::FailurePolicy;
 
 /// Runs the campaign and prints the final table. Exit status: 0 every test passed, 1 a test
 /// failed or was aborted, 2 an error (preflight refused, link lost, interrupted, …).
@@ -70,30 +71,6 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     finish(result, wall)
 }
 
-pub(super) fn runtime(virtual_time: bool) -> Result<tokio::runtime::Runtime> {
-    let runtime = if virtual_time {
-        tokio::runtime::Builder::new_current_thread()
-            .enable_all()
-            .start_paused(true)
-            .build()
-    } else {
-        tokio::runtime::Builder::new_multi_thread()
-            .worker_threads(2)
-            .enable_all()
-            .build()
-    };
-    runtime.context("cannot start the async runtime")
-}
-
-/// How the runner talks to any car: round trips on a radio link can exceed the 250 ms default.
-pub fn car_config() -> CarConfig {
-    CarConfig {
-        request_timeout: Duration::from_secs(1),
-        terminal_timeout: Duration::from_secs(2),
-        ..CarConfig::default()
-    }
-}
-
 /// Connects to the car (starting the embedded simulator for `sim`) and runs the campaign,
 /// interrupted by Ctrl-C.
 async fn campaign_on(
@@ -103,75 +80,11 @@ async fn campaign_on(
 ) -> Result<CampaignReport, anyhow::Error> {
     let (car, sim) = connect(address, scenario, config.campaign.seed).await?;
     let cancel = cancel_on_ctrl_c();
-    let progress = progress_bar(config.campaign.tests);
-    let result = run_campaign(&car, scenario, config, sim.as_ref(), &cancel, &progress).await;
-    progress.finish_and_clear();
-    result.map_err(|error| anyhow::Error::new(CampaignFailed::new(error, &config.out_dir)))
-}
-
-/// The car at `address`; for `sim` a fresh embedded simulated car seeded with `seed`, with its
-/// handle.
-pub(super) async fn connect(
-    address: &CarAddress,
-    scenario: &Scenario,
-    seed: u64,
-) -> Result<(Car, Option<car_sim::SimHandle>)> {
-    if *address != CarAddress::Sim {
-        let car = Car::connect(address, car_config())
-            .await
-            .with_context(|| format!("cannot connect to the car at {address}"))?;
-        return Ok((car, None));
-    }
-    let sim_config = car_sim::SimConfig {
-        seed,
-        ..car_sim::SimConfig::from_scenario(scenario)
-    };
-    let (stream, sim) = car_sim::spawn_in_process(&sim_config);
-    let car = Car::over_stream(stream, car_config())
-        .await
-        .context("cannot connect to the embedded simulated car")?;
-    Ok((car, Some(sim)))
-}
-
-/// A token cancelled when the operator presses Ctrl-C (the runner then stops the car safely).
-/// Call it inside the runtime.
-pub(super) fn cancel_on_ctrl_c() -> CancellationToken {
-    let cancel = CancellationToken::new();
-    let on_ctrl_c = cancel.clone();
-    tokio::spawn(async move {
-        if tokio::signal::ctrl_c().await.is_ok() {
-            eprintln!("interrupted: stopping the car safely");
-            on_ctrl_c.cancel();
-        }
-    });
-    cancel
-}
-
-pub(super) fn progress_bar(tests: usize) -> ProgressBar {
-    let bar = ProgressBar::new(tests as u64);
-    if let Ok(style) =
-        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} tests  {msg}")
-    {
-        bar.set_style(style.progress_chars("=> "));
-    }
-    bar
-}
-
-/// A campaign that did not run to its end, with where its record is.
-#[derive(Debug, thiserror::Error)]
-#[error("{error} (run directory {})", dir.display())]
-pub(super) struct CampaignFailed {
-    error: RunError,
-    dir: PathBuf,
-}
-
-impl CampaignFailed {
-    pub(super) fn new(error: RunError, dir: &std::path::Path) -> Self {
-        Self {
-            error,
-            dir: dir.to_owned(),
-        }
-    }
+    let progress = Progress::new(config.campaign.tests);
+    let result = run_campaign(&car, scenario, config, &cancel, &progress, sim_view(&sim)).await;
+    progress.finish();
+    result
+        .map_err(|failure| anyhow::Error::new(CampaignFailed::new(failure.error, &config.out_dir)))
 }
 
 fn finish(result: Result<CampaignReport>, wall: Duration) -> Result<ExitCode> {
@@ -184,46 +97,4 @@ fn finish(result: Result<CampaignReport>, wall: Duration) -> Result<ExitCode> {
     } else {
         ExitCode::from(1)
     })
-}
-
-/// Prints a campaign's table of tests and its summary (with the wall time when known).
-pub(super) fn print_report(report: &CampaignReport, wall: Option<Duration>) {
-    println!("| test | verdict | worst deviation | starvations | smallest margin | reason |");
-    println!("|---|---|---|---|---|---|");
-    for t in &report.tests {
-        println!(
-            "| {} | {} | {} | {} | {} | {} |",
-            t.test_index,
-            t.verdict.map_or("not run", Verdict::as_str),
-            metres(t.worst_deviation_m),
-            t.starvations,
-            t.smallest_margin_s
-                .map_or_else(|| "-".to_owned(), |m| format!("{m:.2} s")),
-            t.reason.as_deref().unwrap_or("")
-        );
-    }
-    let Some(s) = &report.record.summary else {
-        return;
-    };
-    println!();
-    println!(
-        "tests {}, passed {}, failed {}, aborted {}, worst deviation {}{}",
-        s.tests,
-        s.passed,
-        s.failed,
-        s.aborted,
-        metres(s.worst_deviation_m),
-        wall.map_or_else(String::new, |w| format!(
-            "; {:.1} s wall time",
-            w.as_secs_f64()
-        ))
-    );
-    for file in &s.failing_cases {
-        println!("  {}", report.dir.join(file).display());
-    }
-    println!("run directory: {}", report.dir.display());
-}
-
-pub(super) fn metres(value: Option<f64>) -> String {
-    value.map_or_else(|| "-".to_owned(), |m| format!("{m:.2} m"))
 }

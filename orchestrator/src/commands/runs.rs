@@ -7,7 +7,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 
-use super::run::{metres, print_report};
+use super::shared::{metres, print_report};
 use crate::cli::{RunsArgs, RunsCommand};
 use crate::runner::{CampaignReport, TestSummary};
 use campaign::case::{CampaignRecord, Case};
@@ -242,6 +242,7 @@ fn show_campaign(dir: &Path, record: CampaignRecord) -> Result<()> {
         .collect();
     files.sort();
     let mut tests = Vec::new();
+    let mut cases = Vec::new();
     for (i, path) in files.iter().enumerate() {
         let file = path
             .file_name()
@@ -249,6 +250,7 @@ fn show_campaign(dir: &Path, record: CampaignRecord) -> Result<()> {
         let text = std::fs::read_to_string(path).with_context(|| path.display().to_string())?;
         let case = Case::from_json(&text).with_context(|| path.display().to_string())?;
         tests.push(TestSummary::of(case.test_index.unwrap_or(i), file, &case));
+        cases.push(case);
     }
     println!();
     print_report(
@@ -256,6 +258,7 @@ fn show_campaign(dir: &Path, record: CampaignRecord) -> Result<()> {
             dir: dir.to_owned(),
             record,
             tests,
+            cases,
         },
         None,
     );

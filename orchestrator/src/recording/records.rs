@@ -729,13 +729,14 @@ impl Record for SimFault {
 pub enum SimEventKind {
     /// The communication watchdog expired.
     WatchdogExpired,
-    /// The anchor walk would hang here (quirk 13; the round is skipped).
+    /// The anchor walk would hang here (`docs/firmware.md#ranging-schedule`; the round is skipped).
     AnchorWalkWouldHang,
-    /// The autopilot window held a zero-length segment (quirk 9).
+    /// The autopilot window held a zero-length segment (`docs/firmware.md#uploading-points`).
     ZeroLengthSegment,
-    /// The route ring overflowed (quirk 7).
+    /// The route ring overflowed (`docs/firmware.md#route-ring-and-points-left`).
     RouteRingOverflow,
-    /// A route packet repeating the previous packet's first point was dropped (quirk 6).
+    /// A route packet repeating the previous packet's first point was dropped
+    /// (`docs/firmware.md#uploading-points`).
     DuplicatePacketDropped,
 }
 

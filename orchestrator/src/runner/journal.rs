@@ -1,6 +1,7 @@
 //! The runner's side of the recording: a [`Journal`] wraps the campaign's
-//! [`Recorder`](crate::recording::Recorder) (and, in a simulated run, the simulator's handle)
-//! so that the drive, the reset and the telemetry can record through a shared reference.
+//! [`Recorder`](crate::recording::Recorder) (and, in a simulated run, the simulator's debug view,
+//! a [`SimulatorView`]) so that the drive, the reset and the telemetry can record through a
+//! shared reference.
 //!
 //! Recording never interrupts a drive: the first recording error is kept (later writes are
 //! skipped) and the runner ends the campaign with [`RunError::Recording`] at the end of the
@@ -9,12 +10,11 @@
 use std::future::Future;
 use std::sync::{Mutex, MutexGuard};
 
-use car_link::{CarError, StateSample};
-use car_sim::SimHandle;
-
 use super::RunError;
+use super::events::SimulatorView;
 use crate::recording::{CarCommand, Record, Recorder, RecordingError};
 use campaign::case::CampaignRecord;
+use car_link::{CarError, StateSample};
 
 /// The recorder and the first error it returned.
 #[derive(Debug)]
@@ -24,16 +24,24 @@ struct State {
 }
 
 /// The campaign's recording, shared by the runner's parts (see the module doc).
-#[derive(Debug)]
 pub(crate) struct Journal<'a> {
     state: Mutex<State>,
-    sim: Option<&'a SimHandle>,
+    sim: Option<&'a dyn SimulatorView>,
+}
+
+impl std::fmt::Debug for Journal<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Journal")
+            .field("state", &self.state)
+            .field("simulated", &self.sim.is_some())
+            .finish()
+    }
 }
 
 impl<'a> Journal<'a> {
     /// Records through `recorder`; with `sim`, every state sample also records the simulator's
     /// truth and debug events.
-    pub(crate) fn new(recorder: Recorder, sim: Option<&'a SimHandle>) -> Self {
+    pub(crate) fn new(recorder: Recorder, sim: Option<&'a dyn SimulatorView>) -> Self {
         Self {
             state: Mutex::new(State {
                 recorder: Some(recorder),

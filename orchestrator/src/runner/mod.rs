@@ -1,15 +1,16 @@
 //! The campaign runner: drives planned tests against a car in real time (or in virtual time
-//! against the simulator) and writes the run directory (method §6, issue 6).
+//! against the simulator) and writes the run directory (`docs/method.md#a-test-step-by-step`).
 //!
 //! [`run_campaign`] performs, on tokio's clock:
 //! 1. **Preflight**, once: the firmware version, the configuration the method needs (routes not
 //!    repeated, speed mode, the fused position reported; set by read-modify-write or refused),
 //!    the scenario's anchors uploaded, fault injection enabled and cleared, the car inside the
-//!    fence, and the link's round trip measured ([`preflight`]).
-//! 2. Per test, the **reset** ([`reset`]): faults and route cleared, a return route planned with
+//!    fence, and the link's round trip measured (`preflight`).
+//! 2. Per test, the **reset** (`reset`): faults and route cleared, a return route planned with
 //!    the `recovery` crate from the car's RTK pose and driven with the rest of the recovery
 //!    route to its end, the car braked to a stop, the UWB estimate set to the RTK estimate.
-//! 3. The **test drive** ([`drive`]): the start route from where the car stands, then the
+//! 3. The **test drive** (`drive`, the async loop around the state machine
+//!    [`campaign::drive::TestDrive`]): the start route from where the car stands, then the
 //!    planned commands, streamed: each segment is appended when the time the car still needs to
 //!    reach its stopping point falls to the lead time (measured round trips and generation time
 //!    plus a margin, and a round trip per command still to send before it); fault commands are
@@ -17,12 +18,16 @@
 //!    the safety monitor. At the end, and on any abort, the safe stop: a slow (0.8 m/s)
 //!    extension generated with the ahead margin, then braking until the speed is below 0.1 m/s
 //!    (or braking at once when the monitor demands it).
-//! 4. The **record** ([`record`]): `campaign.json` (written at the start and again at the end)
-//!    and one case file per test, in the formats of [`campaign::case`]; and all along, the
-//!    telemetry recording `campaign.mcap` ([`crate::recording`], written through a journal):
+//! 4. The **run directory** (`run_dir`): `campaign.json` (written at the start and again at
+//!    the end) and one case file per test, in the formats of [`campaign::case`]; and all along,
+//!    the telemetry recording `campaign.mcap` ([`crate::recording`], written through a journal):
 //!    every state sample, every command sent with its answer, the planned segments and return
 //!    routes, the fault commands, the oracle results, the safety stops, each test's start and
 //!    end, and with the embedded simulator its truth and debug events.
+//!
+//! Progress reaches the caller through a [`CampaignObserver`], and the simulator's debug view
+//! reaches the journal through a [`SimulatorView`] (`events`): the runner knows neither the
+//! terminal nor the simulator.
 //!
 //! Invariants: a lost link is never a pass (the test is `aborted` with reason `link lost` and the
 //! campaign ends as an error); every random choice derives from the campaign seed; in virtual
@@ -30,22 +35,22 @@
 //! and a recording whose messages are identical (its log time is tokio's clock); a recording
 //! error ends the campaign as an error after the running test.
 //!
-//! Not here: planning the tests (`campaign::model`), judging samples (`campaign::oracle`), the safety
-//! and streaming rules (`campaign::safety`, `campaign::streaming`), the wire protocol (`car-link`).
+//! Not here: planning the tests (`campaign::model`), judging samples (`campaign::oracle`), the
+//! safety and streaming rules (`campaign::safety`, `campaign::streaming`), the drive's decisions
+//! (`campaign::drive`), the wire protocol (`car-link`).
 
-pub mod drive;
+mod drive;
+mod events;
 mod journal;
-pub mod preflight;
-pub mod record;
-pub mod reset;
+mod preflight;
+mod reset;
+mod run_dir;
 mod telemetry;
 
 use std::path::PathBuf;
 use std::time::Duration;
 
 use car_link::{Car, CarError};
-use car_sim::SimHandle;
-use indicatif::ProgressBar;
 use scenarios::Scenario;
 use thiserror::Error;
 use tokio_util::sync::CancellationToken;
@@ -56,27 +61,25 @@ use crate::recording::{
     SafetyRecord, TestEvent, TestEventKind,
 };
 use campaign::case::{Case, CaseError, ReplayOf, RoutePointRecord, Settings};
+use campaign::drive::DriveSettings;
 use campaign::model::{Campaign, ModelError, Planner, ProbeRates, TestPlan};
 use campaign::oracle::{FailurePolicy, Verdict};
 use campaign::safety::{Abort, AbortReason, SafetyConfig};
 use campaign::streaming::StreamingConfig;
 
-pub use preflight::Preflight;
-pub use record::{
-    CampaignReport, RECORDING_FILE, RunDirectory, TestSummary, rfc3339_now, run_dir_name,
-};
+pub use events::{CampaignObserver, Silent, SimulatorView};
+pub use run_dir::{CampaignReport, RECORDING_FILE, TestSummary};
+pub(crate) use run_dir::{rfc3339_now, run_dir_name};
 
 use journal::Journal;
+use preflight::Preflight;
+use run_dir::RunDirectory;
 use telemetry::Telemetry;
 
-/// Speed of the safe stop's extension, m/s (method §6).
-pub const SAFE_STOP_SPEED_MPS: f64 = 0.8;
-/// The car counts as stopped below this speed, m/s.
-pub const STOPPED_SPEED_MPS: f64 = 0.1;
+use campaign::drive::{BRAKE_TIMEOUT, SAFE_STOP_SPEED_MPS, STOPPED_SPEED_MPS};
+
 /// Brake current of the safe stop, amperes (the reference's 50 A).
-pub const BRAKE_CURRENT_A: f64 = 50.0;
-/// Longest the runner brakes waiting for the car to stop.
-pub const BRAKE_TIMEOUT: Duration = Duration::from_secs(5);
+const BRAKE_CURRENT_A: f64 = 50.0;
 
 /// How a campaign runs.
 #[derive(Debug, Clone, PartialEq)]
@@ -85,8 +88,8 @@ pub struct RunConfig {
     pub campaign: Campaign,
     /// What happens after a failing segment.
     pub policy: FailurePolicy,
-    /// The safety monitor's limits (the stale-telemetry limit is raised to what the measured
-    /// link allows, see [`Preflight::safety`]).
+    /// The safety monitor's limits as configured. Preflight may raise the stale-telemetry limit
+    /// to what the measured link needs; the limits in force are recorded in `campaign.json`.
     pub safety: SafetyConfig,
     /// The streaming rule's constants.
     pub streaming: StreamingConfig,
@@ -193,7 +196,7 @@ pub enum RunError {
 
 impl RunError {
     /// The error of `source` while doing `what`.
-    pub fn car(what: impl Into<String>, source: CarError) -> Self {
+    pub(crate) fn car(what: impl Into<String>, source: CarError) -> Self {
         Self::Car {
             what: what.into(),
             source,
@@ -210,12 +213,34 @@ enum TestEnd {
     Stop(RunError),
 }
 
+/// A campaign that did not run to its end (see [`run_campaign`]).
+#[derive(Debug, Error)]
+#[error("{error}")]
+pub struct CampaignFailure {
+    /// Why it ended.
+    pub error: RunError,
+    /// What the run directory holds: `None` when it could not be created or completed.
+    pub report: Option<CampaignReport>,
+}
+
+impl CampaignFailure {
+    fn without_report(error: RunError) -> Self {
+        Self {
+            error,
+            report: None,
+        }
+    }
+}
+
 /// Everything a test needs that stays the same over the campaign.
 #[derive(Debug)]
 pub(crate) struct Context<'a> {
     pub(crate) car: &'a Car,
     pub(crate) scenario: &'a Scenario,
     pub(crate) config: &'a RunConfig,
+    /// The safety limits in force: [`RunConfig::safety`] with the stale-telemetry limit preflight
+    /// found the link needs (the one value every monitor of the campaign uses, and
+    /// `campaign.json` records).
     pub(crate) safety: SafetyConfig,
     pub(crate) sample_timeout: Duration,
     pub(crate) generator: Generator,
@@ -224,33 +249,53 @@ pub(crate) struct Context<'a> {
     pub(crate) journal: &'a Journal<'a>,
 }
 
+impl Context<'_> {
+    /// What the test drive's state machine needs of the campaign.
+    pub(crate) fn drive_settings(&self) -> DriveSettings<'_> {
+        DriveSettings {
+            area: &self.scenario.area,
+            generator: self.generator,
+            safety: self.safety,
+            streaming: self.config.streaming,
+            policy: self.config.policy,
+            oracle_threshold_m: self.scenario.campaign.oracle_threshold_m,
+            stop_points: self.scenario.campaign.points_per_segment.min,
+            rates: self.rates,
+            campaign_seed: self.config.campaign.seed,
+        }
+    }
+}
+
 /// Runs a campaign against `car` in `scenario` and writes its run directory, with its recording
-/// `campaign.mcap`; `sim` is the embedded simulator's handle when `car` is simulated (its truth
-/// and debug events are recorded too), `None` for a real car.
+/// `campaign.mcap`. Progress goes to `observer`; `sim` is the embedded simulator's debug view when
+/// `car` is simulated (its truth and debug events are recorded too), `None` for a real car.
 ///
-/// Returns the report when every test ran (whatever their verdicts); an error when the campaign
-/// could not run to its end (preflight refused, link lost, interrupted, a reset or a plan
-/// failed): the run directory is then still complete (`campaign.json` with its end time and
-/// summary, a case file for every test started, the recording completed as far as it could be
-/// written). A recording that cannot be written is an error ([`RunError::Recording`]): the
-/// campaign stops after the running test.
+/// Returns the report, with every case written, when every test ran (whatever their verdicts);
+/// a [`CampaignFailure`] when the campaign could not run to its end (preflight refused, link
+/// lost, interrupted, a reset or a plan failed): the run directory is then still complete
+/// (`campaign.json` with its end time and summary, a case file for every test started, the
+/// recording completed as far as it could be written) and the failure carries its report. A
+/// recording that cannot be written is an error ([`RunError::Recording`]): the campaign stops
+/// after the running test.
 ///
 /// Timeout: every car command is bounded by the link's timeouts; a reset drive by its route's
-/// length at its speed plus 60 s; braking by [`BRAKE_TIMEOUT`]. Cancellation: `cancel` performs
-/// the safe stop of the running test, records it as `aborted (interrupted)` and ends the campaign
-/// with [`RunError::Interrupted`]. Dropping the future instead stops at once without a safe stop
-/// (the car's watchdog then brakes it within 2 s) and leaves `campaign.json` without an end.
+/// length at its speed plus 60 s; braking by [`campaign::drive::BRAKE_TIMEOUT`]. Cancellation:
+/// `cancel` performs the safe stop of the running test, records it as `aborted (interrupted)`
+/// and ends the campaign with [`RunError::Interrupted`]. Dropping the future instead stops at
+/// once without a safe stop (the car's watchdog then brakes it within 2 s) and leaves
+/// `campaign.json` without an end.
 pub async fn run_campaign(
     car: &Car,
     scenario: &Scenario,
     config: &RunConfig,
-    sim: Option<&SimHandle>,
     cancel: &CancellationToken,
-    progress: &ProgressBar,
-) -> Result<CampaignReport, RunError> {
+    observer: &dyn CampaignObserver,
+    sim: Option<&dyn SimulatorView>,
+) -> Result<CampaignReport, CampaignFailure> {
     let origin = tokio::time::Instant::now();
     let settings = Settings::new(scenario, config.campaign.tests, config.policy);
-    let mut dir = RunDirectory::create(config, scenario, settings)?;
+    let mut dir = RunDirectory::create(config, scenario, settings)
+        .map_err(CampaignFailure::without_report)?;
     let start = RecordingStart {
         campaign: dir.record(),
         scenario,
@@ -261,57 +306,70 @@ pub async fn run_campaign(
     let journal = match Recorder::create(&dir.path().join(RECORDING_FILE), &start) {
         Ok(recorder) => Journal::new(recorder, sim),
         Err(error) => {
-            dir.finish()?;
-            return Err(RunError::Recording(error));
+            let report = dir.finish().map_err(CampaignFailure::without_report)?;
+            return Err(CampaignFailure {
+                error: RunError::Recording(error),
+                report: Some(report),
+            });
         }
     };
-    let run = Run {
+    let inputs = Inputs {
         car,
         scenario,
         config,
         cancel,
-        progress,
+        observer,
         journal: &journal,
     };
-    let result = run_tests(&run, &mut dir).await;
-    let report = dir.finish()?;
+    let result = run_tests(&inputs, &mut dir).await;
+    let report = dir.finish().map_err(CampaignFailure::without_report)?;
     let recorded = journal.finish(&report.record);
-    result.and(recorded).map(|()| report)
+    match result.and(recorded) {
+        Ok(()) => Ok(report),
+        Err(error) => Err(CampaignFailure {
+            error,
+            report: Some(report),
+        }),
+    }
 }
 
-/// What [`run_tests`] works with.
-struct Run<'a> {
+/// What [`run_campaign`] was given, with the journal it opened: what [`run_tests`] works with.
+struct Inputs<'a> {
     car: &'a Car,
     scenario: &'a Scenario,
     config: &'a RunConfig,
     cancel: &'a CancellationToken,
-    progress: &'a ProgressBar,
+    observer: &'a dyn CampaignObserver,
     journal: &'a Journal<'a>,
 }
 
-async fn run_tests(run: &Run<'_>, dir: &mut RunDirectory) -> Result<(), RunError> {
-    let Run {
+async fn run_tests(inputs: &Inputs<'_>, dir: &mut RunDirectory) -> Result<(), RunError> {
+    let Inputs {
         car,
         scenario,
         config,
         cancel,
-        progress,
+        observer,
         journal,
-    } = *run;
+    } = *inputs;
     let preflight = Preflight::run(car, scenario, config, journal).await?;
     if !preflight.switched_off.is_empty() {
-        progress.println(format!(
+        observer.note(&format!(
             "preflight: switched off {}",
             preflight.switched_off.join(", ")
         ));
     }
+    let safety = SafetyConfig {
+        stale_after: preflight.stale_after,
+        ..config.safety
+    };
     dir.set_firmware(car.version().to_string());
-    dir.set_runtime(preflight.safety, config.streaming);
+    dir.set_runtime(safety, config.streaming);
     let ctx = Context {
         car,
         scenario,
         config,
-        safety: preflight.safety,
+        safety,
         sample_timeout: preflight.sample_timeout,
         generator: Generator::new(scenario.generator.generator_config(Strategy::Wedge))
             .map_err(RunError::Generator)?,
@@ -325,15 +383,16 @@ async fn run_tests(run: &Run<'_>, dir: &mut RunDirectory) -> Result<(), RunError
     // The first sample comes a round trip after polling starts: wait for it (or for the link's
     // end), so that no safety monitor is armed before samples flow.
     let _ = tokio::time::timeout(
-        preflight.safety.stale_after + ctx.sample_timeout,
+        ctx.safety.stale_after + ctx.sample_timeout,
         telemetry.next(journal),
     )
     .await;
-    progress.set_length(config.campaign.tests as u64);
+    observer.tests_planned(config.campaign.tests);
     for test_index in 0..config.campaign.tests {
         if cancel.is_cancelled() {
             return Err(RunError::Interrupted { test_index });
         }
+        observer.test_started(test_index);
         let started = tokio::time::Instant::now();
         let plan = match &config.replay {
             Some(replay) => TestPlan {
@@ -353,11 +412,7 @@ async fn run_tests(run: &Run<'_>, dir: &mut RunDirectory) -> Result<(), RunError
         let end = run_test(&ctx, &mut telemetry, &plan, &mut case, per_segment).await;
         dir.write_case(&case)?;
         record_test_end(journal, test_index, &case);
-        progress.set_message(format!(
-            "test {test_index}: {}",
-            case.verdict.map_or("not run", Verdict::as_str)
-        ));
-        progress.inc(1);
+        observer.test_finished(test_index, case.verdict);
         if let TestEnd::Stop(error) = end {
             return Err(error);
         }
@@ -430,9 +485,9 @@ async fn run_test(
         .collect();
     case.return_clearance_m =
         (reset.clearance_m < ctx.scenario.generator.clearance_m).then_some(reset.clearance_m);
-    let outcome = drive::drive(ctx, telemetry, plan, reset.standing, generation).await;
-    outcome.record(case);
-    match outcome.stop {
+    let (outcome, error) = drive::drive(ctx, telemetry, plan, reset.standing, generation).await;
+    outcome.write_into(case, error.as_ref().map(ToString::to_string).as_deref());
+    match error {
         Some(error) => TestEnd::Stop(error),
         None if outcome
             .abort

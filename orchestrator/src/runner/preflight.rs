@@ -25,7 +25,6 @@ use super::journal::Journal;
 use super::{RunConfig, RunError, retried};
 use crate::recording::CarCommand;
 use campaign::model::ProbeRates;
-use campaign::safety::SafetyConfig;
 use car_link::firmware::MAX_STALE_LIMIT;
 
 /// GET_STATE requests the round trip is measured over.
@@ -35,24 +34,24 @@ const LOST_IN_A_ROW: u32 = 2;
 
 /// What preflight learned about the car and its link.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Preflight {
+pub(crate) struct Preflight {
     /// The configuration fields preflight switched off, with their old values (`ApRepeatRoutes
     /// (was 1)`); empty when the car was ready.
-    pub switched_off: Vec<String>,
+    pub(crate) switched_off: Vec<String>,
     /// The 99th-percentile GET_STATE round trip measured.
-    pub rtt_p99: Duration,
+    pub(crate) rtt_p99: Duration,
     /// The median GET_STATE round trip measured.
-    pub rtt_p50: Duration,
+    pub(crate) rtt_p50: Duration,
     /// How long one state request may take before the next tick asks again:
     /// `max(150 ms, rtt_p99 + 100 ms)` (a lost request is asked again soon, so that a few losses
     /// in a row stay within the stale-telemetry limit).
-    pub sample_timeout: Duration,
-    /// The safety limits in force: the configured ones, with the stale-telemetry limit raised, if
-    /// it is shorter, to what the link's jitter and losses need: `3 × state period + 2 ×
-    /// (rtt_p99 − rtt_p50)`, at most 1.9 s.
-    pub safety: SafetyConfig,
+    pub(crate) sample_timeout: Duration,
+    /// The stale-telemetry limit in force: the configured one, raised, if it is shorter, to what
+    /// the link's jitter and losses need: `3 × state period + 2 × (rtt_p99 − rtt_p50)`, at most
+    /// 1.9 s (see [`stale_limit`]).
+    pub(crate) stale_after: Duration,
     /// The fault probes' call rates of this firmware with the scenario's anchors.
-    pub rates: ProbeRates,
+    pub(crate) rates: ProbeRates,
 }
 
 impl Preflight {
@@ -107,21 +106,18 @@ impl Preflight {
         switched_off: Vec<String>,
     ) -> Self {
         let sample_timeout = Duration::from_millis(150).max(rtt_p99 + Duration::from_millis(100));
-        let safety = SafetyConfig {
-            stale_after: stale_limit(
-                config.safety.stale_after,
-                config.state_period,
-                rtt_p50,
-                rtt_p99,
-            ),
-            ..config.safety
-        };
+        let stale_after = stale_limit(
+            config.safety.stale_after,
+            config.state_period,
+            rtt_p50,
+            rtt_p99,
+        );
         Self {
             switched_off,
             rtt_p99,
             rtt_p50,
             sample_timeout,
-            safety,
+            stale_after,
             rates,
         }
     }

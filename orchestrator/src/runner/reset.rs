@@ -1,10 +1,10 @@
-//! The reset before every test (method §6): clear the faults and the route, plan a return route
-//! from the car's RTK pose with the `recovery` crate, drive it and the rest of the recovery route
-//! to its end, brake to a stop, and set the UWB estimate to the RTK estimate (its position with
-//! `pos_uwb_reset_pos`, and from firmware 11.0 its heading too, with SET_POS). The test drive then
-//! starts from where the car stands, at the end of the recovery route: every test starts from the
-//! same known state. A car the safety monitor braked just outside the drivable region is first
-//! driven back in ([`reentry`]).
+//! The reset before every test (`docs/method.md#a-test-step-by-step`): clear the faults and the
+//! route, plan a return route from the car's RTK pose with the `recovery` crate, drive it and the
+//! rest of the recovery route to its end, brake to a stop, and set the UWB estimate to the RTK
+//! estimate (its position with `pos_uwb_reset_pos`, and from firmware 11.0 its heading too, with
+//! SET_POS). The test drive then starts from where the car stands, at the end of the recovery
+//! route: every test starts from the same known state. A car the safety monitor braked just outside
+//! the drivable region is first driven back in ([`reentry`]).
 //!
 //! The return route keeps the scenario's clearance from every edge when it can. A car that stopped
 //! inside the clearance band (nearer an edge than the clearance: it cuts corners, and braking
@@ -37,26 +37,26 @@ const RESET_SLACK: Duration = Duration::from_secs(60);
 /// Near the end of its route and slower than this, the car has stopped at the route end.
 const NEAR_END: Duration = Duration::from_secs(2);
 /// Largest distance outside the drivable region from which the reset drives the car back.
-pub const MAX_REENTRY_M: f64 = 1.5;
+pub(crate) const MAX_REENTRY_M: f64 = 1.5;
 /// How far inside the drivable region a re-entry aims.
-pub const REENTRY_INSIDE_M: f64 = 0.5;
+pub(crate) const REENTRY_INSIDE_M: f64 = 0.5;
 
 /// Where the reset left the car.
 #[derive(Debug, Clone, PartialEq)]
-pub struct ResetDone {
+pub(crate) struct ResetDone {
     /// The return route driven: from the car's position to the joint with the recovery route,
     /// with the speed of each point.
-    pub return_route: Vec<(Point, f64)>,
+    pub(crate) return_route: Vec<(Point, f64)>,
     /// Where the car stands, stopped, with UWB equal to RTK.
-    pub standing: Point,
+    pub(crate) standing: Point,
     /// The clearance from every edge the return route keeps, metres: the scenario's, or less when
     /// the car stood inside the clearance band (see the module doc).
-    pub clearance_m: f64,
+    pub(crate) clearance_m: f64,
 }
 
 /// How braking ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum BrakeEnd {
+pub(crate) enum BrakeEnd {
     /// The car is slower than 0.1 m/s.
     Stopped,
     /// It did not stop within [`BRAKE_TIMEOUT`].
@@ -129,8 +129,9 @@ pub(crate) async fn reset(
         .map_err(|e| car_stop("reading the state", e))?;
     journal.state(&standing);
     if car.version().major >= 11 {
-        // From 11.0 `pos_uwb_reset_pos` resets the position only (firmware §7.5); SET_POS with
-        // the RTK pose also sets the UWB heading.
+        // From 11.0 `pos_uwb_reset_pos` resets the position only
+        // (`docs/firmware.md#resetting-the-estimate`); SET_POS with the RTK pose also sets the UWB
+        // heading.
         let s = &standing.state;
         let pose = car_link::message::Pose {
             x: s.px,
@@ -164,7 +165,7 @@ pub(crate) fn car_stop(what: &str, error: CarError) -> Stopped {
 }
 
 /// The car's pose from a state: RTK position, heading from the clockwise yaw in degrees.
-pub fn pose_of(sample: &StateSample) -> Pose {
+pub(crate) fn pose_of(sample: &StateSample) -> Pose {
     let s = &sample.state;
     Pose::new(Point::new(s.px, s.py), (-s.yaw).to_radians())
 }
@@ -173,7 +174,7 @@ pub fn pose_of(sample: &StateSample) -> Pose {
 /// monitor braked it there) re-enters it: [`REENTRY_INSIDE_M`] inside the nearest boundary, on
 /// the line from the car through the nearest boundary point, heading that way. `None` when the
 /// car is inside (or too far out to drive back unattended).
-pub fn reentry(area: &Area, car: Pose) -> Option<Pose> {
+pub(crate) fn reentry(area: &Area, car: Pose) -> Option<Pose> {
     let p = car.position;
     if area.contains_point(p) || !p.is_finite() {
         return None;
@@ -316,7 +317,8 @@ async fn watch_until_end(
                 let s = &sample.state;
                 let position = Point::new(s.px, s.py);
                 let now = t0.elapsed();
-                // GET_STATE carries no fix type (firmware §5): the fused position is the reference.
+                // GET_STATE carries no fix type (`docs/firmware.md#fused-position`): the fused
+                // position is the reference.
                 if let Some(abort) = safety.sample(now, CarSample { position, rtk_fix: true }) {
                     return Err(abort);
                 }

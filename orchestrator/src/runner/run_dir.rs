@@ -18,7 +18,7 @@ use campaign::safety::SafetyConfig;
 use campaign::streaming::StreamingConfig;
 
 /// The file name of the campaign record in a run directory.
-pub const CAMPAIGN_FILE: &str = "campaign.json";
+pub(crate) const CAMPAIGN_FILE: &str = "campaign.json";
 /// The file name of the recording in a run directory.
 pub const RECORDING_FILE: &str = "campaign.mcap";
 
@@ -50,19 +50,23 @@ pub struct CampaignReport {
     pub record: CampaignRecord,
     /// Every test that was started, in order.
     pub tests: Vec<TestSummary>,
+    /// The case of every test that was started, in order: what its case file holds (which
+    /// rounds durations to whole milliseconds).
+    pub cases: Vec<Case>,
 }
 
 /// A run directory being written.
 #[derive(Debug)]
-pub struct RunDirectory {
+pub(crate) struct RunDirectory {
     path: PathBuf,
     record: CampaignRecord,
     tests: Vec<TestSummary>,
+    cases: Vec<Case>,
 }
 
 impl RunDirectory {
     /// Creates the directory (and its parents) and writes the first `campaign.json`.
-    pub fn create(
+    pub(crate) fn create(
         config: &RunConfig,
         scenario: &Scenario,
         settings: Settings,
@@ -91,47 +95,49 @@ impl RunDirectory {
             path,
             record,
             tests: Vec::new(),
+            cases: Vec::new(),
         };
         dir.write_record()?;
         Ok(dir)
     }
 
     /// The directory.
-    pub fn path(&self) -> &Path {
+    pub(crate) fn path(&self) -> &Path {
         &self.path
     }
 
     /// `campaign.json` as last written.
-    pub fn record(&self) -> &CampaignRecord {
+    pub(crate) fn record(&self) -> &CampaignRecord {
         &self.record
     }
 
     /// The campaign's settings (with the runtime constants once preflight set them).
-    pub fn settings(&self) -> &Settings {
+    pub(crate) fn settings(&self) -> &Settings {
         &self.record.settings
     }
 
     /// Records the car's firmware version.
-    pub fn set_firmware(&mut self, version: String) {
+    pub(crate) fn set_firmware(&mut self, version: String) {
         self.record.car_firmware_version = Some(version);
     }
 
     /// Records the safety limits and streaming constants in force.
-    pub fn set_runtime(&mut self, safety: SafetyConfig, streaming: StreamingConfig) {
+    pub(crate) fn set_runtime(&mut self, safety: SafetyConfig, streaming: StreamingConfig) {
         self.record.settings = self.record.settings.clone().with_runtime(safety, streaming);
     }
 
-    /// Writes a test's case file.
-    pub fn write_case(&mut self, case: &Case) -> Result<(), RunError> {
+    /// Writes a test's case file (and keeps the case for the report).
+    pub(crate) fn write_case(&mut self, case: &Case) -> Result<(), RunError> {
         let test_index = case.test_index.unwrap_or(self.tests.len());
         let file = format!("case-{test_index:03}.json");
         write(&self.path.join(&file), &case.to_json()?)?;
         self.tests.push(summarise(test_index, file, case));
+        self.cases.push(case.clone());
         Ok(())
     }
 
     /// Writes the final `campaign.json` (end time and summary) and returns the report.
-    pub fn finish(mut self) -> Result<CampaignReport, RunError> {
+    pub(crate) fn finish(mut self) -> Result<CampaignReport, RunError> {
         self.record.ended_at = Some(rfc3339_now());
         self.record.summary = Some(self.summary());
         self.write_record()?;
@@ -139,6 +145,7 @@ impl RunDirectory {
             dir: self.path,
             record: self.record,
             tests: self.tests,
+            cases: self.cases,
         })
     }
 
@@ -171,7 +178,7 @@ impl RunDirectory {
 impl TestSummary {
     /// The summary of test `test_index` from its case file `file` (relative to the run
     /// directory) holding `case`.
-    pub fn of(test_index: usize, file: String, case: &Case) -> Self {
+    pub(crate) fn of(test_index: usize, file: String, case: &Case) -> Self {
         summarise(test_index, file, case)
     }
 }
@@ -201,14 +208,14 @@ fn write(path: &Path, text: &str) -> Result<(), RunError> {
 }
 
 /// Now as RFC 3339 UTC with whole seconds, for example `2026-11-22T10:55:21Z`.
-pub fn rfc3339_now() -> String {
+pub(crate) fn rfc3339_now() -> String {
     let (date, [h, m, s]) = utc_now();
     format!("{date}T{h:02}:{m:02}:{s:02}Z")
 }
 
 /// The default run directory name: `<UTC timestamp>-<scenario>-<seed>`, for example
 /// `20261122T105521Z-parking-lot-2anchors-7`.
-pub fn run_dir_name(scenario: &str, seed: u64) -> String {
+pub(crate) fn run_dir_name(scenario: &str, seed: u64) -> String {
     let (date, [h, m, s]) = utc_now();
     let compact: String = date.chars().filter(|c| *c != '-').collect();
     format!("{compact}T{h:02}{m:02}{s:02}Z-{scenario}-{seed}")

@@ -1,0 +1,202 @@
+//! What the commands that drive a car (`run`, `replay`) share, and what `runs` shows the same
+//! way: the async runtime, the connection to the car (or the embedded simulator, whose debug view
+//! the runner records), Ctrl-C, the progress bar, a failed campaign as an error, and the table of
+//! a campaign's tests.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use car_link::{Car, CarAddress, CarConfig};
+use car_sim::{DebugEvent, SimHandle, Truth};
+use indicatif::{ProgressBar, ProgressStyle};
+use scenarios::Scenario;
+use tokio_util::sync::CancellationToken;
+
+use crate::runner::{CampaignObserver, CampaignReport, RunError, SimulatorView};
+use campaign::oracle::Verdict;
+
+/// The async runtime: on one thread with a paused clock (virtual time, the embedded simulated
+/// car) or on two threads against the wall clock.
+pub(super) fn runtime(virtual_time: bool) -> Result<tokio::runtime::Runtime> {
+    let runtime = if virtual_time {
+        tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .start_paused(true)
+            .build()
+    } else {
+        tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .enable_all()
+            .build()
+    };
+    runtime.context("cannot start the async runtime")
+}
+
+/// How the runner talks to any car: round trips on a radio link can exceed the 250 ms default.
+pub(super) fn car_config() -> CarConfig {
+    CarConfig {
+        request_timeout: Duration::from_secs(1),
+        terminal_timeout: Duration::from_secs(2),
+        ..CarConfig::default()
+    }
+}
+
+/// The car at `address`; for `sim` a fresh embedded simulated car seeded with `seed`, with its
+/// handle.
+pub(super) async fn connect(
+    address: &CarAddress,
+    scenario: &Scenario,
+    seed: u64,
+) -> Result<(Car, Option<SimHandle>)> {
+    if *address != CarAddress::Sim {
+        let car = Car::connect(address, car_config())
+            .await
+            .with_context(|| format!("cannot connect to the car at {address}"))?;
+        return Ok((car, None));
+    }
+    let sim_config = car_sim::SimConfig {
+        seed,
+        ..car_sim::SimConfig::from_scenario(scenario)
+    };
+    let (stream, sim) = car_sim::spawn_in_process(&sim_config);
+    let car = Car::over_stream(stream, car_config())
+        .await
+        .context("cannot connect to the embedded simulated car")?;
+    Ok((car, Some(sim)))
+}
+
+/// The embedded simulator's debug view, as the runner records it.
+impl SimulatorView for SimHandle {
+    fn truth(&self) -> Truth {
+        SimHandle::truth(self)
+    }
+
+    fn take_events(&self) -> Vec<DebugEvent> {
+        SimHandle::take_events(self)
+    }
+}
+
+/// The debug view of `sim`, if the car is the embedded simulator.
+pub(super) fn sim_view(sim: &Option<SimHandle>) -> Option<&dyn SimulatorView> {
+    sim.as_ref().map(|sim| sim as &dyn SimulatorView)
+}
+
+/// A token cancelled when the operator presses Ctrl-C (the runner then stops the car safely).
+/// Call it inside the runtime.
+pub(super) fn cancel_on_ctrl_c() -> CancellationToken {
+    let cancel = CancellationToken::new();
+    let on_ctrl_c = cancel.clone();
+    tokio::spawn(async move {
+        if tokio::signal::ctrl_c().await.is_ok() {
+            eprintln!("interrupted: stopping the car safely");
+            on_ctrl_c.cancel();
+        }
+    });
+    cancel
+}
+
+/// A campaign's progress on the terminal: a bar of the tests run, the test running, each
+/// verdict printed above the bar (nothing when standard error is not a terminal).
+#[derive(Debug)]
+pub(super) struct Progress {
+    bar: ProgressBar,
+}
+
+impl Progress {
+    /// A bar for `tests` tests.
+    pub(super) fn new(tests: usize) -> Self {
+        let bar = ProgressBar::new(tests as u64);
+        if let Ok(style) =
+            ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} tests  {msg}")
+        {
+            bar.set_style(style.progress_chars("=> "));
+        }
+        Self { bar }
+    }
+
+    /// Removes the bar.
+    pub(super) fn finish(&self) {
+        self.bar.finish_and_clear();
+    }
+}
+
+impl CampaignObserver for Progress {
+    fn note(&self, text: &str) {
+        self.bar.println(text);
+    }
+
+    fn tests_planned(&self, tests: usize) {
+        self.bar.set_length(tests as u64);
+    }
+
+    fn test_started(&self, test_index: usize) {
+        self.bar.set_message(format!("test {test_index}: running"));
+    }
+
+    fn test_finished(&self, test_index: usize, verdict: Option<Verdict>) {
+        let verdict = verdict.map_or("not run", Verdict::as_str);
+        self.bar.println(format!("test {test_index}: {verdict}"));
+        self.bar.inc(1);
+    }
+}
+
+/// A campaign that did not run to its end, with where its record is.
+#[derive(Debug, thiserror::Error)]
+#[error("{error} (run directory {})", dir.display())]
+pub(super) struct CampaignFailed {
+    error: RunError,
+    dir: PathBuf,
+}
+
+impl CampaignFailed {
+    pub(super) fn new(error: RunError, dir: &Path) -> Self {
+        Self {
+            error,
+            dir: dir.to_owned(),
+        }
+    }
+}
+
+/// Prints a campaign's table of tests and its summary (with the wall time when known).
+pub(super) fn print_report(report: &CampaignReport, wall: Option<Duration>) {
+    println!("| test | verdict | worst deviation | starvations | smallest margin | reason |");
+    println!("|---|---|---|---|---|---|");
+    for t in &report.tests {
+        println!(
+            "| {} | {} | {} | {} | {} | {} |",
+            t.test_index,
+            t.verdict.map_or("not run", Verdict::as_str),
+            metres(t.worst_deviation_m),
+            t.starvations,
+            t.smallest_margin_s
+                .map_or_else(|| "-".to_owned(), |m| format!("{m:.2} s")),
+            t.reason.as_deref().unwrap_or("")
+        );
+    }
+    let Some(s) = &report.record.summary else {
+        return;
+    };
+    println!();
+    println!(
+        "tests {}, passed {}, failed {}, aborted {}, worst deviation {}{}",
+        s.tests,
+        s.passed,
+        s.failed,
+        s.aborted,
+        metres(s.worst_deviation_m),
+        wall.map_or_else(String::new, |w| format!(
+            "; {:.1} s wall time",
+            w.as_secs_f64()
+        ))
+    );
+    for file in &s.failing_cases {
+        println!("  {}", report.dir.join(file).display());
+    }
+    println!("run directory: {}", report.dir.display());
+}
+
+/// Metres with two decimals, or `-`.
+pub(super) fn metres(value: Option<f64>) -> String {
+    value.map_or_else(|| "-".to_owned(), |m| format!("{m:.2} m"))
+}
