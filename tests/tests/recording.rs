@@ -147,6 +147,7 @@ fn check_faults(case: &Case, faults: &[FaultRecord]) -> usize {
             param,
             start,
             duration,
+            ..
         } = case.commands[record.command_index]
         else {
             panic!("command {} is not a fault", record.command_index);
