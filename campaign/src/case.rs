@@ -18,6 +18,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 use trajgen::{GenerationError, Generator, Point, RouteTail, check_route};
 
+use crate::drive::FaultPlacement;
 use crate::model::{
     Command, Fault, FaultKind, FaultPlace, Probe, Segment, SegmentIntent, TestPlan,
 };
@@ -529,6 +530,9 @@ pub struct Case {
     /// How the segments were streamed: every append and the starvation events.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub streaming: Option<StreamingRecord>,
+    /// Where each fault the car added was meant to act and where it did (version 2).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub fault_places: Vec<FaultPlacement>,
 }
 
 /// How a test's segments were streamed to the car.
@@ -571,6 +575,7 @@ impl Case {
             reason: None,
             abort: None,
             streaming: None,
+            fault_places: Vec::new(),
         }
     }
 
@@ -1177,6 +1182,7 @@ mod tests {
             reason: None,
             abort: None,
             streaming: None,
+            fault_places: Vec::new(),
         };
         let point = |speed| RoutePointRecord {
             x: 0.0,

@@ -264,6 +264,7 @@ mod tests {
             reason: None,
             abort: None,
             streaming: None,
+            fault_places: Vec::new(),
         }
     }
 

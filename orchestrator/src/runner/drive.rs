@@ -2,10 +2,12 @@
 //! ([`campaign::drive::TestDrive`]: streaming, oracle, safety, the safe stop) fed with what
 //! happens and its actions carried out on the car.
 //!
-//! One loop waits for whichever comes first: the operator's interrupt, the answer to the
-//! operation in flight (one at a time: a segment or the safe stop's extension appended, a fault
-//! added), a state sample, or the monitor's tick. Before waiting, when nothing is in flight, it
-//! asks the machine for the next operation.
+//! One loop waits for whichever comes first: the operator's interrupt, the answer to the route
+//! operation in flight (a segment or the safe stop's extension appended), the answer to the fault
+//! command in flight, the time the next fault is due at its place, a state sample, or the
+//! monitor's tick. Before waiting it asks the machine for the next route operation and the next
+//! fault (one of each in flight at a time): segments are streamed by time, faults sent at their
+//! places on the route, and neither waits for the other.
 //!
 //! Recorded in the campaign's journal as they happen: every command with its answer (fault
 //! commands as sent and confirmed or refused, an operation abandoned when the drive stopped),
@@ -111,13 +113,18 @@ enum Recorded {
     Fault { command: usize, fault: Fault },
 }
 
-type OpFuture = Pin<Box<dyn Future<Output = Result<(), CarError>> + Send>>;
+/// How an operation ended: `Ok(true)` for a fault added whose reply was lost (the car's list of
+/// faults showed it).
+type OpResult = Result<bool, CarError>;
+type OpFuture = Pin<Box<dyn Future<Output = OpResult> + Send>>;
 type InFlight = (Recorded, OpFuture);
 
 /// What the loop woke up for.
 enum Woke {
     Interrupt,
-    Op(Recorded, Result<(), CarError>),
+    Op(Recorded, OpResult),
+    Fault(Recorded, OpResult),
+    FaultDue,
     Sample(Sample),
     Tick,
 }
@@ -131,6 +138,7 @@ async fn run(
     t0: Instant,
 ) {
     let mut op: Option<InFlight> = None;
+    let mut fault_op: Option<InFlight> = None;
     let mut ticker = tokio::time::interval(ctx.config.state_period);
     ticker.set_missed_tick_behavior(MissedTickBehavior::Delay);
     telemetry.drain(ctx.journal);
@@ -150,10 +158,21 @@ async fn run(
             }
             op = next.map(|operation| start(ctx, test_index, operation));
         }
+        if fault_op.is_none() {
+            fault_op = machine
+                .next_fault(t0.elapsed())
+                .map(|operation| start(ctx, test_index, operation));
+        }
+        let due = machine
+            .fault_due()
+            .filter(|_| fault_op.is_none())
+            .map(|due| t0 + due);
         let woke = tokio::select! {
             biased;
             () = ctx.cancel.cancelled(), if machine.interruptible() => Woke::Interrupt,
             (recorded, result) = wait_op(&mut op) => Woke::Op(recorded, result),
+            (recorded, result) = wait_op(&mut fault_op) => Woke::Fault(recorded, result),
+            () = sleep_until(due) => Woke::FaultDue,
             sample = telemetry.next(ctx.journal) => Woke::Sample(sample),
             _ = ticker.tick() => Woke::Tick,
         };
@@ -162,26 +181,60 @@ async fn run(
             Woke::Op(recorded, result) => {
                 op = None;
                 record_answer(ctx, test_index, recorded, &result);
-                Event::Reply(match result {
-                    Ok(()) => Reply::Done,
-                    Err(CarError::LinkLost) => Reply::LinkLost,
-                    Err(error) => Reply::Failed(error.to_string()),
-                })
+                Event::Reply(reply(result))
             }
+            Woke::Fault(recorded, result) => {
+                fault_op = None;
+                record_answer(ctx, test_index, recorded, &result);
+                let resent = matches!(result, Ok(true));
+                Event::FaultReply {
+                    reply: reply(result),
+                    resent,
+                }
+            }
+            // The next fault is due: the loop asks for it.
+            Woke::FaultDue => continue,
             Woke::Sample(Sample::State(sample)) => Event::Sample(drive_sample(&sample)),
             Woke::Sample(Sample::LinkLost) => Event::LinkLost,
             Woke::Tick => Event::Tick,
         };
         let actions = machine.handle(t0.elapsed(), event);
-        carry_out(ctx, machine, &mut op, actions, test_index, t0).await;
+        let in_flight = InFlightOps {
+            op: &mut op,
+            fault: &mut fault_op,
+        };
+        carry_out(ctx, machine, in_flight, actions, test_index, t0).await;
     }
+}
+
+/// The reply the machine gets for an operation's result.
+fn reply(result: OpResult) -> Reply {
+    match result {
+        Ok(_) => Reply::Done,
+        Err(CarError::LinkLost) => Reply::LinkLost,
+        Err(error) => Reply::Failed(error.to_string()),
+    }
+}
+
+/// Sleeps until `deadline`; never completes without one.
+async fn sleep_until(deadline: Option<Instant>) {
+    match deadline {
+        Some(deadline) => tokio::time::sleep_until(deadline).await,
+        None => std::future::pending().await,
+    }
+}
+
+/// The operations in flight: the route's and the fault's.
+struct InFlightOps<'o> {
+    op: &'o mut Option<InFlight>,
+    fault: &'o mut Option<InFlight>,
 }
 
 /// Carries out `actions` in order (and those of a lost link the brake command finds).
 async fn carry_out(
     ctx: &Context<'_>,
     machine: &mut TestDrive<'_>,
-    op: &mut Option<InFlight>,
+    in_flight: InFlightOps<'_>,
     actions: Vec<Action>,
     test_index: usize,
     t0: Instant,
@@ -193,9 +246,13 @@ async fn carry_out(
                 ctx.journal
                     .write(&SafetyRecord::new(Some(test_index), abort));
             }
-            Action::Abandon => {
-                if let Some((recorded, _)) = op.take() {
-                    let abandoned = Err::<(), _>("abandoned: the drive stopped");
+            Action::Abandon | Action::AbandonFault => {
+                let slot = match action {
+                    Action::Abandon => &mut *in_flight.op,
+                    _ => &mut *in_flight.fault,
+                };
+                if let Some((recorded, _)) = slot.take() {
+                    let abandoned = Err::<bool, _>("abandoned: the drive stopped");
                     record_answer(ctx, test_index, recorded, &abandoned);
                 }
             }
@@ -247,7 +304,7 @@ fn start(ctx: &Context<'_>, test_index: usize, operation: Operation) -> InFlight
             let points = route_points(&points);
             let command = CarCommand::add_points(&points);
             let id = ctx.journal.sent(Some(test_index), command);
-            let future = async move { car.add_points(&points).await };
+            let future = async move { car.add_points(&points).await.map(|()| false) };
             (Recorded::Points { id }, Box::pin(future))
         }
     }
@@ -258,8 +315,9 @@ fn record_answer<E: std::fmt::Display>(
     ctx: &Context<'_>,
     test_index: usize,
     recorded: Recorded,
-    result: &Result<(), E>,
+    result: &Result<bool, E>,
 ) {
+    let result = &result.as_ref().map(|_| ());
     match recorded {
         Recorded::Points { id } => ctx.journal.answered(id, result),
         Recorded::Fault { command, fault } => {
@@ -271,7 +329,7 @@ fn record_answer<E: std::fmt::Display>(
 
 /// Waits for the operation in flight; never completes without one. Cancel-safe: the
 /// operation's future stays in `op`.
-async fn wait_op(op: &mut Option<InFlight>) -> (Recorded, Result<(), CarError>) {
+async fn wait_op(op: &mut Option<InFlight>) -> (Recorded, OpResult) {
     match op {
         Some((recorded, future)) => (*recorded, future.as_mut().await),
         None => std::future::pending().await,
@@ -284,11 +342,12 @@ const FAULT_TRIES: u32 = 3;
 /// Adds `fault` to the car, which holds `before` faults on its probe. When the reply is lost,
 /// asks the car for its faults (`fi_print_faults`): a fault more on the probe means the command
 /// took effect; otherwise it is sent again (up to [`FAULT_TRIES`] times in all). So a lost reply
-/// neither aborts the test nor adds the fault twice.
+/// neither aborts the test nor adds the fault twice. `Ok(true)`: added, found in the car's list
+/// after a lost reply.
 ///
 /// Timeout: each try as `Car::add_fault` and `Car::list_faults`. Cancellation: safe between
 /// tries; a fault command cancelled in flight may or may not have taken effect.
-async fn add_fault_once(car: &Car, fault: Fault, before: usize) -> Result<(), CarError> {
+async fn add_fault_once(car: &Car, fault: Fault, before: usize) -> OpResult {
     let (probe, kind) = (fault.probe, fault.kind);
     let mut tries = 1;
     loop {
@@ -306,11 +365,11 @@ async fn add_fault_once(car: &Car, fault: Fault, before: usize) -> Result<(), Ca
                 let listed = super::retried(|| car.list_faults()).await?;
                 let id = probe.to_string();
                 if listed.iter().filter(|f| f.probe == id).count() > before {
-                    return Ok(());
+                    return Ok(true);
                 }
                 tries += 1;
             }
-            result => return result,
+            result => return result.map(|()| false),
         }
     }
 }

@@ -110,8 +110,16 @@ pub enum Reply {
 pub enum Event {
     /// A state sample arrived.
     Sample(Sample),
-    /// The operation in flight ended.
+    /// The operation in flight (a segment or the safe stop's extension) ended.
     Reply(Reply),
+    /// The fault command in flight ended; `resent`: its reply was lost and the car's list of
+    /// faults showed it added (so its reply's time does not say when).
+    FaultReply {
+        /// How it ended.
+        reply: Reply,
+        /// Whether the reply was lost and the fault found in the car's list.
+        resent: bool,
+    },
     /// The monitor's tick (at the state rate, also when no sample comes).
     Tick,
     /// The operator interrupted the campaign.
@@ -169,6 +177,8 @@ pub enum Action {
     Stop(Abort),
     /// The drive stopped with an operation in flight: drop it and record it as abandoned.
     Abandon,
+    /// The drive stopped with a fault command in flight: drop it and record it as abandoned.
+    AbandonFault,
     /// Send one brake command; if it finds the link lost, feed [`Event::LinkLost`].
     Brake,
 }
@@ -201,8 +211,11 @@ pub struct DriveOutcome {
     pub abort_text: Option<String>,
     /// How the segments were streamed.
     pub streaming: StreamingRecord,
-    /// The fault commands the car confirmed (their command indices), and when.
+    /// The fault commands the car confirmed (their command indices), and when the car added
+    /// them (estimated).
     pub faults_confirmed: Vec<(usize, Duration)>,
+    /// Where each confirmed fault was meant to act and where it did.
+    pub fault_places: Vec<FaultPlacement>,
 }
 
 impl DriveOutcome {
@@ -225,6 +238,7 @@ impl DriveOutcome {
         case.reason = verdict.reason;
         case.abort = self.abort;
         case.streaming = Some(self.streaming.clone());
+        case.fault_places = self.fault_places.clone();
     }
 }
 
@@ -271,8 +285,6 @@ enum Region {
 enum InFlight {
     /// A segment (`append`: its index in the streamer's appends).
     Segment { append: usize },
-    /// The fault of command `command`.
-    Fault { command: usize },
     /// The safe stop's extension.
     Extension { append: usize },
 }
@@ -326,6 +338,8 @@ pub struct TestDrive<'a> {
     /// Whether segments are still judged (not after a failure stopped the test).
     judging: bool,
     faults: Vec<(usize, Duration)>,
+    /// The faults, sent at their places.
+    placer: Placer,
     stopping: Stopping,
     abort: Option<Abort>,
     /// Details of the stop or its end, for the abort's text.
@@ -348,6 +362,7 @@ impl<'a> TestDrive<'a> {
         let mut safety = SafetyMonitor::new(settings.area.clone(), settings.safety, Duration::ZERO);
         let positions: Vec<Point> = start.iter().map(|w| w.position).collect();
         safety.set_route(&positions);
+        let placer = Placer::new(plan, &positions);
         Self {
             settings,
             plan,
@@ -363,6 +378,7 @@ impl<'a> TestDrive<'a> {
             segments: Vec::new(),
             judging: true,
             faults: Vec::new(),
+            placer,
             stopping: Stopping::default(),
             abort: None,
             detail: None,
@@ -413,6 +429,46 @@ impl<'a> TestDrive<'a> {
         }
     }
 
+    /// The next fault command to start at `now`, if one is due (see [`Placer`]); `None` while
+    /// one is in flight, and once the test is stopping for a failure or a stop demanded.
+    pub fn next_fault(&mut self, now: Duration) -> Option<Operation> {
+        if !self.faults_wanted() {
+            return None;
+        }
+        let (command_index, fault) = self.placer.take_due(now)?;
+        // Faults on this probe the car confirmed in this test (the reset cleared the others).
+        let on_probe = self
+            .faults
+            .iter()
+            .filter(|(i, _)| {
+                self.plan.commands[*i]
+                    .fault()
+                    .is_some_and(|f| f.probe == fault.probe)
+            })
+            .count();
+        Some(Operation::AddFault {
+            command_index,
+            fault,
+            on_probe,
+        })
+    }
+
+    /// When the next fault is due (time since the test began): wake the drive then and ask
+    /// [`Self::next_fault`].
+    pub fn fault_due(&self) -> Option<Duration> {
+        if self.faults_wanted() {
+            self.placer.due()
+        } else {
+            None
+        }
+    }
+
+    /// Faults are sent while the test runs its plan to the end: not after a failure stopped it,
+    /// a stop was demanded, or braking began.
+    fn faults_wanted(&self) -> bool {
+        self.judging && self.abort.is_none() && !matches!(self.phase, Phase::Braking | Phase::Done)
+    }
+
     /// The time generating the safe stop's extension took (measured around the
     /// [`Self::next_operation`] call that returned [`Operation::AppendStop`]): a generation time
     /// for the lead time.
@@ -432,6 +488,7 @@ impl<'a> TestDrive<'a> {
                     self.op_done(op, reply, now);
                 }
             }
+            Event::FaultReply { reply, resent } => self.fault_done(reply, resent, now),
             Event::Sample(sample) => self.on_sample(now, sample),
             Event::LinkLost => {
                 let abort = self.safety.link_lost(now);
@@ -443,6 +500,10 @@ impl<'a> TestDrive<'a> {
             && self.cursor.in_flight.take().is_some()
         {
             self.actions.push(Action::Abandon);
+        }
+        if matches!(self.phase, Phase::Braking | Phase::Done) && self.placer.in_flight() {
+            self.placer.dropped();
+            self.actions.push(Action::AbandonFault);
         }
         if std::mem::take(&mut self.stopping.brake_now) {
             self.actions.push(Action::Brake);
@@ -469,6 +530,7 @@ impl<'a> TestDrive<'a> {
             abort_text,
             streaming: self.streaming_record(),
             faults_confirmed: self.faults,
+            fault_places: self.placer.placements().to_vec(),
         }
     }
 
@@ -485,6 +547,12 @@ impl<'a> TestDrive<'a> {
         }
         let decision = self.streamer.observe(now, sample.rtk);
         self.cursor.decision = Some(decision);
+        self.placer.observe(
+            now,
+            self.streamer.progress(),
+            sample.speed,
+            sample.round_trip,
+        );
         self.track(now, sample.uwb, sample.rtk);
         self.advance_stop(now, decision, sample.speed);
     }
@@ -560,7 +628,8 @@ impl<'a> TestDrive<'a> {
                 return self.extension(now);
             };
             match command {
-                Command::AddFault(fault) => return Some(self.fault_op(*fault)),
+                // Faults are sent at their places, beside the segments (`next_fault`).
+                Command::AddFault(_) => self.cursor.command += 1,
                 Command::RunSegments(_) if self.cursor.appended == Some(self.cursor.command) => {
                     let next = self.cursor.command + 1;
                     if decision.time_to_end > self.lead(decision, next, link) {
@@ -580,12 +649,12 @@ impl<'a> TestDrive<'a> {
         }
     }
 
-    /// The lead time before the commands from `from` to the next segment: the streamer's, plus
-    /// a round trip for every fault command before that segment and every extra packet of it,
-    /// plus one request timeout (a retry) once the link has shown it loses packets.
+    /// The lead time before the next segment from command `from` on: the streamer's, plus a
+    /// round trip for every extra packet of it, plus one request timeout (a retry) once the link
+    /// has shown it loses packets. Fault commands do not delay a segment: they are sent beside
+    /// it, at their places.
     fn lead(&self, decision: Decision, from: usize, link: LinkStatus) -> Duration {
         let commands = self.plan.commands.get(from..).unwrap_or_default();
-        let faults = commands.iter().take_while(|c| c.fault().is_some()).count();
         let packets = commands
             .iter()
             .find_map(Command::segment)
@@ -593,7 +662,7 @@ impl<'a> TestDrive<'a> {
         let rtt = link
             .rtt_p99
             .unwrap_or(self.settings.streaming.initial_round_trip);
-        let extra = u32::try_from(faults + packets.saturating_sub(1)).unwrap_or(u32::MAX);
+        let extra = u32::try_from(packets.saturating_sub(1)).unwrap_or(u32::MAX);
         let retry = if link.lossy {
             link.request_timeout
         } else {
@@ -603,28 +672,6 @@ impl<'a> TestDrive<'a> {
             .lead
             .saturating_add(rtt.saturating_mul(extra))
             .saturating_add(retry)
-    }
-
-    fn fault_op(&mut self, fault: Fault) -> Operation {
-        let command_index = self.cursor.command;
-        // Faults on this probe the car confirmed in this test (the reset cleared the others).
-        let on_probe = self
-            .faults
-            .iter()
-            .filter(|(i, _)| {
-                self.plan.commands[*i]
-                    .fault()
-                    .is_some_and(|f| f.probe == fault.probe)
-            })
-            .count();
-        self.cursor.in_flight = Some(InFlight::Fault {
-            command: command_index,
-        });
-        Operation::AddFault {
-            command_index,
-            fault,
-            on_probe,
-        }
     }
 
     fn append_op(&mut self, now: Duration, decision: Decision, segment: &Segment) -> Operation {
@@ -643,6 +690,9 @@ impl<'a> TestDrive<'a> {
             oracle: SegmentOracle::new(),
             result: None,
         });
+        self.placer.extend(&segment.points);
+        self.placer
+            .segment_appended(self.segments.len() - 1, self.route.len, points.len());
         self.route.len += points.len();
         self.route.tail = self.route.tail.advanced(&segment.points);
         self.cursor.appended = Some(command_index);
@@ -690,6 +740,7 @@ impl<'a> TestDrive<'a> {
         });
         let append = self.streamer.appended(now, &decision, &points);
         self.safety.extend_route(&extension.points);
+        self.placer.extend(&extension.points);
         self.route.stop_first = Some(self.route.len);
         self.route.len += points.len();
         self.phase = Phase::Extending;
@@ -704,10 +755,6 @@ impl<'a> TestDrive<'a> {
                 self.on_abort(abort, now);
             }
             (InFlight::Segment { append }, Reply::Done) => self.streamer.confirmed(append, now),
-            (InFlight::Fault { command }, Reply::Done) => {
-                self.faults.push((command, now));
-                self.cursor.command += 1;
-            }
             (InFlight::Extension { append }, Reply::Done) => {
                 self.streamer.confirmed(append, now);
                 if self.phase == Phase::Extending {
@@ -719,8 +766,32 @@ impl<'a> TestDrive<'a> {
                 self.detail = Some(format!("the safe stop extension failed: {error}"));
                 self.begin_braking(now);
             }
-            (InFlight::Segment { .. } | InFlight::Fault { .. }, Reply::Failed(error)) => {
+            (InFlight::Segment { .. }, Reply::Failed(error)) => {
                 let command_index = self.cursor.command;
+                self.detail = Some(format!("command {command_index}: {error}"));
+                let abort = self
+                    .safety
+                    .stop(AbortReason::CommandRefused { command_index }, now);
+                self.on_abort(abort, now);
+            }
+        }
+    }
+
+    fn fault_done(&mut self, reply: Reply, resent: bool, now: Duration) {
+        match reply {
+            Reply::Done => {
+                if let Some(added) = self.placer.confirmed(now, resent, &self.settings.rates) {
+                    self.faults.push(added);
+                }
+            }
+            Reply::LinkLost => {
+                self.placer.dropped();
+                let abort = self.safety.link_lost(now);
+                self.on_abort(abort, now);
+            }
+            Reply::Failed(error) => {
+                let command_index = self.placer.in_flight_command().unwrap_or_default();
+                self.placer.dropped();
                 self.detail = Some(format!("command {command_index}: {error}"));
                 let abort = self
                     .safety
@@ -847,564 +918,8 @@ fn stop_seed(campaign_seed: u64, test_index: usize) -> u64 {
     u64::from_le_bytes(last)
 }
 
+mod place;
 #[cfg(test)]
-mod tests {
-    use trajgen::Polygon;
+mod tests;
 
-    use super::*;
-    use crate::model::{FaultKind, Probe};
-    use crate::oracle::Verdict;
-
-    fn ms(v: u64) -> Duration {
-        Duration::from_millis(v)
-    }
-
-    /// A 40 m × 20 m rectangle.
-    fn area() -> Area {
-        let fence = Polygon::new(vec![
-            Point::new(0.0, 0.0),
-            Point::new(40.0, 0.0),
-            Point::new(40.0, 20.0),
-            Point::new(0.0, 20.0),
-        ])
-        .unwrap();
-        Area::new(fence, vec![]).unwrap()
-    }
-
-    /// Points every 2 m along y = 10 from `from` to `to` (inclusive).
-    fn along(from: f64, to: f64) -> Vec<Point> {
-        let n = ((to - from) / 2.0).round() as usize;
-        (0..=n)
-            .map(|i| Point::new(from + 2.0 * i as f64, 10.0))
-            .collect()
-    }
-
-    /// The start route: x = 2 … 10 at 1 m/s.
-    fn start() -> Vec<Waypoint> {
-        along(2.0, 10.0)
-            .into_iter()
-            .map(|position| Waypoint {
-                position,
-                speed: 1.0,
-            })
-            .collect()
-    }
-
-    /// A hand-written segment of 4 points at 1 m/s from `from` on.
-    fn segment(from: f64) -> Command {
-        let points = along(from, from + 6.0);
-        Command::RunSegments(Segment {
-            intent: None,
-            speeds: vec![1.0; points.len()],
-            points,
-            margin: Vec::new(),
-        })
-    }
-
-    fn fault(probe: Probe) -> Command {
-        Command::AddFault(Fault {
-            probe,
-            kind: FaultKind::Offset,
-            param: 2.0,
-            start: 0,
-            duration: 50,
-            at: None,
-        })
-    }
-
-    fn plan(commands: Vec<Command>) -> TestPlan {
-        let positions: Vec<Point> = start().iter().map(|w| w.position).collect();
-        TestPlan {
-            test_index: 0,
-            start_tail: RouteTail::from_points(&positions).unwrap(),
-            commands,
-        }
-    }
-
-    fn settings(area: &Area, policy: FailurePolicy) -> DriveSettings<'_> {
-        DriveSettings {
-            area,
-            generator: Generator::default(),
-            safety: SafetyConfig::default(),
-            streaming: StreamingConfig::default(),
-            policy,
-            oracle_threshold_m: 1.0,
-            stop_points: 4,
-            rates: ProbeRates::firmware_10(2),
-            campaign_seed: 7,
-        }
-    }
-
-    const LINK: LinkStatus = LinkStatus {
-        rtt_p99: Some(Duration::from_millis(20)),
-        lossy: false,
-        request_timeout: Duration::from_secs(1),
-    };
-
-    /// A drive on the straight route, fed with samples every 50 ms (round trips of 20 ms, so
-    /// the lead time is 20 ms + 0 ms generation + 1 s margin).
-    struct Harness<'a> {
-        drive: TestDrive<'a>,
-        now: Duration,
-        /// The UWB estimate's offset from RTK (north), metres.
-        uwb_offset: f64,
-    }
-
-    impl<'a> Harness<'a> {
-        fn new(area: &'a Area, plan: &'a TestPlan, policy: FailurePolicy) -> Self {
-            let drive = TestDrive::new(settings(area, policy), plan, &start(), Duration::ZERO);
-            Self {
-                drive,
-                now: Duration::ZERO,
-                uwb_offset: 0.0,
-            }
-        }
-
-        /// One sample 50 ms after the last, of the car at `at` driving at `speed`.
-        fn sample_at(&mut self, at: Point, speed: f64) -> Vec<Action> {
-            self.now += ms(50);
-            let sample = Sample {
-                rtk: at,
-                uwb: Point::new(at.x, at.y + self.uwb_offset),
-                speed,
-                round_trip: ms(20),
-            };
-            self.drive.handle(self.now, Event::Sample(sample))
-        }
-
-        /// One sample of the car at `x` on y = 10, at 1 m/s.
-        fn sample(&mut self, x: f64) -> Vec<Action> {
-            self.sample_at(Point::new(x, 10.0), 1.0)
-        }
-
-        fn next(&mut self) -> Option<Operation> {
-            self.drive.next_operation(self.now, LINK)
-        }
-
-        fn reply(&mut self, reply: Reply) -> Vec<Action> {
-            self.drive.handle(self.now, Event::Reply(reply))
-        }
-
-        /// Drives along y = 10 from `from` to `to` at 1 m/s, starting every operation that is
-        /// due at once and confirming it at once; the operations, in order.
-        fn drive_to(&mut self, from: f64, to: f64) -> Vec<Operation> {
-            let mut sent = Vec::new();
-            let mut x = from;
-            while x <= to + 1e-9 {
-                let actions = self.sample(x);
-                assert!(actions.is_empty(), "at x = {x}: {actions:?}");
-                while let Some(op) = self.next() {
-                    sent.push(op);
-                    if self.drive.phase() != Phase::Extending {
-                        assert!(self.reply(Reply::Done).is_empty());
-                    }
-                }
-                x += 0.05;
-            }
-            sent
-        }
-    }
-
-    fn append_index(op: &Operation) -> Option<usize> {
-        match op {
-            Operation::AppendSegment { command_index, .. } => Some(*command_index),
-            _ => None,
-        }
-    }
-
-    #[test]
-    fn nothing_is_sent_before_the_first_sample() {
-        let (area, plan) = (area(), plan(vec![segment(12.0)]));
-        let mut h = Harness::new(&area, &plan, FailurePolicy::default());
-        assert_eq!(h.next(), None);
-        assert_eq!(h.drive.phase(), Phase::Commands);
-        assert!(h.sample(2.0).is_empty());
-        assert_eq!(h.next(), None, "6.7 s from the stopping point");
-    }
-
-    #[test]
-    fn the_first_segment_is_appended_when_the_time_to_the_end_falls_to_the_lead_time() {
-        let (area, plan) = (area(), plan(vec![segment(12.0), segment(20.0)]));
-        let mut h = Harness::new(&area, &plan, FailurePolicy::default());
-        // The car stops 1.323 m before x = 10 (look-ahead at 1 m/s); the lead time is 1.02 s.
-        h.sample(7.6);
-        assert_eq!(h.next(), None, "1.077 s left");
-        h.sample(7.7);
-        let Some(Operation::AppendSegment {
-            command_index,
-            points,
-        }) = h.next()
-        else {
-            panic!("no segment appended with 0.977 s left");
-        };
-        assert_eq!(command_index, 0);
-        let xs: Vec<f64> = points.iter().map(|w| w.position.x).collect();
-        assert_eq!(xs, [12.0, 14.0, 16.0, 18.0]);
-        assert!(points.iter().all(|w| w.speed == 1.0));
-        let outcome = h.drive.finish(h.now);
-        assert_eq!(outcome.streaming.appends.len(), 1);
-        assert_eq!(outcome.streaming.appends[0].lead, ms(1020));
-        assert_eq!(outcome.streaming.appends[0].confirmed_after, None);
-    }
-
-    #[test]
-    fn the_next_segment_waits_for_the_previous_one_to_be_confirmed() {
-        let (area, plan) = (area(), plan(vec![segment(12.0), segment(20.0)]));
-        let mut h = Harness::new(&area, &plan, FailurePolicy::default());
-        h.sample(7.7);
-        assert_eq!(h.next().as_ref().and_then(append_index), Some(0));
-        // Segment 0 is still on its way: nothing else goes out, however late it gets.
-        h.sample(15.7);
-        assert_eq!(h.next(), None);
-        h.now += ms(30);
-        assert!(h.reply(Reply::Done).is_empty());
-        assert_eq!(h.next().as_ref().and_then(append_index), Some(1));
-        let outcome = h.drive.finish(h.now);
-        assert_eq!(outcome.streaming.appends[0].confirmed_after, Some(ms(80)));
-    }
-
-    #[test]
-    fn after_an_append_the_next_decision_waits_for_a_sample() {
-        let (area, plan) = (area(), plan(vec![segment(12.0), segment(20.0)]));
-        let mut h = Harness::new(&area, &plan, FailurePolicy::default());
-        h.sample(7.7);
-        assert!(h.next().is_some());
-        assert!(h.reply(Reply::Done).is_empty());
-        assert_eq!(h.next(), None, "no sample located on the new route yet");
-        h.sample(7.75);
-        assert_eq!(h.next(), None, "7.9 s left of the new route");
-    }
-
-    #[test]
-    fn fault_commands_go_out_in_order_once_their_segment_is_done_and_confirmed() {
-        let commands = vec![
-            segment(12.0),
-            fault(Probe::UwbYaw),
-            fault(Probe::UwbYaw),
-            segment(20.0),
-        ];
-        let (area, plan) = (area(), plan(commands));
-        let mut h = Harness::new(&area, &plan, FailurePolicy::default());
-        h.sample(7.7);
-        assert_eq!(h.next().as_ref().and_then(append_index), Some(0));
-        assert!(h.reply(Reply::Done).is_empty());
-        // Segment 0 ends at x = 18 (stopping point 16.677); two faults before segment 3 add two
-        // round trips to the lead time: 1.06 s.
-        h.sample(15.6);
-        assert_eq!(h.next(), None, "1.077 s left");
-        h.sample(15.7);
-        let first = h.next();
-        assert!(
-            matches!(
-                first,
-                Some(Operation::AddFault {
-                    command_index: 1,
-                    on_probe: 0,
-                    ..
-                })
-            ),
-            "{first:?}"
-        );
-        assert_eq!(h.next(), None, "one operation at a time");
-        h.now += ms(20);
-        assert!(h.reply(Reply::Done).is_empty());
-        let second = h.next();
-        assert!(
-            matches!(
-                second,
-                Some(Operation::AddFault {
-                    command_index: 2,
-                    on_probe: 1,
-                    ..
-                })
-            ),
-            "{second:?}"
-        );
-        h.now += ms(20);
-        assert!(h.reply(Reply::Done).is_empty());
-        assert_eq!(h.next().as_ref().and_then(append_index), Some(3));
-        let outcome = h.drive.finish(h.now);
-        assert_eq!(
-            outcome.faults_confirmed,
-            [(1, ms(170)), (2, ms(190))],
-            "confirmed 20 ms after each was sent"
-        );
-    }
-
-    #[test]
-    fn a_lossy_link_sends_earlier_by_a_request_timeout() {
-        let (area, plan) = (area(), plan(vec![segment(12.0)]));
-        let mut h = Harness::new(&area, &plan, FailurePolicy::default());
-        h.sample(6.7);
-        assert_eq!(h.next(), None, "1.977 s left");
-        let lossy = LinkStatus {
-            lossy: true,
-            ..LINK
-        };
-        assert!(h.drive.next_operation(h.now, lossy).is_some());
-    }
-
-    #[test]
-    fn the_default_policy_stops_at_the_first_failing_segment() {
-        let commands = vec![segment(12.0), segment(20.0), segment(28.0)];
-        let (area, plan) = (area(), plan(commands));
-        let mut h = Harness::new(&area, &plan, FailurePolicy::StopAtFailingSegment);
-        h.uwb_offset = 2.0;
-        let sent = h.drive_to(7.0, 17.95);
-        assert_eq!(
-            sent.iter().filter_map(append_index).collect::<Vec<_>>(),
-            [0, 1]
-        );
-        assert_eq!(h.drive.phase(), Phase::Commands);
-        // Leaving segment 0 judges it: failed, so the safe stop begins.
-        h.uwb_offset = 0.0;
-        assert!(h.sample(18.05).is_empty());
-        assert_eq!(h.drive.phase(), Phase::StopPending);
-        let Some(Operation::AppendStop { points }) = h.next() else {
-            panic!("no safe stop extension");
-        };
-        assert_eq!(points.len(), 4);
-        assert!(points.iter().all(|w| w.speed == SAFE_STOP_SPEED_MPS));
-        assert!(points.iter().all(|w| area.contains_point(w.position)));
-        assert_eq!(h.drive.phase(), Phase::Extending);
-        let outcome = h.drive.finish(h.now);
-        assert_eq!(outcome.segments.len(), 1, "segment 1 is not judged");
-        assert_eq!(outcome.segments[0].oracle.verdict, SegmentVerdict::Failed);
-        assert_eq!(outcome.abort, None);
-    }
-
-    #[test]
-    fn continue_and_record_judges_every_segment() {
-        let commands = vec![segment(12.0), segment(20.0), segment(28.0)];
-        let (area, plan) = (area(), plan(commands));
-        let mut h = Harness::new(&area, &plan, FailurePolicy::ContinueAndRecord);
-        h.uwb_offset = 2.0;
-        h.drive_to(7.0, 17.95);
-        h.uwb_offset = 0.5;
-        let sent = h.drive_to(18.0, 27.0);
-        assert_eq!(
-            sent.iter().filter_map(append_index).collect::<Vec<_>>(),
-            [2]
-        );
-        assert_eq!(h.drive.phase(), Phase::Commands);
-        // Segment 2, being driven, is judged on what was seen of it.
-        let outcome = h.drive.finish(h.now);
-        let verdicts: Vec<SegmentVerdict> =
-            outcome.segments.iter().map(|s| s.oracle.verdict).collect();
-        assert_eq!(
-            verdicts,
-            [
-                SegmentVerdict::Failed,
-                SegmentVerdict::Passed,
-                SegmentVerdict::Passed
-            ]
-        );
-        let commands: Vec<usize> = outcome.segments.iter().map(|s| s.command_index).collect();
-        assert_eq!(commands, [0, 1, 2]);
-    }
-
-    #[test]
-    fn an_interrupt_demands_the_safe_stop_once() {
-        let (area, plan) = (area(), plan(vec![segment(12.0)]));
-        let mut h = Harness::new(&area, &plan, FailurePolicy::default());
-        h.sample(5.0);
-        assert!(h.drive.interruptible());
-        let actions = h.drive.handle(h.now, Event::Interrupt);
-        let [Action::Stop(abort)] = actions[..] else {
-            panic!("{actions:?}");
-        };
-        assert_eq!(abort.reason, AbortReason::Interrupted);
-        assert_eq!(abort.action, StopAction::SafeStop);
-        assert!(!h.drive.interruptible());
-        assert_eq!(h.drive.phase(), Phase::StopPending);
-        assert!(matches!(h.next(), Some(Operation::AppendStop { .. })));
-        // A second stop is not recorded again.
-        assert!(h.drive.handle(h.now, Event::Interrupt).is_empty());
-        assert_eq!(h.drive.abort(), Some(abort));
-    }
-
-    #[test]
-    fn a_starving_car_demands_the_safe_stop() {
-        let (area, plan) = (area(), plan(vec![segment(12.0)]));
-        let mut h = Harness::new(&area, &plan, FailurePolicy::default());
-        h.sample(8.0);
-        let actions = h.sample(8.7);
-        assert!(
-            matches!(
-                actions[..],
-                [Action::Stop(Abort {
-                    reason: AbortReason::Starved,
-                    ..
-                })]
-            ),
-            "{actions:?}"
-        );
-        assert_eq!(h.drive.phase(), Phase::StopPending);
-    }
-
-    #[test]
-    fn a_braking_abort_abandons_the_operation_in_flight_and_brakes() {
-        let (area, plan) = (area(), plan(vec![segment(12.0)]));
-        let mut h = Harness::new(&area, &plan, FailurePolicy::default());
-        h.sample(7.7);
-        assert!(h.next().is_some());
-        let actions = h.sample_at(Point::new(7.75, 12.0), 1.0);
-        let [Action::Stop(abort), Action::Abandon, Action::Brake] = actions[..] else {
-            panic!("{actions:?}");
-        };
-        assert!(matches!(abort.reason, AbortReason::OffRoute { .. }));
-        assert_eq!(h.drive.phase(), Phase::Braking);
-        assert_eq!(h.next(), None);
-    }
-
-    #[test]
-    fn a_lost_link_ends_the_drive_at_once() {
-        let (area, plan) = (area(), plan(vec![segment(12.0)]));
-        let mut h = Harness::new(&area, &plan, FailurePolicy::default());
-        h.sample(5.0);
-        let actions = h.drive.handle(h.now, Event::LinkLost);
-        assert!(
-            matches!(
-                actions[..],
-                [Action::Stop(Abort {
-                    reason: AbortReason::LinkLost,
-                    ..
-                })]
-            ),
-            "{actions:?}"
-        );
-        assert!(h.drive.is_done());
-        let outcome = h.drive.finish(h.now);
-        assert_eq!(outcome.abort_text.as_deref(), Some("link lost"));
-        // So does a command that finds it lost, abandoning nothing (the answer came).
-        let (area, plan) = (self::area(), self::plan(vec![segment(12.0)]));
-        let mut h = Harness::new(&area, &plan, FailurePolicy::default());
-        h.sample(7.7);
-        assert!(h.next().is_some());
-        let actions = h.reply(Reply::LinkLost);
-        assert!(matches!(actions[..], [Action::Stop(_)]), "{actions:?}");
-        assert!(h.drive.is_done());
-    }
-
-    #[test]
-    fn a_refused_command_brakes_with_the_reason() {
-        let (area, plan) = (area(), plan(vec![segment(12.0)]));
-        let mut h = Harness::new(&area, &plan, FailurePolicy::default());
-        h.sample(7.7);
-        assert!(h.next().is_some());
-        let actions = h.reply(Reply::Failed("no reply".to_owned()));
-        assert!(
-            matches!(
-                actions[..],
-                [
-                    Action::Stop(Abort {
-                        reason: AbortReason::CommandRefused { command_index: 0 },
-                        ..
-                    }),
-                    Action::Brake
-                ]
-            ),
-            "{actions:?}"
-        );
-        let outcome = h.drive.finish(h.now);
-        assert_eq!(
-            outcome.abort_text.as_deref(),
-            Some("command 0 failed: command 0: no reply")
-        );
-    }
-
-    #[test]
-    fn the_safe_stop_rolls_out_the_extension_then_brakes_until_the_car_stands() {
-        let (area, plan) = (area(), plan(vec![segment(12.0)]));
-        let mut h = Harness::new(&area, &plan, FailurePolicy::default());
-        let sent = h.drive_to(7.0, 15.7);
-        assert_eq!(sent.len(), 2, "{sent:?}");
-        let Operation::AppendStop { points } = &sent[1] else {
-            panic!("{sent:?}");
-        };
-        // The plan is done: its extension is on its way.
-        assert_eq!(h.drive.phase(), Phase::Extending);
-        assert!(h.reply(Reply::Done).is_empty());
-        assert_eq!(h.drive.phase(), Phase::Rolling);
-        // Still rolling on the extension, then at its end: brake.
-        assert!(h.sample_at(points[0].position, 0.8).is_empty());
-        let end = points[points.len() - 1].position;
-        assert_eq!(h.sample_at(end, 0.8), [Action::Brake]);
-        assert_eq!(h.drive.phase(), Phase::Braking);
-        assert_eq!(h.sample_at(end, 0.3), [Action::Brake]);
-        assert!(h.sample_at(end, 0.05).is_empty());
-        assert!(h.drive.is_done());
-        let outcome = h.drive.finish(h.now);
-        assert_eq!(outcome.abort, None);
-        assert_eq!(outcome.segments.len(), 1);
-        assert_eq!(outcome.segments[0].oracle.verdict, SegmentVerdict::Passed);
-        assert_eq!(outcome.streaming.appends.len(), 2);
-        assert!(outcome.streaming.starvations_ms.is_empty());
-    }
-
-    #[test]
-    fn the_safe_stop_brakes_at_once_when_the_car_already_stands() {
-        let (area, plan) = (area(), plan(vec![segment(12.0)]));
-        let mut h = Harness::new(&area, &plan, FailurePolicy::default());
-        h.sample(5.0);
-        h.drive.handle(h.now, Event::Interrupt);
-        assert!(matches!(h.next(), Some(Operation::AppendStop { .. })));
-        assert!(h.reply(Reply::Done).is_empty());
-        assert_eq!(h.sample_at(Point::new(5.0, 10.0), 0.0), [Action::Brake]);
-        assert_eq!(h.drive.phase(), Phase::Braking);
-    }
-
-    #[test]
-    fn braking_gives_up_after_5_s() {
-        let (area, plan) = (area(), plan(vec![segment(12.0)]));
-        let mut h = Harness::new(&area, &plan, FailurePolicy::default());
-        h.sample(5.0);
-        let actions = h.sample_at(Point::new(5.05, 13.0), 1.0);
-        assert_eq!(actions.len(), 2, "{actions:?}");
-        let braking_at = h.now;
-        while h.now + ms(50) < braking_at + BRAKE_TIMEOUT {
-            assert_eq!(h.sample_at(Point::new(5.05, 13.0), 1.0), [Action::Brake]);
-            assert!(h.drive.handle(h.now, Event::Tick).is_empty());
-        }
-        assert!(!h.drive.is_done());
-        h.now = braking_at + BRAKE_TIMEOUT;
-        assert!(h.drive.handle(h.now, Event::Tick).is_empty());
-        assert!(h.drive.is_done());
-        let text = h.drive.finish(h.now).abort_text.unwrap();
-        assert!(
-            text.ends_with(
-                "off the planned route at (5.05, 13.00): the car did not stop within 5 s of braking"
-            ),
-            "{text}"
-        );
-    }
-
-    #[test]
-    fn a_drive_stopped_before_the_start_is_aborted_with_no_segment() {
-        let (area, plan) = (area(), plan(vec![segment(12.0)]));
-        let mut h = Harness::new(&area, &plan, FailurePolicy::default());
-        h.drive
-            .end_before_start(Some(Abort::new(AbortReason::LinkLost, Duration::ZERO)));
-        assert!(h.drive.is_done());
-        let outcome = h.drive.finish(Duration::ZERO);
-        assert!(outcome.segments.is_empty());
-        assert_eq!(outcome.abort_text.as_deref(), Some("link lost"));
-        let judged: Vec<JudgedSegment> = Vec::new();
-        assert_eq!(
-            test_verdict(&judged, outcome.abort_text.as_deref()).verdict,
-            Verdict::Aborted
-        );
-    }
-
-    #[test]
-    fn the_safe_stop_extension_is_the_same_for_the_same_seed() {
-        let (area, plan) = (area(), plan(vec![segment(12.0)]));
-        let extension = || {
-            let mut h = Harness::new(&area, &plan, FailurePolicy::default());
-            h.sample(5.0);
-            h.drive.handle(h.now, Event::Interrupt);
-            h.next()
-        };
-        assert_eq!(extension(), extension());
-    }
-}
+pub use place::{EARLIER_TOOL_POINTS_LEFT, FaultPlacement, PlaceRule, Placer};

@@ -1,0 +1,399 @@
+//! Faults sent at their place on the route, not at a time.
+//!
+//! The firmware counts a fault's `start` and `duration` in probe calls from the moment the fault
+//! is added, so where on the route a fault acts depends on when the car receives it. A
+//! [`Placer`] sends each fault when the car reaches the fault's place, so that a case is the same
+//! test on any link:
+//!
+//! - **The place.** A fault with a place ([`FaultPlace`]) is sent at that distance along its
+//!   segment. A fault without one (a hand-written or version-1 case) is sent as the earlier tool
+//!   sent faults: once its preceding segment is appended and the car has 4 or fewer route points
+//!   left of it (the firmware's `ap_route_left` counts the points from the start of the stretch
+//!   the car drives to the route's end, both included: 4 left means the car has reached the
+//!   segment's fourth point from the end). Either way the place becomes a distance along the
+//!   car's route once its segment is appended.
+//! - **When to send.** The car's distance along its route is known at each state sample, as it
+//!   was when the car answered (about half a round trip before the sample arrived). From the
+//!   last sample, the car's speed and the median round trip, the placer predicts when the car
+//!   will be at the place and sends the command half a round trip before: the car then adds the
+//!   fault as it passes the place. The caller wakes the drive at [`Placer::due`].
+//! - **Where it acted.** The car added the fault at about the middle of the command's round trip
+//!   (after a lost reply resolved by listing the car's faults: half a round trip after sending).
+//!   The car's distance at that time is interpolated between the samples around it; the
+//!   difference from the place is the placement's error.
+//!
+//! One fault command is in flight at a time. Segments are streamed by the time-based rule
+//! independently: a fault never delays a segment.
+
+use std::collections::VecDeque;
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+use trajgen::Point;
+
+use crate::model::{Command, Fault, FaultPlace, FaultWindow, ProbeRates, TestPlan};
+use crate::streaming::Progress;
+
+/// How the earlier tool placed a fault: once its segment's car had this many route points left.
+pub const EARLIER_TOOL_POINTS_LEFT: usize = 4;
+
+/// Round trips kept for the median.
+const ROUND_TRIPS: usize = 9;
+/// Samples kept to interpolate where the car was.
+const HISTORY: usize = 64;
+/// The slowest speed a prediction assumes, m/s (a standing car's place is never predicted).
+const MIN_SPEED_MPS: f64 = 0.05;
+
+/// Which rule placed a fault.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PlaceRule {
+    /// The case gave the place.
+    Planned,
+    /// The case gave none: the earlier tool's rule (4 or fewer route points left).
+    EarlierTool,
+}
+
+/// Where a fault was meant to act and where it did: what a case file and the recording keep.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FaultPlacement {
+    /// The fault command's index in the plan.
+    pub command_index: usize,
+    /// The rule that placed it.
+    pub rule: PlaceRule,
+    /// The segment it is placed on (among the test's segments, from 0).
+    pub segment_index: usize,
+    /// The place: metres along that segment from its start.
+    pub planned_along_m: f64,
+    /// When the command was sent, seconds since the test began.
+    pub sent_s: f64,
+    /// When the car added the fault (estimated), seconds since the test began.
+    pub added_s: f64,
+    /// Where the car was then: metres along the segment (absent when no sample came after).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub actual_along_m: Option<f64>,
+    /// `actual_along_m − planned_along_m`: positive when the fault was added past its place.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error_m: Option<f64>,
+    /// The estimated window in which the fault acted, seconds since the test began (from the
+    /// probe's call rate: `start` and `duration` calls after it was added).
+    pub acts_from_s: f64,
+    /// The window's end.
+    pub acts_to_s: f64,
+}
+
+/// A fault not sent yet.
+#[derive(Debug, Clone, Copy)]
+struct Pending {
+    command_index: usize,
+    fault: Fault,
+    rule: PlaceRule,
+    segment_index: usize,
+    /// Along the segment: the case's place, or (earlier tool) known once the segment is appended.
+    along_m: Option<f64>,
+    /// The place as a distance along the car's route, once its segment is appended.
+    target_s: Option<f64>,
+}
+
+/// The fault command in flight.
+#[derive(Debug, Clone, Copy)]
+struct InFlight {
+    pending: Pending,
+    sent: Duration,
+}
+
+/// Where the car was seen last.
+#[derive(Debug, Clone, Copy)]
+struct Seen {
+    /// When the car was there (the sample's arrival less half its round trip).
+    car_time: f64,
+    /// Its distance along the route, metres.
+    s: f64,
+    /// Its speed, m/s.
+    speed: f64,
+}
+
+/// The faults of a test, sent at their places (see the module doc).
+#[derive(Debug, Clone)]
+pub struct Placer {
+    /// Distance along the car's route at each of its points, metres.
+    route_s: Vec<f64>,
+    /// The route's last point (the next appended point continues from it).
+    route_end: Option<Point>,
+    /// The car's route index of each appended segment's first point.
+    segment_first: Vec<usize>,
+    pending: Vec<Pending>,
+    in_flight: Option<InFlight>,
+    placements: Vec<FaultPlacement>,
+    /// Placements whose actual place waits for a sample after the car added the fault.
+    unresolved: Vec<usize>,
+    history: VecDeque<(f64, f64)>,
+    round_trips: VecDeque<Duration>,
+    seen: Option<Seen>,
+}
+
+impl Placer {
+    /// The faults of `plan`, for a car whose route starts with `start` (the start route's
+    /// points).
+    pub fn new(plan: &TestPlan, start: &[Point]) -> Self {
+        let mut segments = 0usize;
+        let mut pending = Vec::new();
+        for (command_index, command) in plan.commands.iter().enumerate() {
+            match command {
+                Command::RunSegments(_) => segments += 1,
+                Command::AddFault(fault) => {
+                    let (rule, segment_index, along_m) = match fault.at {
+                        Some(FaultPlace {
+                            segment_index,
+                            along_m,
+                        }) => (PlaceRule::Planned, segment_index, Some(along_m)),
+                        None => (PlaceRule::EarlierTool, segments.saturating_sub(1), None),
+                    };
+                    pending.push(Pending {
+                        command_index,
+                        fault: *fault,
+                        rule,
+                        segment_index,
+                        along_m,
+                        target_s: None,
+                    });
+                }
+            }
+        }
+        let mut placer = Self {
+            route_s: Vec::new(),
+            route_end: None,
+            segment_first: Vec::new(),
+            pending,
+            in_flight: None,
+            placements: Vec::new(),
+            unresolved: Vec::new(),
+            history: VecDeque::new(),
+            round_trips: VecDeque::new(),
+            seen: None,
+        };
+        placer.extend(start);
+        placer
+    }
+
+    /// The car's route grows by `points` (a segment or the safe stop's extension).
+    pub fn extend(&mut self, points: &[Point]) {
+        for &p in points {
+            let s = match (self.route_end, self.route_s.last()) {
+                (Some(end), Some(&s)) => s + end.dist(p),
+                _ => 0.0,
+            };
+            self.route_s.push(s);
+            self.route_end = Some(p);
+        }
+    }
+
+    /// Segment `segment_index` was appended: its first point is the route's point `first` and
+    /// it has `len` points (call after [`Self::extend`] with them). Its faults get their
+    /// targets.
+    pub fn segment_appended(&mut self, segment_index: usize, first: usize, len: usize) {
+        if self.segment_first.len() == segment_index {
+            self.segment_first.push(first);
+        }
+        let Some(start) = first.checked_sub(1) else {
+            return;
+        };
+        let last = first + len.saturating_sub(1);
+        let (Some(&start_s), Some(&last_s)) = (self.route_s.get(start), self.route_s.get(last))
+        else {
+            return;
+        };
+        let earlier = last.saturating_sub(EARLIER_TOOL_POINTS_LEFT - 1).max(start);
+        let earlier_s = self.route_s.get(earlier).copied().unwrap_or(start_s);
+        for p in self
+            .pending
+            .iter_mut()
+            .filter(|p| p.segment_index == segment_index)
+        {
+            let along = p.along_m.unwrap_or(earlier_s - start_s);
+            p.along_m = Some(along);
+            p.target_s = Some((start_s + along).min(last_s));
+        }
+    }
+
+    /// A state sample arrived at `now`: the car was at `progress` on its route, at `speed`,
+    /// about half of `round_trip` ago.
+    pub fn observe(&mut self, now: Duration, progress: Progress, speed: f64, round_trip: Duration) {
+        self.round_trips.push_back(round_trip);
+        if self.round_trips.len() > ROUND_TRIPS {
+            self.round_trips.pop_front();
+        }
+        let Some(s) = self.distance(progress) else {
+            return;
+        };
+        let car_time = now.as_secs_f64() - round_trip.as_secs_f64() / 2.0;
+        self.seen = Some(Seen {
+            car_time,
+            s,
+            speed: speed.abs(),
+        });
+        self.history.push_back((car_time, s));
+        if self.history.len() > HISTORY {
+            self.history.pop_front();
+        }
+        self.resolve();
+    }
+
+    /// When the next fault should be sent (seconds since the test began), if one's place is
+    /// known and none is in flight: half a round trip before the car is predicted to reach it.
+    pub fn due(&self) -> Option<Duration> {
+        if self.in_flight.is_some() {
+            return None;
+        }
+        let next = self.next()?;
+        let seen = self.seen?;
+        let target = next.target_s?;
+        let speed = seen.speed.max(MIN_SPEED_MPS);
+        let half_rtt = self.median_round_trip().as_secs_f64() / 2.0;
+        let at = seen.car_time + (target - seen.s).max(0.0) / speed - half_rtt;
+        Some(Duration::from_secs_f64(at.max(0.0)))
+    }
+
+    /// The fault to send at `now`, if one is due; it is then in flight.
+    pub fn take_due(&mut self, now: Duration) -> Option<(usize, Fault)> {
+        if self.due()? > now {
+            return None;
+        }
+        let next = *self.next()?;
+        self.pending
+            .retain(|p| p.command_index != next.command_index);
+        self.in_flight = Some(InFlight {
+            pending: next,
+            sent: now,
+        });
+        Some((next.command_index, next.fault))
+    }
+
+    /// Whether a fault command is in flight.
+    pub fn in_flight(&self) -> bool {
+        self.in_flight.is_some()
+    }
+
+    /// The command index of the fault in flight.
+    pub fn in_flight_command(&self) -> Option<usize> {
+        self.in_flight.map(|f| f.pending.command_index)
+    }
+
+    /// Whether a fault is still to be sent or in flight.
+    pub fn busy(&self) -> bool {
+        self.in_flight.is_some() || !self.pending.is_empty()
+    }
+
+    /// The car confirmed the fault in flight at `now` (`resent`: its reply was lost and the
+    /// car's fault list showed it added). Returns its command index and when the car added it.
+    pub fn confirmed(
+        &mut self,
+        now: Duration,
+        resent: bool,
+        rates: &ProbeRates,
+    ) -> Option<(usize, Duration)> {
+        let flight = self.in_flight.take()?;
+        let sent = flight.sent.as_secs_f64();
+        let half_rtt = self.median_round_trip().as_secs_f64() / 2.0;
+        let elapsed = now.as_secs_f64() - sent;
+        // The middle of the command's round trip; after a lost reply, half a round trip after
+        // sending (the reply's time says nothing then).
+        let added = if resent || elapsed > 6.0 * half_rtt.max(0.001) {
+            sent + half_rtt
+        } else {
+            sent + elapsed / 2.0
+        };
+        let added_at = Duration::from_secs_f64(added.max(0.0));
+        let p = flight.pending;
+        let window = FaultWindow::of(&p.fault, added_at, rates);
+        self.placements.push(FaultPlacement {
+            command_index: p.command_index,
+            rule: p.rule,
+            segment_index: p.segment_index,
+            planned_along_m: p.along_m.unwrap_or(0.0),
+            sent_s: sent,
+            added_s: added,
+            actual_along_m: None,
+            error_m: None,
+            acts_from_s: window.from.as_secs_f64(),
+            acts_to_s: window.to.as_secs_f64(),
+        });
+        self.unresolved.push(self.placements.len() - 1);
+        self.resolve();
+        Some((p.command_index, added_at))
+    }
+
+    /// The fault in flight ended without being added (refused, or the drive stopped).
+    pub fn dropped(&mut self) {
+        self.in_flight = None;
+    }
+
+    /// The placements so far (sent and confirmed faults), in the order the car added them.
+    pub fn placements(&self) -> &[FaultPlacement] {
+        &self.placements
+    }
+
+    /// The next fault to send: of those whose segment is appended, the one whose place comes
+    /// first on the route (in plan order among equal places).
+    fn next(&self) -> Option<&Pending> {
+        self.pending
+            .iter()
+            .filter(|p| p.target_s.is_some())
+            .min_by(|a, b| {
+                a.target_s
+                    .unwrap_or(f64::INFINITY)
+                    .total_cmp(&b.target_s.unwrap_or(f64::INFINITY))
+                    .then(a.command_index.cmp(&b.command_index))
+            })
+    }
+
+    fn distance(&self, progress: Progress) -> Option<f64> {
+        let a = *self.route_s.get(progress.segment)?;
+        let b = self.route_s.get(progress.segment + 1).copied().unwrap_or(a);
+        Some(a + (b - a) * progress.fraction.clamp(0.0, 1.0))
+    }
+
+    fn median_round_trip(&self) -> Duration {
+        let mut sorted: Vec<Duration> = self.round_trips.iter().copied().collect();
+        sorted.sort();
+        sorted.get(sorted.len() / 2).copied().unwrap_or_default()
+    }
+
+    /// Finds where the car was when each unresolved fault was added: between the samples seen
+    /// before and after that time.
+    fn resolve(&mut self) {
+        let history = &self.history;
+        let route_s = &self.route_s;
+        let segment_first = &self.segment_first;
+        let placements = &mut self.placements;
+        self.unresolved.retain(|&i| {
+            let placement = &mut placements[i];
+            let t = placement.added_s;
+            let Some(after) = history.iter().position(|&(time, _)| time >= t) else {
+                return true;
+            };
+            let s = match after.checked_sub(1).map(|before| history[before]) {
+                Some((t0, s0)) => {
+                    let (t1, s1) = history[after];
+                    if t1 > t0 {
+                        s0 + (s1 - s0) * (t - t0) / (t1 - t0)
+                    } else {
+                        s1
+                    }
+                }
+                None => history[after].1,
+            };
+            let start = segment_first
+                .get(placement.segment_index)
+                .and_then(|&first| first.checked_sub(1))
+                .and_then(|start| route_s.get(start));
+            if let Some(&start_s) = start {
+                let actual = s - start_s;
+                placement.actual_along_m = Some(actual);
+                placement.error_m = Some(actual - placement.planned_along_m);
+            }
+            false
+        });
+    }
+}
