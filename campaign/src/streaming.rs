@@ -162,7 +162,7 @@ fn remaining_stretches(route: &[Waypoint], progress: Progress) -> Vec<(f64, f64)
 pub fn p99(values: &VecDeque<Duration>) -> Option<Duration> {
     let mut sorted: Vec<Duration> = values.iter().copied().collect();
     sorted.sort_unstable();
-    crate::oracle::nearest_rank(&sorted, 0.99)
+    trajgen::stats::nearest_rank(&sorted, 0.99)
 }
 
 /// Measured link round trips and generation times (the most recent `window` of each).

@@ -112,11 +112,10 @@ fn polyline_length(points: &[Point]) -> f64 {
     points.windows(2).map(|w| w[0].dist(w[1])).sum()
 }
 
+/// The nearest-rank percentile `p` of `xs` (the workspace's one definition).
 fn percentile(mut xs: Vec<f64>, p: f64) -> f64 {
-    assert!(!xs.is_empty(), "no samples");
     xs.sort_by(f64::total_cmp);
-    let i = ((xs.len() - 1) as f64 * p).round() as usize;
-    xs[i]
+    trajgen::stats::nearest_rank(&xs, p).expect("no samples")
 }
 
 /// An orchestrator stand-in: uploads the route in acked packets of 5 as the car needs it and polls

@@ -7,6 +7,7 @@
 //! - [`constraints`]: what makes a route drivable, and the check.
 //! - [`generator`]: extends a route by `n` points with the ahead margin (method §3).
 //! - [`validation`]: drives one long trajectory through an area and gives a verdict (method §4).
+//! - [`stats`]: the nearest-rank percentile every crate of the workspace reports with.
 //!
 //! ```
 //! use rand::SeedableRng;
@@ -35,6 +36,7 @@ pub mod generator;
 pub mod geometry;
 #[cfg(test)]
 mod proptests;
+pub mod stats;
 #[cfg(any(test, feature = "test-areas"))]
 #[doc(hidden)]
 pub mod test_areas;

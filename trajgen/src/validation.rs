@@ -33,6 +33,7 @@ use thiserror::Error;
 
 use crate::generator::{ExtensionStats, GenerationError, Generator, GeneratorConfig, RouteTail};
 use crate::geometry::{Area, Point};
+use crate::stats::nearest_rank;
 
 /// What to validate and how.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -520,7 +521,7 @@ fn report(run: Run<'_>, completed: bool) -> ValidationReport {
     } else {
         sorted.iter().map(|&t| f64::from(t)).sum::<f64>() / sorted.len() as f64
     };
-    let p99_outer_tries = percentile(&sorted, 0.99);
+    let p99_outer_tries = nearest_rank(&sorted, 0.99).unwrap_or(0);
     let failures = run.failures.len() as u64;
     let safe = completed && failures == 0 && max_outer_tries <= limit / 2;
     let mut grid = CoverageGrid::new(run.area, run.config.cell_size);
@@ -549,15 +550,6 @@ fn report(run: Run<'_>, completed: bool) -> ValidationReport {
         grid,
         stats: run.stats,
     }
-}
-
-/// Nearest-rank percentile of sorted values.
-fn percentile(sorted: &[u32], q: f64) -> u32 {
-    if sorted.is_empty() {
-        return 0;
-    }
-    let rank = (q * sorted.len() as f64).ceil() as usize;
-    sorted[rank.clamp(1, sorted.len()) - 1]
 }
 
 /// The `count` worst places, failures first, then by outer tries, then by inner tries, pairwise
@@ -812,14 +804,6 @@ mod tests {
         let area = Area::new(rect(0.0, 0.0, 4.0, 4.0), vec![rect(1.0, 1.0, 3.0, 3.0)]).unwrap();
         let grid = CoverageGrid::new(&area, 1.0);
         assert_eq!(grid.drivable_cells(), 12);
-    }
-
-    #[test]
-    fn percentile_is_nearest_rank() {
-        let v: Vec<u32> = (1..=200).collect();
-        assert_eq!(percentile(&v, 0.99), 198);
-        assert_eq!(percentile(&[7], 0.99), 7);
-        assert_eq!(percentile(&[], 0.99), 0);
     }
 
     #[test]

@@ -116,7 +116,7 @@ fn measure(scenario: &Scenario, strategy: Strategy, args: &BenchGeneratorArgs) -
 
 /// The `q`-quantile of sorted durations (nearest rank); zero for none.
 pub(super) fn percentile(sorted: &[Duration], q: f64) -> Duration {
-    campaign::oracle::nearest_rank(sorted, q).unwrap_or_default()
+    trajgen::stats::nearest_rank(sorted, q).unwrap_or_default()
 }
 
 fn print_row(row: &Row) {
