@@ -7,6 +7,7 @@
 //! - [`constraints`]: what makes a route drivable, and the check.
 //! - [`generator`]: extends a route by `n` points with the ahead margin (method §3).
 //! - [`validation`]: drives one long trajectory through an area and gives a verdict (method §4).
+//! - [`raster`]: the area on a square grid (which cells have a drivable centre).
 //! - [`stats`]: the nearest-rank percentile every crate of the workspace reports with.
 //!
 //! ```
@@ -36,6 +37,7 @@ pub mod generator;
 pub mod geometry;
 #[cfg(test)]
 mod proptests;
+pub mod raster;
 pub mod stats;
 #[cfg(any(test, feature = "test-areas"))]
 #[doc(hidden)]
@@ -50,6 +52,7 @@ pub use generator::{
     Strategy,
 };
 pub use geometry::{Area, AreaError, BBox, Point, Polygon, PolygonError};
+pub use raster::Raster;
 pub use validation::{
     CoverageGrid, FailureRecord, HotSpot, Progress, ValidationConfig, ValidationError,
     ValidationReport, Verdict, validate_area,

@@ -17,9 +17,9 @@
 //! failures occur, the run stops early and the report says `completed: false`.
 //!
 //! **Coverage** is measured on a grid of [`ValidationConfig::cell_size`] cells over the fence's
-//! bounding box: a cell is *drivable* when its centre is strictly inside the drivable region, and
-//! *visited* when a segment of the final trajectory (start route excluded) passes through it
-//! (exact grid traversal). Coverage = visited drivable cells / drivable cells.
+//! bounding box ([`Raster`]): a cell is *drivable* when its centre is strictly inside the drivable
+//! region, and *visited* when a segment of the final trajectory (start route excluded) passes
+//! through it (exact grid traversal). Coverage = visited drivable cells / drivable cells.
 //!
 //! **Hot spots** are the places (route ends) of the hardest extensions — failures first, then most
 //! outer tries, then most inner tries (candidate points drawn, which still ranks tight places when
@@ -33,6 +33,7 @@ use thiserror::Error;
 
 use crate::generator::{ExtensionStats, GenerationError, Generator, GeneratorConfig, RouteTail};
 use crate::geometry::{Area, Point};
+use crate::raster::Raster;
 use crate::stats::nearest_rank;
 
 /// What to validate and how.
@@ -154,64 +155,29 @@ pub struct FailureRecord {
     pub reached: usize,
 }
 
-/// Visits per cell of a square grid over the fence's bounding box, for coverage and a heat map.
+/// Visits per cell of the area's [`Raster`], for coverage and a heat map.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CoverageGrid {
-    /// Lower-left corner of cell (0, 0).
-    pub origin: Point,
-    /// Side of a cell, metres.
-    pub cell_size: f64,
-    /// Cells along x.
-    pub cols: usize,
-    /// Cells along y.
-    pub rows: usize,
-    /// Per cell (row-major, `row * cols + col`): whether its centre is drivable.
-    pub drivable: Vec<bool>,
-    /// Per cell (row-major): how many trajectory segments pass through it.
+    /// The cells over the fence's bounding box and which of them are drivable.
+    pub raster: Raster,
+    /// Per cell (row-major, `row * cols + col`): how many trajectory segments pass through it.
     pub visits: Vec<u32>,
 }
 
 impl CoverageGrid {
     /// An empty grid over `area`'s fence bounding box.
     pub fn new(area: &Area, cell_size: f64) -> Self {
-        let bbox = area.bbox();
-        let (w, h) = bbox.size();
-        let cols = ((w / cell_size).ceil() as usize).max(1);
-        let rows = ((h / cell_size).ceil() as usize).max(1);
-        let mut grid = Self {
-            origin: bbox.min,
-            cell_size,
-            cols,
-            rows,
-            drivable: Vec::with_capacity(cols * rows),
-            visits: vec![0; cols * rows],
-        };
-        for row in 0..rows {
-            for col in 0..cols {
-                let centre = grid.cell_centre(col, row);
-                grid.drivable.push(area.contains_point(centre));
-            }
+        let raster = Raster::new(area, cell_size);
+        Self {
+            visits: vec![0; raster.drivable.len()],
+            raster,
         }
-        grid
-    }
-
-    /// The centre of cell (`col`, `row`).
-    pub fn cell_centre(&self, col: usize, row: usize) -> Point {
-        self.origin
-            + Point::new(
-                (col as f64 + 0.5) * self.cell_size,
-                (row as f64 + 0.5) * self.cell_size,
-            )
-    }
-
-    /// Number of drivable cells.
-    pub fn drivable_cells(&self) -> usize {
-        self.drivable.iter().filter(|&&d| d).count()
     }
 
     /// Number of drivable cells visited at least once.
     pub fn visited_cells(&self) -> usize {
-        self.drivable
+        self.raster
+            .drivable
             .iter()
             .zip(&self.visits)
             .filter(|&(&d, &v)| d && v > 0)
@@ -220,7 +186,7 @@ impl CoverageGrid {
 
     /// Visited drivable cells / drivable cells (0 when none is drivable).
     pub fn coverage(&self) -> f64 {
-        let drivable = self.drivable_cells();
+        let drivable = self.raster.drivable_cells();
         if drivable == 0 {
             0.0
         } else {
@@ -228,36 +194,32 @@ impl CoverageGrid {
         }
     }
 
-    fn cell_of(&self, p: Point) -> (i64, i64) {
-        let c = (p - self.origin) * (1.0 / self.cell_size);
-        (c.x.floor() as i64, c.y.floor() as i64)
-    }
-
     fn mark(&mut self, col: i64, row: i64) {
-        if (0..self.cols as i64).contains(&col) && (0..self.rows as i64).contains(&row) {
-            self.visits[row as usize * self.cols + col as usize] += 1;
+        if let Some(i) = self.raster.index(col, row) {
+            self.visits[i] += 1;
         }
     }
 
     /// Counts one visit in every cell the segment `a → b` passes through (Amanatides–Woo
     /// traversal).
     pub fn visit_segment(&mut self, a: Point, b: Point) {
-        let (mut col, mut row) = self.cell_of(a);
-        let (end_col, end_row) = self.cell_of(b);
+        let (mut col, mut row) = self.raster.cell_of(a);
+        let (end_col, end_row) = self.raster.cell_of(b);
+        let (origin, cell_size) = (self.raster.origin, self.raster.cell_size);
         let d = b - a;
         let axis = |start: f64, origin: f64, index: i64, delta: f64| -> (i64, f64, f64) {
             if delta > 0.0 {
-                let boundary = origin + (index + 1) as f64 * self.cell_size;
-                (1, (boundary - start) / delta, self.cell_size / delta)
+                let boundary = origin + (index + 1) as f64 * cell_size;
+                (1, (boundary - start) / delta, cell_size / delta)
             } else if delta < 0.0 {
-                let boundary = origin + index as f64 * self.cell_size;
-                (-1, (boundary - start) / delta, -self.cell_size / delta)
+                let boundary = origin + index as f64 * cell_size;
+                (-1, (boundary - start) / delta, -cell_size / delta)
             } else {
                 (0, f64::INFINITY, f64::INFINITY)
             }
         };
-        let (step_x, mut t_x, dt_x) = axis(a.x, self.origin.x, col, d.x);
-        let (step_y, mut t_y, dt_y) = axis(a.y, self.origin.y, row, d.y);
+        let (step_x, mut t_x, dt_x) = axis(a.x, origin.x, col, d.x);
+        let (step_y, mut t_y, dt_y) = axis(a.y, origin.y, row, d.y);
         self.mark(col, row);
         let steps = (end_col - col).abs() + (end_row - row).abs();
         for _ in 0..steps {
@@ -743,11 +705,13 @@ mod tests {
         let config = ValidationConfig::default().with_km(2.0);
         let report = validate_area(&area, &start, &config, &mut rng(1), &mut |_| {}).unwrap();
         assert_eq!(report.verdict, Verdict::Safe, "{report:?}");
-        let grid = &report.grid;
-        let corridor: Vec<usize> = (0..grid.visits.len())
-            .filter(|&i| grid.drivable[i] && grid.cell_centre(i % grid.cols, i / grid.cols).x > 9.0)
+        let (raster, visits) = (&report.grid.raster, &report.grid.visits);
+        let corridor: Vec<usize> = (0..visits.len())
+            .filter(|&i| {
+                raster.drivable[i] && raster.cell_centre(i % raster.cols, i / raster.cols).x > 9.0
+            })
             .collect();
-        assert!(corridor.iter().all(|&i| grid.visits[i] == 0));
+        assert!(corridor.iter().all(|&i| visits[i] == 0));
         assert!(report.coverage < 0.6, "coverage {}", report.coverage);
     }
 
@@ -788,7 +752,11 @@ mod tests {
     fn a_segment_visits_every_cell_it_passes_through() {
         let area = Area::new(rect(0.0, 0.0, 4.0, 4.0), vec![]).unwrap();
         let mut grid = CoverageGrid::new(&area, 1.0);
-        assert_eq!((grid.cols, grid.rows, grid.drivable_cells()), (4, 4, 16));
+        let raster = &grid.raster;
+        assert_eq!(
+            (raster.cols, raster.rows, raster.drivable_cells()),
+            (4, 4, 16)
+        );
         grid.visit_segment(Point::new(0.5, 0.5), Point::new(2.5, 1.5));
         let visited: Vec<(usize, usize)> = (0..16)
             .filter(|&i| grid.visits[i] > 0)
@@ -802,8 +770,11 @@ mod tests {
     #[test]
     fn only_cells_with_a_drivable_centre_count() {
         let area = Area::new(rect(0.0, 0.0, 4.0, 4.0), vec![rect(1.0, 1.0, 3.0, 3.0)]).unwrap();
-        let grid = CoverageGrid::new(&area, 1.0);
-        assert_eq!(grid.drivable_cells(), 12);
+        let mut grid = CoverageGrid::new(&area, 1.0);
+        grid.visit_segment(Point::new(0.5, 0.5), Point::new(3.5, 0.5));
+        grid.visit_segment(Point::new(1.5, 1.5), Point::new(2.5, 2.5));
+        // 4 of the 12 drivable cells; the cutout's cells do not count.
+        assert!((grid.coverage() - 4.0 / 12.0).abs() < 1e-12);
     }
 
     #[test]
