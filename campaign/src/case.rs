@@ -16,9 +16,11 @@ use car_link::firmware::MAX_RANGED_ANCHOR_ID;
 use scenarios::{CampaignSettings, Interval, Scenario};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
-use trajgen::{GenerationError, Generator, Point, RouteTail, check_route};
+use trajgen::{GenerationError, Generator, Point, check_route};
 
-use crate::model::{Command, Fault, FaultKind, Probe, Segment, SegmentIntent, TestPlan};
+use crate::model::{
+    Command, Fault, FaultKind, ModelError, Probe, Segment, SegmentIntent, TestPlan, start_tail,
+};
 use crate::oracle::{FailurePolicy, SegmentOutcome, Verdict};
 use crate::safety::{Abort, SafetyConfig};
 use crate::streaming::{Append, StreamingConfig};
@@ -83,6 +85,9 @@ pub enum CaseError {
         /// Why the generator failed.
         error: GenerationError,
     },
+    /// The scenario's start route, where a case's first segment starts, cannot be continued.
+    #[error("scenario.start_route: {0}")]
+    StartRoute(#[source] ModelError),
     /// Writing JSON failed.
     #[error("cannot write JSON: {0}")]
     Write(#[source] serde_json::Error),
@@ -585,7 +590,7 @@ impl Case {
     /// Checks that every segment (with its margin, when recorded) continues the route drivably
     /// from the end of `scenario`'s start route.
     pub fn check_route(&self, scenario: &Scenario) -> Result<(), CaseError> {
-        let mut tail = start_tail(scenario)?;
+        let mut tail = start_tail(scenario).map_err(CaseError::StartRoute)?;
         let constraints = scenario.constraints();
         for (command, record) in self.commands.iter().enumerate() {
             let CommandRecord::RunSegments { points, margin, .. } = record else {
@@ -631,7 +636,7 @@ impl Case {
         {
             return Err(invalid("commands", "no run_segments command to drive"));
         }
-        let start_tail = start_tail(scenario)?;
+        let start_tail = start_tail(scenario).map_err(CaseError::StartRoute)?;
         let commands = case
             .commands
             .iter()
@@ -656,7 +661,7 @@ impl Case {
         generator: &Generator,
         seed: u64,
     ) -> Result<Case, CaseError> {
-        let mut tail = start_tail(scenario)?;
+        let mut tail = start_tail(scenario).map_err(CaseError::StartRoute)?;
         let mut rng = crate::seed::rng(seed);
         let mut case = self.clone();
         for (command, record) in case.commands.iter_mut().enumerate() {
@@ -680,12 +685,6 @@ impl Case {
         }
         Ok(case)
     }
-}
-
-/// Where a case's first segment starts: the end of `scenario`'s start route.
-fn start_tail(scenario: &Scenario) -> Result<RouteTail, CaseError> {
-    RouteTail::from_points(&scenario.start_route.positions())
-        .map_err(|e| invalid("scenario.start_route", e.to_string()))
 }
 
 fn check_command(i: usize, command: &CommandRecord) -> Result<(), CaseError> {
@@ -887,7 +886,7 @@ fn check_header(format: &str, expected: &'static str, version: u32) -> Result<()
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::{Campaign, plan_test, start_tail};
+    use crate::model::{Campaign, plan_test};
     use crate::oracle::{SegmentOracle, SegmentVerdict};
 
     fn scenario(name: &str) -> Scenario {
