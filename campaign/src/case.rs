@@ -16,7 +16,7 @@ use car_link::firmware::MAX_RANGED_ANCHOR_ID;
 use scenarios::{CampaignSettings, Interval, Scenario};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
-use trajgen::{GenerationError, Generator, Point, check_route};
+use trajgen::{GenerationError, Generator, Point, Waypoint, check_route};
 
 use crate::model::{
     Command, Fault, FaultKind, ModelError, Probe, Segment, SegmentIntent, TestPlan, start_tail,
@@ -288,6 +288,22 @@ impl RoutePointRecord {
     }
 }
 
+impl From<Waypoint> for RoutePointRecord {
+    fn from(w: Waypoint) -> Self {
+        Self {
+            x: w.position.x,
+            y: w.position.y,
+            speed: w.speed,
+        }
+    }
+}
+
+impl From<RoutePointRecord> for Waypoint {
+    fn from(p: RoutePointRecord) -> Self {
+        Waypoint::new(p.position(), p.speed)
+    }
+}
+
 /// A position without a speed (ahead margin points are never driven).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -378,17 +394,20 @@ impl From<SegmentIntent> for IntentRecord {
     }
 }
 
+impl From<IntentRecord> for SegmentIntent {
+    fn from(i: IntentRecord) -> Self {
+        Self {
+            seed: i.seed,
+            points: i.points,
+            speed_mps: i.speed_mps,
+        }
+    }
+}
+
 fn segment_record(segment: &Segment) -> CommandRecord {
     CommandRecord::RunSegments {
         intent: segment.intent.map(IntentRecord::from),
-        points: segment
-            .waypoints()
-            .map(|(p, speed)| RoutePointRecord {
-                x: p.x,
-                y: p.y,
-                speed,
-            })
-            .collect(),
+        points: segment.waypoints().map(RoutePointRecord::from).collect(),
         margin: segment.margin.iter().map(|&p| p.into()).collect(),
     }
 }
@@ -416,11 +435,7 @@ impl CommandRecord {
                 points,
                 margin,
             } => Command::RunSegments(Segment {
-                intent: intent.map(|i| SegmentIntent {
-                    seed: i.seed,
-                    points: i.points,
-                    speed_mps: i.speed_mps,
-                }),
+                intent: intent.map(SegmentIntent::from),
                 points: points.iter().map(RoutePointRecord::position).collect(),
                 speeds: points.iter().map(|p| p.speed).collect(),
                 margin: margin.iter().map(|&p| p.into()).collect(),

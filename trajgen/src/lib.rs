@@ -3,7 +3,8 @@
 //! `trajgen` is pure: no I/O, no clocks, no threads. Every random choice takes an explicit RNG, so
 //! the same seed gives the same trajectory.
 //!
-//! - [`geometry`]: points, closed polygons, the area (fence minus cutouts), exact predicates.
+//! - [`geometry`]: points, waypoints (a point with a speed), closed polygons, the area (fence minus
+//!   cutouts), exact predicates.
 //! - [`constraints`]: what makes a route drivable, and the check.
 //! - [`generator`]: extends a route by `n` points with the ahead margin (method §3).
 //! - [`validation`]: drives one long trajectory through an area and gives a verdict (method §4).
@@ -51,7 +52,7 @@ pub use generator::{
     Extension, ExtensionStats, GenerationError, Generator, GeneratorConfig, Pose, RouteTail,
     Strategy,
 };
-pub use geometry::{Area, AreaError, BBox, Point, Polygon, PolygonError};
+pub use geometry::{Area, AreaError, BBox, Point, Polygon, PolygonError, Waypoint};
 pub use raster::Raster;
 pub use validation::{
     CoverageGrid, FailureRecord, HotSpot, Progress, ValidationConfig, ValidationError,

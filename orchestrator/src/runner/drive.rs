@@ -114,10 +114,7 @@ fn start_route(ctx: &Context<'_>, standing: Point) -> Vec<Waypoint> {
         position: standing,
         speed,
     })
-    .chain(points.iter().map(|p| Waypoint {
-        position: p.position(),
-        speed: p.speed,
-    }))
+    .chain(points.iter().copied())
     .collect()
 }
 
@@ -534,10 +531,7 @@ impl<'c, 'a> Drive<'c, 'a> {
 
     fn append_op(&mut self, decision: Decision, segment: &Segment) -> InFlight {
         let command_index = self.cursor;
-        let waypoints: Vec<Waypoint> = segment
-            .waypoints()
-            .map(|(position, speed)| Waypoint { position, speed })
-            .collect();
+        let waypoints: Vec<Waypoint> = segment.waypoints().collect();
         let append = self.streamer.appended(self.now(), &decision, &waypoints);
         self.safety.extend_route(&segment.points);
         self.runs.push(Run {

@@ -422,11 +422,8 @@ async fn run_test(
     case.return_route = reset
         .return_route
         .iter()
-        .map(|&(p, speed)| RoutePointRecord {
-            x: p.x,
-            y: p.y,
-            speed,
-        })
+        .copied()
+        .map(RoutePointRecord::from)
         .collect();
     case.return_clearance_m =
         (reset.clearance_m < ctx.scenario.generator.clearance_m).then_some(reset.clearance_m);
