@@ -7,8 +7,9 @@
 //! - [`oracle`]: |UWB − RTK| per sample, per segment, and the verdicts.
 //! - [`safety`]: the runtime safety monitor (fence, cutouts, cross-track, stale telemetry).
 //! - [`streaming`]: when to append the next segment so the car never reaches its route's end.
-//! - [`case`]: the versioned case-file and `campaign.json` formats, and replay planning.
-//! - [`replay`]: the comparison of a replay's runs.
+//! - [`case`]: the versioned case-file and `campaign.json` formats and their checks.
+//! - [`replay`]: replay planning (the test a recorded case is driven as) and the comparison of a
+//!   replay's runs.
 //! - [`seed`]: the one random number generator of every run.
 //!
 //! Not here: the wire protocol and the client (`car-link`; only its protocol layer and firmware
