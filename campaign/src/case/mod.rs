@@ -124,44 +124,24 @@ impl ScenarioRef {
     }
 }
 
-/// An inclusive range in a record.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Range<T> {
-    /// Smallest value.
-    pub min: T,
-    /// Largest value.
-    pub max: T,
-}
-
-impl<T: Copy> From<Interval<T>> for Range<T> {
-    fn from(i: Interval<T>) -> Self {
-        Self {
-            min: i.min,
-            max: i.max,
-        }
-    }
-}
-
-impl<T: Copy> From<Range<T>> for Interval<T> {
-    fn from(r: Range<T>) -> Self {
-        Interval::new(r.min, r.max)
-    }
-}
-
 /// The settings a campaign ran with: the scenario's campaign settings, the ahead margin and the
 /// oracle's failure policy.
+///
+/// The case format's own spelling of the scenario's [`CampaignSettings`]: flat fault ranges with
+/// the firmware's fault kind names, every field required, and what the scenario does not hold
+/// (the ahead margin, the failure policy, the runtime constants). Its `{min, max}` ranges are the
+/// scenario's [`Interval`]s.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Settings {
     /// Tests in the campaign.
     pub tests: usize,
     /// Commands per test, growing over the campaign.
-    pub test_size: Range<usize>,
+    pub test_size: Interval<usize>,
     /// Points per `run_segments`.
-    pub points_per_segment: Range<usize>,
+    pub points_per_segment: Interval<usize>,
     /// Speed of a segment, km/h.
-    pub speed_kmh: Range<f64>,
+    pub speed_kmh: Interval<f64>,
     /// Points of every segment's ahead margin.
     pub ahead_margin: usize,
     /// Largest allowed deviation of UWB from RTK, metres.
@@ -180,7 +160,8 @@ pub struct Settings {
     pub streaming: Option<StreamingConfig>,
 }
 
-/// Command weights in a record.
+/// Command weights in a record: the scenario's [`scenarios::CommandWeights`], but a case file
+/// must give all four (a scenario file defaults the ones it leaves out).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Weights {
@@ -201,23 +182,23 @@ pub struct FaultRanges {
     /// Fault kinds of anchor range faults.
     pub anchor_range_kinds: Vec<FaultKind>,
     /// Anchor range fault parameter.
-    pub anchor_range_param: Range<f64>,
+    pub anchor_range_param: Interval<f64>,
     /// Anchor range fault start, probe iterations.
-    pub anchor_range_start: Range<u32>,
+    pub anchor_range_start: Interval<u32>,
     /// Anchor range fault duration, probe iterations.
-    pub anchor_range_duration: Range<u32>,
+    pub anchor_range_duration: Interval<u32>,
     /// Wheel slip amplification.
-    pub wheel_slip_amplification: Range<f64>,
+    pub wheel_slip_amplification: Interval<f64>,
     /// Wheel slip start, probe iterations.
-    pub wheel_slip_start: Range<u32>,
+    pub wheel_slip_start: Interval<u32>,
     /// Wheel slip duration, probe iterations.
-    pub wheel_slip_duration: Range<u32>,
+    pub wheel_slip_duration: Interval<u32>,
     /// Yaw offset, degrees.
-    pub yaw_offset_deg: Range<f64>,
+    pub yaw_offset_deg: Interval<f64>,
     /// Yaw start, probe iterations.
-    pub yaw_start: Range<u32>,
+    pub yaw_start: Interval<u32>,
     /// Yaw duration, probe iterations.
-    pub yaw_duration: Range<u32>,
+    pub yaw_duration: Interval<u32>,
 }
 
 impl Settings {
@@ -227,9 +208,9 @@ impl Settings {
         let f = &c.faults;
         Self {
             tests,
-            test_size: c.test_size.into(),
-            points_per_segment: c.points_per_segment.into(),
-            speed_kmh: c.speed_kmh.into(),
+            test_size: c.test_size,
+            points_per_segment: c.points_per_segment,
+            speed_kmh: c.speed_kmh,
             ahead_margin: scenario.generator.ahead_margin,
             oracle_threshold_m: c.oracle_threshold_m,
             failure_policy: policy,
@@ -246,15 +227,15 @@ impl Settings {
                     .iter()
                     .map(|&k| crate::model::range_fault_kind(k))
                     .collect(),
-                anchor_range_param: f.anchor_range.param.into(),
-                anchor_range_start: f.anchor_range.start.into(),
-                anchor_range_duration: f.anchor_range.duration.into(),
-                wheel_slip_amplification: f.wheel_slip.amplification.into(),
-                wheel_slip_start: f.wheel_slip.start.into(),
-                wheel_slip_duration: f.wheel_slip.duration.into(),
-                yaw_offset_deg: f.yaw.offset_deg.into(),
-                yaw_start: f.yaw.start.into(),
-                yaw_duration: f.yaw.duration.into(),
+                anchor_range_param: f.anchor_range.param,
+                anchor_range_start: f.anchor_range.start,
+                anchor_range_duration: f.anchor_range.duration,
+                wheel_slip_amplification: f.wheel_slip.amplification,
+                wheel_slip_start: f.wheel_slip.start,
+                wheel_slip_duration: f.wheel_slip.duration,
+                yaw_offset_deg: f.yaw.offset_deg,
+                yaw_start: f.yaw.start,
+                yaw_duration: f.yaw.duration,
             },
             safety: None,
             streaming: None,
