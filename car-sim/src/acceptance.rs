@@ -8,7 +8,7 @@ use scenarios::geometry::{Area, Point, Polygon, point_segment_distance};
 
 use crate::noise::Noise;
 use crate::{
-    Car, CarOptions, Firmware, Placement, RadioPath, RcMode, RoutePoint, StateReport, World,
+    CarOptions, Firmware, Placement, RadioPath, RcMode, RoutePoint, SimCar, StateReport, World,
     WorldAnchor,
 };
 
@@ -121,13 +121,13 @@ fn percentile(mut xs: Vec<f64>, p: f64) -> f64 {
 /// An orchestrator stand-in: uploads the route in acked packets of 5 as the car needs it and polls
 /// GET_STATE every 50 ms.
 struct Driver {
-    car: Car,
+    car: SimCar,
     queue: VecDeque<RoutePoint>,
     stopped: bool,
 }
 
 impl Driver {
-    fn new(mut car: Car, route: &[RoutePoint]) -> Self {
+    fn new(mut car: SimCar, route: &[RoutePoint]) -> Self {
         car.terminal("pos_uwb_reset_pos");
         if car.firmware().is_12x() {
             // 12.x's reset copies the position only, and the UWB heading of a car that stood
@@ -159,7 +159,7 @@ impl Driver {
     }
 
     /// Runs for `ms`, calling `on_poll` with every state.
-    fn run(&mut self, ms: u64, mut on_poll: impl FnMut(&Car, &StateReport)) {
+    fn run(&mut self, ms: u64, mut on_poll: impl FnMut(&SimCar, &StateReport)) {
         let end = self.car.now_ms() + ms;
         while self.car.now_ms() < end {
             self.car.step();
@@ -181,9 +181,9 @@ impl Driver {
     }
 }
 
-fn placed_car(firmware: Firmware, seed: u64, route: &[Point]) -> Car {
+fn placed_car(firmware: Firmware, seed: u64, route: &[Point]) -> SimCar {
     let heading = (route[1] - route[0]).heading();
-    let mut car = Car::new(CarOptions {
+    let mut car = SimCar::new(CarOptions {
         firmware,
         seed,
         world: lot_world(),
@@ -251,7 +251,7 @@ fn drive_and_measure(
     seed: u64,
     length_m: f64,
     steering: Steering,
-    configure: impl Fn(&mut Car),
+    configure: impl Fn(&mut SimCar),
 ) -> CrossTrack {
     let area = &scenario.area;
     let mut route = scenario.start_route.positions();
@@ -266,7 +266,7 @@ fn drive_and_measure(
         .collect();
     let points = route_points(&route, |i| start_speeds.get(i).copied().unwrap_or(3.0));
     let ideal = steering == Steering::DocumentedIdealSensors;
-    let mut car = Car::new(CarOptions {
+    let mut car = SimCar::new(CarOptions {
         firmware,
         seed,
         world: World::from_scenario(scenario),
@@ -583,7 +583,7 @@ fn a_silent_link_for_two_seconds_brakes_and_stops_the_autopilot() {
 
 #[test]
 fn the_watchdog_is_expired_from_two_seconds_after_boot_and_heartbeats_do_not_count() {
-    let mut car = Car::new(CarOptions::default());
+    let mut car = SimCar::new(CarOptions::default());
     car.run_for(2_000);
     assert!(!car.watchdog_expired());
     car.step();
@@ -654,7 +654,7 @@ fn rc_control_deactivates_and_brakes_to_a_stop() {
 
 #[test]
 fn on_a_bench_the_fused_heading_never_changes_whatever_the_steering() {
-    let mut car = Car::new(CarOptions {
+    let mut car = SimCar::new(CarOptions {
         imu_on_bench: true,
         gnss: crate::GnssModel {
             enabled: false,
@@ -700,7 +700,7 @@ fn nlos_events(walls: Vec<crate::Wall>) -> Vec<crate::DebugEvent> {
         obstacles: vec![square],
         walls,
     };
-    let mut car = Car::new(CarOptions {
+    let mut car = SimCar::new(CarOptions {
         world,
         preload_anchors: true,
         record_events: true,
@@ -786,7 +786,7 @@ fn scenario_deviations(name: &str, with_environment: bool, seed: u64, ms: u64) -
         world.obstacles.clear();
         world.walls.clear();
     }
-    let mut car = Car::new(CarOptions {
+    let mut car = SimCar::new(CarOptions {
         seed,
         world,
         preload_anchors: true,
@@ -839,7 +839,7 @@ fn rock_lot_drive(seed: u64, ms: u64) -> Vec<ShadowSample> {
     let points = route_points(&route, |_| 1.5);
     let world = World::from_scenario(&scenario);
     let anchor = world.anchor(234).expect("anchor 234").position;
-    let mut car = Car::new(CarOptions {
+    let mut car = SimCar::new(CarOptions {
         seed,
         world: world.clone(),
         preload_anchors: true,
@@ -982,7 +982,7 @@ fn the_12_3_uwb_heading_after_set_pos_starts_exact_and_stays_within_ten_degrees(
             car.get_state();
         }
     }
-    let heading_error = |car: &Car| {
+    let heading_error = |car: &SimCar| {
         let t = car.truth();
         let e = (f64::from(-t.uwb.yaw).to_radians() - t.heading + PI).rem_euclid(2.0 * PI) - PI;
         e.to_degrees().abs()

@@ -1,5 +1,5 @@
 //! The simulated car: every firmware task stepped on a 10 ms tick, and the firmware's command
-//! handlers. No I/O and no clock: time advances only through [`Car::step`].
+//! handlers. No I/O and no clock: time advances only through [`SimCar::step`].
 
 use std::collections::VecDeque;
 use std::f64::consts::PI;
@@ -115,7 +115,7 @@ pub struct CarOptions {
     /// Load the world's anchors into the firmware's list at boot (the real firmware boots with
     /// none; the orchestrator uploads them).
     pub preload_anchors: bool,
-    /// Record [`DebugEvent`]s (drain them with [`Car::drain_events`]).
+    /// Record [`DebugEvent`]s (drain them with [`SimCar::drain_events`]).
     pub record_events: bool,
     /// HIL-bench fidelity (quirk 30): the board lies on a desk, so the IMU never rotates and its
     /// yaw stays at the boot heading whatever the simulated motion (default false: the IMU yaw
@@ -228,7 +228,7 @@ pub struct StateReport {
 
 /// A simulated car.
 #[derive(Debug, Clone)]
-pub struct Car {
+pub struct SimCar {
     options: CarOptions,
     config: CarConfig,
     car_id: u8,
@@ -264,7 +264,7 @@ struct TrueMotion {
     yaw_rate: f64,
 }
 
-impl Car {
+impl SimCar {
     /// A car just booted with `options`.
     pub fn new(options: CarOptions) -> Self {
         let fw = options.firmware;
@@ -987,8 +987,8 @@ ap_set_look_ahead\nap_dynamic_rad\nap_ang_dist_comp\nap_state\n";
 mod tests {
     use super::*;
 
-    fn car(firmware: Firmware) -> Car {
-        Car::new(CarOptions {
+    fn car(firmware: Firmware) -> SimCar {
+        SimCar::new(CarOptions {
             firmware,
             ..CarOptions::default()
         })
@@ -1006,7 +1006,7 @@ mod tests {
 
     #[test]
     fn ms_today_is_unknown_until_gnss_time_or_set_ms_today() {
-        let mut c = Car::new(CarOptions {
+        let mut c = SimCar::new(CarOptions {
             gnss: GnssModel {
                 enabled: false,
                 ..GnssModel::default()
@@ -1066,7 +1066,7 @@ mod tests {
     #[test]
     fn use_uwb_pos_swaps_the_estimates_in_12x_only() {
         for firmware in [Firmware::V10_1, Firmware::V12_3] {
-            let mut c = Car::new(CarOptions {
+            let mut c = SimCar::new(CarOptions {
                 firmware,
                 placement: Placement {
                     x: 3.0,

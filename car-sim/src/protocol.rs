@@ -1,5 +1,5 @@
 //! The firmware's packet handler: decodes a request payload with `car-link`, runs it on the
-//! [`Car`] and encodes the replies the firmware would send (car-protocol §3, §5–§10).
+//! [`SimCar`] and encodes the replies the firmware would send (car-protocol §3, §5–§10).
 
 use std::time::Duration;
 
@@ -12,7 +12,7 @@ use car_link::message::{
 use car_link::version::{CommandId, FirmwareVersion};
 
 use crate::autopilot::RoutePoint;
-use crate::car::{Car, RcMode, StateReport};
+use crate::car::{RcMode, SimCar, StateReport};
 use crate::config::{ApTimeMode, CarConfig};
 use crate::firmware::Firmware;
 
@@ -39,14 +39,14 @@ pub fn link_version(firmware: Firmware) -> FirmwareVersion {
 /// The simulated controller board: the car model plus its stored configuration record.
 #[derive(Debug, Clone)]
 pub struct Board {
-    car: Car,
+    car: SimCar,
     record: MainConfig,
     version: FirmwareVersion,
 }
 
 impl Board {
     /// A board around a freshly built car.
-    pub fn new(car: Car) -> Self {
+    pub fn new(car: SimCar) -> Self {
         let version = link_version(car.firmware());
         let record = default_record(version, car.car_id());
         let mut board = Self {
@@ -60,12 +60,12 @@ impl Board {
     }
 
     /// The car model.
-    pub fn car(&self) -> &Car {
+    pub fn car(&self) -> &SimCar {
         &self.car
     }
 
     /// The car model, mutable (for stepping and tests).
-    pub fn car_mut(&mut self) -> &mut Car {
+    pub fn car_mut(&mut self) -> &mut SimCar {
         &mut self.car
     }
 
