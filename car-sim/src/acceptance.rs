@@ -135,7 +135,7 @@ impl Driver {
             let s = car.get_state();
             car.set_pos(s.px, s.py, s.yaw);
         }
-        car.set_config(crate::CarConfig {
+        car.set_config(crate::FirmwareConfig {
             ap_repeat_routes: false,
             ..*car.config()
         });

@@ -7,7 +7,7 @@ use std::f64::consts::PI;
 use scenarios::geometry::Point;
 
 use crate::autopilot::{ApInputs, Autopilot, FwPose, RoutePart, RoutePoint, StoreOutcome};
-use crate::config::{CarConfig, VehicleParams};
+use crate::config::{FirmwareConfig, VehicleParams};
 use crate::debug::{DebugEvent, Truth};
 use crate::fault::FaultInjection;
 use crate::firmware::Firmware;
@@ -230,7 +230,7 @@ pub struct StateReport {
 #[derive(Debug, Clone)]
 pub struct SimCar {
     options: CarOptions,
-    config: CarConfig,
+    config: FirmwareConfig,
     car_id: u8,
     now_ms: u64,
     motor: Motor,
@@ -268,7 +268,7 @@ impl SimCar {
     /// A car just booted with `options`.
     pub fn new(options: CarOptions) -> Self {
         let fw = options.firmware;
-        let config = CarConfig::defaults(fw);
+        let config = FirmwareConfig::defaults(fw);
         let p = options.placement;
         let mut car = Self {
             config,
@@ -614,7 +614,7 @@ impl SimCar {
     }
 
     /// The configuration in force.
-    pub fn config(&self) -> &CarConfig {
+    pub fn config(&self) -> &FirmwareConfig {
         &self.config
     }
 
@@ -947,16 +947,16 @@ impl SimCar {
     }
 
     /// SET_MAIN_CONFIG (the record already decoded). Resets the watchdog.
-    pub fn set_config(&mut self, config: CarConfig) {
+    pub fn set_config(&mut self, config: FirmwareConfig) {
         self.kick_watchdog();
         self.config = config;
     }
 
     /// GET_MAIN_CONFIG(_DEFAULT): the configuration in force, or the defaults. Resets the watchdog.
-    pub fn main_config(&mut self, defaults: bool) -> CarConfig {
+    pub fn main_config(&mut self, defaults: bool) -> FirmwareConfig {
         self.kick_watchdog();
         if defaults {
-            CarConfig::defaults(self.options.firmware)
+            FirmwareConfig::defaults(self.options.firmware)
         } else {
             self.config
         }

@@ -66,7 +66,7 @@ pub mod world;
 
 pub use autopilot::{FwPose, RoutePart, RoutePoint};
 pub use car::{CarOptions, GnssModel, Placement, RcMode, SimCar, StateReport};
-pub use config::{ApTimeMode, CarConfig, VehicleParams};
+pub use config::{ApTimeMode, FirmwareConfig, VehicleParams};
 pub use debug::{DebugEvent, Truth};
 pub use fault::{FaultInjection, FaultKind};
 pub use firmware::Firmware;

@@ -13,7 +13,7 @@ use car_link::version::{CommandId, FirmwareVersion};
 
 use crate::autopilot::RoutePoint;
 use crate::car::{RcMode, SimCar, StateReport};
-use crate::config::{ApTimeMode, CarConfig};
+use crate::config::{ApTimeMode, FirmwareConfig};
 use crate::firmware::Firmware;
 
 /// SET_MAIN_CONFIG acks only after the flash write; the simulator waits this long.
@@ -54,7 +54,7 @@ impl Board {
             record,
             version,
         };
-        let config = car_config_from(&board.record, board.car.firmware());
+        let config = firmware_config_from(&board.record, board.car.firmware());
         board.car.set_config(config);
         board
     }
@@ -235,7 +235,7 @@ impl Board {
         if record.version() != self.version {
             return Vec::new();
         }
-        let config = car_config_from(&record, self.car.firmware());
+        let config = firmware_config_from(&record, self.car.firmware());
         self.record = record;
         self.car.set_config(config);
         vec![(Reply::Ack(CommandId::SetMainConfig), FLASH_WRITE_DELAY)]
@@ -251,8 +251,8 @@ fn default_record(version: FirmwareVersion, car_id: u8) -> MainConfig {
 }
 
 /// The model's configuration from a record; fields absent in the version keep the defaults.
-pub fn car_config_from(record: &MainConfig, firmware: Firmware) -> CarConfig {
-    let mut c = CarConfig::defaults(firmware);
+pub fn firmware_config_from(record: &MainConfig, firmware: Firmware) -> FirmwareConfig {
+    let mut c = FirmwareConfig::defaults(firmware);
     let flag = |f: ConfigField, d: bool| record.get_u8(f).map_or(d, |v| v != 0);
     let real = |f: ConfigField, d: f32| record.get_f32(f).unwrap_or(d);
     c.ap_repeat_routes = flag(ConfigField::ApRepeatRoutes, c.ap_repeat_routes);
