@@ -5,7 +5,7 @@
 use std::time::{Duration, Instant};
 
 use car_link::message::RoutePoint as LinkPoint;
-use car_link::{Car as LinkCar, CarConfig as LinkConfig};
+use car_link::{Car as LinkCar, LinkConfig};
 use car_sim::{CarOptions, RoutePoint, SimCar, SimConfig, World, WorldAnchor, spawn_in_process};
 use criterion::{Criterion, criterion_group, criterion_main};
 use scenarios::geometry::Point;

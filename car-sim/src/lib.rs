@@ -39,7 +39,7 @@
 //! let scenario = scenarios::bundled::load("parking-lot-2anchors")?.scenario;
 //! let config = car_sim::SimConfig { seed: 7, ..car_sim::SimConfig::from_scenario(&scenario) };
 //! let (stream, sim) = car_sim::spawn_in_process(&config);
-//! let car = car_link::Car::over_stream(stream, car_link::CarConfig::default()).await?;
+//! let car = car_link::Car::over_stream(stream, car_link::LinkConfig::default()).await?;
 //! println!("{} at {:?}", car.version(), sim.truth());
 //! # Ok(()) }
 //! ```

@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use car_link::firmware::{MAX_STALE_LIMIT, WATCHDOG};
-use car_link::{Car, CarAddress, CarConfig};
+use car_link::{Car, CarAddress, LinkConfig};
 use indicatif::{ProgressBar, ProgressStyle};
 use scenarios::Scenario;
 use tokio_util::sync::CancellationToken;
@@ -86,11 +86,11 @@ pub(super) fn runtime(virtual_time: bool) -> Result<tokio::runtime::Runtime> {
 }
 
 /// How the runner talks to any car: round trips on a radio link can exceed the 250 ms default.
-pub fn car_config() -> CarConfig {
-    CarConfig {
+pub fn car_config() -> LinkConfig {
+    LinkConfig {
         request_timeout: Duration::from_secs(1),
         terminal_timeout: Duration::from_secs(2),
-        ..CarConfig::default()
+        ..LinkConfig::default()
     }
 }
 
