@@ -55,6 +55,6 @@ pub use generator::{
 pub use geometry::{Area, AreaError, BBox, Point, Polygon, PolygonError, Waypoint};
 pub use raster::Raster;
 pub use validation::{
-    CoverageGrid, FailureRecord, HotSpot, Progress, ValidationConfig, ValidationError,
-    ValidationReport, Verdict, validate_area,
+    AreaVerdict, CoverageGrid, FailureRecord, HotSpot, Progress, ValidationConfig, ValidationError,
+    ValidationReport, validate_area,
 };

@@ -4,7 +4,7 @@
 //! [`ValidationConfig::km`] kilometres, in extensions of [`ValidationConfig::extension_points`]
 //! points, each generated with the ahead margin. The [`ValidationReport`] gives the outer tries per
 //! extension (max, mean, p99), the failures, the worst places ([`HotSpot`]s), the coverage of the
-//! drivable area and a downsampled trajectory for drawing. The verdict is [`Verdict::Safe`] iff the
+//! drivable area and a downsampled trajectory for drawing. The verdict is [`AreaVerdict::Safe`] iff the
 //! run completed, no extension failed and no extension needed more than half the outer-try limit.
 //!
 //! **After a failure** (an extension that used every outer try): the failure is counted, the
@@ -104,24 +104,24 @@ pub struct Progress {
 
 /// The method's judgement of an area.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Verdict {
+pub enum AreaVerdict {
     /// Completed, no failure, and no extension needed more than half the outer-try limit.
     Safe,
     /// Anything else.
     Unsafe,
 }
 
-impl Verdict {
+impl AreaVerdict {
     /// `"safe"` or `"unsafe"`.
     pub fn as_str(self) -> &'static str {
         match self {
-            Verdict::Safe => "safe",
-            Verdict::Unsafe => "unsafe",
+            AreaVerdict::Safe => "safe",
+            AreaVerdict::Unsafe => "unsafe",
         }
     }
 }
 
-impl std::fmt::Display for Verdict {
+impl std::fmt::Display for AreaVerdict {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.as_str())
     }
@@ -239,7 +239,7 @@ impl CoverageGrid {
 #[derive(Debug, Clone, PartialEq)]
 pub struct ValidationReport {
     /// Safe iff completed, no failure, max outer tries ≤ half the limit.
-    pub verdict: Verdict,
+    pub verdict: AreaVerdict,
     /// Kilometres of trajectory driven (as kept, start route excluded).
     pub km: f64,
     /// Kilometres asked for.
@@ -491,7 +491,11 @@ fn report(run: Run<'_>, completed: bool) -> ValidationReport {
         grid.visit_segment(w[0], w[1]);
     }
     ValidationReport {
-        verdict: if safe { Verdict::Safe } else { Verdict::Unsafe },
+        verdict: if safe {
+            AreaVerdict::Safe
+        } else {
+            AreaVerdict::Unsafe
+        },
         km: run.km(),
         target_km: run.config.km,
         completed,
@@ -614,7 +618,7 @@ mod tests {
             .unwrap();
             assert_eq!(
                 report.verdict,
-                Verdict::Safe,
+                AreaVerdict::Safe,
                 "{}: {report:?}",
                 fixture.name
             );
@@ -680,7 +684,7 @@ mod tests {
                 .with_generator(generator)
         };
         let report = validate_area(&area, &start, &config, &mut rng(1), &mut |_| {}).unwrap();
-        assert_eq!(report.verdict, Verdict::Unsafe);
+        assert_eq!(report.verdict, AreaVerdict::Unsafe);
         assert!(report.failures > 0);
         assert_eq!(report.failure_records.len() as u64, report.failures);
         let worst = report.hotspots[0];
@@ -704,7 +708,7 @@ mod tests {
         let (area, start) = room_with_trap();
         let config = ValidationConfig::default().with_km(2.0);
         let report = validate_area(&area, &start, &config, &mut rng(1), &mut |_| {}).unwrap();
-        assert_eq!(report.verdict, Verdict::Safe, "{report:?}");
+        assert_eq!(report.verdict, AreaVerdict::Safe, "{report:?}");
         let (raster, visits) = (&report.grid.raster, &report.grid.visits);
         let corridor: Vec<usize> = (0..visits.len())
             .filter(|&i| {
@@ -728,7 +732,7 @@ mod tests {
         };
         let report = validate_area(&area, &start, &config, &mut rng(1), &mut |_| {}).unwrap();
         assert!(!report.completed);
-        assert_eq!(report.verdict, Verdict::Unsafe);
+        assert_eq!(report.verdict, AreaVerdict::Unsafe);
         assert_eq!(report.failures, 1);
         assert_eq!(report.hotspots[0].x, 32.0);
     }
