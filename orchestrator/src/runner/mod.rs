@@ -56,7 +56,7 @@ use crate::recording::{
     SafetyRecord, TestEvent, TestEventKind,
 };
 use campaign::case::{Case, CaseError, ReplayOf, RoutePointRecord, Settings};
-use campaign::model::{Campaign, ModelError, Planner, ProbeRates, TestPlan};
+use campaign::model::{Campaign, ModelError, ProbeRates, TestPlan, TestPlanner};
 use campaign::oracle::{FailurePolicy, Verdict};
 use campaign::safety::{Abort, AbortReason, SafetyConfig};
 use campaign::streaming::StreamingConfig;
@@ -319,7 +319,7 @@ async fn run_tests(run: &Run<'_>, dir: &mut RunDirectory) -> Result<(), RunError
         cancel,
         journal,
     };
-    let planner = Planner::new(scenario)?;
+    let planner = TestPlanner::new(scenario)?;
     let start_tail = campaign::model::start_tail(scenario)?;
     let mut telemetry = Telemetry::start(car, config.state_period, ctx.sample_timeout);
     // The first sample comes a round trip after polling starts: wait for it (or for the link's
