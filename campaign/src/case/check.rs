@@ -46,7 +46,7 @@ impl Case {
     /// Checks that every segment (with its margin, when recorded) continues the route drivably
     /// from the end of `scenario`'s start route.
     pub fn check_route(&self, scenario: &Scenario) -> Result<(), CaseError> {
-        let mut tail = start_tail(scenario).map_err(CaseError::StartRoute)?;
+        let mut tail = start_tail(scenario)?;
         let constraints = scenario.constraints();
         for (command, record) in self.commands.iter().enumerate() {
             let CommandRecord::RunSegments { points, margin, .. } = record else {

@@ -87,12 +87,20 @@ pub enum CaseError {
         /// Why the generator failed.
         error: GenerationError,
     },
-    /// The scenario's start route, where a case's first segment starts, cannot be continued.
+    /// The scenario's start route, where a case's first segment starts, cannot be continued
+    /// ([`crate::model::start_tail`]'s error).
     #[error("scenario.start_route: {0}")]
-    StartRoute(#[source] ModelError),
+    StartRoute(#[source] Box<ModelError>),
     /// Writing JSON failed.
     #[error("cannot write JSON: {0}")]
     Write(#[source] serde_json::Error),
+}
+
+/// The start tail's error ([`crate::model::start_tail`]), the one model error a case meets.
+impl From<ModelError> for CaseError {
+    fn from(error: ModelError) -> Self {
+        Self::StartRoute(Box::new(error))
+    }
 }
 
 pub(crate) fn invalid(path: impl Into<String>, message: impl Into<String>) -> CaseError {

@@ -33,7 +33,7 @@ impl Case {
         {
             return Err(invalid("commands", "no run_segments command to drive"));
         }
-        let start_tail = start_tail(scenario).map_err(CaseError::StartRoute)?;
+        let start_tail = start_tail(scenario)?;
         let commands = case
             .commands
             .iter()
@@ -58,7 +58,7 @@ impl Case {
         generator: &Generator,
         seed: u64,
     ) -> Result<Case, CaseError> {
-        let mut tail = start_tail(scenario).map_err(CaseError::StartRoute)?;
+        let mut tail = start_tail(scenario)?;
         let mut rng = crate::seed::rng(seed);
         let mut case = self.clone();
         for (command, record) in case.commands.iter_mut().enumerate() {
