@@ -10,8 +10,9 @@
 //! - [`drive`]: the test drive as a state machine fed with events (samples, answers, ticks) and
 //!   returning actions (segments and faults to send, stops, brake): streaming, oracle bookkeeping,
 //!   safety decisions and the safe stop.
-//! - [`case`]: the versioned case-file and `campaign.json` formats, and replay planning.
-//! - [`replay`]: the comparison of a replay's runs.
+//! - [`case`]: the versioned case-file and `campaign.json` formats and their checks.
+//! - [`replay`]: replay planning (the test a recorded case is driven as) and the comparison of a
+//!   replay's runs.
 //! - [`seed`]: the one random number generator of every run.
 //!
 //! Not here: the wire protocol and the client (`car-link`; only its protocol layer and firmware

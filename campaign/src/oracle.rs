@@ -14,6 +14,7 @@
 
 use serde::{Deserialize, Serialize};
 use trajgen::Point;
+use trajgen::stats::nearest_rank;
 
 /// The method's threshold, metres.
 pub const DEFAULT_THRESHOLD_M: f64 = 1.0;
@@ -96,13 +97,6 @@ pub fn stats(deviations: &[f64]) -> Option<DeviationStats> {
         rms_m: mean_square.sqrt(),
         p95_m: nearest_rank(&sorted, 0.95).unwrap_or(sorted[n - 1]),
     })
-}
-
-/// The nearest-rank percentile `q` (0..=1) of ascending `sorted`: the smallest value that at
-/// least `q` of the values do not exceed; `None` when empty.
-pub fn nearest_rank<T: Copy>(sorted: &[T], q: f64) -> Option<T> {
-    let rank = (q * sorted.len() as f64).ceil() as usize;
-    sorted.get(rank.clamp(1, sorted.len().max(1)) - 1).copied()
 }
 
 /// Collects one segment's samples and judges it.

@@ -57,13 +57,16 @@ impl Default for StreamingConfig {
     }
 }
 
-/// A point of the car's route with the speed it drives towards it.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Waypoint {
-    /// Position, local ENU metres.
-    pub position: Point,
-    /// Speed towards it, m/s.
-    pub speed: f64,
+/// A point of the car's route with the speed it drives towards it (the route the streamer
+/// watches is a list of them).
+pub use trajgen::Waypoint;
+
+/// `route` as the car's protocol sends it: speed-mode points (`AP_ADD_POINTS`).
+pub fn route_points(route: &[Waypoint]) -> Vec<car_link::RoutePoint> {
+    route
+        .iter()
+        .map(|w| car_link::RoutePoint::at(w.position.x, w.position.y, w.speed))
+        .collect()
 }
 
 /// Where the car is along its route: on segment `segment` (from point `segment` to
@@ -162,7 +165,7 @@ fn remaining_stretches(route: &[Waypoint], progress: Progress) -> Vec<(f64, f64)
 pub fn p99(values: &VecDeque<Duration>) -> Option<Duration> {
     let mut sorted: Vec<Duration> = values.iter().copied().collect();
     sorted.sort_unstable();
-    crate::oracle::nearest_rank(&sorted, 0.99)
+    trajgen::stats::nearest_rank(&sorted, 0.99)
 }
 
 /// Measured link round trips and generation times (the most recent `window` of each).

@@ -45,9 +45,9 @@ const STORED_POINT_TOLERANCE_M: f64 = 1e-3;
 pub const DUPLICATE_POINT_THRESHOLD: f64 = 1e-4;
 use crate::firmware::WATCHDOG;
 
-/// How a [`Car`] talks to the car. Built with [`CarConfig::default`] and changed field by field.
+/// How a [`Car`] talks to the car. Built with [`LinkConfig::default`] and changed field by field.
 #[derive(Debug, Clone, PartialEq)]
-pub struct CarConfig {
+pub struct LinkConfig {
     /// The id requests are sent to before the handshake; 255 (broadcast) learns the car's own id from its reply.
     pub car_id: u8,
     /// Time allowed for each try of a request (MAVLink mission style: about 250 ms per item). It also bounds
@@ -75,9 +75,9 @@ pub struct CarConfig {
     pub byte_timeout: Duration,
 }
 
-impl Default for CarConfig {
+impl Default for LinkConfig {
     fn default() -> Self {
-        CarConfig {
+        LinkConfig {
             car_id: ID_ALL,
             request_timeout: Duration::from_millis(250),
             tries: 5,
@@ -361,7 +361,7 @@ impl Car {
     /// Timeout: the connection attempt is bounded by `connect_timeout`, the handshake by `tries` ×
     /// `request_timeout`. Cancellation: dropping the future closes the link; nothing keeps running.
     /// `sim` is refused here: the orchestrator passes the simulator's pipe to [`Car::over_stream`].
-    pub async fn connect(address: &CarAddress, config: CarConfig) -> Result<Car, CarError> {
+    pub async fn connect(address: &CarAddress, config: LinkConfig) -> Result<Car, CarError> {
         let bridged = matches!(address, CarAddress::Tcp { .. } | CarAddress::Udp { .. });
         if bridged && config.car_id == ID_CAR_CLIENT {
             return Err(CarError::InvalidArgument(
@@ -383,7 +383,7 @@ impl Car {
     ///
     /// Timeout: the handshake is bounded by `tries` × `request_timeout`. Cancellation: dropping the future
     /// closes the stream.
-    pub async fn over_stream<S>(stream: S, config: CarConfig) -> Result<Car, CarError>
+    pub async fn over_stream<S>(stream: S, config: LinkConfig) -> Result<Car, CarError>
     where
         S: AsyncRead + AsyncWrite + Send + 'static,
     {
@@ -394,14 +394,14 @@ impl Car {
     /// A car behind an already open [`Link`]. No reconnection.
     ///
     /// Timeout and cancellation: as [`Car::over_stream`].
-    pub async fn over_link(link: Link, config: CarConfig) -> Result<Car, CarError> {
+    pub async fn over_link(link: Link, config: LinkConfig) -> Result<Car, CarError> {
         Car::start(link, None, config).await
     }
 
     async fn start(
         link: Link,
         reconnect_to: Option<CarAddress>,
-        config: CarConfig,
+        config: LinkConfig,
     ) -> Result<Car, CarError> {
         if config.keepalive.is_some_and(|period| period > WATCHDOG / 4) {
             return Err(CarError::InvalidArgument(format!(
@@ -457,7 +457,7 @@ impl Car {
     }
 
     /// The configuration in force.
-    pub fn config(&self) -> &CarConfig {
+    pub fn config(&self) -> &LinkConfig {
         &self.shared().config
     }
 

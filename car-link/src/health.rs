@@ -65,7 +65,10 @@ impl HealthRecorder {
     }
 }
 
-/// The nearest-rank percentile of sorted samples.
+/// The nearest-rank percentile `pct` (0..=100) of sorted samples: the value of rank
+/// `⌈pct · n / 100⌉` (at least 1); `None` for none. The same definition as
+/// `trajgen::stats::nearest_rank`, kept here because `car-link` depends on no other crate of the
+/// workspace.
 pub fn percentile(sorted: &[Duration], pct: usize) -> Option<Duration> {
     if sorted.is_empty() {
         return None;

@@ -12,9 +12,9 @@
 //!
 //! ```no_run
 //! # async fn drive() -> Result<(), car_link::client::CarError> {
-//! use car_link::{CarAddress, Car, CarConfig, RoutePoint};
+//! use car_link::{CarAddress, Car, LinkConfig, RoutePoint};
 //! let address: CarAddress = "tcp://192.168.1.20:8300".parse().expect("a valid address");
-//! let car = Car::connect(&address, CarConfig::default()).await?;
+//! let car = Car::connect(&address, LinkConfig::default()).await?;
 //! println!("firmware {}", car.version());
 //! car.clear_route().await?;
 //! car.add_points(&[RoutePoint::at(0.0, 0.0, 1.0), RoutePoint::at(5.0, 0.0, 1.0)]).await?;
@@ -47,7 +47,7 @@ pub mod version;
 
 pub use address::CarAddress;
 #[cfg(feature = "client")]
-pub use client::{Car, CarConfig, CarError, LinkEvent, StatePolling, StateSample};
+pub use client::{Car, CarError, LinkConfig, LinkEvent, StatePolling, StateSample};
 pub use fault::{FaultKind, Probe};
 pub use message::{CarState, Reply, Request, RoutePoint};
 pub use version::{CommandId, FirmwareVersion};

@@ -57,7 +57,7 @@ pub struct SimPipe {
 /// use car_link::frame::FrameCodec;
 /// use car_link::message::{CarState, Dialect, Reply, Request};
 /// use car_link::transport::sim_pipe;
-/// use car_link::{Car, CarConfig, FirmwareVersion};
+/// use car_link::{Car, LinkConfig, FirmwareVersion};
 /// use futures::{SinkExt, StreamExt};
 /// use tokio_util::codec::Framed;
 ///
@@ -78,7 +78,7 @@ pub struct SimPipe {
 ///         }
 ///     }
 /// });
-/// let car = Car::over_stream(pipe.host, CarConfig::default()).await.expect("handshake");
+/// let car = Car::over_stream(pipe.host, LinkConfig::default()).await.expect("handshake");
 /// assert_eq!(car.version(), FirmwareVersion::V12_3);
 /// assert_eq!(car.state().await.expect("a state").ms_today(), 1_000);
 /// # }

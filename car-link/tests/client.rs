@@ -5,7 +5,7 @@ mod support;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use car_link::client::{Car, CarConfig, CarError, LinkEvent};
+use car_link::client::{Car, CarError, LinkConfig, LinkEvent};
 use car_link::fault::{FaultError, FaultKind, FaultRejection, Probe};
 use car_link::message::{Anchor, DecodeError, EnuRef, Request, RoutePoint};
 use car_link::transport::sim_pipe;
@@ -16,7 +16,7 @@ use support::{Behaviour, Log, sample_state, serve};
 /// A car behind the in-process pipe, served by the fake car.
 async fn pipe_car(
     behaviour: Behaviour,
-    config: CarConfig,
+    config: LinkConfig,
 ) -> (Result<Car, CarError>, Arc<Mutex<Log>>) {
     let pipe = sim_pipe();
     let log = Arc::new(Mutex::new(Log::default()));
@@ -28,10 +28,10 @@ fn requests(log: &Arc<Mutex<Log>>) -> Vec<Request> {
     log.lock().map(|l| l.requests.clone()).unwrap_or_default()
 }
 
-fn no_keepalive() -> CarConfig {
-    CarConfig {
+fn no_keepalive() -> LinkConfig {
+    LinkConfig {
         keepalive: None,
-        ..CarConfig::default()
+        ..LinkConfig::default()
     }
 }
 
@@ -152,7 +152,7 @@ async fn stray_and_duplicate_replies_are_not_taken_for_answers() {
         ..Behaviour::default()
     };
     // With another car on the same link, the handshake must name the car: a broadcast would take any answer.
-    let config = CarConfig {
+    let config = LinkConfig {
         car_id: 1,
         ..no_keepalive()
     };
@@ -243,7 +243,7 @@ async fn an_undecodable_payload_before_the_reply_does_not_end_the_try() {
     car.enu_ref()
         .await
         .expect("the reply after the garbled payload");
-    assert!(started.elapsed() < CarConfig::default().request_timeout);
+    assert!(started.elapsed() < LinkConfig::default().request_timeout);
     assert_eq!(car.health().undecodable, 1);
 }
 
@@ -542,7 +542,7 @@ async fn terminal_returns_the_reply_text() {
 
 #[tokio::test(start_paused = true)]
 async fn the_keepalive_feeds_the_watchdog_while_the_car_is_alive() {
-    let (car, log) = pipe_car(Behaviour::default(), CarConfig::default()).await;
+    let (car, log) = pipe_car(Behaviour::default(), LinkConfig::default()).await;
     let car = car.expect("handshake");
     let count = || {
         requests(&log)

@@ -7,7 +7,7 @@ mod support;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use car_link::client::{Car, CarConfig, CarError, StatePolling, StateSample};
+use car_link::client::{Car, CarError, LinkConfig, StatePolling, StateSample};
 use car_link::message::Request;
 use futures::StreamExt;
 use support::{Behaviour, Log, serve, slow_pipe};
@@ -23,10 +23,10 @@ async fn slow_car(behaviour: Behaviour) -> (Car, Arc<Mutex<Log>>) {
     let (host, car_end) = slow_pipe(ONE_WAY);
     let log = Arc::new(Mutex::new(Log::default()));
     tokio::spawn(serve(car_end, behaviour, log.clone()));
-    let config = CarConfig {
+    let config = LinkConfig {
         request_timeout: Duration::from_secs(1),
         keepalive: None,
-        ..CarConfig::default()
+        ..LinkConfig::default()
     };
     let car = Car::over_stream(host, config).await.expect("handshake");
     (car, log)

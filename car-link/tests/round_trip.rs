@@ -8,7 +8,7 @@ mod support;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use car_link::client::{Car, CarConfig};
+use car_link::client::{Car, LinkConfig};
 use car_link::health::percentile;
 use support::{Behaviour, Log, serve};
 
@@ -32,9 +32,9 @@ async fn get_state_round_trip_over_loopback_tcp() {
         }
     });
     let address = format!("tcp://127.0.0.1:{port}").parse().expect("address");
-    let config = CarConfig {
+    let config = LinkConfig {
         keepalive: None,
-        ..CarConfig::default()
+        ..LinkConfig::default()
     };
     let car = Car::connect(&address, config).await.expect("connected");
     for _ in 0..200 {

@@ -5,8 +5,8 @@
 use std::time::{Duration, Instant};
 
 use car_link::message::RoutePoint as LinkPoint;
-use car_link::{Car as LinkCar, CarConfig as LinkConfig};
-use car_sim::{Car, CarOptions, RoutePoint, SimConfig, World, WorldAnchor, spawn_in_process};
+use car_link::{Car as LinkCar, LinkConfig};
+use car_sim::{CarOptions, RoutePoint, SimCar, SimConfig, World, WorldAnchor, spawn_in_process};
 use criterion::{Criterion, criterion_group, criterion_main};
 use scenarios::geometry::Point;
 
@@ -38,8 +38,8 @@ fn circle(n: usize, speed: f64) -> Vec<(f64, f64, f64)> {
 }
 
 /// One simulated minute of the model with a GET_STATE poll every 50 ms.
-fn model_minute() -> Car {
-    let mut car = Car::new(CarOptions {
+fn model_minute() -> SimCar {
+    let mut car = SimCar::new(CarOptions {
         world: world(),
         preload_anchors: true,
         ..CarOptions::default()

@@ -9,7 +9,7 @@ use scenarios::geometry::{Area, Point, Polygon, point_segment_distance};
 
 use crate::noise::Noise;
 use crate::{
-    Car, CarOptions, Firmware, Placement, RadioPath, RcMode, RoutePoint, StateReport, World,
+    CarOptions, Firmware, Placement, RadioPath, RcMode, RoutePoint, SimCar, StateReport, World,
     WorldAnchor,
 };
 
@@ -113,23 +113,22 @@ fn polyline_length(points: &[Point]) -> f64 {
     points.windows(2).map(|w| w[0].dist(w[1])).sum()
 }
 
+/// The nearest-rank percentile `p` of `xs` (the workspace's one definition).
 fn percentile(mut xs: Vec<f64>, p: f64) -> f64 {
-    assert!(!xs.is_empty(), "no samples");
     xs.sort_by(f64::total_cmp);
-    let i = ((xs.len() - 1) as f64 * p).round() as usize;
-    xs[i]
+    trajgen::stats::nearest_rank(&xs, p).expect("no samples")
 }
 
 /// An orchestrator stand-in: uploads the route in acked packets of 5 as the car needs it and polls
 /// GET_STATE every 50 ms.
 struct Driver {
-    car: Car,
+    car: SimCar,
     queue: VecDeque<RoutePoint>,
     stopped: bool,
 }
 
 impl Driver {
-    fn new(mut car: Car, route: &[RoutePoint]) -> Self {
+    fn new(mut car: SimCar, route: &[RoutePoint]) -> Self {
         car.terminal("pos_uwb_reset_pos");
         if car.firmware().is_12x() {
             // 12.x's reset copies the position only, and the UWB heading of a car that stood
@@ -137,7 +136,7 @@ impl Driver {
             let s = car.get_state();
             car.set_pos(s.px, s.py, s.yaw);
         }
-        car.set_config(crate::CarConfig {
+        car.set_config(crate::FirmwareConfig {
             ap_repeat_routes: false,
             ..*car.config()
         });
@@ -161,7 +160,7 @@ impl Driver {
     }
 
     /// Runs for `ms`, calling `on_poll` with every state.
-    fn run(&mut self, ms: u64, mut on_poll: impl FnMut(&Car, &StateReport)) {
+    fn run(&mut self, ms: u64, mut on_poll: impl FnMut(&SimCar, &StateReport)) {
         let end = self.car.now_ms() + ms;
         while self.car.now_ms() < end {
             self.car.step();
@@ -183,9 +182,9 @@ impl Driver {
     }
 }
 
-fn placed_car(firmware: Firmware, seed: u64, route: &[Point]) -> Car {
+fn placed_car(firmware: Firmware, seed: u64, route: &[Point]) -> SimCar {
     let heading = (route[1] - route[0]).heading();
-    let mut car = Car::new(CarOptions {
+    let mut car = SimCar::new(CarOptions {
         firmware,
         seed,
         world: lot_world(),
@@ -254,7 +253,7 @@ fn drive_and_measure(
     seed: u64,
     length_m: f64,
     steering: Steering,
-    configure: impl Fn(&mut Car),
+    configure: impl Fn(&mut SimCar),
 ) -> CrossTrack {
     let area = &scenario.area;
     let mut route = scenario.start_route.positions();
@@ -269,7 +268,7 @@ fn drive_and_measure(
         .collect();
     let points = route_points(&route, |i| start_speeds.get(i).copied().unwrap_or(3.0));
     let ideal = steering == Steering::DocumentedIdealSensors;
-    let mut car = Car::new(CarOptions {
+    let mut car = SimCar::new(CarOptions {
         firmware,
         seed,
         world: World::from_scenario(scenario),
@@ -588,7 +587,7 @@ fn a_silent_link_for_two_seconds_brakes_and_stops_the_autopilot() {
 
 #[test]
 fn the_watchdog_is_expired_from_two_seconds_after_boot_and_heartbeats_do_not_count() {
-    let mut car = Car::new(CarOptions::default());
+    let mut car = SimCar::new(CarOptions::default());
     car.run_for(2_000);
     assert!(!car.watchdog_expired());
     car.step();
@@ -659,7 +658,7 @@ fn rc_control_deactivates_and_brakes_to_a_stop() {
 
 #[test]
 fn on_a_bench_the_fused_heading_never_changes_whatever_the_steering() {
-    let mut car = Car::new(CarOptions {
+    let mut car = SimCar::new(CarOptions {
         imu_on_bench: true,
         gnss: crate::GnssModel {
             enabled: false,
@@ -705,7 +704,7 @@ fn nlos_events(walls: Vec<crate::Wall>) -> Vec<crate::DebugEvent> {
         obstacles: vec![square],
         walls,
     };
-    let mut car = Car::new(CarOptions {
+    let mut car = SimCar::new(CarOptions {
         world,
         preload_anchors: true,
         record_events: true,
@@ -791,7 +790,7 @@ fn scenario_deviations(name: &str, with_environment: bool, seed: u64, ms: u64) -
         world.obstacles.clear();
         world.walls.clear();
     }
-    let mut car = Car::new(CarOptions {
+    let mut car = SimCar::new(CarOptions {
         seed,
         world,
         preload_anchors: true,
@@ -844,7 +843,7 @@ fn rock_lot_drive(seed: u64, ms: u64) -> Vec<ShadowSample> {
     let points = route_points(&route, |_| 1.5);
     let world = World::from_scenario(&scenario);
     let anchor = world.anchor(234).expect("anchor 234").position;
-    let mut car = Car::new(CarOptions {
+    let mut car = SimCar::new(CarOptions {
         seed,
         world: world.clone(),
         preload_anchors: true,
@@ -988,7 +987,7 @@ fn the_12_3_uwb_heading_after_set_pos_starts_exact_and_stays_within_ten_degrees(
             car.get_state();
         }
     }
-    let heading_error = |car: &Car| {
+    let heading_error = |car: &SimCar| {
         let t = car.truth();
         let e = (f64::from(-t.uwb.yaw).to_radians() - t.heading + PI).rem_euclid(2.0 * PI) - PI;
         e.to_degrees().abs()

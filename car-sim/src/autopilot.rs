@@ -1,7 +1,7 @@
 //! The pure-pursuit autopilot (`docs/firmware.md#autopilot`): route ring, window scan, steering
 //! law, speed, end of route, and the replace/clear/activate semantics of both firmware generations.
 
-use crate::config::{ApTimeMode, CarConfig, VehicleParams};
+use crate::config::{ApTimeMode, FirmwareConfig, VehicleParams};
 use crate::firmware::Firmware;
 use crate::motor::MotorCommand;
 use crate::terminal::scan_i32;
@@ -207,7 +207,7 @@ impl Autopilot {
     // ----- commands -----
 
     /// AP_ADD_POINTS: the duplicate check on the first point, then store every point.
-    pub fn add_points(&mut self, points: &[RoutePoint], cfg: &CarConfig) -> StoreOutcome {
+    pub fn add_points(&mut self, points: &[RoutePoint], cfg: &FirmwareConfig) -> StoreOutcome {
         let mut outcome = StoreOutcome::default();
         let Some((first, rest)) = points.split_first() else {
             return outcome;
@@ -227,7 +227,7 @@ impl Autopilot {
     pub fn replace_route(
         &mut self,
         points: &[RoutePoint],
-        cfg: &CarConfig,
+        cfg: &FirmwareConfig,
         ms_today: i32,
     ) -> StoreOutcome {
         let mut outcome = StoreOutcome::default();
@@ -262,7 +262,7 @@ impl Autopilot {
     fn replace_in_time_mode(
         &mut self,
         points: &[RoutePoint],
-        cfg: &CarConfig,
+        cfg: &FirmwareConfig,
         outcome: &mut StoreOutcome,
     ) {
         self.has_prev_point = true;
@@ -283,7 +283,7 @@ impl Autopilot {
     fn time_replace_one(
         &mut self,
         p: RoutePoint,
-        cfg: &CarConfig,
+        cfg: &FirmwareConfig,
         outcome: &mut StoreOutcome,
     ) -> bool {
         let size = self.size();
@@ -315,7 +315,7 @@ impl Autopilot {
         true
     }
 
-    fn store(&mut self, p: RoutePoint, cfg: &CarConfig, outcome: &mut StoreOutcome) {
+    fn store(&mut self, p: RoutePoint, cfg: &FirmwareConfig, outcome: &mut StoreOutcome) {
         let size = self.size();
         self.route[self.point_last] = p;
         self.point_last = (self.point_last + 1) % size;
@@ -405,7 +405,7 @@ impl Autopilot {
         time_ms: i32,
         min_diff: i32,
         car: FwPose,
-        cfg: &CarConfig,
+        cfg: &FirmwareConfig,
     ) {
         let size = self.size();
         let Ok(target) = usize::try_from(point) else {
@@ -454,7 +454,7 @@ impl Autopilot {
     }
 
     /// One 10 ms cycle.
-    pub fn cycle(&mut self, cfg: &CarConfig, input: &ApInputs) -> ApOutput {
+    pub fn cycle(&mut self, cfg: &FirmwareConfig, input: &ApInputs) -> ApOutput {
         if !self.active {
             self.rad_now = -1.0;
             return ApOutput::default();
@@ -499,7 +499,7 @@ impl Autopilot {
         (self.point_last + self.size() - 1) % self.size()
     }
 
-    fn pose_source(&self, cfg: &CarConfig, input: &ApInputs) -> FwPose {
+    fn pose_source(&self, cfg: &FirmwareConfig, input: &ApInputs) -> FwPose {
         let use_uwb = match self.firmware {
             Firmware::V10_1 => false,
             Firmware::V12_3 => {
@@ -518,7 +518,7 @@ impl Autopilot {
         if use_uwb { input.uwb } else { input.fused }
     }
 
-    fn radius(&self, cfg: &CarConfig, speed: f32) -> f32 {
+    fn radius(&self, cfg: &FirmwareConfig, speed: f32) -> f32 {
         if !self.dynamic_rad {
             return cfg.ap_base_rad;
         }
@@ -528,7 +528,7 @@ impl Autopilot {
         }
     }
 
-    fn drive_to_start(&mut self, cfg: &CarConfig, input: &ApInputs, car: FwPose) -> ApOutput {
+    fn drive_to_start(&mut self, cfg: &FirmwareConfig, input: &ApInputs, car: FwPose) -> ApOutput {
         self.point_now = 0;
         self.goal = self.route[0];
         let speed = self.route[0].speed;
@@ -558,7 +558,7 @@ impl Autopilot {
         })
     }
 
-    fn scan(&mut self, cfg: &CarConfig, len: usize, car: FwPose, radius: f32) -> Scan {
+    fn scan(&mut self, cfg: &FirmwareConfig, len: usize, car: FwPose, radius: f32) -> Scan {
         let last = self.last_index();
         let repeat = cfg.ap_repeat_routes;
         let mut goal = None;
@@ -616,7 +616,7 @@ impl Autopilot {
         best.map_or((self.route[0], fallback), |(_, p, s)| (p, s))
     }
 
-    fn speed(&self, cfg: &CarConfig, input: &ApInputs, car: FwPose, seg: Segment) -> f32 {
+    fn speed(&self, cfg: &FirmwareConfig, input: &ApInputs, car: FwPose, seg: Segment) -> f32 {
         let (a, b) = (self.route[seg.start], self.route[seg.end]);
         let goal = self.goal;
         if cfg.ap_mode_time == ApTimeMode::Speed || self.sync_received {
@@ -632,7 +632,7 @@ impl Autopilot {
 
     fn time_mode_speed(
         &self,
-        cfg: &CarConfig,
+        cfg: &FirmwareConfig,
         input: &ApInputs,
         car: FwPose,
         a: RoutePoint,
@@ -658,7 +658,7 @@ impl Autopilot {
         goal.dist_to(car.x, car.y) / (dt as f32 / 1000.0)
     }
 
-    fn drive(&self, cfg: &CarConfig, odo_speed: f32, car: FwPose, speed: f32) -> ApOutput {
+    fn drive(&self, cfg: &FirmwareConfig, odo_speed: f32, car: FwPose, speed: f32) -> ApOutput {
         let v = &cfg.vehicle;
         let mut angle = steering_angle(
             car,
@@ -679,7 +679,7 @@ impl Autopilot {
         }
     }
 
-    fn route_end_actions(&mut self, cfg: &CarConfig, ms_today: i32) -> ApOutput {
+    fn route_end_actions(&mut self, cfg: &FirmwareConfig, ms_today: i32) -> ApOutput {
         self.rad_now = -1.0;
         let out = ApOutput {
             servo: Some(cfg.vehicle.steering_center),
@@ -902,8 +902,8 @@ pub(crate) mod experiment {
 mod tests {
     use super::*;
 
-    fn cfg(fw: Firmware, repeat: bool) -> CarConfig {
-        let mut c = CarConfig::defaults(fw);
+    fn cfg(fw: Firmware, repeat: bool) -> FirmwareConfig {
+        let mut c = FirmwareConfig::defaults(fw);
         c.ap_repeat_routes = repeat;
         c
     }
@@ -943,8 +943,8 @@ mod tests {
     fn radius_rule_per_era() {
         let ap10 = Autopilot::new(Firmware::V10_1);
         let ap12 = Autopilot::new(Firmware::V12_3);
-        let c10 = CarConfig::defaults(Firmware::V10_1);
-        let c12 = CarConfig::defaults(Firmware::V12_3);
+        let c10 = FirmwareConfig::defaults(Firmware::V10_1);
+        let c12 = FirmwareConfig::defaults(Firmware::V12_3);
         assert!((ap10.radius(&c10, 1.0) - 1.323).abs() < 1e-3);
         assert!((ap10.radius(&c10, 2.0) - 1.452).abs() < 1e-3);
         assert!((ap12.radius(&c12, 1.0) - 0.8).abs() < 1e-6);

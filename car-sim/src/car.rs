@@ -1,5 +1,5 @@
 //! The simulated car: every firmware task stepped on a 10 ms tick, and the firmware's command
-//! handlers. No I/O and no clock: time advances only through [`Car::step`].
+//! handlers. No I/O and no clock: time advances only through [`SimCar::step`].
 
 use std::collections::VecDeque;
 use std::f64::consts::PI;
@@ -7,7 +7,7 @@ use std::f64::consts::PI;
 use scenarios::geometry::Point;
 
 use crate::autopilot::{ApInputs, Autopilot, FwPose, RoutePart, RoutePoint, StoreOutcome};
-use crate::config::{CarConfig, VehicleParams};
+use crate::config::{FirmwareConfig, VehicleParams};
 use crate::debug::{DebugEvent, Truth};
 use crate::fault::FaultInjection;
 use crate::firmware::Firmware;
@@ -115,7 +115,7 @@ pub struct CarOptions {
     /// Load the world's anchors into the firmware's list at boot (the real firmware boots with
     /// none; the orchestrator uploads them).
     pub preload_anchors: bool,
-    /// Record [`DebugEvent`]s (drain them with [`Car::drain_events`]).
+    /// Record [`DebugEvent`]s (drain them with [`SimCar::drain_events`]).
     pub record_events: bool,
     /// HIL-bench fidelity (`docs/firmware.md#odometry-and-yaw`): the board lies on a desk, so the
     /// IMU never rotates and its yaw stays at the boot heading whatever the simulated motion
@@ -228,9 +228,9 @@ pub struct StateReport {
 
 /// A simulated car.
 #[derive(Debug, Clone)]
-pub struct Car {
+pub struct SimCar {
     options: CarOptions,
-    config: CarConfig,
+    config: FirmwareConfig,
     car_id: u8,
     now_ms: u64,
     motor: Motor,
@@ -264,11 +264,11 @@ struct TrueMotion {
     yaw_rate: f64,
 }
 
-impl Car {
+impl SimCar {
     /// A car just booted with `options`.
     pub fn new(options: CarOptions) -> Self {
         let fw = options.firmware;
-        let config = CarConfig::defaults(fw);
+        let config = FirmwareConfig::defaults(fw);
         let p = options.placement;
         let mut car = Self {
             config,
@@ -614,7 +614,7 @@ impl Car {
     }
 
     /// The configuration in force.
-    pub fn config(&self) -> &CarConfig {
+    pub fn config(&self) -> &FirmwareConfig {
         &self.config
     }
 
@@ -947,16 +947,16 @@ impl Car {
     }
 
     /// SET_MAIN_CONFIG (the record already decoded). Resets the watchdog.
-    pub fn set_config(&mut self, config: CarConfig) {
+    pub fn set_config(&mut self, config: FirmwareConfig) {
         self.kick_watchdog();
         self.config = config;
     }
 
     /// GET_MAIN_CONFIG(_DEFAULT): the configuration in force, or the defaults. Resets the watchdog.
-    pub fn main_config(&mut self, defaults: bool) -> CarConfig {
+    pub fn main_config(&mut self, defaults: bool) -> FirmwareConfig {
         self.kick_watchdog();
         if defaults {
-            CarConfig::defaults(self.options.firmware)
+            FirmwareConfig::defaults(self.options.firmware)
         } else {
             self.config
         }
@@ -987,8 +987,8 @@ ap_set_look_ahead\nap_dynamic_rad\nap_ang_dist_comp\nap_state\n";
 mod tests {
     use super::*;
 
-    fn car(firmware: Firmware) -> Car {
-        Car::new(CarOptions {
+    fn car(firmware: Firmware) -> SimCar {
+        SimCar::new(CarOptions {
             firmware,
             ..CarOptions::default()
         })
@@ -1006,7 +1006,7 @@ mod tests {
 
     #[test]
     fn ms_today_is_unknown_until_gnss_time_or_set_ms_today() {
-        let mut c = Car::new(CarOptions {
+        let mut c = SimCar::new(CarOptions {
             gnss: GnssModel {
                 enabled: false,
                 ..GnssModel::default()
@@ -1066,7 +1066,7 @@ mod tests {
     #[test]
     fn use_uwb_pos_swaps_the_estimates_in_12x_only() {
         for firmware in [Firmware::V10_1, Firmware::V12_3] {
-            let mut c = Car::new(CarOptions {
+            let mut c = SimCar::new(CarOptions {
                 firmware,
                 placement: Placement {
                     x: 3.0,

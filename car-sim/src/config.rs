@@ -117,7 +117,7 @@ impl VehicleParams {
 
 /// The part of the firmware's main configuration that the simulated car obeys.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct CarConfig {
+pub struct FirmwareConfig {
     /// `ap_repeat_routes`: loop over the route forever (factory default **on**).
     pub ap_repeat_routes: bool,
     /// `ap_base_rad`: base look-ahead radius, m.
@@ -158,7 +158,7 @@ pub struct CarConfig {
     pub vehicle: VehicleParams,
 }
 
-impl CarConfig {
+impl FirmwareConfig {
     /// The factory defaults of a firmware generation (with `simulate_motor` on: this is a HIL board).
     pub fn defaults(firmware: Firmware) -> Self {
         Self {
@@ -203,8 +203,8 @@ mod tests {
 
     #[test]
     fn era_defaults_differ_where_documented() {
-        let old = CarConfig::defaults(Firmware::V10_1);
-        let new = CarConfig::defaults(Firmware::V12_3);
+        let old = FirmwareConfig::defaults(Firmware::V10_1);
+        let new = FirmwareConfig::defaults(Firmware::V12_3);
         assert_eq!((old.ap_base_rad, new.ap_base_rad), (1.2, 0.8));
         assert_eq!(old.vehicle.steering_ramp_time, 0.6);
         assert_eq!(new.vehicle.steering_ramp_time, 0.0);

@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use car_link::crc::checksum;
 use car_link::message::{Anchor, EnuRef, Pose, RoutePoint as LinkPoint, SyncPoint};
-use car_link::{Car as LinkCar, CarConfig as LinkConfig, FaultKind, FirmwareVersion, Probe};
+use car_link::{Car as LinkCar, FaultKind, FirmwareVersion, LinkConfig, Probe};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpStream, UdpSocket};
 use tokio::time::timeout;

@@ -2,18 +2,18 @@
 //! reference controller board: same behaviour, same quirks, both firmware generations (10.1, the
 //! default, and 12.3).
 //!
-//! The core is [`Car`]: a deterministic model of the firmware's tasks stepped on a 10 ms tick —
+//! The core is [`SimCar`]: a deterministic model of the firmware's tasks stepped on a 10 ms tick —
 //! the HIL motor simulator, steering servo, true vehicle motion, odometry and the RTK-fused
 //! position, the pure-pursuit autopilot, UWB ranging against a [`World`] (line of sight,
 //! reflections, blocking) with the UWB estimator of each era, fault injection with the exact
 //! terminal texts, and the communication watchdog. It does no I/O and reads no clock: time passes
-//! only through [`Car::step`], and every random draw comes from streams seeded by
+//! only through [`SimCar::step`], and every random draw comes from streams seeded by
 //! [`CarOptions::seed`], so the same seed and the same commands give identical telemetry.
 //!
 //! ```
-//! use car_sim::{Car, CarOptions, RoutePoint};
+//! use car_sim::{SimCar, CarOptions, RoutePoint};
 //!
-//! let mut car = Car::new(CarOptions::default());
+//! let mut car = SimCar::new(CarOptions::default());
 //! let route: Vec<RoutePoint> = (0..20).map(|i| RoutePoint::at(i as f32, 0.0, 2.0)).collect();
 //! car.terminal("ping");
 //! car.add_points(&route[..5]);
@@ -39,7 +39,7 @@
 //! let scenario = scenarios::bundled::load("parking-lot-2anchors")?.scenario;
 //! let config = car_sim::SimConfig { seed: 7, ..car_sim::SimConfig::from_scenario(&scenario) };
 //! let (stream, sim) = car_sim::spawn_in_process(&config);
-//! let car = car_link::Car::over_stream(stream, car_link::CarConfig::default()).await?;
+//! let car = car_link::Car::over_stream(stream, car_link::LinkConfig::default()).await?;
 //! println!("{} at {:?}", car.version(), sim.truth());
 //! # Ok(()) }
 //! ```
@@ -65,8 +65,8 @@ pub mod uwb;
 pub mod world;
 
 pub use autopilot::{FwPose, RoutePart, RoutePoint};
-pub use car::{Car, CarOptions, GnssModel, Placement, RcMode, StateReport};
-pub use config::{ApTimeMode, CarConfig, VehicleParams};
+pub use car::{CarOptions, GnssModel, Placement, RcMode, SimCar, StateReport};
+pub use config::{ApTimeMode, FirmwareConfig, VehicleParams};
 pub use debug::{DebugEvent, Truth};
 pub use fault::{FaultInjection, FaultKind};
 pub use firmware::Firmware;

@@ -5,7 +5,7 @@
 use std::collections::VecDeque;
 
 use crate::autopilot::FwPose;
-use crate::config::CarConfig;
+use crate::config::FirmwareConfig;
 use crate::firmware::Firmware;
 
 /// Entries of the pose history.
@@ -164,7 +164,7 @@ impl FusedPosition {
 
     /// One odometry tick: motor values to distance and speed, the heading from the IMU, the
     /// position step and the history entry.
-    pub fn odometry_tick(&mut self, cfg: &CarConfig, input: OdometryInput) -> OdometryStep {
+    pub fn odometry_tick(&mut self, cfg: &FirmwareConfig, input: OdometryInput) -> OdometryStep {
         let OdometryInput {
             tacho,
             rpm,
@@ -202,7 +202,7 @@ impl FusedPosition {
     /// the IMU pull (`yaw_imu_gain` degrees per IMU sample, snapping within ±1.2·gain).
     fn odometry_yaw_step(
         &mut self,
-        cfg: &CarConfig,
+        cfg: &FirmwareConfig,
         distance: f32,
         imu_yaw: f32,
         steering_angle: f32,
@@ -263,7 +263,7 @@ impl FusedPosition {
 
     /// A GNSS fix arrives: store `px_gps/py_gps`, then correct heading and position if the gate
     /// allows.
-    pub fn gnss_fix(&mut self, cfg: &CarConfig, fix: GnssFix) {
+    pub fn gnss_fix(&mut self, cfg: &FirmwareConfig, fix: GnssFix) {
         let (gx, gy) = self.minus_antenna_offset(cfg, fix.x, fix.y);
         self.px_gps = gx;
         self.py_gps = gy;
@@ -277,7 +277,7 @@ impl FusedPosition {
         self.driven_since_fix = 0.0;
     }
 
-    fn minus_antenna_offset(&self, cfg: &CarConfig, x: f32, y: f32) -> (f32, f32) {
+    fn minus_antenna_offset(&self, cfg: &FirmwareConfig, x: f32, y: f32) -> (f32, f32) {
         let a = -self.yaw.to_radians();
         let (s, c) = a.sin_cos();
         // 10.x quirk: the y offset enters with the wrong sign.
@@ -291,7 +291,7 @@ impl FusedPosition {
         (x - ox, y - oy)
     }
 
-    fn correct_heading(&mut self, cfg: &CarConfig, gx: f32, gy: f32, t_fix: u64) {
+    fn correct_heading(&mut self, cfg: &FirmwareConfig, gx: f32, gy: f32, t_fix: u64) {
         let Some((px_prev, py_prev, t_prev)) = self.prev_corr else {
             return;
         };
@@ -309,7 +309,7 @@ impl FusedPosition {
         ));
     }
 
-    fn correct_position(&mut self, cfg: &CarConfig, gx: f32, gy: f32, t_fix: u64) {
+    fn correct_position(&mut self, cfg: &FirmwareConfig, gx: f32, gy: f32, t_fix: u64) {
         let Some(h) = self.history_at(t_fix) else {
             return;
         };
@@ -325,8 +325,8 @@ impl FusedPosition {
 mod tests {
     use super::*;
 
-    fn cfg() -> CarConfig {
-        CarConfig::defaults(Firmware::V10_1)
+    fn cfg() -> FirmwareConfig {
+        FirmwareConfig::defaults(Firmware::V10_1)
     }
 
     #[test]

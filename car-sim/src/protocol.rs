@@ -1,5 +1,5 @@
 //! The firmware's packet handler: decodes a request payload with `car-link`, runs it on the
-//! [`Car`] and encodes the replies the firmware would send (`docs/protocol.md`).
+//! [`SimCar`] and encodes the replies the firmware would send (`docs/protocol.md`).
 
 use std::time::Duration;
 
@@ -12,8 +12,8 @@ use car_link::message::{
 use car_link::version::{CommandId, FirmwareVersion};
 
 use crate::autopilot::RoutePoint;
-use crate::car::{Car, RcMode, StateReport};
-use crate::config::{ApTimeMode, CarConfig};
+use crate::car::{RcMode, SimCar, StateReport};
+use crate::config::{ApTimeMode, FirmwareConfig};
 use crate::firmware::Firmware;
 
 /// SET_MAIN_CONFIG acks only after the flash write; the simulator waits this long.
@@ -39,14 +39,14 @@ pub fn link_version(firmware: Firmware) -> FirmwareVersion {
 /// The simulated controller board: the car model plus its stored configuration record.
 #[derive(Debug, Clone)]
 pub struct Board {
-    car: Car,
+    car: SimCar,
     record: MainConfig,
     version: FirmwareVersion,
 }
 
 impl Board {
     /// A board around a freshly built car.
-    pub fn new(car: Car) -> Self {
+    pub fn new(car: SimCar) -> Self {
         let version = link_version(car.firmware());
         let record = default_record(version, car.car_id());
         let mut board = Self {
@@ -54,18 +54,18 @@ impl Board {
             record,
             version,
         };
-        let config = car_config_from(&board.record, board.car.firmware());
+        let config = firmware_config_from(&board.record, board.car.firmware());
         board.car.set_config(config);
         board
     }
 
     /// The car model.
-    pub fn car(&self) -> &Car {
+    pub fn car(&self) -> &SimCar {
         &self.car
     }
 
     /// The car model, mutable (for stepping and tests).
-    pub fn car_mut(&mut self) -> &mut Car {
+    pub fn car_mut(&mut self) -> &mut SimCar {
         &mut self.car
     }
 
@@ -235,7 +235,7 @@ impl Board {
         if record.version() != self.version {
             return Vec::new();
         }
-        let config = car_config_from(&record, self.car.firmware());
+        let config = firmware_config_from(&record, self.car.firmware());
         self.record = record;
         self.car.set_config(config);
         vec![(Reply::Ack(CommandId::SetMainConfig), FLASH_WRITE_DELAY)]
@@ -251,8 +251,8 @@ fn default_record(version: FirmwareVersion, car_id: u8) -> MainConfig {
 }
 
 /// The model's configuration from a record; fields absent in the version keep the defaults.
-pub fn car_config_from(record: &MainConfig, firmware: Firmware) -> CarConfig {
-    let mut c = CarConfig::defaults(firmware);
+pub fn firmware_config_from(record: &MainConfig, firmware: Firmware) -> FirmwareConfig {
+    let mut c = FirmwareConfig::defaults(firmware);
     let flag = |f: ConfigField, d: bool| record.get_u8(f).map_or(d, |v| v != 0);
     let real = |f: ConfigField, d: f32| record.get_f32(f).unwrap_or(d);
     c.ap_repeat_routes = flag(ConfigField::ApRepeatRoutes, c.ap_repeat_routes);

@@ -21,7 +21,7 @@ use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tokio::time::{Instant, sleep_until, timeout};
 
-use crate::car::{Car, CarOptions, GnssModel, Placement, TICK_MS};
+use crate::car::{CarOptions, GnssModel, Placement, SimCar, TICK_MS};
 use crate::debug::{DebugEvent, Truth};
 use crate::firmware::Firmware;
 use crate::noise::Noise;
@@ -354,7 +354,7 @@ impl Core {
 }
 
 fn start_core(config: &SimConfig) -> (mpsc::Sender<CoreMsg>, Arc<Mutex<Shared>>, JoinHandle<()>) {
-    let car = Car::new(config.car_options());
+    let car = SimCar::new(config.car_options());
     let shared = Arc::new(Mutex::new(Shared {
         truth: car.truth(),
         events: Vec::new(),

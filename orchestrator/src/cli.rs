@@ -300,7 +300,7 @@ pub struct ReturnArgs {
     /// Planner: `dubins` (search over poses with Dubins connections, the default) or
     /// `reference` (the method's arcs, random extensions and best of 100).
     #[arg(long, default_value = "dubins")]
-    pub planner: recovery::Planner,
+    pub planner: recovery::PlannerKind,
     /// Print the route as JSON on standard output.
     #[arg(long)]
     pub json: bool,

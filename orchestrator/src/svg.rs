@@ -110,8 +110,8 @@ pub fn area_picture(scenario: &Scenario, report: &ValidationReport) -> String {
 }
 
 fn heat_map(svg: &mut String, frame: &Frame, report: &ValidationReport) {
-    let grid = &report.grid;
-    let max_visits = grid.visits.iter().copied().max().unwrap_or(0).max(1);
+    let (grid, visits) = (&report.grid.raster, &report.grid.visits);
+    let max_visits = visits.iter().copied().max().unwrap_or(0).max(1);
     let size = grid.cell_size * frame.scale;
     for row in 0..grid.rows {
         for col in 0..grid.cols {
@@ -120,7 +120,7 @@ fn heat_map(svg: &mut String, frame: &Frame, report: &ValidationReport) {
                 continue;
             }
             let centre = grid.cell_centre(col, row);
-            let fill = heat_colour(grid.visits[i], max_visits);
+            let fill = heat_colour(visits[i], max_visits);
             let _ = writeln!(
                 svg,
                 r#"<rect x="{:.1}" y="{:.1}" width="{:.2}" height="{:.2}" fill="{fill}"/>"#,

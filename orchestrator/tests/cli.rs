@@ -1,16 +1,13 @@
 //! The `drivecheck` command line, end to end: exit codes, JSON outputs, files written.
 
-use std::process::{Command, Output};
+mod common;
+
+use common::drivecheck;
+
+use std::process::Output;
 
 use scenarios::bundled;
 use trajgen::{Point, check_route};
-
-fn drivecheck(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_drivecheck"))
-        .args(args)
-        .output()
-        .expect("the drivecheck binary runs")
-}
 
 fn json(output: &Output) -> serde_json::Value {
     serde_json::from_slice(&output.stdout).unwrap_or_else(|e| {

@@ -3,31 +3,15 @@
 //! conversion clamps it, and the oracle fails the test. The car never falls silent, so such a test
 //! is failed, not aborted for stale telemetry.
 
+mod common;
+
+use common::{drivecheck, path, text};
+
 use std::path::Path;
-use std::process::{Command, Output};
 
 use campaign::case::{Case, CommandRecord};
 use campaign::model::{FaultKind, Probe};
 use campaign::oracle::Verdict;
-
-fn drivecheck(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_drivecheck"))
-        .args(args)
-        .output()
-        .expect("the drivecheck binary runs")
-}
-
-fn text(output: &Output) -> String {
-    format!(
-        "stdout: {}\nstderr: {}",
-        String::from_utf8_lossy(&output.stdout),
-        String::from_utf8_lossy(&output.stderr)
-    )
-}
-
-fn path(p: &Path) -> &str {
-    p.to_str().expect("temporary paths are UTF-8")
-}
 
 /// A passing case without faults (seed 1, test 0), with `fault` added after its first segment.
 fn case_with(dir: &Path, fault: CommandRecord) -> std::path::PathBuf {

@@ -3,31 +3,15 @@
 //! seed, closely with varied seeds), passes without its faults, is refused in another scenario
 //! unless told, and a hand-written case replays; the run directories list and show.
 
+mod common;
+
+use common::{drivecheck, path, text};
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use campaign::case::{CampaignRecord, Case};
 use campaign::oracle::Verdict;
 use campaign::replay::Comparison;
-
-fn drivecheck(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_drivecheck"))
-        .args(args)
-        .output()
-        .expect("the drivecheck binary runs")
-}
-
-fn text(output: &Output) -> String {
-    format!(
-        "stdout: {}\nstderr: {}",
-        String::from_utf8_lossy(&output.stdout),
-        String::from_utf8_lossy(&output.stderr)
-    )
-}
-
-fn path(p: &Path) -> &str {
-    p.to_str().expect("temporary paths are UTF-8")
-}
 
 /// Runs a 4-test campaign with seed 1 in `dir` and returns its first failing case file.
 fn failing_case(dir: &Path) -> PathBuf {

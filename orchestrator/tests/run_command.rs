@@ -1,6 +1,10 @@
 //! `drivecheck run` end to end on the embedded simulated car in virtual time: the exit status
 //! says whether every test passed, and the run directory holds the campaign and its cases.
 
+mod common;
+
+use common::text;
+
 use std::process::{Command, Output};
 
 fn run(args: &[&str], out: &std::path::Path) -> Output {
@@ -11,14 +15,6 @@ fn run(args: &[&str], out: &std::path::Path) -> Output {
         .arg(out)
         .output()
         .expect("the drivecheck binary runs")
-}
-
-fn text(output: &Output) -> String {
-    format!(
-        "stdout: {}\nstderr: {}",
-        String::from_utf8_lossy(&output.stdout),
-        String::from_utf8_lossy(&output.stderr)
-    )
 }
 
 #[test]

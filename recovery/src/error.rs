@@ -6,7 +6,7 @@ use thiserror::Error;
 
 use trajgen::Violation;
 
-use crate::planner::Planner;
+use crate::planner::PlannerKind;
 
 /// Why [`plan`](crate::plan) returned no route.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -69,7 +69,7 @@ pub enum RecoveryError {
     #[error("the {planner} planner found no return route: {tried}")]
     NoRoute {
         /// The planner that gave up.
-        planner: Planner,
+        planner: PlannerKind,
         /// What it tried.
         tried: Tried,
     },

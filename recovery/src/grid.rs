@@ -1,7 +1,7 @@
 //! The search's heuristic: distance to go around the obstacles, over a grid.
 //!
-//! The area is rasterised into square cells (a cell is free when its centre is inside the fence
-//! and outside every cutout, found by scanlines), and Dijkstra's algorithm spreads from the joins'
+//! The area is rasterised into square cells ([`trajgen::Raster`]: a cell is free when its centre
+//! is inside the drivable region), and Dijkstra's algorithm spreads from the joins'
 //! cells (each seeded with the recovery route left after it) over 8-connected free cells, with no
 //! diagonal step past a blocked cell. The result ignores headings and turning; it steers the
 //! search around cutouts and walls instead of into them.
@@ -9,7 +9,7 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-use trajgen::{Area, Point};
+use trajgen::{Area, Point, Raster};
 
 use crate::join::Join;
 
@@ -19,11 +19,8 @@ const MAX_CELLS: f64 = 4.0e6;
 /// Distance to go from every free cell to the recovery route.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct DistanceGrid {
-    origin: Point,
-    cell: f64,
-    cols: usize,
-    rows: usize,
-    free: Vec<bool>,
+    /// The free cells: the area's drivable ones and the joins'.
+    raster: Raster,
     cost: Vec<f64>,
 }
 
@@ -55,20 +52,12 @@ impl DistanceGrid {
     /// The grid of `area` with cells of `cell` metres (larger in a huge area: at most
     /// [`MAX_CELLS`] cells), distances to `joins`.
     pub fn new(area: &Area, joins: &[Join], cell: f64) -> Self {
-        let bbox = area.bbox();
-        let (width, height) = bbox.size();
-        let cell = cell.max((width * height / MAX_CELLS).sqrt());
-        let cols = ((width / cell).ceil() as usize).max(1);
-        let rows = ((height / cell).ceil() as usize).max(1);
+        let (width, height) = area.bbox().size();
+        let raster = Raster::new(area, cell.max((width * height / MAX_CELLS).sqrt()));
         let mut grid = Self {
-            origin: bbox.min,
-            cell,
-            cols,
-            rows,
-            free: vec![false; cols * rows],
-            cost: vec![f64::INFINITY; cols * rows],
+            cost: vec![f64::INFINITY; raster.drivable.len()],
+            raster,
         };
-        grid.rasterise(area);
         grid.spread(joins);
         grid
     }
@@ -76,53 +65,19 @@ impl DistanceGrid {
     /// Distance to go from `p` (the cost of its cell; infinite outside the grid or where the
     /// recovery route cannot be reached).
     pub fn at(&self, p: Point) -> f64 {
-        self.index_of(p).map_or(f64::INFINITY, |i| self.cost[i])
-    }
-
-    fn index_of(&self, p: Point) -> Option<usize> {
-        let col = ((p.x - self.origin.x) / self.cell).floor();
-        let row = ((p.y - self.origin.y) / self.cell).floor();
-        let inside = col >= 0.0 && row >= 0.0 && col < self.cols as f64 && row < self.rows as f64;
-        inside.then(|| row as usize * self.cols + col as usize)
-    }
-
-    /// Marks cells whose centre lies inside the area, row by row (even–odd rule over every edge
-    /// of the fence and the cutouts).
-    fn rasterise(&mut self, area: &Area) {
-        let mut crossings = Vec::new();
-        for row in 0..self.rows {
-            let y = self.origin.y + (row as f64 + 0.5) * self.cell;
-            crossings.clear();
-            for e in area.edges() {
-                if (e.a.y > y) != (e.b.y > y) {
-                    crossings.push(e.a.x + (y - e.a.y) * (e.b.x - e.a.x) / (e.b.y - e.a.y));
-                }
-            }
-            crossings.sort_by(f64::total_cmp);
-            for pair in crossings.chunks_exact(2) {
-                let first = ((pair[0] - self.origin.x) / self.cell - 0.5)
-                    .ceil()
-                    .max(0.0) as usize;
-                let last = ((pair[1] - self.origin.x) / self.cell - 0.5).floor();
-                if last < 0.0 {
-                    continue;
-                }
-                let last = (last as usize).min(self.cols - 1);
-                for col in first..=last {
-                    self.free[row * self.cols + col] = true;
-                }
-            }
-        }
+        self.raster
+            .index_of(p)
+            .map_or(f64::INFINITY, |i| self.cost[i])
     }
 
     /// Dijkstra from the joins' cells over free cells.
     fn spread(&mut self, joins: &[Join]) {
         let mut queue = BinaryHeap::new();
         for join in joins {
-            if let Some(i) = self.index_of(join.point)
+            if let Some(i) = self.raster.index_of(join.point)
                 && join.remaining < self.cost[i]
             {
-                self.free[i] = true;
+                self.raster.drivable[i] = true;
                 self.cost[i] = join.remaining;
                 queue.push(Entry {
                     cost: join.remaining,
@@ -150,12 +105,12 @@ impl DistanceGrid {
 
     /// Free 8-neighbours of cell `index` with the step length; no diagonal past a blocked cell.
     fn neighbours(&self, index: usize) -> impl Iterator<Item = (usize, f64)> + '_ {
-        let (row, col) = ((index / self.cols) as isize, (index % self.cols) as isize);
-        let free = move |r: isize, c: isize| {
-            let inside = r >= 0 && c >= 0 && (r as usize) < self.rows && (c as usize) < self.cols;
-            inside && self.free[r as usize * self.cols + c as usize]
-        };
-        const MOVES: [(isize, isize); 8] = [
+        let cols = self.raster.cols;
+        let (row, col) = ((index / cols) as i64, (index % cols) as i64);
+        let free_cell =
+            move |r: i64, c: i64| self.raster.index(c, r).filter(|&i| self.raster.drivable[i]);
+        let free = move |r: i64, c: i64| free_cell(r, c).is_some();
+        const MOVES: [(i64, i64); 8] = [
             (0, 1),
             (1, 0),
             (0, -1),
@@ -168,13 +123,13 @@ impl DistanceGrid {
         MOVES.into_iter().filter_map(move |(dr, dc)| {
             let (r, c) = (row + dr, col + dc);
             let diagonal = dr != 0 && dc != 0;
-            let open = free(r, c) && (!diagonal || (free(row + dr, col) && free(row, col + dc)));
+            let open = !diagonal || (free(row + dr, col) && free(row, col + dc));
             let step = if diagonal {
-                self.cell * std::f64::consts::SQRT_2
+                self.raster.cell_size * std::f64::consts::SQRT_2
             } else {
-                self.cell
+                self.raster.cell_size
             };
-            open.then(|| (r as usize * self.cols + c as usize, step))
+            free_cell(r, c).filter(|_| open).map(|i| (i, step))
         })
     }
 }

@@ -15,9 +15,9 @@
 //!   ([`ReturnRoute::checked_points`]); the car then drives on along the recovery route
 //!   ([`ReturnRoute::joined`]).
 //!
-//! Two planners ([`Planner`]): [`Planner::Dubins`] (the default) searches poses with a hybrid A*
+//! Two planners ([`PlannerKind`]): [`PlannerKind::Dubins`] (the default) searches poses with a hybrid A*
 //! and shoots discretised Dubins paths at every joinable point of the recovery route, minimising
-//! the distance to the start route; [`Planner::Reference`] is the method's own (arcs and a line,
+//! the distance to the start route; [`PlannerKind::Reference`] is the method's own (arcs and a line,
 //! random extensions, best of 100 attempts), kept as a baseline. Both end with the method's
 //! shortening pass. Every plan carries its [`Quality`]: length, a lower bound, their ratio, and
 //! what was tried.
@@ -70,7 +70,7 @@ pub use arcs::{ArcConnector, can_turn_around};
 pub use error::{RecoveryError, Tried};
 pub use join::Join;
 pub use planner::{
-    FALLBACK_CLEARANCE_FRACTIONS, JoinPolicy, PlanConfig, Planner, Quality, ReturnRoute,
+    FALLBACK_CLEARANCE_FRACTIONS, JoinPolicy, PlanConfig, PlannerKind, Quality, ReturnRoute,
     UnknownPlanner,
 };
 pub use reference::ReferenceConfig;
@@ -82,7 +82,7 @@ use rand::Rng;
 use trajgen::{Area, Point};
 
 /// Plans a return route from the car's pose `from` to `recovery_route` in `area` with the default
-/// planner ([`Planner::Dubins`]) and budgets; see [`PlanConfig`] to choose others.
+/// planner ([`PlannerKind::Dubins`]) and budgets; see [`PlanConfig`] to choose others.
 ///
 /// Errors: the pose is non-finite, outside the fence, inside a cutout or on an edge; the recovery
 /// route has fewer than two points or nothing joinable; the constraints make no sense; no route

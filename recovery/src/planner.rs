@@ -36,7 +36,7 @@ const MAX_ARC_STEPS: usize = 1000;
 
 /// Which planner to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
-pub enum Planner {
+pub enum PlannerKind {
     /// Hybrid A* over poses with Dubins shots to any joinable point of the recovery route, then
     /// the shortening pass with Dubins and tight-arc shortcuts (the default: shorter routes, a
     /// bounded worst case). Uses no randomness.
@@ -48,20 +48,20 @@ pub enum Planner {
     Reference,
 }
 
-impl Planner {
+impl PlannerKind {
     /// Every planner.
-    pub const ALL: [Planner; 2] = [Planner::Dubins, Planner::Reference];
+    pub const ALL: [PlannerKind; 2] = [PlannerKind::Dubins, PlannerKind::Reference];
 
     /// The name used on the command line (`--planner NAME`).
     pub fn name(self) -> &'static str {
         match self {
-            Planner::Dubins => "dubins",
-            Planner::Reference => "reference",
+            PlannerKind::Dubins => "dubins",
+            PlannerKind::Reference => "reference",
         }
     }
 }
 
-impl fmt::Display for Planner {
+impl fmt::Display for PlannerKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.name())
     }
@@ -79,7 +79,7 @@ pub enum JoinPolicy {
     Earliest,
 }
 
-/// A planner name that is not one of [`Planner::ALL`].
+/// A planner name that is not one of [`PlannerKind::ALL`].
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
 #[error("unknown planner {name:?}: expected one of dubins, reference")]
 pub struct UnknownPlanner {
@@ -87,11 +87,11 @@ pub struct UnknownPlanner {
     pub name: String,
 }
 
-impl FromStr for Planner {
+impl FromStr for PlannerKind {
     type Err = UnknownPlanner;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        Planner::ALL
+        PlannerKind::ALL
             .into_iter()
             .find(|p| p.name().eq_ignore_ascii_case(s))
             .ok_or_else(|| UnknownPlanner { name: s.to_owned() })
@@ -139,7 +139,7 @@ pub struct ReturnRoute {
     /// The quality numbers.
     pub quality: Quality,
     /// The planner that made it.
-    pub planner: Planner,
+    pub planner: PlannerKind,
     /// The clearance from every edge the route keeps, metres: the constraints' own, or less when
     /// [`PlanConfig::plan_with_fallback`] had to relax it. `points` followed by [`Join::next`]
     /// passes [`trajgen::check_route`] with the constraints and this clearance.
@@ -168,7 +168,7 @@ impl ReturnRoute {
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct PlanConfig {
     /// The planner to run.
-    pub planner: Planner,
+    pub planner: PlannerKind,
     /// Where the route may join the recovery route (the reference planner: always the earliest
     /// joinable point).
     pub join_policy: JoinPolicy,
@@ -182,7 +182,7 @@ pub struct PlanConfig {
 
 impl PlanConfig {
     /// This configuration with another planner.
-    pub fn with_planner(self, planner: Planner) -> Self {
+    pub fn with_planner(self, planner: PlannerKind) -> Self {
         Self { planner, ..self }
     }
 
@@ -222,15 +222,15 @@ impl PlanConfig {
         self.check()?;
         check_pose(area, from)?;
         let recovery = match (self.planner, self.join_policy) {
-            (Planner::Dubins, JoinPolicy::Anywhere) => {
+            (PlannerKind::Dubins, JoinPolicy::Anywhere) => {
                 RecoveryRoute::new(area, recovery_route, constraints)?
             }
             _ => RecoveryRoute::new(area, recovery_route, constraints)?.only_earliest(),
         };
         let scene = Scene { area, constraints };
         let (found, tried) = match self.planner {
-            Planner::Dubins => search::search(scene, &recovery, &self.search, from),
-            Planner::Reference => {
+            PlannerKind::Dubins => search::search(scene, &recovery, &self.search, from),
+            PlannerKind::Reference => {
                 let target = *recovery.earliest();
                 reference::search(scene, from, target, &self.reference, rng)
             }
@@ -340,7 +340,7 @@ impl PlanConfig {
         let dubins = DubinsConnector::new(&self.search.radii, scene.constraints, SHORTCUT_TRIES);
         let tight_arcs = ArcConnector::tight(scene.constraints);
         let shortcuts = match self.planner {
-            Planner::Dubins => vec![
+            PlannerKind::Dubins => vec![
                 Shortcuts {
                     connector: &dubins as &dyn Connect,
                     window: DUBINS_WINDOW,
@@ -350,7 +350,7 @@ impl PlanConfig {
                     window: TIGHT_ARCS_WINDOW,
                 },
             ],
-            Planner::Reference => vec![Shortcuts {
+            PlannerKind::Reference => vec![Shortcuts {
                 connector: &self.reference.arcs,
                 window: usize::MAX,
             }],

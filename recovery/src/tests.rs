@@ -5,7 +5,7 @@ use rand::{RngExt, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 use trajgen::{Area, Point, Polygon, check_route};
 
-use crate::{Constraints, PlanConfig, Planner, Pose, RecoveryError, can_turn_around, plan};
+use crate::{Constraints, PlanConfig, PlannerKind, Pose, RecoveryError, can_turn_around, plan};
 use trajgen::test_areas::{REAL_AREAS, RealArea};
 
 fn points(raw: &[[f64; 2]]) -> Vec<Point> {
@@ -52,7 +52,7 @@ fn turnable_pose(area: &Area, clearance: f64, rng: &mut Pcg64Mcg) -> Pose {
 /// The pose must also let the car turn around where it stands ([`can_turn_around`]): about one
 /// pose in 200 with 1 m clearance faces the fence in a narrow tip or corner with no forward way
 /// out (see `a_boxed_in_pose_is_no_route_not_a_bad_route`).
-fn route_from_clear_pose_passes_the_check(planner: Planner, real: &RealArea, seed: u64) {
+fn route_from_clear_pose_passes_the_check(planner: PlannerKind, real: &RealArea, seed: u64) {
     let area = area_of(real);
     let recovery = points(real.recovery_route);
     let c = Constraints::default();
@@ -92,7 +92,7 @@ proptest! {
         area in 0..REAL_AREAS.len(),
         seed in any::<u64>(),
     ) {
-        route_from_clear_pose_passes_the_check(Planner::Dubins, &REAL_AREAS[area], seed);
+        route_from_clear_pose_passes_the_check(PlannerKind::Dubins, &REAL_AREAS[area], seed);
     }
 }
 
@@ -108,7 +108,7 @@ proptest! {
         area in 0..REAL_AREAS.len(),
         seed in any::<u64>(),
     ) {
-        route_from_clear_pose_passes_the_check(Planner::Reference, &REAL_AREAS[area], seed);
+        route_from_clear_pose_passes_the_check(PlannerKind::Reference, &REAL_AREAS[area], seed);
     }
 }
 
@@ -117,7 +117,7 @@ fn the_same_seed_gives_the_same_route() {
     for real in &REAL_AREAS {
         let area = area_of(real);
         let recovery = points(real.recovery_route);
-        for planner in Planner::ALL {
+        for planner in PlannerKind::ALL {
             let config = PlanConfig::default().with_planner(planner);
             let run = |seed: u64| {
                 let mut rng = Pcg64Mcg::seed_from_u64(seed);
@@ -218,7 +218,7 @@ fn a_search_out_of_budget_reports_what_it_tried() {
         let RecoveryError::NoRoute { planner, tried } = failure else {
             panic!("expected NoRoute, got {failure:?}");
         };
-        assert_eq!(planner, Planner::Dubins);
+        assert_eq!(planner, PlannerKind::Dubins);
         assert_eq!(tried.expansions, 1);
         assert!(tried.connections > 0);
     }
@@ -226,10 +226,10 @@ fn a_search_out_of_budget_reports_what_it_tried() {
 
 #[test]
 fn planner_names_round_trip() {
-    for planner in Planner::ALL {
-        assert_eq!(planner.name().parse::<Planner>(), Ok(planner));
+    for planner in PlannerKind::ALL {
+        assert_eq!(planner.name().parse::<PlannerKind>(), Ok(planner));
     }
-    assert!("astar".parse::<Planner>().is_err());
+    assert!("astar".parse::<PlannerKind>().is_err());
 }
 
 #[test]
@@ -285,7 +285,7 @@ fn a_boxed_in_pose_is_no_route_not_a_bad_route() {
         attempts: 3,
         ..crate::ReferenceConfig::default()
     };
-    for planner in Planner::ALL {
+    for planner in PlannerKind::ALL {
         let mut rng = Pcg64Mcg::seed_from_u64(1);
         let config = PlanConfig::default()
             .with_planner(planner)
@@ -339,7 +339,7 @@ fn the_earliest_join_policy_joins_where_the_reference_planner_does() {
         };
         let earliest =
             plan_with(PlanConfig::default().with_join_policy(crate::JoinPolicy::Earliest));
-        let reference = plan_with(PlanConfig::default().with_planner(Planner::Reference));
+        let reference = plan_with(PlanConfig::default().with_planner(PlannerKind::Reference));
         assert_eq!(earliest.join, reference.join, "{}", real.name);
         let anywhere = plan_with(PlanConfig::default());
         assert!(

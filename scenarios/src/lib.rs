@@ -37,14 +37,14 @@ mod xml;
 use std::path::Path;
 
 pub use error::{Location, Place, Problem, ScenarioError, Warning, WarningKind};
-pub use model::{Anchor, EnuOrigin, Environment, Obstacle, Route, RoutePoint, Scenario, Wall};
+pub use model::{Anchor, EnuOrigin, Environment, Obstacle, Route, Scenario, Wall};
 pub use settings::{
     AnchorRangeFault, CampaignSettings, CommandWeights, DEFAULT_BITFLIP_BITS, FaultKind,
     FaultSettings, GeneratorSettings, Interval, Vehicle, WheelSlipFault, YawFault, fault_kind_name,
 };
 /// The area geometry of [`trajgen`], re-exported for crates that see scenarios but not the generator.
 pub use trajgen::geometry;
-pub use trajgen::{Area, Constraints, Point, Polygon};
+pub use trajgen::{Area, Constraints, Point, Polygon, Waypoint};
 pub use validate::{MAX_ANCHORS, MAX_SPEED_KMH};
 pub use write::to_toml;
 

@@ -5,7 +5,7 @@
 
 use serde::Deserialize;
 use sha2::{Digest, Sha256};
-use trajgen::{Area, Constraints, Point, Polygon};
+use trajgen::{Area, Constraints, Point, Polygon, Waypoint};
 
 use crate::settings::{CampaignSettings, GeneratorSettings, Vehicle};
 use crate::{ScenarioError, Warning};
@@ -74,44 +74,27 @@ pub struct EnuOrigin {
     pub height: f64,
 }
 
-/// One point of a hand-drawn route.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct RoutePoint {
-    /// East, metres.
-    pub x: f64,
-    /// North, metres.
-    pub y: f64,
-    /// Speed the car should drive towards this point, m/s.
-    pub speed: f64,
-}
-
-impl RoutePoint {
-    /// The point's position.
-    pub fn position(&self) -> Point {
-        Point::new(self.x, self.y)
-    }
-}
-
-/// A hand-drawn route: the points the car's autopilot follows, in order.
+/// A hand-drawn route: the points the car's autopilot follows, in order, each with the speed the
+/// car should drive towards it.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Route {
     /// The points, in driving order.
-    pub points: Vec<RoutePoint>,
+    pub points: Vec<Waypoint>,
 }
 
 impl Route {
     /// The positions of the points, in order.
     pub fn positions(&self) -> Vec<Point> {
-        self.points.iter().map(RoutePoint::position).collect()
+        self.points.iter().map(|p| p.position).collect()
     }
 
     /// The first point, if any.
-    pub fn first(&self) -> Option<&RoutePoint> {
+    pub fn first(&self) -> Option<&Waypoint> {
         self.points.first()
     }
 
     /// The last point, if any.
-    pub fn last(&self) -> Option<&RoutePoint> {
+    pub fn last(&self) -> Option<&Waypoint> {
         self.points.last()
     }
 }

@@ -6,10 +6,10 @@
 use std::path::Path;
 
 use serde::Deserialize;
-use trajgen::{Area, AreaError, Point, Polygon};
+use trajgen::{Area, AreaError, Point, Polygon, Waypoint};
 
 use crate::error::{Location, Problem, ScenarioError};
-use crate::model::{Anchor, EnuOrigin, Environment, Obstacle, Route, RoutePoint, Scenario, Wall};
+use crate::model::{Anchor, EnuOrigin, Environment, Obstacle, Route, Scenario, Wall};
 use crate::settings::{CampaignSettings, GeneratorSettings, Vehicle};
 
 /// A scenario as written in a file, before any check.
@@ -210,11 +210,10 @@ fn route(points: &[RawRoutePoint], field: &str) -> Result<Route, FieldProblem> {
         .enumerate()
         .map(|(i, p)| {
             let at = |name: &str| format!("{field}[{i}].{name}");
-            Ok(RoutePoint {
-                x: finite(p.x, || at("x"))?,
-                y: finite(p.y, || at("y"))?,
-                speed: finite(p.speed, || at("speed"))?,
-            })
+            Ok(Waypoint::new(
+                Point::new(finite(p.x, || at("x"))?, finite(p.y, || at("y"))?),
+                finite(p.speed, || at("speed"))?,
+            ))
         })
         .collect::<Result<Vec<_>, _>>()?;
     Ok(Route { points })

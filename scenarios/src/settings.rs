@@ -1,10 +1,10 @@
 //! Vehicle, generator and campaign settings: every field has the method's default.
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use trajgen::{Constraints, GeneratorConfig, Strategy};
 
-/// An inclusive range `min..=max`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+/// An inclusive range `min..=max` (also the `{min, max}` ranges of a case file's settings).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Interval<T> {
     /// Smallest value.

@@ -10,10 +10,10 @@
 //! edge than the generator's clearance.
 
 use trajgen::geometry::turn_angle;
-use trajgen::{Area, Point};
+use trajgen::{Area, Point, Waypoint};
 
 use crate::error::{Problem, ScenarioError, Warning, WarningKind};
-use crate::model::{Route, RoutePoint, Scenario};
+use crate::model::{Route, Scenario};
 use crate::settings::{
     CampaignSettings, FaultKind, GeneratorSettings, Interval, Vehicle, fault_kind_name,
 };
@@ -264,10 +264,13 @@ fn check_route(area: &Area, route: &Route, field: &str) -> Check {
     }
     for (i, p) in route.points.iter().enumerate() {
         positive(p.speed, &format!("{field}[{i}].speed"))?;
-        if !area.contains_point(p.position()) {
+        if !area.contains_point(p.position) {
             return Err((
                 format!("{field}[{i}]"),
-                Problem::PointOutsideArea { x: p.x, y: p.y },
+                Problem::PointOutsideArea {
+                    x: p.position.x,
+                    y: p.position.y,
+                },
             ));
         }
     }
@@ -294,7 +297,7 @@ fn check_join(s: &Scenario) -> Check {
     let (Some(end), Some(start)) = (s.recovery_route.last(), s.start_route.first()) else {
         return Ok(());
     };
-    let (end, start) = (end.position(), start.position());
+    let (end, start) = (end.position, start.position);
     let gap = end.dist(start);
     let limit = s.generator.recovery_join_max_m();
     if gap > limit {
@@ -380,8 +383,8 @@ impl Vertex {
 /// a recovery route that ends exactly on the start route's first point does not repeat it.
 fn approach(s: &Scenario) -> (Vec<Vertex>, Option<usize>) {
     let vertex = |on_start: bool| {
-        move |(index, p): (usize, &RoutePoint)| Vertex {
-            position: p.position(),
+        move |(index, p): (usize, &Waypoint)| Vertex {
+            position: p.position,
             on_start,
             index,
         }
@@ -569,7 +572,7 @@ mod tests {
             "built: anchors[0].x: not a finite number"
         );
         scenario.anchors.clear();
-        scenario.start_route.points[1].x = f64::INFINITY;
+        scenario.start_route.points[1].position.x = f64::INFINITY;
         let error = scenario.validate("built").unwrap_err();
         assert_eq!(error.field(), Some("start_route[1]"));
     }

@@ -102,8 +102,8 @@ fn route(out: &mut String, key: &str, route: &Route) {
         let _ = writeln!(
             out,
             "    {{ x = {}, y = {}, speed = {} }},",
-            float(p.x),
-            float(p.y),
+            float(p.position.x),
+            float(p.position.y),
             float(p.speed)
         );
     }
@@ -259,10 +259,10 @@ fn yaw(out: &mut String, f: &YawFault) {
 #[cfg(test)]
 mod tests {
     use proptest::prelude::*;
-    use trajgen::{Area, Point, Polygon};
+    use trajgen::{Area, Point, Polygon, Waypoint};
 
     use super::*;
-    use crate::model::{EnuOrigin, Environment, RoutePoint};
+    use crate::model::{EnuOrigin, Environment};
     use crate::raw::{build, parse_toml};
 
     #[test]
@@ -284,11 +284,7 @@ mod tests {
     fn route(points: &[(f64, f64)], shift: Point, speed: f64) -> Route {
         let points = points
             .iter()
-            .map(|&(x, y)| RoutePoint {
-                x: x + shift.x,
-                y: y + shift.y,
-                speed,
-            })
+            .map(|&(x, y)| Waypoint::new(Point::new(x + shift.x, y + shift.y), speed))
             .collect();
         Route { points }
     }

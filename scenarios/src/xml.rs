@@ -358,7 +358,7 @@ mod tests {
         assert_eq!(s.area.fence().vertices().len(), 4);
         assert_eq!(s.area.cutouts().len(), 2, "route 3 is ignored");
         assert_eq!(s.area.cutouts()[0].vertices()[0].x, 6.0, "route 4 first");
-        assert_eq!(s.start_route.points[1].x, 3.5);
+        assert_eq!(s.start_route.points[1].position.x, 3.5);
         assert_eq!(s.recovery_route.points[0].speed, 0.5);
         assert_eq!((s.anchors[0].id, s.anchors[0].x), (7, -1.0));
     }

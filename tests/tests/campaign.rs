@@ -10,7 +10,7 @@ use std::time::Duration;
 use campaign::case::{CampaignRecord, Case};
 use campaign::model::Campaign;
 use campaign::oracle::{SegmentVerdict, Verdict};
-use car_link::{Car, CarConfig};
+use car_link::{Car, LinkConfig};
 use car_sim::{SimConfig, SimHandle};
 use orchestrator::runner::{
     CampaignReport, RunConfig, RunError, Silent, SimulatorView, run_campaign,
@@ -31,10 +31,10 @@ async fn sim_car(scenario: &Scenario, seed: u64) -> (Car, SimHandle) {
         ..SimConfig::from_scenario(scenario)
     };
     let (stream, sim) = car_sim::spawn_in_process(&config);
-    let car_config = CarConfig {
+    let car_config = LinkConfig {
         request_timeout: Duration::from_secs(1),
         terminal_timeout: Duration::from_secs(2),
-        ..CarConfig::default()
+        ..LinkConfig::default()
     };
     let car = Car::over_stream(stream, car_config).await.unwrap();
     (car, sim)
@@ -186,10 +186,10 @@ async fn a_lossy_slow_link_ends_no_test_early() {
         ..SimConfig::from_scenario(&scenario)
     };
     let (stream, sim) = car_sim::spawn_in_process(&sim_config);
-    let car_config = CarConfig {
+    let car_config = LinkConfig {
         request_timeout: Duration::from_secs(1),
         terminal_timeout: Duration::from_secs(2),
-        ..CarConfig::default()
+        ..LinkConfig::default()
     };
     let car = Car::over_stream(stream, car_config).await.unwrap();
     let dir = tempfile::tempdir().unwrap();

@@ -5,7 +5,7 @@ use proptest::prelude::*;
 use rand::SeedableRng;
 use rand_pcg::Pcg64Mcg;
 use scenarios::{Scenario, bundled};
-use trajgen::{Generator, Point, RouteTail, Strategy, ValidationConfig, Verdict, check_route};
+use trajgen::{AreaVerdict, Generator, Point, RouteTail, Strategy, ValidationConfig, check_route};
 
 fn scenario(name: &str) -> Scenario {
     bundled::load(name)
@@ -42,7 +42,7 @@ fn every_bundled_area_validates_safe_over_10_km() {
             &mut |_| {},
         )
         .unwrap();
-        assert_eq!(report.verdict, Verdict::Safe, "{name}: {report:?}");
+        assert_eq!(report.verdict, AreaVerdict::Safe, "{name}: {report:?}");
         assert!(report.completed && report.km >= 10.0, "{name}");
         assert_eq!(report.failures, 0, "{name}");
     }

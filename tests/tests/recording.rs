@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use campaign::case::{Case, CommandRecord};
 use campaign::model::Campaign;
-use car_link::CarConfig;
+use car_link::LinkConfig;
 use car_sim::SimConfig;
 use orchestrator::recording::{
     AckOutcome, CarCommand, CarStateRecord, CommandAck, CommandSent, FaultRecord, FaultStatus,
@@ -37,10 +37,10 @@ async fn try_campaign(seed: u64, tests: usize, out: &Path) -> Result<(), RunErro
         ..SimConfig::from_scenario(&scenario)
     };
     let (stream, sim) = car_sim::spawn_in_process(&sim_config);
-    let car_config = CarConfig {
+    let car_config = LinkConfig {
         request_timeout: Duration::from_secs(1),
         terminal_timeout: Duration::from_secs(2),
-        ..CarConfig::default()
+        ..LinkConfig::default()
     };
     let car = car_link::Car::over_stream(stream, car_config)
         .await

@@ -1,4 +1,5 @@
-//! Planar geometry of test areas: points, closed polygons and the area (fence minus cutouts).
+//! Planar geometry of test areas: points (and waypoints, points with a speed), closed polygons and
+//! the area (fence minus cutouts).
 //!
 //! Coordinates are local ENU metres (x east, y north); headings are radians counter-clockwise from
 //! east. Polygons are stored open (the first vertex is not repeated) and always treated as closed:
@@ -67,6 +68,24 @@ impl Point {
     /// Whether both coordinates are finite.
     pub fn is_finite(self) -> bool {
         self.x.is_finite() && self.y.is_finite()
+    }
+}
+
+/// A point of a route with the speed the car drives towards it: the one shape of a route point
+/// with a speed (scenario routes, segments, return routes, the route the car is streamed). File
+/// formats and the car's wire protocol have their own spellings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Waypoint {
+    /// Position, local ENU metres.
+    pub position: Point,
+    /// Speed towards it, m/s.
+    pub speed: f64,
+}
+
+impl Waypoint {
+    /// A waypoint at `position` driven towards at `speed` m/s.
+    pub const fn new(position: Point, speed: f64) -> Self {
+        Self { position, speed }
     }
 }
 

@@ -3,12 +3,15 @@
 //! `trajgen` is pure: no I/O, no clocks, no threads. Every random choice takes an explicit RNG, so
 //! the same seed gives the same trajectory.
 //!
-//! - [`geometry`]: points, closed polygons, the area (fence minus cutouts), exact predicates.
+//! - [`geometry`]: points, waypoints (a point with a speed), closed polygons, the area (fence minus
+//!   cutouts), exact predicates.
 //! - [`constraints`]: what makes a route drivable, and the check.
 //! - [`generator`]: extends a route by `n` points with the ahead margin
 //!   (`docs/method.md#ahead-margin`).
 //! - [`validation`]: drives one long trajectory through an area and gives a verdict
 //!   (`docs/method.md#validating-an-area`).
+//! - [`raster`]: the area on a square grid (which cells have a drivable centre).
+//! - [`stats`]: the nearest-rank percentile every crate of the workspace reports with.
 //!
 //! ```
 //! use rand::SeedableRng;
@@ -37,6 +40,8 @@ pub mod generator;
 pub mod geometry;
 #[cfg(test)]
 mod proptests;
+pub mod raster;
+pub mod stats;
 #[cfg(any(test, feature = "test-areas"))]
 #[doc(hidden)]
 pub mod test_areas;
@@ -49,8 +54,9 @@ pub use generator::{
     Extension, ExtensionStats, GenerationError, Generator, GeneratorConfig, Pose, RouteTail,
     Strategy,
 };
-pub use geometry::{Area, AreaError, BBox, Point, Polygon, PolygonError};
+pub use geometry::{Area, AreaError, BBox, Point, Polygon, PolygonError, Waypoint};
+pub use raster::Raster;
 pub use validation::{
-    CoverageGrid, FailureRecord, HotSpot, Progress, ValidationConfig, ValidationError,
-    ValidationReport, Verdict, validate_area,
+    AreaVerdict, CoverageGrid, FailureRecord, HotSpot, Progress, ValidationConfig, ValidationError,
+    ValidationReport, validate_area,
 };

@@ -5,7 +5,7 @@
 //! [`ValidationConfig::km`] kilometres, in extensions of [`ValidationConfig::extension_points`]
 //! points, each generated with the ahead margin. The [`ValidationReport`] gives the outer tries per
 //! extension (max, mean, p99), the failures, the worst places ([`HotSpot`]s), the coverage of the
-//! drivable area and a downsampled trajectory for drawing. The verdict is [`Verdict::Safe`] iff the
+//! drivable area and a downsampled trajectory for drawing. The verdict is [`AreaVerdict::Safe`] iff the
 //! run completed, no extension failed and no extension needed more than half the outer-try limit.
 //!
 //! **After a failure** (an extension that used every outer try): the failure is counted, the
@@ -18,9 +18,9 @@
 //! failures occur, the run stops early and the report says `completed: false`.
 //!
 //! **Coverage** is measured on a grid of [`ValidationConfig::cell_size`] cells over the fence's
-//! bounding box: a cell is *drivable* when its centre is strictly inside the drivable region, and
-//! *visited* when a segment of the final trajectory (start route excluded) passes through it
-//! (exact grid traversal). Coverage = visited drivable cells / drivable cells.
+//! bounding box ([`Raster`]): a cell is *drivable* when its centre is strictly inside the drivable
+//! region, and *visited* when a segment of the final trajectory (start route excluded) passes
+//! through it (exact grid traversal). Coverage = visited drivable cells / drivable cells.
 //!
 //! **Hot spots** are the places (route ends) of the hardest extensions — failures first, then most
 //! outer tries, then most inner tries (candidate points drawn, which still ranks tight places when
@@ -34,6 +34,8 @@ use thiserror::Error;
 
 use crate::generator::{ExtensionStats, GenerationError, Generator, GeneratorConfig, RouteTail};
 use crate::geometry::{Area, Point};
+use crate::raster::Raster;
+use crate::stats::nearest_rank;
 
 /// What to validate and how.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -103,24 +105,24 @@ pub struct Progress {
 
 /// The method's judgement of an area.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Verdict {
+pub enum AreaVerdict {
     /// Completed, no failure, and no extension needed more than half the outer-try limit.
     Safe,
     /// Anything else.
     Unsafe,
 }
 
-impl Verdict {
+impl AreaVerdict {
     /// `"safe"` or `"unsafe"`.
     pub fn as_str(self) -> &'static str {
         match self {
-            Verdict::Safe => "safe",
-            Verdict::Unsafe => "unsafe",
+            AreaVerdict::Safe => "safe",
+            AreaVerdict::Unsafe => "unsafe",
         }
     }
 }
 
-impl std::fmt::Display for Verdict {
+impl std::fmt::Display for AreaVerdict {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.as_str())
     }
@@ -154,64 +156,29 @@ pub struct FailureRecord {
     pub reached: usize,
 }
 
-/// Visits per cell of a square grid over the fence's bounding box, for coverage and a heat map.
+/// Visits per cell of the area's [`Raster`], for coverage and a heat map.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CoverageGrid {
-    /// Lower-left corner of cell (0, 0).
-    pub origin: Point,
-    /// Side of a cell, metres.
-    pub cell_size: f64,
-    /// Cells along x.
-    pub cols: usize,
-    /// Cells along y.
-    pub rows: usize,
-    /// Per cell (row-major, `row * cols + col`): whether its centre is drivable.
-    pub drivable: Vec<bool>,
-    /// Per cell (row-major): how many trajectory segments pass through it.
+    /// The cells over the fence's bounding box and which of them are drivable.
+    pub raster: Raster,
+    /// Per cell (row-major, `row * cols + col`): how many trajectory segments pass through it.
     pub visits: Vec<u32>,
 }
 
 impl CoverageGrid {
     /// An empty grid over `area`'s fence bounding box.
     pub fn new(area: &Area, cell_size: f64) -> Self {
-        let bbox = area.bbox();
-        let (w, h) = bbox.size();
-        let cols = ((w / cell_size).ceil() as usize).max(1);
-        let rows = ((h / cell_size).ceil() as usize).max(1);
-        let mut grid = Self {
-            origin: bbox.min,
-            cell_size,
-            cols,
-            rows,
-            drivable: Vec::with_capacity(cols * rows),
-            visits: vec![0; cols * rows],
-        };
-        for row in 0..rows {
-            for col in 0..cols {
-                let centre = grid.cell_centre(col, row);
-                grid.drivable.push(area.contains_point(centre));
-            }
+        let raster = Raster::new(area, cell_size);
+        Self {
+            visits: vec![0; raster.drivable.len()],
+            raster,
         }
-        grid
-    }
-
-    /// The centre of cell (`col`, `row`).
-    pub fn cell_centre(&self, col: usize, row: usize) -> Point {
-        self.origin
-            + Point::new(
-                (col as f64 + 0.5) * self.cell_size,
-                (row as f64 + 0.5) * self.cell_size,
-            )
-    }
-
-    /// Number of drivable cells.
-    pub fn drivable_cells(&self) -> usize {
-        self.drivable.iter().filter(|&&d| d).count()
     }
 
     /// Number of drivable cells visited at least once.
     pub fn visited_cells(&self) -> usize {
-        self.drivable
+        self.raster
+            .drivable
             .iter()
             .zip(&self.visits)
             .filter(|&(&d, &v)| d && v > 0)
@@ -220,7 +187,7 @@ impl CoverageGrid {
 
     /// Visited drivable cells / drivable cells (0 when none is drivable).
     pub fn coverage(&self) -> f64 {
-        let drivable = self.drivable_cells();
+        let drivable = self.raster.drivable_cells();
         if drivable == 0 {
             0.0
         } else {
@@ -228,36 +195,32 @@ impl CoverageGrid {
         }
     }
 
-    fn cell_of(&self, p: Point) -> (i64, i64) {
-        let c = (p - self.origin) * (1.0 / self.cell_size);
-        (c.x.floor() as i64, c.y.floor() as i64)
-    }
-
     fn mark(&mut self, col: i64, row: i64) {
-        if (0..self.cols as i64).contains(&col) && (0..self.rows as i64).contains(&row) {
-            self.visits[row as usize * self.cols + col as usize] += 1;
+        if let Some(i) = self.raster.index(col, row) {
+            self.visits[i] += 1;
         }
     }
 
     /// Counts one visit in every cell the segment `a → b` passes through (Amanatides–Woo
     /// traversal).
     pub fn visit_segment(&mut self, a: Point, b: Point) {
-        let (mut col, mut row) = self.cell_of(a);
-        let (end_col, end_row) = self.cell_of(b);
+        let (mut col, mut row) = self.raster.cell_of(a);
+        let (end_col, end_row) = self.raster.cell_of(b);
+        let (origin, cell_size) = (self.raster.origin, self.raster.cell_size);
         let d = b - a;
         let axis = |start: f64, origin: f64, index: i64, delta: f64| -> (i64, f64, f64) {
             if delta > 0.0 {
-                let boundary = origin + (index + 1) as f64 * self.cell_size;
-                (1, (boundary - start) / delta, self.cell_size / delta)
+                let boundary = origin + (index + 1) as f64 * cell_size;
+                (1, (boundary - start) / delta, cell_size / delta)
             } else if delta < 0.0 {
-                let boundary = origin + index as f64 * self.cell_size;
-                (-1, (boundary - start) / delta, -self.cell_size / delta)
+                let boundary = origin + index as f64 * cell_size;
+                (-1, (boundary - start) / delta, -cell_size / delta)
             } else {
                 (0, f64::INFINITY, f64::INFINITY)
             }
         };
-        let (step_x, mut t_x, dt_x) = axis(a.x, self.origin.x, col, d.x);
-        let (step_y, mut t_y, dt_y) = axis(a.y, self.origin.y, row, d.y);
+        let (step_x, mut t_x, dt_x) = axis(a.x, origin.x, col, d.x);
+        let (step_y, mut t_y, dt_y) = axis(a.y, origin.y, row, d.y);
         self.mark(col, row);
         let steps = (end_col - col).abs() + (end_row - row).abs();
         for _ in 0..steps {
@@ -277,7 +240,7 @@ impl CoverageGrid {
 #[derive(Debug, Clone, PartialEq)]
 pub struct ValidationReport {
     /// Safe iff completed, no failure, max outer tries ≤ half the limit.
-    pub verdict: Verdict,
+    pub verdict: AreaVerdict,
     /// Kilometres of trajectory driven (as kept, start route excluded).
     pub km: f64,
     /// Kilometres asked for.
@@ -522,7 +485,7 @@ fn report(run: Run<'_>, completed: bool) -> ValidationReport {
     } else {
         sorted.iter().map(|&t| f64::from(t)).sum::<f64>() / sorted.len() as f64
     };
-    let p99_outer_tries = percentile(&sorted, 0.99);
+    let p99_outer_tries = nearest_rank(&sorted, 0.99).unwrap_or(0);
     let failures = run.failures.len() as u64;
     let safe = completed && failures == 0 && max_outer_tries <= limit / 2;
     let mut grid = CoverageGrid::new(run.area, run.config.cell_size);
@@ -530,7 +493,11 @@ fn report(run: Run<'_>, completed: bool) -> ValidationReport {
         grid.visit_segment(w[0], w[1]);
     }
     ValidationReport {
-        verdict: if safe { Verdict::Safe } else { Verdict::Unsafe },
+        verdict: if safe {
+            AreaVerdict::Safe
+        } else {
+            AreaVerdict::Unsafe
+        },
         km: run.km(),
         target_km: run.config.km,
         completed,
@@ -551,15 +518,6 @@ fn report(run: Run<'_>, completed: bool) -> ValidationReport {
         grid,
         stats: run.stats,
     }
-}
-
-/// Nearest-rank percentile of sorted values.
-fn percentile(sorted: &[u32], q: f64) -> u32 {
-    if sorted.is_empty() {
-        return 0;
-    }
-    let rank = (q * sorted.len() as f64).ceil() as usize;
-    sorted[rank.clamp(1, sorted.len()) - 1]
 }
 
 /// The `count` worst places, failures first, then by outer tries, then by inner tries, pairwise
@@ -662,7 +620,7 @@ mod tests {
             .unwrap();
             assert_eq!(
                 report.verdict,
-                Verdict::Safe,
+                AreaVerdict::Safe,
                 "{}: {report:?}",
                 fixture.name
             );
@@ -728,7 +686,7 @@ mod tests {
                 .with_generator(generator)
         };
         let report = validate_area(&area, &start, &config, &mut rng(1), &mut |_| {}).unwrap();
-        assert_eq!(report.verdict, Verdict::Unsafe);
+        assert_eq!(report.verdict, AreaVerdict::Unsafe);
         assert!(report.failures > 0);
         assert_eq!(report.failure_records.len() as u64, report.failures);
         let worst = report.hotspots[0];
@@ -752,12 +710,14 @@ mod tests {
         let (area, start) = room_with_trap();
         let config = ValidationConfig::default().with_km(2.0);
         let report = validate_area(&area, &start, &config, &mut rng(1), &mut |_| {}).unwrap();
-        assert_eq!(report.verdict, Verdict::Safe, "{report:?}");
-        let grid = &report.grid;
-        let corridor: Vec<usize> = (0..grid.visits.len())
-            .filter(|&i| grid.drivable[i] && grid.cell_centre(i % grid.cols, i / grid.cols).x > 9.0)
+        assert_eq!(report.verdict, AreaVerdict::Safe, "{report:?}");
+        let (raster, visits) = (&report.grid.raster, &report.grid.visits);
+        let corridor: Vec<usize> = (0..visits.len())
+            .filter(|&i| {
+                raster.drivable[i] && raster.cell_centre(i % raster.cols, i / raster.cols).x > 9.0
+            })
             .collect();
-        assert!(corridor.iter().all(|&i| grid.visits[i] == 0));
+        assert!(corridor.iter().all(|&i| visits[i] == 0));
         assert!(report.coverage < 0.6, "coverage {}", report.coverage);
     }
 
@@ -774,7 +734,7 @@ mod tests {
         };
         let report = validate_area(&area, &start, &config, &mut rng(1), &mut |_| {}).unwrap();
         assert!(!report.completed);
-        assert_eq!(report.verdict, Verdict::Unsafe);
+        assert_eq!(report.verdict, AreaVerdict::Unsafe);
         assert_eq!(report.failures, 1);
         assert_eq!(report.hotspots[0].x, 32.0);
     }
@@ -798,7 +758,11 @@ mod tests {
     fn a_segment_visits_every_cell_it_passes_through() {
         let area = Area::new(rect(0.0, 0.0, 4.0, 4.0), vec![]).unwrap();
         let mut grid = CoverageGrid::new(&area, 1.0);
-        assert_eq!((grid.cols, grid.rows, grid.drivable_cells()), (4, 4, 16));
+        let raster = &grid.raster;
+        assert_eq!(
+            (raster.cols, raster.rows, raster.drivable_cells()),
+            (4, 4, 16)
+        );
         grid.visit_segment(Point::new(0.5, 0.5), Point::new(2.5, 1.5));
         let visited: Vec<(usize, usize)> = (0..16)
             .filter(|&i| grid.visits[i] > 0)
@@ -812,16 +776,11 @@ mod tests {
     #[test]
     fn only_cells_with_a_drivable_centre_count() {
         let area = Area::new(rect(0.0, 0.0, 4.0, 4.0), vec![rect(1.0, 1.0, 3.0, 3.0)]).unwrap();
-        let grid = CoverageGrid::new(&area, 1.0);
-        assert_eq!(grid.drivable_cells(), 12);
-    }
-
-    #[test]
-    fn percentile_is_nearest_rank() {
-        let v: Vec<u32> = (1..=200).collect();
-        assert_eq!(percentile(&v, 0.99), 198);
-        assert_eq!(percentile(&[7], 0.99), 7);
-        assert_eq!(percentile(&[], 0.99), 0);
+        let mut grid = CoverageGrid::new(&area, 1.0);
+        grid.visit_segment(Point::new(0.5, 0.5), Point::new(3.5, 0.5));
+        grid.visit_segment(Point::new(1.5, 1.5), Point::new(2.5, 2.5));
+        // 4 of the 12 drivable cells; the cutout's cells do not count.
+        assert!((grid.coverage() - 4.0 / 12.0).abs() < 1e-12);
     }
 
     #[test]

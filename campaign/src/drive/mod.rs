@@ -250,10 +250,7 @@ pub fn start_route(start: &Route, standing: Point) -> Vec<Waypoint> {
         position: standing,
         speed,
     })
-    .chain(start.points.iter().map(|p| Waypoint {
-        position: p.position(),
-        speed: p.speed,
-    }))
+    .chain(start.points.iter().copied())
     .collect()
 }
 
@@ -676,10 +673,7 @@ impl<'a> TestDrive<'a> {
 
     fn append_op(&mut self, now: Duration, decision: Decision, segment: &Segment) -> Operation {
         let command_index = self.cursor.command;
-        let points: Vec<Waypoint> = segment
-            .waypoints()
-            .map(|(position, speed)| Waypoint { position, speed })
-            .collect();
+        let points: Vec<Waypoint> = segment.waypoints().collect();
         let append = self.streamer.appended(now, &decision, &points);
         self.safety.extend_route(&segment.points);
         self.segments.push(AppendedSegment {

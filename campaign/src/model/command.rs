@@ -6,7 +6,7 @@
 //! command is what the runner sends and what a replay re-sends.
 
 pub use car_link::fault::{FaultKind, Probe, UnknownProbe};
-use trajgen::{Point, RouteTail};
+use trajgen::{Point, RouteTail, Waypoint};
 
 /// One step of a test.
 #[derive(Debug, Clone, PartialEq)]
@@ -95,12 +95,12 @@ impl Segment {
     }
 
     /// The points with their speeds (a missing speed repeats the last one).
-    pub fn waypoints(&self) -> impl Iterator<Item = (Point, f64)> + '_ {
+    pub fn waypoints(&self) -> impl Iterator<Item = Waypoint> + '_ {
         let last = self.speeds.last().copied().unwrap_or(0.0);
         self.points
             .iter()
             .enumerate()
-            .map(move |(i, &p)| (p, self.speeds.get(i).copied().unwrap_or(last)))
+            .map(move |(i, &p)| Waypoint::new(p, self.speeds.get(i).copied().unwrap_or(last)))
     }
 
     /// Length of the extension from `start` (the route's end before it) through its points, metres.

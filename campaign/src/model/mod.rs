@@ -38,10 +38,10 @@
 //!
 //! # Shrinking
 //!
-//! Off on hardware (`docs/method.md#replay-and-shrinking`): [`Planner::plan_test`] takes the first
-//! value of the strategy and never shrinks. For simulation, [`Planner::plan_tree`] returns the
-//! proptest value tree ([`PlanTree`]): after a failing run call [`PlanTree::simplify`] with the
-//! number of commands that ran (the ones after the failure are dropped first) and run
+//! Off on hardware (`docs/method.md#replay-and-shrinking`): [`TestPlanner::plan_test`] takes the
+//! first value of the strategy and never shrinks. For simulation, [`TestPlanner::plan_tree`]
+//! returns the proptest value tree ([`PlanTree`]): after a failing run call [`PlanTree::simplify`]
+//! with the number of commands that ran (the ones after the failure are dropped first) and run
 //! [`PlanTree::current`] again; call [`PlanTree::complicate`] when the simpler test passed. The
 //! `Sequential` tree then deletes commands from the back and shrinks single commands (a segment's
 //! intent shrinks towards fewer points and lower speeds and its points are regenerated from the
@@ -208,12 +208,12 @@ pub fn plan_test(
     test_index: usize,
     start_tail: RouteTail,
 ) -> Result<TestPlan, ModelError> {
-    Planner::new(scenario)?.plan_test(campaign, test_index, start_tail)
+    TestPlanner::new(scenario)?.plan_test(campaign, test_index, start_tail)
 }
 
 /// Plans the tests of one scenario (validates its settings once).
 #[derive(Debug, Clone)]
-pub struct Planner {
+pub struct TestPlanner {
     preconditions: Preconditions,
     generator: Generator,
     settings: CampaignSettings,
@@ -291,7 +291,7 @@ impl PlanTree {
     }
 }
 
-impl Planner {
+impl TestPlanner {
     /// A planner for `scenario`, with its generator (wedge strategy) and campaign settings.
     pub fn new(scenario: &Scenario) -> Result<Self, ModelError> {
         check_settings(&scenario.campaign)?;

@@ -236,7 +236,7 @@ fn a_zero_run_segments_weight_is_refused() {
     let mut s = parking_lot();
     s.campaign.weights.run_segments = 0;
     assert!(matches!(
-        Planner::new(&s),
+        TestPlanner::new(&s),
         Err(ModelError::InvalidSettings(_))
     ));
 }
@@ -246,7 +246,7 @@ fn an_inverted_range_is_refused() {
     let mut s = parking_lot();
     s.campaign.faults.yaw.duration = Interval::new(5, 1);
     assert!(matches!(
-        Planner::new(&s),
+        TestPlanner::new(&s),
         Err(ModelError::InvalidSettings(_))
     ));
 }
@@ -298,7 +298,7 @@ fn a_route_facing_the_fence_up_close_is_a_generation_error() {
 #[test]
 fn shrinking_keeps_every_simpler_test_drivable() {
     let s = parking_lot();
-    let planner = Planner::new(&s).unwrap();
+    let planner = TestPlanner::new(&s).unwrap();
     let tail = start_tail(&s).unwrap();
     let mut tree = planner.plan_tree(&campaign(4), 9, tail).unwrap();
     let full = tree.current().commands.len();
@@ -317,7 +317,7 @@ fn shrinking_keeps_every_simpler_test_drivable() {
 #[test]
 fn shrinking_first_drops_the_commands_that_never_ran() {
     let s = parking_lot();
-    let planner = Planner::new(&s).unwrap();
+    let planner = TestPlanner::new(&s).unwrap();
     let tail = start_tail(&s).unwrap();
     let mut tree = planner.plan_tree(&campaign(4), 9, tail).unwrap();
     let before = tree.current();

@@ -24,7 +24,7 @@ use tokio::sync::{broadcast, mpsc, oneshot, watch};
 use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 
-use super::{CarConfig, CarError, LinkEvent, StateSample};
+use super::{CarError, LinkConfig, LinkEvent, StateSample};
 use crate::address::CarAddress;
 use crate::health::HealthRecorder;
 use crate::message::{DecodeError, Dialect, ID_ALL, POINTS_PER_PACKET, Reply, Request, RoutePoint};
@@ -106,7 +106,7 @@ pub(super) struct RouteMemory {
 
 #[derive(Debug)]
 pub(super) struct Shared {
-    pub(super) config: CarConfig,
+    pub(super) config: LinkConfig,
     pub(super) identity: Mutex<Identity>,
     pub(super) outgoing: Mutex<Option<mpsc::Sender<Bytes>>>,
     pub(super) waiters: Mutex<HashMap<Key, oneshot::Sender<Answer>>>,
@@ -147,7 +147,7 @@ impl Drop for WaiterGuard<'_> {
 }
 
 impl Shared {
-    pub(super) fn new(config: CarConfig) -> Shared {
+    pub(super) fn new(config: LinkConfig) -> Shared {
         Shared {
             identity: Mutex::new(Identity {
                 car_id: config.car_id,

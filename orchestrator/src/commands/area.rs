@@ -6,7 +6,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, ensure};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
-use trajgen::{ValidationConfig, ValidationReport, Verdict, validate_area};
+use trajgen::{AreaVerdict, ValidationConfig, ValidationReport, validate_area};
 
 use crate::cli::ValidateArgs;
 use crate::scenario_arg::{load_scenario, print_warnings};
@@ -99,8 +99,8 @@ pub fn validate(args: &ValidateArgs) -> Result<ExitCode> {
         print_summary(&summary);
     }
     Ok(match report.verdict {
-        Verdict::Safe => ExitCode::SUCCESS,
-        Verdict::Unsafe => ExitCode::from(1),
+        AreaVerdict::Safe => ExitCode::SUCCESS,
+        AreaVerdict::Unsafe => ExitCode::from(1),
     })
 }
 

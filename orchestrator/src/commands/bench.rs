@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Result, ensure};
 use rand::RngExt;
 use scenarios::Scenario;
-use trajgen::{Generator, RouteTail, Strategy, ValidationConfig, validate_area};
+use trajgen::{Generator, Strategy, ValidationConfig, validate_area};
 
 use crate::cli::BenchGeneratorArgs;
 use crate::seed::rng;
@@ -62,7 +62,7 @@ fn measure(scenario: &Scenario, strategy: Strategy, args: &BenchGeneratorArgs) -
     let generator = Generator::new(config)?;
     let sizes = scenario.campaign.points_per_segment;
     let mut rng = rng(args.seed);
-    let start = RouteTail::from_points(&scenario.start_route.positions())?;
+    let start = campaign::model::start_tail(scenario)?;
     let mut tail = start;
     let mut times = Vec::with_capacity(args.extensions);
     let (mut tries_sum, mut tries_max, mut failures) = (0u64, 0u32, 0u64);
@@ -116,7 +116,7 @@ fn measure(scenario: &Scenario, strategy: Strategy, args: &BenchGeneratorArgs) -
 
 /// The `q`-quantile of sorted durations (nearest rank); zero for none.
 pub(super) fn percentile(sorted: &[Duration], q: f64) -> Duration {
-    campaign::oracle::nearest_rank(sorted, q).unwrap_or_default()
+    trajgen::stats::nearest_rank(sorted, q).unwrap_or_default()
 }
 
 fn print_row(row: &Row) {

@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Result, ensure};
 use rand::RngExt;
-use recovery::{PlanConfig, Planner};
+use recovery::{PlanConfig, PlannerKind};
 use scenarios::Scenario;
 use trajgen::{Constraints, Point, Pose};
 
@@ -35,7 +35,7 @@ pub fn run(args: &BenchRecoveryArgs) -> Result<ExitCode> {
     for name in scenarios::bundled::names() {
         let scenario = scenarios::bundled::load(name)?.scenario;
         let poses = random_poses(&scenario, args, &mut rng(args.seed))?;
-        for planner in Planner::ALL {
+        for planner in PlannerKind::ALL {
             let figures = measure(&scenario, planner, &poses, args.seed);
             print_row(&scenario.name, planner, &figures);
             stranded.extend(
@@ -113,7 +113,7 @@ struct Figures {
     total_ratio: f64,
 }
 
-fn measure(scenario: &Scenario, planner: Planner, poses: &[Pose], seed: u64) -> Figures {
+fn measure(scenario: &Scenario, planner: PlannerKind, poses: &[Pose], seed: u64) -> Figures {
     let config = PlanConfig::default().with_planner(planner);
     let recovery_route = scenario.recovery_route.positions();
     let constraints = scenario.constraints();
@@ -169,7 +169,7 @@ fn measure(scenario: &Scenario, planner: Planner, poses: &[Pose], seed: u64) -> 
     figures
 }
 
-fn print_row(area: &str, planner: Planner, f: &Figures) {
+fn print_row(area: &str, planner: PlannerKind, f: &Figures) {
     let ms = |d: Duration| format!("{:.2} ms", d.as_secs_f64() * 1e3);
     let mean = |sum: f64| sum / f.planned.max(1) as f64;
     println!(

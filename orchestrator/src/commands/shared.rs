@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use anyhow::{Context, Result};
-use car_link::{Car, CarAddress, CarConfig};
+use car_link::{Car, CarAddress, LinkConfig};
 use car_sim::{DebugEvent, SimHandle, Truth};
 use indicatif::{ProgressBar, ProgressStyle};
 use scenarios::Scenario;
@@ -34,11 +34,11 @@ pub(super) fn runtime(virtual_time: bool) -> Result<tokio::runtime::Runtime> {
 }
 
 /// How the runner talks to any car: round trips on a radio link can exceed the 250 ms default.
-pub(super) fn car_config() -> CarConfig {
-    CarConfig {
+pub(super) fn car_config() -> LinkConfig {
+    LinkConfig {
         request_timeout: Duration::from_secs(1),
         terminal_timeout: Duration::from_secs(2),
-        ..CarConfig::default()
+        ..LinkConfig::default()
     }
 }
 

@@ -372,14 +372,7 @@ impl PlannedSegment {
             command_index,
             segment_index,
             intent: segment.intent.map(IntentRecord::from),
-            points: segment
-                .waypoints()
-                .map(|(p, speed)| RoutePointRecord {
-                    x: p.x,
-                    y: p.y,
-                    speed,
-                })
-                .collect(),
+            points: segment.waypoints().map(RoutePointRecord::from).collect(),
             margin: segment.margin.iter().map(|&p| p.into()).collect(),
         }
     }

@@ -18,7 +18,7 @@ use std::pin::Pin;
 use std::time::Duration;
 
 use car_link::fault::FaultError;
-use car_link::{Car, CarError, RoutePoint, StateSample};
+use car_link::{Car, CarError, StateSample};
 use tokio::time::{Instant, MissedTickBehavior};
 use trajgen::Point;
 
@@ -30,7 +30,7 @@ use campaign::drive::{
     Action, DriveOutcome, Event, LinkStatus, Operation, Reply, TestDrive, start_route,
 };
 use campaign::model::{Fault, TestPlan};
-use campaign::streaming::Waypoint;
+use campaign::streaming::{Waypoint, route_points};
 
 /// Drives `plan` from `standing` (see the module doc). `generation` is the measured generation
 /// time of one segment, fed to the lead time. Returns the drive's outcome, and the error that
@@ -95,13 +95,6 @@ async fn upload_start(
         .call(test, start, car.set_autopilot(true, false))
         .await
         .map_err(|e| car_stop("starting the autopilot", e))
-}
-
-fn route_points(route: &[Waypoint]) -> Vec<RoutePoint> {
-    route
-        .iter()
-        .map(|w| RoutePoint::at(w.position.x, w.position.y, w.speed))
-        .collect()
 }
 
 /// What the answer to the operation in flight is recorded as.

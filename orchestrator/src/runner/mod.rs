@@ -62,7 +62,7 @@ use crate::recording::{
 };
 use campaign::case::{Case, CaseError, ReplayOf, RoutePointRecord, Settings};
 use campaign::drive::DriveSettings;
-use campaign::model::{Campaign, ModelError, Planner, ProbeRates, TestPlan};
+use campaign::model::{Campaign, ModelError, ProbeRates, TestPlan, TestPlanner};
 use campaign::oracle::{FailurePolicy, Verdict};
 use campaign::safety::{Abort, AbortReason, SafetyConfig};
 use campaign::streaming::StreamingConfig;
@@ -377,7 +377,7 @@ async fn run_tests(inputs: &Inputs<'_>, dir: &mut RunDirectory) -> Result<(), Ru
         cancel,
         journal,
     };
-    let planner = Planner::new(scenario)?;
+    let planner = TestPlanner::new(scenario)?;
     let start_tail = campaign::model::start_tail(scenario)?;
     let mut telemetry = Telemetry::start(car, config.state_period, ctx.sample_timeout);
     // The first sample comes a round trip after polling starts: wait for it (or for the link's
@@ -477,11 +477,8 @@ async fn run_test(
     case.return_route = reset
         .return_route
         .iter()
-        .map(|&(p, speed)| RoutePointRecord {
-            x: p.x,
-            y: p.y,
-            speed,
-        })
+        .copied()
+        .map(RoutePointRecord::from)
         .collect();
     case.return_clearance_m =
         (reset.clearance_m < ctx.scenario.generator.clearance_m).then_some(reset.clearance_m);

@@ -17,20 +17,19 @@
 
 use std::time::Duration;
 
-use car_link::{CarError, RoutePoint, StateSample};
+use car_link::{CarError, StateSample};
 use recovery::{PlanConfig, ReturnRoute};
 use tokio::time::{Instant, MissedTickBehavior, sleep_until};
 use trajgen::geometry::closest_point_on_segment;
-use trajgen::{Area, Point, Pose};
+use trajgen::{Area, Point, Pose, Waypoint};
 
 use super::telemetry::{Sample, Telemetry};
 use super::{
     BRAKE_CURRENT_A, BRAKE_TIMEOUT, Context, RunError, STOPPED_SPEED_MPS, Stopped, retried,
 };
 use crate::recording::{CarCommand, PlannedReturnRoute, Pose as RecordedPose};
-use campaign::case::RoutePointRecord;
 use campaign::safety::{Abort, AbortReason, CarSample, SafetyConfig, SafetyMonitor};
-use campaign::streaming::{Streamer, Waypoint};
+use campaign::streaming::{Streamer, route_points};
 
 /// Slack on top of the time a reset drive needs at its speeds.
 const RESET_SLACK: Duration = Duration::from_secs(60);
@@ -46,7 +45,7 @@ pub(crate) const REENTRY_INSIDE_M: f64 = 0.5;
 pub(crate) struct ResetDone {
     /// The return route driven: from the car's position to the joint with the recovery route,
     /// with the speed of each point.
-    pub(crate) return_route: Vec<(Point, f64)>,
+    pub(crate) return_route: Vec<Waypoint>,
     /// Where the car stands, stopped, with UWB equal to RTK.
     pub(crate) standing: Point,
     /// The clearance from every edge the return route keeps, metres: the scenario's, or less when
@@ -92,26 +91,17 @@ pub(crate) async fn reset(
     let entry = reentry(&ctx.scenario.area, car_pose);
     let route = plan_return(ctx, entry.unwrap_or(car_pose), test_index)?;
     let speed = recovery_speed(ctx);
-    let mut return_route: Vec<(Point, f64)> = entry
-        .map(|_| (car_pose.position, speed))
+    let mut return_route: Vec<Waypoint> = entry
+        .map(|_| car_pose.position)
         .into_iter()
-        .chain(route.points.iter().map(|&p| (p, speed)))
+        .chain(route.points.iter().copied())
+        .map(|p| Waypoint::new(p, speed))
         .collect();
     journal.write(&PlannedReturnRoute {
         test_index,
-        points: return_route
-            .iter()
-            .map(|&(p, speed)| RoutePointRecord {
-                x: p.x,
-                y: p.y,
-                speed,
-            })
-            .collect(),
+        points: return_route.iter().map(|&w| w.into()).collect(),
     });
-    let mut drive: Vec<Waypoint> = return_route
-        .iter()
-        .map(|&(position, speed)| Waypoint { position, speed })
-        .collect();
+    let mut drive = return_route.clone();
     drive.extend(recovery_rest(ctx, &route));
     // Re-entering, the car may first have to turn away from the boundary.
     let slack = entry.map_or(0.0, |_| MAX_REENTRY_M);
@@ -228,7 +218,7 @@ fn recovery_rest(ctx: &Context<'_>, route: &ReturnRoute) -> Vec<Waypoint> {
         .joined(&ctx.scenario.recovery_route.positions())
         .into_iter()
         .skip(route.points.len())
-        .map(|position| Waypoint { position, speed })
+        .map(|position| Waypoint::new(position, speed))
         .collect()
 }
 
@@ -241,10 +231,7 @@ async fn follow_to_end(
     safety: SafetyConfig,
     test_index: usize,
 ) -> Result<(), Stopped> {
-    let points: Vec<RoutePoint> = route
-        .iter()
-        .map(|w| RoutePoint::at(w.position.x, w.position.y, w.speed))
-        .collect();
+    let points = route_points(route);
     let journal = ctx.journal;
     journal
         .call(

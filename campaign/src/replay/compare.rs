@@ -1,15 +1,11 @@
-//! The comparison of a replay (`drivecheck replay`, `docs/method.md#replay-and-shrinking`): a
-//! recorded case driven again N times after the same reset; per segment each run's maximum
-//! deviation, their mean, and each run's difference from the mean (the repeatability measure);
-//! whether the verdict was the same every time; and, for a replay without the fault commands,
-//! whether the failure disappeared.
+//! The comparison of a replay: a recorded case driven again N times after the same reset; per segment each run's maximum deviation, their mean, and each
+//! run's difference from the mean (the repeatability measure); whether the verdict was the same
+//! every time; and, for a replay without the fault commands, whether the failure disappeared.
 //!
 //! Segments are matched by their index among the test's segments (`segment_index`), which is the
 //! same with and without the fault commands. A segment a run did not drive (the test stopped
 //! earlier) has no value for that run and is left out of the mean.
 //!
-//! Pure: built from case files, no clock, no I/O (the command writes `replay.json`).
-
 use serde::{Deserialize, Serialize};
 
 use crate::case::{Case, ReplayOf, ScenarioRef};

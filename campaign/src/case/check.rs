@@ -1,0 +1,177 @@
+//! The checks of a case's values and geometry: what replay relies on before a car is sent a
+//! recorded command.
+
+use car_link::firmware::MAX_RANGED_ANCHOR_ID;
+use scenarios::Scenario;
+use trajgen::{Point, check_route};
+
+use super::{Case, CaseError, CommandRecord, PlaceRecord, RoutePointRecord, invalid};
+use crate::model::{Probe, start_tail};
+
+impl Case {
+    /// Checks the values: finite coordinates, positive finite speeds, non-empty segments whose
+    /// intent agrees with their points, finite fault parameters, result indices in range.
+    pub fn check(&self) -> Result<(), CaseError> {
+        let mut segments = 0;
+        for (i, command) in self.commands.iter().enumerate() {
+            check_command(i, command)?;
+            match command {
+                CommandRecord::RunSegments { .. } => segments += 1,
+                CommandRecord::AddFault { at: Some(at), .. } => check_place(i, at, segments)?,
+                CommandRecord::AddFault { at: None, .. } => {}
+            }
+        }
+        check_route_points("return_route", &self.return_route)?;
+        if let Some(clearance) = self.return_clearance_m
+            && !(clearance.is_finite() && clearance >= 0.0)
+        {
+            return Err(invalid(
+                "return_clearance_m",
+                "must be finite and non-negative",
+            ));
+        }
+        self.check_results()
+    }
+
+    fn check_results(&self) -> Result<(), CaseError> {
+        for (i, result) in self.segments.iter().enumerate() {
+            let is_segment = matches!(
+                self.commands.get(result.command_index),
+                Some(CommandRecord::RunSegments { .. })
+            );
+            if !is_segment {
+                return Err(invalid(
+                    format!("segments[{i}].command_index"),
+                    "does not name a run_segments command",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks that every segment (with its margin, when recorded) continues the route drivably
+    /// from the end of `scenario`'s start route.
+    pub fn check_route(&self, scenario: &Scenario) -> Result<(), CaseError> {
+        let mut tail = start_tail(scenario)?;
+        let constraints = scenario.constraints();
+        for (command, record) in self.commands.iter().enumerate() {
+            let CommandRecord::RunSegments { points, margin, .. } = record else {
+                continue;
+            };
+            let driven: Vec<Point> = points.iter().map(RoutePointRecord::position).collect();
+            let route: Vec<Point> = std::iter::once(tail.end)
+                .chain(driven.iter().copied())
+                .chain(margin.iter().map(|&p| Point::from(p)))
+                .collect();
+            check_route(&scenario.area, &route, &constraints, Some(tail.heading))
+                .map_err(|violation| CaseError::NotDrivable { command, violation })?;
+            tail = tail.advanced(&driven);
+        }
+        Ok(())
+    }
+}
+
+fn check_command(i: usize, command: &CommandRecord) -> Result<(), CaseError> {
+    let path = format!("commands[{i}]");
+    match command {
+        CommandRecord::AddFault {
+            probe,
+            param,
+            duration,
+            ..
+        } => {
+            match probe {
+                Probe::Px => {
+                    return Err(invalid(
+                        format!("{path}.probe"),
+                        "px alters the position the car reports, which the safety monitor relies \
+                         on: drivecheck injects faults into UWB probes only",
+                    ));
+                }
+                Probe::UwbRange(id) if *id > MAX_RANGED_ANCHOR_ID => {
+                    return Err(invalid(
+                        format!("{path}.probe"),
+                        format!(
+                            "anchor {id} is never ranged: the firmware sends an anchor id's low byte, \
+                             so ids above {MAX_RANGED_ANCHOR_ID} never answer"
+                        ),
+                    ));
+                }
+                _ => {}
+            }
+            if !param.is_finite() {
+                return Err(invalid(format!("{path}.param"), "must be finite"));
+            }
+            if *duration == 0 {
+                return Err(invalid(
+                    format!("{path}.duration"),
+                    "0 would make the fault permanent",
+                ));
+            }
+            Ok(())
+        }
+        CommandRecord::RunSegments {
+            intent,
+            points,
+            margin,
+        } => {
+            if points.is_empty() {
+                return Err(invalid(format!("{path}.points"), "a segment needs points"));
+            }
+            check_route_points(&format!("{path}.points"), points)?;
+            if let Some(intent) = intent
+                && intent.points != points.len()
+            {
+                return Err(invalid(
+                    format!("{path}.intent.points"),
+                    "differs from the number of points",
+                ));
+            }
+            match margin.iter().position(|p| !Point::from(*p).is_finite()) {
+                Some(j) => Err(invalid(format!("{path}.margin[{j}]"), "not finite")),
+                None => Ok(()),
+            }
+        }
+    }
+}
+
+/// A fault's place lies on a segment driven before the fault command (`segments` of them), at a
+/// finite, non-negative distance along it (how far it may be is checked against the segment's
+/// length when the case is planned for driving).
+fn check_place(i: usize, at: &PlaceRecord, segments: usize) -> Result<(), CaseError> {
+    let path = format!("commands[{i}].at");
+    if at.segment_index >= segments {
+        return Err(invalid(
+            format!("{path}.segment_index"),
+            format!(
+                "segment {} is not driven before this fault (only {segments} segment(s) precede it)",
+                at.segment_index
+            ),
+        ));
+    }
+    if !(at.along_m.is_finite() && at.along_m >= 0.0) {
+        return Err(invalid(
+            format!("{path}.along_m"),
+            "must be finite and non-negative",
+        ));
+    }
+    Ok(())
+}
+
+fn check_route_points(path: &str, points: &[RoutePointRecord]) -> Result<(), CaseError> {
+    for (j, p) in points.iter().enumerate() {
+        if !p.position().is_finite() {
+            return Err(invalid(
+                format!("{path}[{j}]"),
+                "coordinates must be finite",
+            ));
+        }
+        if !(p.speed.is_finite() && p.speed > 0.0) {
+            return Err(invalid(
+                format!("{path}[{j}].speed"),
+                "must be positive and finite",
+            ));
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,286 @@
+use super::*;
+use crate::model::{Campaign, plan_test, start_tail};
+use crate::oracle::{SegmentOracle, SegmentVerdict};
+
+pub(crate) fn scenario(name: &str) -> Scenario {
+    scenarios::bundled::load(name).unwrap().scenario
+}
+
+fn run_case() -> (Scenario, Case) {
+    let s = scenario("parking-lot-2anchors");
+    let campaign = Campaign {
+        seed: 99,
+        tests: 10,
+        no_faults: false,
+    };
+    let plan = plan_test(&s, &campaign, 9, start_tail(&s).unwrap()).unwrap();
+    let settings = Settings::new(&s, 10, FailurePolicy::default())
+        .with_runtime(SafetyConfig::default(), StreamingConfig::default());
+    let mut case = Case::planned(&plan, &s, 99, false, settings);
+    let mut oracle = SegmentOracle::new();
+    oracle.push(Point::new(0.4, 0.3), Point::new(0.0, 0.0));
+    oracle.push(Point::new(1.2, 0.0), Point::new(0.1, 0.0));
+    let (command_index, _) = plan.segments().nth(1).unwrap();
+    case.segments.push(SegmentResult {
+        segment_index: 1,
+        command_index,
+        faults_preceding: plan.faults_before(command_index),
+        faults_active: vec![],
+        oracle: oracle.result(1.0),
+    });
+    case.return_route = vec![RoutePointRecord {
+        x: -26.0,
+        y: -60.0,
+        speed: 0.8,
+    }];
+    case.return_clearance_m = Some(0.25);
+    case.verdict = Some(Verdict::Failed);
+    case.reason = Some("segment 1: deviation 1.10 m above 1.00 m".to_owned());
+    case.abort = Some(Abort::new(
+        crate::safety::AbortReason::Interrupted,
+        std::time::Duration::from_millis(9000),
+    ));
+    case.streaming = Some(StreamingRecord {
+        appends: vec![Append {
+            decided_at: std::time::Duration::from_millis(1500),
+            time_to_end: std::time::Duration::from_millis(2100),
+            lead: std::time::Duration::from_millis(1800),
+            confirmed_after: Some(std::time::Duration::from_millis(160)),
+        }],
+        starvations_ms: vec![],
+        smallest_margin_s: Some(1.94),
+    });
+    (s, case)
+}
+
+#[test]
+fn a_case_survives_a_round_trip_through_json() {
+    let (s, case) = run_case();
+    assert_eq!(case.segments[0].oracle.verdict, SegmentVerdict::Failed);
+    let json = case.to_json().unwrap();
+    let back = Case::from_json(&json).unwrap();
+    assert_eq!(back, case);
+    assert_eq!(back.check().map_err(|e| e.to_string()), Ok(()));
+    assert_eq!(back.check_route(&s).map_err(|e| e.to_string()), Ok(()));
+}
+
+#[test]
+fn recorded_commands_give_back_the_planned_commands() {
+    let s = scenario("parking-lot-2anchors");
+    let campaign = Campaign {
+        seed: 5,
+        tests: 3,
+        no_faults: false,
+    };
+    let plan = plan_test(&s, &campaign, 2, start_tail(&s).unwrap()).unwrap();
+    for command in &plan.commands {
+        let record = CommandRecord::from(command);
+        assert_eq!(record.to_command(), *command);
+    }
+}
+
+#[test]
+fn a_campaign_record_survives_a_round_trip_through_json() {
+    let s = scenario("parking-lot-2anchors");
+    let record = CampaignRecord {
+        format: CAMPAIGN_FORMAT.to_owned(),
+        schema_version: SCHEMA_VERSION,
+        tool_version: tool_version().to_owned(),
+        seed: 42,
+        no_faults: true,
+        scenario: ScenarioRef::of(&s),
+        settings: Settings::new(&s, 10, FailurePolicy::ContinueAndRecord),
+        car: "sim".to_owned(),
+        car_firmware_version: Some("12.3".to_owned()),
+        started_at: "2026-11-22T10:55:21Z".to_owned(),
+        ended_at: Some("2026-11-22T10:56:02Z".to_owned()),
+        summary: Some(CampaignSummary {
+            tests: 10,
+            passed: 8,
+            failed: 1,
+            aborted: 1,
+            worst_deviation_m: Some(1.42),
+            failing_cases: vec!["case-003.json".to_owned(), "case-007.json".to_owned()],
+        }),
+        replay_of: None,
+    };
+    let back = CampaignRecord::from_json(&record.to_json().unwrap()).unwrap();
+    assert_eq!(back, record);
+}
+
+/// The JSON blocks of the documentation page, in order.
+pub(crate) fn doc_examples() -> Vec<&'static str> {
+    let doc = include_str!("../../../docs/case-format.md");
+    doc.split("```json\n")
+        .skip(1)
+        .filter_map(|block| block.split("\n```").next())
+        .collect()
+}
+
+#[test]
+fn the_documented_hand_written_case_is_valid_and_drivable() {
+    let examples = doc_examples();
+    let case = Case::from_json(examples[0]).unwrap();
+    assert_eq!(case.check().map_err(|e| e.to_string()), Ok(()));
+    let s = scenario(&case.scenario.name);
+    assert_eq!(case.check_route(&s).map_err(|e| e.to_string()), Ok(()));
+    assert!(case.verdict.is_none());
+}
+
+#[test]
+fn the_documented_recorded_case_and_campaign_parse() {
+    let examples = doc_examples();
+    let case = Case::from_json(examples[1]).unwrap();
+    assert_eq!(case.check().map_err(|e| e.to_string()), Ok(()));
+    assert_eq!(case.verdict, Some(Verdict::Failed));
+    CampaignRecord::from_json(examples[2]).unwrap();
+}
+
+#[test]
+fn another_format_or_a_newer_version_is_refused() {
+    let (_, case) = run_case();
+    let mut other = case.clone();
+    other.format = CAMPAIGN_FORMAT.to_owned();
+    let error = Case::from_json(&other.to_json().unwrap()).unwrap_err();
+    assert!(matches!(error, CaseError::WrongFormat { .. }));
+    let mut newer = case;
+    newer.schema_version = 3;
+    let error = Case::from_json(&newer.to_json().unwrap()).unwrap_err();
+    assert!(matches!(
+        error,
+        CaseError::UnsupportedVersion { found: 3, .. }
+    ));
+}
+
+#[test]
+fn a_parse_error_names_the_field() {
+    let text = r#"{"format": "drivecheck-case", "schema_version": 1,
+        "scenario": {"name": "x"},
+        "commands": [{"command": "run_segments", "points": [{"x": 1, "y": 2, "speed": "fast"}]}]}"#;
+    let error = Case::from_json(text).unwrap_err().to_string();
+    assert!(error.starts_with("commands[0]: invalid type"), "{error}");
+    let text = r#"{"format": "drivecheck-case", "schema_version": 1, "scenario": {"name": "x"},
+        "commands": [{"command": "add_fault", "probe": "uwb_range_x", "kind": "offset",
+        "param": 1.0, "start": 0, "duration": 1}]}"#;
+    let error = Case::from_json(text).unwrap_err().to_string();
+    assert!(error.contains("unknown probe"), "{error}");
+}
+
+#[test]
+fn check_refuses_unusable_values() {
+    let base = |command: CommandRecord| Case {
+        format: CASE_FORMAT.to_owned(),
+        schema_version: SCHEMA_VERSION,
+        tool_version: None,
+        campaign_seed: None,
+        test_index: None,
+        scenario: ScenarioRef {
+            name: "x".to_owned(),
+            hash: None,
+        },
+        settings: None,
+        no_faults: false,
+        commands: vec![command],
+        return_route: vec![],
+        return_clearance_m: None,
+        segments: vec![],
+        verdict: None,
+        reason: None,
+        abort: None,
+        streaming: None,
+        fault_places: Vec::new(),
+    };
+    let point = |speed| RoutePointRecord {
+        x: 0.0,
+        y: 0.0,
+        speed,
+    };
+    let stopped = base(CommandRecord::RunSegments {
+        intent: None,
+        points: vec![point(0.0)],
+        margin: vec![],
+    });
+    assert!(
+        stopped
+            .check()
+            .unwrap_err()
+            .to_string()
+            .starts_with("commands[0].points[0].speed")
+    );
+    let empty = base(CommandRecord::RunSegments {
+        intent: None,
+        points: vec![],
+        margin: vec![],
+    });
+    assert!(empty.check().is_err());
+    let miscounted = base(CommandRecord::RunSegments {
+        intent: Some(IntentRecord {
+            seed: 1,
+            points: 2,
+            speed_mps: 1.0,
+        }),
+        points: vec![point(1.0)],
+        margin: vec![],
+    });
+    assert!(miscounted.check().is_err());
+    let permanent = base(CommandRecord::AddFault {
+        probe: Probe::UwbYaw,
+        kind: FaultKind::Offset,
+        param: 3.0,
+        start: 0,
+        duration: 0,
+        at: None,
+    });
+    assert!(permanent.check().is_err());
+    let mut dangling = base(CommandRecord::AddFault {
+        probe: Probe::UwbYaw,
+        kind: FaultKind::Offset,
+        param: 3.0,
+        start: 0,
+        duration: 2,
+        at: None,
+    });
+    dangling.segments.push(SegmentResult {
+        segment_index: 0,
+        command_index: 0,
+        faults_preceding: vec![],
+        faults_active: vec![],
+        oracle: SegmentOracle::new().result(1.0),
+    });
+    assert!(dangling.check().is_err());
+    let mut negative = base(CommandRecord::RunSegments {
+        intent: None,
+        points: vec![point(1.0)],
+        margin: vec![],
+    });
+    assert_eq!(negative.check().map_err(|e| e.to_string()), Ok(()));
+    negative.return_clearance_m = Some(-0.25);
+    assert!(
+        negative
+            .check()
+            .unwrap_err()
+            .to_string()
+            .starts_with("return_clearance_m")
+    );
+}
+
+#[test]
+fn a_segment_outside_the_area_is_not_drivable() {
+    let (s, mut case) = run_case();
+    case.commands.insert(
+        0,
+        CommandRecord::RunSegments {
+            intent: None,
+            points: vec![RoutePointRecord {
+                x: 1000.0,
+                y: 1000.0,
+                speed: 1.0,
+            }],
+            margin: vec![],
+        },
+    );
+    assert!(matches!(
+        case.check_route(&s),
+        Err(CaseError::NotDrivable { command: 0, .. })
+    ));
+}
