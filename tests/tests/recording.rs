@@ -165,7 +165,12 @@ fn check_faults(case: &Case, faults: &[FaultRecord]) -> usize {
         .collect();
     let answered: Vec<usize> = of_test
         .iter()
-        .filter(|f| f.status != FaultStatus::Sent)
+        .filter(|f| {
+            matches!(
+                f.status,
+                FaultStatus::Confirmed | FaultStatus::Refused { .. }
+            )
+        })
         .map(|f| f.command_index)
         .collect();
     assert_eq!(
@@ -181,6 +186,28 @@ fn check_faults(case: &Case, faults: &[FaultRecord]) -> usize {
         for fault in &result.faults_preceding {
             assert!(confirmed.contains(fault), "test {test_index} fault {fault}");
         }
+    }
+    // Every fault confirmed is placed: where the case planned it, and in virtual time within a
+    // few centimetres of that place.
+    let placed: Vec<_> = of_test
+        .iter()
+        .filter_map(|f| match f.status {
+            FaultStatus::Placed { placement } => Some(placement),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(placed.len(), confirmed.len(), "test {test_index}");
+    assert_eq!(placed, case.fault_places, "test {test_index}");
+    for placement in &placed {
+        let Some(CommandRecord::AddFault { at: Some(at), .. }) =
+            case.commands.get(placement.command_index)
+        else {
+            panic!("a generated fault has a place: {placement:?}");
+        };
+        assert_eq!(at.segment_index, placement.segment_index);
+        assert_eq!(at.along_m, placement.planned_along_m);
+        let error = placement.error_m.expect("a sample came after the fault");
+        assert!(error.abs() < 0.1, "test {test_index}: {placement:?}");
     }
     confirmed.len()
 }

@@ -12,6 +12,7 @@ use tokio::time::Instant;
 
 use super::topic::{Record, Topic};
 use campaign::case::{IntentRecord, PointRecord, RoutePointRecord, SegmentResult};
+use campaign::drive::FaultPlacement;
 use campaign::model::{Fault, FaultKind, Probe, Segment};
 use campaign::oracle::{Verdict, deviation};
 use campaign::safety::Abort;
@@ -437,6 +438,12 @@ pub enum FaultStatus {
         /// The error.
         error: String,
     },
+    /// Where it was meant to act and where the car added it, and the estimated window in which
+    /// it acted (written when its test ends).
+    Placed {
+        /// The placement, as in the case file's `fault_places`.
+        placement: FaultPlacement,
+    },
 }
 
 /// `/faults`: a fault command sent, then its confirmation.
@@ -480,6 +487,16 @@ impl FaultRecord {
         Self {
             status,
             ..Self::sent(test_index, command_index, fault)
+        }
+    }
+}
+
+impl FaultRecord {
+    /// Where `fault` (command `command_index` of test `test_index`) was meant to act and did.
+    pub fn placed(test_index: usize, fault: &Fault, placement: FaultPlacement) -> Self {
+        Self {
+            status: FaultStatus::Placed { placement },
+            ..Self::sent(test_index, placement.command_index, fault)
         }
     }
 }

@@ -274,6 +274,12 @@ fn fault() -> Value {
         variant("status", "sent", json!({}), &[]),
         variant("status", "confirmed", json!({}), &[]),
         variant("status", "refused", json!({"error": string()}), &["error"]),
+        variant(
+            "status",
+            "placed",
+            json!({"placement": placement()}),
+            &["placement"],
+        ),
     ]);
     object(
         json!({
@@ -283,6 +289,34 @@ fn fault() -> Value {
             "status": status,
         }),
         &["test_index", "command_index", "fault", "status"],
+    )
+}
+
+/// A fault's placement: `campaign::drive::FaultPlacement`.
+fn placement() -> Value {
+    object(
+        json!({
+            "command_index": integer(),
+            "rule": strings(&["planned", "earlier_tool"]),
+            "segment_index": integer(),
+            "planned_along_m": number(),
+            "sent_s": number(),
+            "added_s": number(),
+            "actual_along_m": number(),
+            "error_m": number(),
+            "acts_from_s": number(),
+            "acts_to_s": number(),
+        }),
+        &[
+            "command_index",
+            "rule",
+            "segment_index",
+            "planned_along_m",
+            "sent_s",
+            "added_s",
+            "acts_from_s",
+            "acts_to_s",
+        ],
     )
 }
 

@@ -57,12 +57,12 @@ use tokio_util::sync::CancellationToken;
 use trajgen::{GenerationError, Generator, Strategy};
 
 use crate::recording::{
-    DEFAULT_CHUNK_INTERVAL, OracleRecord, PlannedSegment, Recorder, RecordingError, RecordingStart,
-    SafetyRecord, TestEvent, TestEventKind,
+    DEFAULT_CHUNK_INTERVAL, FaultRecord, OracleRecord, PlannedSegment, Recorder, RecordingError,
+    RecordingStart, SafetyRecord, TestEvent, TestEventKind,
 };
-use campaign::case::{Case, CaseError, ReplayOf, RoutePointRecord, Settings};
+use campaign::case::{Case, CaseError, CommandRecord, ReplayOf, RoutePointRecord, Settings};
 use campaign::drive::DriveSettings;
-use campaign::model::{Campaign, ModelError, ProbeRates, TestPlan, TestPlanner};
+use campaign::model::{Campaign, Command, ModelError, ProbeRates, TestPlan, TestPlanner};
 use campaign::oracle::{FailurePolicy, Verdict};
 use campaign::safety::{Abort, AbortReason, SafetyConfig};
 use campaign::streaming::StreamingConfig;
@@ -423,6 +423,12 @@ async fn run_tests(inputs: &Inputs<'_>, dir: &mut RunDirectory) -> Result<(), Ru
 
 /// Records a test's oracle results and its end, and writes the recording's open chunk.
 fn record_test_end(journal: &Journal<'_>, test_index: usize, case: &Case) {
+    for placement in &case.fault_places {
+        let command = case.commands.get(placement.command_index);
+        if let Some(Command::AddFault(fault)) = command.map(CommandRecord::to_command) {
+            journal.write(&FaultRecord::placed(test_index, &fault, *placement));
+        }
+    }
     for result in &case.segments {
         journal.write(&OracleRecord {
             test_index,
