@@ -3,8 +3,13 @@
 use scenarios::Scenario;
 use trajgen::{Generator, Point};
 
+use car_link::firmware::{FAULT_PROBES, FAULTS_PER_PROBE};
+
 use crate::case::{Case, CaseError, CommandRecord, RoutePointRecord, invalid};
-use crate::model::{TestPlan, start_tail};
+use crate::model::{FaultKind, Probe, TestPlan, start_tail};
+
+/// How far past a segment's computed length a written place may lie (rounding).
+const PLACE_TOLERANCE_M: f64 = 1e-3;
 
 impl Case {
     /// The plan a replay drives as test `test_index`: the recorded commands (without the fault
@@ -24,6 +29,7 @@ impl Case {
     ) -> Result<TestPlan, CaseError> {
         self.check()?;
         self.check_route(scenario)?;
+        self.check_faults_act(scenario)?;
         let case = self.with_margins(scenario, generator, seed)?;
         case.check_route(scenario)?;
         if !self
@@ -49,6 +55,103 @@ impl Case {
 }
 
 impl Case {
+    /// Refuses, before anything is driven, a fault that cannot act as written: a range fault on
+    /// an anchor the scenario does not have, a bitflip of a bit outside 0–31 (the firmware would
+    /// clamp it to another bit), more faults on a probe or more probes than the firmware's slots
+    /// hold (the extra fault would be refused mid-test), a place beyond the end of its segment.
+    pub fn check_faults_act(&self, scenario: &Scenario) -> Result<(), CaseError> {
+        let mut per_probe: Vec<(Probe, usize)> = Vec::new();
+        let mut tail = start_tail(scenario)?;
+        let mut lengths = Vec::new();
+        for (i, command) in self.commands.iter().enumerate() {
+            let path = format!("commands[{i}]");
+            let (probe, kind, param, at) = match command {
+                CommandRecord::RunSegments { points, .. } => {
+                    let points: Vec<Point> =
+                        points.iter().map(RoutePointRecord::position).collect();
+                    let mut previous = tail.end;
+                    let mut length = 0.0;
+                    for &p in &points {
+                        length += previous.dist(p);
+                        previous = p;
+                    }
+                    lengths.push(length);
+                    tail = tail.advanced(&points);
+                    continue;
+                }
+                CommandRecord::AddFault {
+                    probe,
+                    kind,
+                    param,
+                    at,
+                    ..
+                } => (*probe, *kind, *param, *at),
+            };
+            if let Probe::UwbRange(id) = probe
+                && !scenario.anchors.iter().any(|a| u16::from(a.id) == id)
+            {
+                let known: Vec<String> =
+                    scenario.anchors.iter().map(|a| a.id.to_string()).collect();
+                return Err(invalid(
+                    format!("{path}.probe"),
+                    format!(
+                        "the scenario has no anchor {id} (its anchors: {}): the fault could never act",
+                        if known.is_empty() {
+                            "none".to_owned()
+                        } else {
+                            known.join(", ")
+                        }
+                    ),
+                ));
+            }
+            if kind == FaultKind::Bitflip
+                && !(param.fract() == 0.0 && (0.0..=31.0).contains(&param))
+            {
+                return Err(invalid(
+                    format!("{path}.param"),
+                    format!("bitflip bit {param}: a binary32 value has bits 0 to 31"),
+                ));
+            }
+            let probes = per_probe.len();
+            match per_probe.iter_mut().find(|(p, _)| *p == probe) {
+                Some((_, n)) if *n >= FAULTS_PER_PROBE => {
+                    return Err(invalid(
+                        format!("{path}.probe"),
+                        format!(
+                            "a {FAULTS_PER_PROBE}th fault on {probe} already: the firmware holds \
+                             {FAULTS_PER_PROBE} faults per probe and would refuse this one"
+                        ),
+                    ));
+                }
+                Some((_, n)) => *n += 1,
+                None if probes >= FAULT_PROBES => {
+                    return Err(invalid(
+                        format!("{path}.probe"),
+                        format!(
+                            "{probe} would be a {}th probe: the firmware holds faults on \
+                             {FAULT_PROBES} probes and would refuse this one",
+                            FAULT_PROBES + 1
+                        ),
+                    ));
+                }
+                None => per_probe.push((probe, 1)),
+            }
+            if let Some(at) = at
+                && let Some(&length) = lengths.get(at.segment_index)
+                && at.along_m > length + PLACE_TOLERANCE_M
+            {
+                return Err(invalid(
+                    format!("{path}.at.along_m"),
+                    format!(
+                        "{} m is beyond the end of segment {} ({length:.3} m long)",
+                        at.along_m, at.segment_index
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// This case with an ahead margin generated after every segment that has none: one more
     /// point and its margin, proven inside the area from the route as it stands after the
     /// segment.
@@ -115,5 +218,57 @@ mod tests {
         let without = case.replay_plan(&s, &generator, 1, true, 0).unwrap();
         assert_eq!(without.commands.len(), 3);
         assert_eq!(without.faults().count(), 0);
+    }
+
+    #[test]
+    fn a_fault_that_cannot_act_is_refused_before_driving() {
+        let case = Case::from_json(doc_examples()[0]).unwrap();
+        let s = scenario(&case.scenario.name);
+        assert_eq!(case.check_faults_act(&s).map_err(|e| e.to_string()), Ok(()));
+        let first_fault = case
+            .commands
+            .iter()
+            .position(|c| matches!(c, CommandRecord::AddFault { .. }))
+            .expect("the example has a fault");
+        let with = |edit: &dyn Fn(&mut CommandRecord)| {
+            let mut c = case.clone();
+            edit(&mut c.commands[first_fault]);
+            c.check_faults_act(&s).map_err(|e| e.to_string())
+        };
+        let unknown_anchor = with(&|c| {
+            if let CommandRecord::AddFault { probe, .. } = c {
+                *probe = Probe::UwbRange(77);
+            }
+        });
+        assert!(
+            unknown_anchor
+                .as_ref()
+                .is_err_and(|e| e.contains("no anchor 77")),
+            "{unknown_anchor:?}"
+        );
+        let bit_99 = with(&|c| {
+            if let CommandRecord::AddFault { kind, param, .. } = c {
+                *kind = FaultKind::Bitflip;
+                *param = 99.0;
+            }
+        });
+        assert!(bit_99.is_err_and(|e| e.contains("bits 0 to 31")));
+        let far = with(&|c| {
+            if let CommandRecord::AddFault { at, .. } = c {
+                *at = Some(crate::case::PlaceRecord {
+                    segment_index: 0,
+                    along_m: 500.0,
+                });
+            }
+        });
+        assert!(far.is_err_and(|e| e.contains("beyond the end of segment 0")));
+        // Six faults on one probe: the sixth is refused.
+        let mut crowded = case.clone();
+        let fault = case.commands[first_fault].clone();
+        for _ in 0..FAULTS_PER_PROBE {
+            crowded.commands.insert(first_fault, fault.clone());
+        }
+        let error = crowded.check_faults_act(&s).map_err(|e| e.to_string());
+        assert!(error.is_err_and(|e| e.contains("5 faults per probe")));
     }
 }

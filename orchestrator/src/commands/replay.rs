@@ -25,7 +25,9 @@ use crate::runner::{
 };
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::choose_seed;
+use campaign::case::{CASE_SCHEMA_VERSION, CommandRecord};
 use campaign::case::{Case, ReplayOf, ScenarioRef};
+use campaign::drive::EARLIER_TOOL_POINTS_LEFT;
 use campaign::model::{Campaign, TestPlan};
 use campaign::oracle::Verdict;
 use campaign::replay::{Comparison, REPLAY_FILE, ReplayRun};
@@ -37,6 +39,27 @@ pub fn replay(args: &ReplayArgs) -> Result<ExitCode> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
     let case = Case::from_json(&text).with_context(|| path.display().to_string())?;
+    let unplaced = case
+        .commands
+        .iter()
+        .filter(|c| matches!(c, CommandRecord::AddFault { at: None, .. }))
+        .count();
+    if unplaced > 0 && !args.no_faults {
+        let why = if case.schema_version < CASE_SCHEMA_VERSION {
+            format!(
+                "a version-{} case: the places of its faults are unknown",
+                case.schema_version
+            )
+        } else {
+            "no place given".to_owned()
+        };
+        eprintln!(
+            "warning: {}: {unplaced} fault(s) without a place ({why}); each is sent as the \
+             earlier tool sent faults, once its segment's car has {EARLIER_TOOL_POINTS_LEFT} or \
+             fewer route points left of it",
+            path.display()
+        );
+    }
     let scenario = scenario_of(args, &case)?;
     check_hash(&case, &scenario, args.ignore_scenario_hash)?;
     let generator = Generator::new(scenario.generator.generator_config(Strategy::Wedge))
