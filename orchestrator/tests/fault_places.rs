@@ -8,21 +8,11 @@ use std::path::{Path, PathBuf};
 
 use campaign::case::{CampaignRecord, Case, CommandRecord};
 use campaign::drive::PlaceRule;
-use common::{drivecheck, path, text};
+use common::{campaign, drivecheck, path, text};
 
 /// A failing case of a 10-test campaign with seed 2.
 fn failing_case(dir: &Path) -> PathBuf {
-    let campaign = dir.join("campaign");
-    let out = drivecheck(&[
-        "run",
-        "--seed",
-        "2",
-        "--tests",
-        "10",
-        "--out",
-        path(&campaign),
-    ]);
-    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    let campaign = campaign(dir, 2, 10, &[], 1);
     let record = CampaignRecord::from_json(
         &std::fs::read_to_string(campaign.join("campaign.json")).unwrap(),
     )

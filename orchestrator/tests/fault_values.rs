@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{drivecheck, path, text};
+use common::{campaign, drivecheck, path, text};
 
 use std::path::Path;
 
@@ -15,18 +15,7 @@ use campaign::oracle::Verdict;
 
 /// A passing case without faults (seed 1, test 0), with `fault` added after its first segment.
 fn case_with(dir: &Path, fault: CommandRecord) -> std::path::PathBuf {
-    let campaign = dir.join("campaign");
-    let out = drivecheck(&[
-        "run",
-        "--seed",
-        "1",
-        "--tests",
-        "1",
-        "--no-faults",
-        "--out",
-        path(&campaign),
-    ]);
-    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let campaign = campaign(dir, 1, 1, &["--no-faults"], 0);
     let text = std::fs::read_to_string(campaign.join("case-000.json")).unwrap();
     let mut case = Case::from_json(&text).unwrap();
     let first = case

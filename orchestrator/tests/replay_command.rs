@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{drivecheck, path, text};
+use common::{campaign, drivecheck, path, text};
 
 use std::path::{Path, PathBuf};
 
@@ -15,17 +15,7 @@ use campaign::replay::Comparison;
 
 /// Runs a 4-test campaign with seed 1 in `dir` and returns its first failing case file.
 fn failing_case(dir: &Path) -> PathBuf {
-    let campaign = dir.join("campaign");
-    let out = drivecheck(&[
-        "run",
-        "--seed",
-        "1",
-        "--tests",
-        "4",
-        "--out",
-        path(&campaign),
-    ]);
-    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    let campaign = campaign(dir, 1, 4, &[], 1);
     let record: CampaignRecord = CampaignRecord::from_json(
         &std::fs::read_to_string(campaign.join("campaign.json")).unwrap(),
     )

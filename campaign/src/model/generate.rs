@@ -154,15 +154,8 @@ fn anchor_fault(ctx: &PlanContext, state: &ReferenceState) -> Option<BoxedStrate
         range_u32(settings.start),
         range_u32(settings.duration),
     )
-        .prop_map(|(probe, (kind, param), start, duration)| {
-            Command::AddFault(Fault {
-                probe,
-                kind,
-                param,
-                start,
-                duration,
-                at: None,
-            })
+        .prop_map(|(probe, kind_param, start, duration)| {
+            fault_command(probe, kind_param, start, duration)
         });
     Some(strategy.boxed())
 }
@@ -256,17 +249,27 @@ fn probe_fault(
     duration: Interval<u32>,
 ) -> BoxedStrategy<Command> {
     (kind_and_param, range_u32(start), range_u32(duration))
-        .prop_map(move |((kind, param), start, duration)| {
-            Command::AddFault(Fault {
-                probe,
-                kind,
-                param,
-                start,
-                duration,
-                at: None,
-            })
+        .prop_map(move |(kind_param, start, duration)| {
+            fault_command(probe, kind_param, start, duration)
         })
         .boxed()
+}
+
+/// The fault command drawn (its place is drawn by [`placed`]).
+fn fault_command(
+    probe: Probe,
+    (kind, param): (FaultKind, f64),
+    start: u32,
+    duration: u32,
+) -> Command {
+    Command::AddFault(Fault {
+        probe,
+        kind,
+        param,
+        start,
+        duration,
+        at: None,
+    })
 }
 
 fn range_f64(interval: Interval<f64>) -> std::ops::RangeInclusive<f64> {
