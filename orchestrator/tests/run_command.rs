@@ -100,3 +100,37 @@ fn a_stale_limit_beyond_the_watchdog_is_refused_and_a_valid_one_is_recorded() {
     let record = std::fs::read_to_string(dir.path().join("campaign.json")).unwrap();
     assert!(record.contains("\"stale_after\": 400"), "{record}");
 }
+
+#[test]
+fn a_run_directory_is_never_reused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let first = run(&["--seed", "3", "--tests", "1", "--no-faults"], &out);
+    assert_eq!(first.status.code(), Some(0), "{}", text(&first));
+    let record = std::fs::read(out.join("campaign.json")).unwrap();
+    let files = std::fs::read_dir(&out).unwrap().count();
+    // A second campaign into the same directory is refused before anything is written.
+    let second = run(&["--seed", "4", "--tests", "2"], &out);
+    assert_eq!(second.status.code(), Some(2), "{}", text(&second));
+    assert!(
+        text(&second).contains("exists and is not empty"),
+        "{}",
+        text(&second)
+    );
+    assert_eq!(std::fs::read(out.join("campaign.json")).unwrap(), record);
+    assert_eq!(std::fs::read_dir(&out).unwrap().count(), files);
+    // So is a replay into it.
+    let case = out.join("case-000.json");
+    let replay = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
+        .args(["replay", case.to_str().unwrap(), "--times", "1", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(replay.status.code(), Some(2), "{}", text(&replay));
+    assert_eq!(std::fs::read_dir(&out).unwrap().count(), files);
+    // An empty directory is fine.
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let fresh = run(&["--seed", "3", "--tests", "1", "--no-faults"], &empty);
+    assert_eq!(fresh.status.code(), Some(0), "{}", text(&fresh));
+}

@@ -101,6 +101,9 @@ pub fn replay(args: &ReplayArgs) -> Result<ExitCode> {
         if args.vary_seed { " + run − 1" } else { "" },
         out.display()
     );
+    if crate::runner::is_used(&out) {
+        bail!(crate::runner::RunError::OutDirUsed { path: out });
+    }
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
     let started = Instant::now();
     let job = Job {

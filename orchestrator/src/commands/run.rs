@@ -40,6 +40,9 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("runs").join(run_dir_name(&scenario.name, seed)));
+    if crate::runner::is_used(&out) {
+        anyhow::bail!(crate::runner::RunError::OutDirUsed { path: out });
+    }
     let mut config = RunConfig::new(campaign, out, args.car.clone());
     if args.stale_after.is_zero() || args.stale_after > MAX_STALE_LIMIT {
         anyhow::bail!(

@@ -69,7 +69,7 @@ use campaign::streaming::StreamingConfig;
 
 pub use events::{CampaignObserver, Silent, SimulatorView};
 pub use run_dir::{CampaignReport, RECORDING_FILE, TestSummary};
-pub(crate) use run_dir::{rfc3339_now, run_dir_name};
+pub(crate) use run_dir::{is_used, rfc3339_now, run_dir_name};
 
 use journal::Journal;
 use preflight::Preflight;
@@ -184,6 +184,16 @@ pub enum RunError {
     /// The recording (`campaign.mcap`) could not be written.
     #[error("recording: {0}")]
     Recording(#[source] RecordingError),
+    /// The run directory exists and is not empty (nothing was written): the commands refuse it
+    /// before running.
+    #[error(
+        "{}: exists and is not empty: a run directory is created fresh (give another --out, or remove it)",
+        path.display()
+    )]
+    OutDirUsed {
+        /// The directory.
+        path: PathBuf,
+    },
     /// Writing the run directory failed.
     #[error("{path}: {source}")]
     Io {

@@ -248,6 +248,15 @@ fn civil_from_days(days: i64) -> (i64, u32, u32) {
     (y, m, d)
 }
 
+/// Whether `path` holds something already: a file, or a directory that is not empty. A run
+/// directory is always created fresh, so that no earlier run's files are overwritten or mixed in.
+pub(crate) fn is_used(path: &Path) -> bool {
+    match std::fs::read_dir(path) {
+        Ok(mut entries) => entries.next().is_some(),
+        Err(_) => path.exists(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
