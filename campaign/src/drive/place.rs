@@ -280,11 +280,6 @@ impl Placer {
         self.in_flight.map(|f| f.pending.command_index)
     }
 
-    /// Whether a fault is still to be sent or in flight.
-    pub fn busy(&self) -> bool {
-        self.in_flight.is_some() || !self.pending.is_empty()
-    }
-
     /// The car confirmed the fault in flight at `now` (`resent`: its reply was lost and the
     /// car's fault list showed it added). Returns its command index and when the car added it.
     pub fn confirmed(
