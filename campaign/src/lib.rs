@@ -25,4 +25,5 @@ pub mod oracle;
 pub mod replay;
 pub mod safety;
 pub mod seed;
+pub mod shrink;
 pub mod streaming;

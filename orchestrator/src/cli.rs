@@ -23,6 +23,9 @@ pub enum Command {
     /// Drive a recorded case again, N times after the same reset, and compare the runs segment by
     /// segment. Exit status: 0 every run passed, 1 a run failed or was aborted, 2 error.
     Replay(ReplayArgs),
+    /// Shrink a failing case to the smallest test that still fails the same way every time (on
+    /// the embedded simulated car, in virtual time). Exit status: 0 shrunk, 2 error.
+    Shrink(ShrinkArgs),
     /// List run directories (campaigns and replays) with their summary, or show one.
     Runs(RunsArgs),
     /// Serve a simulated car over TCP (like the reference bridge) or UDP.
@@ -124,6 +127,36 @@ pub struct ReplayArgs {
     /// writes a run directory `run-1/`, `run-2/`, … inside it, the comparison `replay.json`.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+}
+
+/// Options of `drivecheck shrink`.
+#[derive(Debug, Args)]
+pub struct ShrinkArgs {
+    /// The failing case file (a `case-NNN.json` of a run directory, a replay's, or written by
+    /// hand).
+    #[arg(value_name = "CASE.json")]
+    pub case: PathBuf,
+    /// The shrink directory (default `runs/<UTC timestamp>-shrink-<scenario>-<seed>/`): it gets
+    /// `minimal.json` and `shrink.json`.
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Scenario: a bundled name, a .toml file or a reference .xml (default: the bundled scenario
+    /// the case names).
+    #[arg(long)]
+    pub scenario: Option<String>,
+    /// Shrink even when the scenario's hash differs from the case's (or the case has none).
+    #[arg(long)]
+    pub ignore_scenario_hash: bool,
+    /// Runs of every candidate (run k with seed + k − 1): it is kept only when all of them fail
+    /// the same way.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=50))]
+    pub runs: u32,
+    /// Stop after this much wall time with the smallest case found so far.
+    #[arg(long, value_name = "DURATION", default_value = "2min", value_parser = humantime::parse_duration)]
+    pub budget: std::time::Duration,
+    /// Seed of every candidate's first run (default: the case's campaign seed).
+    #[arg(long)]
+    pub seed: Option<u64>,
 }
 
 /// Options of `drivecheck runs`.

@@ -155,7 +155,7 @@ impl Case {
     /// This case with an ahead margin generated after every segment that has none: one more
     /// point and its margin, proven inside the area from the route as it stands after the
     /// segment.
-    fn with_margins(
+    pub(crate) fn with_margins(
         &self,
         scenario: &Scenario,
         generator: &Generator,

@@ -18,12 +18,13 @@ use scenarios::Scenario;
 use tokio_util::sync::CancellationToken;
 use trajgen::{Generator, Strategy};
 
-use super::shared::{CampaignFailed, cancel_on_ctrl_c, connect, metres, runtime, sim_view};
+use super::shared::{
+    CampaignFailed, cancel_on_ctrl_c, check_hash, connect, metres, runtime, scenario_of, sim_view,
+};
 use crate::cli::ReplayArgs;
 use crate::runner::{
     ReplaySource, RunConfig, Silent, TestSummary, rfc3339_now, run_campaign, run_dir_name,
 };
-use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::choose_seed;
 use campaign::case::{CASE_SCHEMA_VERSION, CommandRecord};
 use campaign::case::{Case, ReplayOf, ScenarioRef};
@@ -60,7 +61,7 @@ pub fn replay(args: &ReplayArgs) -> Result<ExitCode> {
             path.display()
         );
     }
-    let scenario = scenario_of(args, &case)?;
+    let scenario = scenario_of(args.scenario.as_deref(), path, &case)?;
     check_hash(&case, &scenario, args.ignore_scenario_hash)?;
     let generator = Generator::new(scenario.generator.generator_config(Strategy::Wedge))
         .context("the scenario's generator settings")?;
@@ -140,54 +141,6 @@ pub fn replay(args: &ReplayArgs) -> Result<ExitCode> {
     } else {
         ExitCode::from(1)
     })
-}
-
-/// The scenario to replay in: `--scenario`, or the bundled one the case names.
-fn scenario_of(args: &ReplayArgs, case: &Case) -> Result<Scenario> {
-    let loaded = match &args.scenario {
-        Some(arg) => load_scenario(arg)?,
-        None => {
-            let name = &case.scenario.name;
-            if scenarios::bundled::text(name).is_none() {
-                bail!(
-                    "{}: scenario.name `{name}` is not a bundled scenario; give its file with \
-                     --scenario",
-                    args.case.display()
-                );
-            }
-            load_scenario(name)?
-        }
-    };
-    print_warnings(&loaded);
-    Ok(loaded.scenario)
-}
-
-/// Refuses a case recorded in another scenario (or without a hash) unless told to proceed.
-fn check_hash(case: &Case, scenario: &Scenario, ignore: bool) -> Result<()> {
-    let hash = scenario.hash();
-    let problem = match &case.scenario.hash {
-        Some(recorded) if *recorded == hash => return Ok(()),
-        Some(recorded) => format!(
-            "the case was recorded in scenario `{}` with hash {}, but scenario `{}` hashes to {}",
-            case.scenario.name,
-            short(recorded),
-            scenario.name,
-            short(&hash)
-        ),
-        None => format!(
-            "the case names no scenario hash, so it cannot be checked against scenario `{}`",
-            scenario.name
-        ),
-    };
-    if ignore {
-        eprintln!("warning: {problem}; replaying anyway (--ignore-scenario-hash)");
-        return Ok(());
-    }
-    bail!("{problem}; pass --ignore-scenario-hash to replay it anyway")
-}
-
-fn short(hash: &str) -> &str {
-    hash.get(..12).unwrap_or(hash)
 }
 
 /// Everything the runs share.

@@ -14,6 +14,9 @@ use scenarios::Scenario;
 use tokio_util::sync::CancellationToken;
 
 use crate::runner::{CampaignObserver, CampaignReport, RunError, SimulatorView};
+use crate::scenario_arg::{load_scenario, print_warnings};
+use anyhow::bail;
+use campaign::case::Case;
 use campaign::oracle::Verdict;
 
 /// The async runtime: on one thread with a paused clock (virtual time, the embedded simulated
@@ -199,4 +202,56 @@ pub(super) fn print_report(report: &CampaignReport, wall: Option<Duration>) {
 /// Metres with two decimals, or `-`.
 pub(super) fn metres(value: Option<f64>) -> String {
     value.map_or_else(|| "-".to_owned(), |m| format!("{m:.2} m"))
+}
+
+/// The scenario a case is driven in: `--scenario`, or the bundled one the case names.
+pub(super) fn scenario_of(
+    scenario: Option<&str>,
+    case_path: &Path,
+    case: &Case,
+) -> Result<Scenario> {
+    let loaded = match scenario {
+        Some(arg) => load_scenario(arg)?,
+        None => {
+            let name = &case.scenario.name;
+            if scenarios::bundled::text(name).is_none() {
+                bail!(
+                    "{}: scenario.name `{name}` is not a bundled scenario; give its file with \
+                     --scenario",
+                    case_path.display()
+                );
+            }
+            load_scenario(name)?
+        }
+    };
+    print_warnings(&loaded);
+    Ok(loaded.scenario)
+}
+
+/// Refuses a case recorded in another scenario (or without a hash) unless told to proceed.
+pub(super) fn check_hash(case: &Case, scenario: &Scenario, ignore: bool) -> Result<()> {
+    let hash = scenario.hash();
+    let problem = match &case.scenario.hash {
+        Some(recorded) if *recorded == hash => return Ok(()),
+        Some(recorded) => format!(
+            "the case was recorded in scenario `{}` with hash {}, but scenario `{}` hashes to {}",
+            case.scenario.name,
+            short(recorded),
+            scenario.name,
+            short(&hash)
+        ),
+        None => format!(
+            "the case names no scenario hash, so it cannot be checked against scenario `{}`",
+            scenario.name
+        ),
+    };
+    if ignore {
+        eprintln!("warning: {problem}; replaying anyway (--ignore-scenario-hash)");
+        return Ok(());
+    }
+    bail!("{problem}; pass --ignore-scenario-hash to replay it anyway")
+}
+
+fn short(hash: &str) -> &str {
+    hash.get(..12).unwrap_or(hash)
 }

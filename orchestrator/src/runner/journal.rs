@@ -51,6 +51,18 @@ impl<'a> Journal<'a> {
         }
     }
 
+    /// Records nothing (a run whose recording is not wanted, e.g. a shrink's candidates); the
+    /// simulator's debug events are still drained.
+    pub(crate) fn without_recording(sim: Option<&'a dyn SimulatorView>) -> Self {
+        Self {
+            state: Mutex::new(State {
+                recorder: None,
+                error: None,
+            }),
+            sim,
+        }
+    }
+
     fn lock(&self) -> MutexGuard<'_, State> {
         self.state.lock().unwrap_or_else(|e| e.into_inner())
     }

@@ -101,6 +101,8 @@ pub struct RunConfig {
     pub car_label: String,
     /// A recorded case to drive in every test instead of generated tests (`drivecheck replay`).
     pub replay: Option<ReplaySource>,
+    /// Write `campaign.mcap` (true by default; a shrink's candidate runs write none).
+    pub record: bool,
 }
 
 /// A case driven again instead of generated tests: every test of the campaign drives its plan
@@ -126,6 +128,7 @@ impl RunConfig {
             out_dir,
             car_label: car_label.into(),
             replay: None,
+            record: true,
         }
     }
 }
@@ -313,14 +316,18 @@ pub async fn run_campaign(
         simulated: sim.is_some(),
         chunk_interval: DEFAULT_CHUNK_INTERVAL,
     };
-    let journal = match Recorder::create(&dir.path().join(RECORDING_FILE), &start) {
-        Ok(recorder) => Journal::new(recorder, sim),
-        Err(error) => {
-            let report = dir.finish().map_err(CampaignFailure::without_report)?;
-            return Err(CampaignFailure {
-                error: RunError::Recording(error),
-                report: Some(report),
-            });
+    let journal = if !config.record {
+        Journal::without_recording(sim)
+    } else {
+        match Recorder::create(&dir.path().join(RECORDING_FILE), &start) {
+            Ok(recorder) => Journal::new(recorder, sim),
+            Err(error) => {
+                let report = dir.finish().map_err(CampaignFailure::without_report)?;
+                return Err(CampaignFailure {
+                    error: RunError::Recording(error),
+                    report: Some(report),
+                });
+            }
         }
     };
     let inputs = Inputs {

@@ -1,0 +1,131 @@
+//! `shrink.json`: what a shrink tried and what it kept.
+
+use serde::{Deserialize, Serialize};
+
+use super::{RunResult, Size, Step};
+use crate::case::{CaseError, ScenarioRef};
+
+/// The `format` of a shrink report.
+pub const SHRINK_FORMAT: &str = "drivecheck-shrink";
+/// Its file name in the shrink directory.
+pub const SHRINK_FILE: &str = "shrink.json";
+/// The minimal case's file name in the shrink directory.
+pub const MINIMAL_FILE: &str = "minimal.json";
+
+/// Why a shrink stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Ended {
+    /// No edit was left that kept the failure: the case is minimal for the shrink's edits.
+    Minimal,
+    /// The time budget ran out (the case is the smallest found so far).
+    Budget,
+    /// The user interrupted it (the case is the smallest found so far).
+    Interrupted,
+}
+
+/// A case as the shrink saw it: its size, its failing segment and the runs that confirmed it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CaseSummary {
+    /// Its size.
+    pub size: Size,
+    /// The segment that fails first.
+    pub target_segment: usize,
+    /// The runs that showed it (all failed there).
+    pub runs: Vec<RunResult>,
+}
+
+/// `shrink.json` (see `docs/case-format.md#shrink-reports`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ShrinkReport {
+    /// Always `drivecheck-shrink`.
+    pub format: String,
+    /// 1.
+    pub schema_version: u32,
+    /// The drivecheck version that shrank it.
+    pub tool_version: String,
+    /// The case file shrunk, as given.
+    pub case: String,
+    /// The scenario it was driven in.
+    pub scenario: ScenarioRef,
+    /// The seed: run k of every candidate has seed + k.
+    pub seed: u64,
+    /// Runs per candidate; a candidate is kept only when all of them fail the same way.
+    pub runs_per_candidate: u32,
+    /// Why it stopped.
+    pub ended: Ended,
+    /// The case shrunk.
+    pub before: CaseSummary,
+    /// The minimal case (`minimal.json`).
+    pub after: CaseSummary,
+    /// The minimal case driven without its faults (absent when it has none): does the failure
+    /// need them?
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub without_faults: Option<Vec<RunResult>>,
+    /// Every edit tried, in order.
+    pub steps: Vec<Step>,
+    /// Simulator runs in all (the confirmations of the case and of the minimal one included).
+    pub simulator_runs: usize,
+    /// Wall time, seconds.
+    pub wall_s: f64,
+    /// The command that replays the minimal case on a real car.
+    pub replay_on_car: String,
+}
+
+impl ShrinkReport {
+    /// The report as pretty-printed JSON.
+    pub fn to_json(&self) -> Result<String, CaseError> {
+        serde_json::to_string_pretty(self).map_err(CaseError::Write)
+    }
+
+    /// The before/after table the command prints.
+    pub fn table(&self) -> String {
+        let median = |runs: &[RunResult]| {
+            let mut values: Vec<f64> = runs.iter().filter_map(|r| r.max_deviation_m).collect();
+            values.sort_by(f64::total_cmp);
+            values
+                .get(values.len() / 2)
+                .map_or_else(|| "-".to_owned(), |v| format!("{v:.2} m"))
+        };
+        let (b, a) = (&self.before, &self.after);
+        let mut out = String::from("| | before | after |\n|---|---|---|\n");
+        let rows = [
+            (
+                "commands",
+                b.size.commands.to_string(),
+                a.size.commands.to_string(),
+            ),
+            (
+                "segments",
+                b.size.segments.to_string(),
+                a.size.segments.to_string(),
+            ),
+            (
+                "faults",
+                b.size.faults.to_string(),
+                a.size.faults.to_string(),
+            ),
+            (
+                "route points",
+                b.size.points.to_string(),
+                a.size.points.to_string(),
+            ),
+            (
+                "failing segment",
+                b.target_segment.to_string(),
+                a.target_segment.to_string(),
+            ),
+            (
+                "its max deviation (median of runs)",
+                median(&b.runs),
+                median(&a.runs),
+            ),
+        ];
+        for (name, before, after) in rows {
+            out.push_str(&format!("| {name} | {before} | {after} |\n"));
+        }
+        out
+    }
+}

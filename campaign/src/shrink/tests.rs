@@ -1,0 +1,255 @@
+use proptest::prelude::*;
+use trajgen::{Point, check_route};
+
+use super::*;
+use crate::case::RoutePointRecord;
+use crate::case::tests::scenario;
+use crate::model::{Campaign, FaultKind, Probe, plan_test, start_tail};
+use crate::oracle::FailurePolicy;
+
+/// A generated test of the two-anchor lot (test `index` of a 10-test campaign with `seed`).
+fn generated(seed: u64, index: usize) -> (Scenario, Case) {
+    let s = scenario("parking-lot-2anchors");
+    let campaign = Campaign {
+        seed,
+        tests: 10,
+        no_faults: false,
+    };
+    let plan = plan_test(&s, &campaign, index, start_tail(&s).unwrap()).unwrap();
+    let settings = crate::case::Settings::new(&s, 10, FailurePolicy::default());
+    let case = Case::planned(&plan, &s, seed, false, settings);
+    (s, case)
+}
+
+/// Every segment of `case` with its margin continues the route drivably from the start route.
+fn drivable(case: &Case, s: &Scenario) -> bool {
+    let mut tail = start_tail(s).unwrap();
+    for command in &case.commands {
+        let CommandRecord::RunSegments { points, margin, .. } = command else {
+            continue;
+        };
+        let driven: Vec<Point> = points.iter().map(RoutePointRecord::position).collect();
+        let route: Vec<Point> = std::iter::once(tail.end)
+            .chain(driven.iter().copied())
+            .chain(margin.iter().map(|&p| Point::from(p)))
+            .collect();
+        if margin.is_empty()
+            || check_route(&s.area, &route, &s.constraints(), Some(tail.heading)).is_err()
+        {
+            return false;
+        }
+        tail = tail.advanced(&driven);
+    }
+    true
+}
+
+/// A stand-in for the simulator: the case fails at its `target`-th segment when it still has a
+/// range fault on anchor 234 with a parameter of at least `threshold` (and enough segments),
+/// otherwise passes.
+fn fake_run(case: &Case, target: usize, threshold: f64, seed: u64) -> RunResult {
+    let segments = segment_commands(case).len();
+    let strong = case.commands.iter().any(|c| {
+        matches!(c, CommandRecord::AddFault { probe: Probe::UwbRange(234), param, .. } if *param >= threshold)
+    });
+    let fails = strong && segments > target;
+    RunResult {
+        seed,
+        verdict: Some(if fails {
+            Verdict::Failed
+        } else {
+            Verdict::Passed
+        }),
+        first_failing_segment: fails.then_some(target),
+        max_deviation_m: Some(if fails { 1.5 } else { 0.5 }),
+    }
+}
+
+/// Shrinks with the stand-in; the kept target follows the failing segment as edits move it.
+fn shrink_with_fake(
+    case: &Case,
+    s: &Scenario,
+    target: usize,
+    threshold: f64,
+) -> (Case, usize, Vec<Step>) {
+    let mut shrinker = Shrinker::new(case, s, target, 7).unwrap();
+    let mut guard = 0;
+    while let Some(candidate) = shrinker.next_candidate() {
+        assert!(drivable(&candidate.case, s), "{}", candidate.edit);
+        // The failure "lives" in the candidate's target segment: the fake fails there.
+        let runs = (0..3)
+            .map(|k| fake_run(&candidate.case, candidate.target, threshold, k))
+            .collect();
+        shrinker.record(candidate, runs);
+        guard += 1;
+        assert!(guard < 2000, "the shrink does not end");
+    }
+    (
+        shrinker.current().clone(),
+        shrinker.target(),
+        shrinker.steps().to_vec(),
+    )
+}
+
+fn with_strong_fault(mut case: Case) -> Case {
+    // A strong reflection on anchor 234 after the second segment, placed at its start.
+    let second = segment_commands(&case)[1];
+    case.commands.insert(
+        second + 1,
+        CommandRecord::AddFault {
+            probe: Probe::UwbRange(234),
+            kind: FaultKind::Amplification,
+            param: 4.0,
+            start: 12,
+            duration: 9,
+            at: Some(crate::case::PlaceRecord {
+                segment_index: 1,
+                along_m: 0.5,
+            }),
+        },
+    );
+    case
+}
+
+#[test]
+fn a_failure_that_needs_one_fault_shrinks_to_that_fault_and_the_failing_segment() {
+    let (s, case) = generated(3, 9);
+    let case = with_strong_fault(case);
+    let segments = segment_commands(&case).len();
+    assert!(segments >= 4, "a long test: {segments} segments");
+    let target = segments - 2;
+    let (minimal, minimal_target, steps) = shrink_with_fake(&case, &s, target, 2.0);
+    let size = Size::of(&minimal);
+    // One fault left, its parameter shrunk as far as the failure allows, start and duration to
+    // neutral.
+    assert_eq!(size.faults, 1, "{minimal:?}");
+    let fault = minimal
+        .commands
+        .iter()
+        .find_map(|c| match c {
+            CommandRecord::AddFault {
+                param,
+                start,
+                duration,
+                ..
+            } => Some((*param, *start, *duration)),
+            CommandRecord::RunSegments { .. } => None,
+        })
+        .unwrap();
+    assert!((2.0..2.5).contains(&fault.0), "{fault:?}");
+    assert_eq!((fault.1, fault.2), (0, 1));
+    // The segments before the target were joined away and the tail cut: one segment is left.
+    assert_eq!(size.segments, minimal_target + 1);
+    assert!(size.segments <= 2, "{size:?}: {steps:#?}");
+    assert!(drivable(&minimal, &s));
+    assert!(
+        steps
+            .iter()
+            .any(|s| s.outcome == Outcome::Kept && matches!(s.edit, Edit::CutTail { .. }))
+    );
+    assert!(
+        steps
+            .iter()
+            .any(|s| s.outcome == Outcome::Kept && matches!(s.edit, Edit::DropSegments { .. }))
+    );
+    // Deterministic: the same shrink again gives the same steps.
+    let again = shrink_with_fake(&case, &s, target, 2.0);
+    assert_eq!(again.2, steps);
+}
+
+#[test]
+fn a_failure_without_faults_loses_them_all() {
+    let (s, case) = generated(5, 8);
+    let faults = Size::of(&case).faults;
+    assert!(faults >= 2, "{faults}");
+    let target = segment_commands(&case).len() - 1;
+    let mut shrinker = Shrinker::new(&case, &s, target, 1).unwrap();
+    let mut tried = 0;
+    while let Some(candidate) = shrinker.next_candidate() {
+        let run = RunResult {
+            seed: 0,
+            verdict: Some(Verdict::Failed),
+            first_failing_segment: Some(candidate.target),
+            max_deviation_m: Some(1.2),
+        };
+        shrinker.record(candidate, vec![run]);
+        tried += 1;
+    }
+    // Every fault went in one step, right after the tail was cut (nothing was after the target).
+    assert!(
+        matches!(shrinker.steps()[0].edit, Edit::DropAllFaults { .. }),
+        "{:?}",
+        shrinker.steps()[0]
+    );
+    let size = Size::of(shrinker.current());
+    assert_eq!((size.faults, size.segments), (0, 1), "{tried} steps");
+}
+
+#[test]
+fn a_candidate_is_kept_only_when_every_run_fails_at_its_target() {
+    let run = |verdict, segment| RunResult {
+        seed: 0,
+        verdict: Some(verdict),
+        first_failing_segment: segment,
+        max_deviation_m: None,
+    };
+    let failed = run(Verdict::Failed, Some(2));
+    assert_eq!(Outcome::of(&[failed, failed, failed], 2), Outcome::Kept);
+    assert_eq!(
+        Outcome::of(&[failed, run(Verdict::Passed, None)], 2),
+        Outcome::Passed
+    );
+    assert_eq!(
+        Outcome::of(&[failed, run(Verdict::Failed, Some(1))], 2),
+        Outcome::FailedElsewhere
+    );
+    assert_eq!(
+        Outcome::of(&[run(Verdict::Aborted, None)], 2),
+        Outcome::Aborted
+    );
+    assert_eq!(Outcome::of(&[], 2), Outcome::Aborted);
+}
+
+#[test]
+fn a_target_beyond_the_segments_is_refused() {
+    let (s, case) = generated(1, 5);
+    let segments = segment_commands(&case).len();
+    let error = Shrinker::new(&case, &s, segments, 1).unwrap_err();
+    assert!(error.to_string().contains("not among"), "{error}");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 12, ..ProptestConfig::default() })]
+
+    /// Whatever the runs say, every candidate the shrinker proposes is drivable with its ahead
+    /// margins and its faults can act, and the shrink ends with a case no larger than the start.
+    #[test]
+    fn every_candidate_is_drivable_and_the_shrink_ends(
+        seed in 0u64..1000,
+        index in 4usize..10,
+        verdicts in proptest::collection::vec(any::<bool>(), 64),
+    ) {
+        let (s, case) = generated(seed, index);
+        let segments = segment_commands(&case).len();
+        let target = segments / 2;
+        let before = Size::of(&case);
+        let mut shrinker = Shrinker::new(&case, &s, target, seed).unwrap();
+        let mut step = 0;
+        while let Some(candidate) = shrinker.next_candidate() {
+            prop_assert!(drivable(&candidate.case, &s), "{}", candidate.edit);
+            prop_assert!(candidate.case.check_faults_act(&s).is_ok());
+            let fails = verdicts[step % verdicts.len()];
+            let run = RunResult {
+                seed: 0,
+                verdict: Some(if fails { Verdict::Failed } else { Verdict::Passed }),
+                first_failing_segment: fails.then_some(candidate.target),
+                max_deviation_m: None,
+            };
+            shrinker.record(candidate, vec![run]);
+            step += 1;
+            prop_assert!(step < 3000);
+        }
+        let after = Size::of(shrinker.current());
+        prop_assert!(after.commands <= before.commands);
+        prop_assert!(shrinker.target() < after.segments);
+    }
+}

@@ -1,0 +1,367 @@
+//! `drivecheck shrink CASE.json` (and `drivecheck run --shrink`): a failing case shrunk to the
+//! smallest test that still fails the same way every time, on the embedded simulated car in
+//! virtual time.
+//!
+//! The strategy is [`campaign::shrink`]'s; this module drives its candidates. Every candidate is
+//! driven `--runs` times (run k with seed + k, so the sensor noise differs), each on a fresh
+//! simulator, and its runs stop at the first that does not fail the same way. The candidates'
+//! runs record no MCAP and their run directories are scratch (removed at the end); the shrink
+//! directory keeps `minimal.json` (the minimal case as its first confirming run wrote it: a case
+//! file every command takes, e.g. `drivecheck replay`) and `shrink.json` (every step).
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, bail};
+use car_link::CarAddress;
+use indicatif::{ProgressBar, ProgressStyle};
+use scenarios::Scenario;
+use tokio_util::sync::CancellationToken;
+use trajgen::{Generator, Strategy};
+
+use super::shared::{
+    CampaignFailed, cancel_on_ctrl_c, check_hash, connect, runtime, scenario_of, sim_view,
+};
+use crate::cli::ShrinkArgs;
+use crate::runner::{ReplaySource, RunConfig, Silent, run_campaign, run_dir_name};
+use crate::seed::choose_seed;
+use campaign::case::{Case, CommandRecord, ReplayOf, ScenarioRef, tool_version};
+use campaign::model::Campaign;
+use campaign::oracle::FailurePolicy;
+use campaign::shrink::{
+    CaseSummary, Ended, MINIMAL_FILE, RunResult, SHRINK_FILE, SHRINK_FORMAT, ShrinkReport,
+    Shrinker, Size,
+};
+
+/// How a shrink is run.
+#[derive(Debug, Clone)]
+pub(super) struct Options {
+    /// Runs per candidate.
+    pub runs: u32,
+    /// Wall-time budget.
+    pub budget: Duration,
+    /// Seed of run 1 of every candidate.
+    pub seed: u64,
+}
+
+/// `drivecheck shrink`. Exit status: 0 the case was shrunk (or was minimal already), 2 an error
+/// (the case refused, or it does not fail the same way every time).
+pub fn shrink(args: &ShrinkArgs) -> Result<ExitCode> {
+    let path = &args.case;
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let case = Case::from_json(&text).with_context(|| path.display().to_string())?;
+    let scenario = scenario_of(args.scenario.as_deref(), path, &case)?;
+    check_hash(&case, &scenario, args.ignore_scenario_hash)?;
+    let seed = args
+        .seed
+        .or(case.campaign_seed)
+        .unwrap_or_else(|| choose_seed(None));
+    let out = args.out.clone().unwrap_or_else(|| {
+        PathBuf::from("runs").join(run_dir_name(&format!("shrink-{}", scenario.name), seed))
+    });
+    let options = Options {
+        runs: args.runs,
+        budget: args.budget,
+        seed,
+    };
+    let runtime = runtime(true)?;
+    let report = runtime.block_on(async {
+        let cancel = cancel_on_ctrl_c();
+        shrink_case(path, &case, &scenario, &options, &out, &cancel, true).await
+    })?;
+    print_summary(&report, &out);
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Prints the before/after table and where the files are.
+pub(super) fn print_summary(report: &ShrinkReport, out: &Path) {
+    print!("{}", report.table());
+    let kept = report
+        .steps
+        .iter()
+        .filter(|s| s.outcome == campaign::shrink::Outcome::Kept)
+        .count();
+    println!(
+        "{} steps tried, {kept} kept, {} simulator runs, {:.1} s wall time; {}",
+        report.steps.len(),
+        report.simulator_runs,
+        report.wall_s,
+        match report.ended {
+            Ended::Minimal => "no simpler case fails the same way",
+            Ended::Budget => "stopped by the time budget (--budget)",
+            Ended::Interrupted => "interrupted",
+        }
+    );
+    if let Some(runs) = &report.without_faults {
+        let failed = runs
+            .iter()
+            .filter(|r| r.fails_at(report.after.target_segment))
+            .count();
+        println!(
+            "without its faults the minimal case fails the same way in {failed} of {} runs",
+            runs.len()
+        );
+    }
+    println!(
+        "minimal case: {}; every step: {}",
+        out.join(MINIMAL_FILE).display(),
+        out.join(SHRINK_FILE).display()
+    );
+    println!("on the car: {}", report.replay_on_car);
+}
+
+/// Shrinks `case` (read from `path`) in `scenario` and writes the shrink directory `out` (which
+/// must be new or empty). With `progress`, shows a spinner on standard error.
+pub(super) async fn shrink_case(
+    path: &Path,
+    case: &Case,
+    scenario: &Scenario,
+    options: &Options,
+    out: &Path,
+    cancel: &CancellationToken,
+    progress: bool,
+) -> Result<ShrinkReport> {
+    let started = Instant::now();
+    if crate::runner::is_used(out) {
+        bail!(crate::runner::RunError::OutDirUsed {
+            path: out.to_owned()
+        });
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let driver = Driver {
+        scenario,
+        policy: case
+            .settings
+            .as_ref()
+            .map_or(FailurePolicy::default(), |s| s.failure_policy),
+        of: ReplayOf {
+            case: path.display().to_string(),
+            campaign_seed: case.campaign_seed,
+            test_index: case.test_index,
+            verdict: case.verdict,
+            no_faults: false,
+        },
+        scratch: out.join(".scratch"),
+        options,
+        cancel,
+        runs: std::cell::Cell::new(0),
+    };
+    let bar = spinner(progress);
+    bar.set_message(format!("driving {} to confirm its failure", path.display()));
+    // The case as it is: it must fail at the same segment in every run.
+    let (before_runs, before_case) = driver.drive_all(case, None).await?;
+    let target = match before_runs.first().and_then(|r| r.first_failing_segment) {
+        Some(target) if before_runs.iter().all(|r| r.fails_at(target)) => target,
+        _ => {
+            let seen: Vec<String> = before_runs.iter().map(describe).collect();
+            bail!(
+                "{}: does not fail the same way in every run ({}): nothing to shrink; replay it \
+                 with --vary-seed to see how it varies",
+                path.display(),
+                seen.join("; ")
+            );
+        }
+    };
+    let mut shrinker = Shrinker::new(case, scenario, target, options.seed)
+        .with_context(|| format!("{}: cannot be shrunk", path.display()))?;
+    let before = CaseSummary {
+        size: Size::of(case),
+        target_segment: target,
+        runs: before_runs.clone(),
+    };
+    let mut minimal = (before_runs, before_case);
+    let mut ended = Ended::Minimal;
+    while let Some(candidate) = shrinker.next_candidate() {
+        if cancel.is_cancelled() {
+            ended = Ended::Interrupted;
+            break;
+        }
+        if started.elapsed() > options.budget {
+            ended = Ended::Budget;
+            break;
+        }
+        bar.set_message(format!(
+            "step {}: {} ({} commands now)",
+            shrinker.steps().len() + 1,
+            candidate.edit,
+            shrinker.current().commands.len()
+        ));
+        let (runs, first) = match driver
+            .drive_all(&candidate.case, Some(candidate.target))
+            .await
+        {
+            Err(_) if cancel.is_cancelled() => {
+                ended = Ended::Interrupted;
+                break;
+            }
+            result => result?,
+        };
+        if shrinker.record(candidate, runs.clone()) {
+            minimal = (runs, first);
+        }
+        bar.tick();
+    }
+    let (after_runs, after_case) = minimal;
+    let current = shrinker.current().clone();
+    let target = shrinker.target();
+    let has_faults = current
+        .commands
+        .iter()
+        .any(|c| matches!(c, CommandRecord::AddFault { .. }));
+    let without_faults = if has_faults && ended == Ended::Minimal {
+        bar.set_message("driving the minimal case without its faults");
+        let mut bare = current.clone();
+        bare.commands
+            .retain(|c| matches!(c, CommandRecord::RunSegments { .. }));
+        Some(driver.drive_all(&bare, None).await?.0)
+    } else {
+        None
+    };
+    bar.finish_and_clear();
+    let _ = std::fs::remove_dir_all(&driver.scratch);
+    // The minimal case as its first confirming run wrote it (with results), or as planned.
+    let mut written = after_case.unwrap_or(current);
+    written.campaign_seed = case.campaign_seed.or(Some(options.seed));
+    written.test_index = case.test_index;
+    let minimal_file = out.join(MINIMAL_FILE);
+    std::fs::write(&minimal_file, format!("{}\n", written.to_json()?))
+        .with_context(|| format!("cannot write {}", minimal_file.display()))?;
+    let report = ShrinkReport {
+        format: SHRINK_FORMAT.to_owned(),
+        schema_version: 1,
+        tool_version: tool_version().to_owned(),
+        case: path.display().to_string(),
+        scenario: ScenarioRef::of(scenario),
+        seed: options.seed,
+        runs_per_candidate: options.runs,
+        ended,
+        before,
+        after: CaseSummary {
+            size: Size::of(&written),
+            target_segment: target,
+            runs: after_runs,
+        },
+        without_faults,
+        steps: shrinker.steps().to_vec(),
+        simulator_runs: driver.runs.get(),
+        wall_s: started.elapsed().as_secs_f64(),
+        replay_on_car: format!(
+            "drivecheck replay {} --car tcp://HOST:PORT",
+            minimal_file.display()
+        ),
+    };
+    let file = out.join(SHRINK_FILE);
+    std::fs::write(&file, format!("{}\n", report.to_json()?))
+        .with_context(|| format!("cannot write {}", file.display()))?;
+    Ok(report)
+}
+
+/// A run in words, for the error that a case does not fail the same way.
+fn describe(run: &RunResult) -> String {
+    let verdict = run
+        .verdict
+        .map_or("no verdict", campaign::oracle::Verdict::as_str);
+    match run.first_failing_segment {
+        Some(segment) => format!("seed {}: {verdict} at segment {segment}", run.seed),
+        None => format!("seed {}: {verdict}", run.seed),
+    }
+}
+
+fn spinner(show: bool) -> ProgressBar {
+    if !show {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new_spinner();
+    if let Ok(style) = ProgressStyle::with_template("{elapsed_precise} {spinner} {msg}") {
+        bar.set_style(style);
+    }
+    bar.enable_steady_tick(Duration::from_millis(120));
+    bar
+}
+
+/// Drives candidates on fresh embedded simulators.
+struct Driver<'a> {
+    scenario: &'a Scenario,
+    policy: FailurePolicy,
+    of: ReplayOf,
+    scratch: PathBuf,
+    options: &'a Options,
+    cancel: &'a CancellationToken,
+    runs: std::cell::Cell<usize>,
+}
+
+impl Driver<'_> {
+    /// Drives `case` up to `options.runs` times (run k with seed + k); with `target`, stops at the
+    /// first run that does not fail there. The results and the first run's case.
+    async fn drive_all(
+        &self,
+        case: &Case,
+        target: Option<usize>,
+    ) -> Result<(Vec<RunResult>, Option<Case>)> {
+        let generator = Generator::new(self.scenario.generator.generator_config(Strategy::Wedge))
+            .context("the scenario's generator settings")?;
+        let plan = case
+            .replay_plan(self.scenario, &generator, self.options.seed, false, 0)
+            .context("the candidate cannot be driven")?;
+        let mut results = Vec::new();
+        let mut first = None;
+        for k in 0..self.options.runs {
+            let seed = self.options.seed.wrapping_add(u64::from(k));
+            let driven = self.drive_once(&plan, seed).await?;
+            let result = RunResult::of(seed, &driven);
+            results.push(result);
+            if first.is_none() {
+                first = Some(driven);
+            }
+            if target.is_some_and(|t| !result.fails_at(t)) {
+                break;
+            }
+        }
+        Ok((results, first))
+    }
+
+    /// One run of `plan` with `seed` on a fresh simulator, unrecorded: the case it wrote.
+    async fn drive_once(&self, plan: &campaign::model::TestPlan, seed: u64) -> Result<Case> {
+        self.runs.set(self.runs.get() + 1);
+        let dir = self.scratch.join("run");
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut config = RunConfig::new(
+            Campaign {
+                seed,
+                tests: 1,
+                no_faults: false,
+            },
+            dir,
+            "sim",
+        );
+        config.replay = Some(ReplaySource {
+            plan: plan.clone(),
+            of: self.of.clone(),
+        });
+        config.policy = self.policy;
+        config.record = false;
+        let (car, sim) = connect(&CarAddress::Sim, self.scenario, seed).await?;
+        let result = run_campaign(
+            &car,
+            self.scenario,
+            &config,
+            self.cancel,
+            &Silent,
+            sim_view(&sim),
+        )
+        .await;
+        if let Some(sim) = sim {
+            sim.shutdown();
+        }
+        let report = result.map_err(|failure| {
+            anyhow::Error::new(CampaignFailed::new(failure.error, &config.out_dir))
+        })?;
+        report
+            .cases
+            .into_iter()
+            .next()
+            .context("the run wrote no case")
+    }
+}
