@@ -75,6 +75,13 @@ pub struct RunArgs {
     /// `continue` driving it and record every segment.
     #[arg(long, value_enum, default_value_t = OnFailure::Stop)]
     pub on_failure: OnFailure,
+    /// At the end, shrink every failed test's case (as `drivecheck shrink` does, on the embedded
+    /// simulated car in virtual time) into `shrink-NNN/` of the run directory.
+    #[arg(long)]
+    pub shrink: bool,
+    /// With `--shrink`: the wall-time budget of each case's shrink.
+    #[arg(long, value_name = "DURATION", default_value = "2min", value_parser = humantime::parse_duration)]
+    pub shrink_budget: std::time::Duration,
     /// The run directory (default `runs/<UTC timestamp>-<scenario>-<seed>/`).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,

@@ -2,7 +2,9 @@
 
 use std::fmt;
 
-use recovery::{PlanConfig, Pose};
+use std::collections::HashMap;
+
+use recovery::{PlanConfig, Pose, ReturnRoute, SearchConfig};
 use scenarios::Scenario;
 use serde::{Deserialize, Serialize};
 use trajgen::{Point, RouteTail};
@@ -205,6 +207,51 @@ fn polyline_length(points: &[Point]) -> f64 {
     points.windows(2).map(|w| w[0].dist(w[1])).sum()
 }
 
+/// Nodes a joining route's search may expand: a join that needs more is a long detour, not a
+/// simpler test (a return route gets 20 000).
+const JOIN_EXPANSIONS: u64 = 3_000;
+
+/// The joining routes planned so far, by their inputs: a shrink tries the same join again after
+/// every kept edit, and a failed search is the costliest thing it does.
+#[derive(Debug, Default)]
+pub(super) struct Joins(HashMap<Vec<u64>, Result<ReturnRoute, String>>);
+
+impl Joins {
+    /// The joining route from `from` to `route` (deterministic: seeded with `seed`).
+    fn plan(
+        &mut self,
+        scenario: &Scenario,
+        from: RouteTail,
+        route: &[Point],
+        seed: u64,
+    ) -> Result<ReturnRoute, String> {
+        let key: Vec<u64> = [from.end.x, from.end.y, from.heading]
+            .into_iter()
+            .chain(route.iter().flat_map(|p| [p.x, p.y]))
+            .map(f64::to_bits)
+            .chain([seed])
+            .collect();
+        self.0
+            .entry(key)
+            .or_insert_with(|| {
+                let config = PlanConfig::default().with_search(SearchConfig {
+                    max_expansions: JOIN_EXPANSIONS,
+                    ..SearchConfig::default()
+                });
+                config
+                    .plan(
+                        &scenario.area,
+                        Pose::new(from.end, from.heading),
+                        route,
+                        &scenario.constraints(),
+                        &mut crate::seed::rng(seed),
+                    )
+                    .map_err(|e| format!("no joining route: {e}"))
+            })
+            .clone()
+    }
+}
+
 /// What applying an edit gives: the changed case (results not yet cleared) and where the
 /// failing segment now is.
 pub(super) type Applied = Result<(Case, usize), String>;
@@ -217,6 +264,7 @@ impl Edit {
         target: usize,
         scenario: &Scenario,
         seed: u64,
+        joins: &mut Joins,
     ) -> Applied {
         let mut out = case.clone();
         match *self {
@@ -256,7 +304,7 @@ impl Edit {
                 Ok((out, target))
             }
             Self::DropSegments { first, last } => {
-                drop_segments(case, target, scenario, seed, first, last)
+                drop_segments(case, target, scenario, seed, joins, first, last)
             }
             Self::FaultValue {
                 command_index,
@@ -352,6 +400,7 @@ fn drop_segments(
     target: usize,
     scenario: &Scenario,
     seed: u64,
+    joins: &mut Joins,
     first: usize,
     last: usize,
 ) -> Applied {
@@ -366,16 +415,7 @@ fn drop_segments(
     let recovery_route: Vec<Point> = std::iter::once(before_next)
         .chain(next_points.iter().map(RoutePointRecord::position))
         .collect();
-    let mut rng = crate::seed::rng(seed);
-    let route = PlanConfig::default()
-        .plan(
-            &scenario.area,
-            Pose::new(from.end, from.heading),
-            &recovery_route,
-            &scenario.constraints(),
-            &mut rng,
-        )
-        .map_err(|e| format!("no joining route: {e}"))?;
+    let route = joins.plan(scenario, from, &recovery_route, seed)?;
     let join = route.join;
     let speed = next_points[0].speed;
     // The merged segment: the joining route (without the car's position it starts from), then

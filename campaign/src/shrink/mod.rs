@@ -49,7 +49,7 @@ mod tests;
 pub use edit::{Edit, FaultField};
 pub use report::{CaseSummary, Ended, MINIMAL_FILE, SHRINK_FILE, SHRINK_FORMAT, ShrinkReport};
 
-use edit::{neutral, part_way, segment_commands};
+use edit::{Joins, neutral, part_way, segment_commands};
 
 /// After moving a value all the way to neutral failed, how far of the way it is moved instead.
 const PART_WAY: [f64; 2] = [0.5, 0.25];
@@ -241,6 +241,7 @@ pub struct Shrinker<'a> {
     /// Edits (in words) that did not keep the failure on the current case.
     rejected: HashSet<String>,
     steps: Vec<Step>,
+    joins: Joins,
 }
 
 impl<'a> Shrinker<'a> {
@@ -267,6 +268,7 @@ impl<'a> Shrinker<'a> {
             target,
             rejected: HashSet::new(),
             steps: Vec::new(),
+            joins: Joins::default(),
         })
     }
 
@@ -294,7 +296,13 @@ impl<'a> Shrinker<'a> {
                 continue;
             }
             let applied = edit
-                .apply(&self.current, self.target, self.scenario, self.seed)
+                .apply(
+                    &self.current,
+                    self.target,
+                    self.scenario,
+                    self.seed,
+                    &mut self.joins,
+                )
                 .and_then(|(case, target)| {
                     prepared(&case, self.scenario, &self.generator, self.seed)
                         .map(|case| (case, target))

@@ -13,12 +13,16 @@ use scenarios::Scenario;
 use super::shared::{
     CampaignFailed, Progress, cancel_on_ctrl_c, connect, print_report, runtime, sim_view,
 };
+use super::shrink;
 use crate::cli::{OnFailure, RunArgs};
 use crate::runner::{CampaignReport, RunConfig, run_campaign, run_dir_name};
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::choose_seed;
+use campaign::case::Case;
 use campaign::model::Campaign;
 use campaign::oracle::FailurePolicy;
+use campaign::oracle::Verdict;
+use campaign::shrink::MINIMAL_FILE;
 
 /// Runs the campaign and prints the final table. Exit status: 0 every test passed, 1 a test
 /// failed or was aborted, 2 an error (preflight refused, link lost, interrupted, …).
@@ -71,7 +75,76 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     let started = Instant::now();
     let result = runtime.block_on(campaign_on(&address, &scenario, &config));
     let wall = started.elapsed();
-    finish(result, wall)
+    let report = result?;
+    print_report(&report, Some(wall));
+    if args.shrink {
+        shrink_failed(&report, &scenario, args.shrink_budget)?;
+    }
+    let summary = report.record.summary.as_ref();
+    let all_passed = summary.is_some_and(|s| s.passed == s.tests && s.tests > 0);
+    Ok(if all_passed {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(1)
+    })
+}
+
+/// Shrinks every failed test's case file into `shrink-NNN/` of the run directory and prints a
+/// line per case; a case that cannot be shrunk (it does not fail the same way every time in
+/// the simulator, say) gets a warning and the next one is shrunk.
+fn shrink_failed(report: &CampaignReport, scenario: &Scenario, budget: Duration) -> Result<()> {
+    let failed: Vec<usize> = report
+        .cases
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| c.verdict == Some(Verdict::Failed))
+        .map(|(i, c)| c.test_index.unwrap_or(i))
+        .collect();
+    if failed.is_empty() {
+        return Ok(());
+    }
+    eprintln!("shrinking {} failed case(s)", failed.len());
+    let runtime = runtime(true)?;
+    let mut lines = vec![
+        "| case | commands | segments | faults | failing segment | simulator runs | wall |"
+            .to_owned(),
+        "|---|---|---|---|---|---|---|".to_owned(),
+    ];
+    for test_index in failed {
+        let path = report.dir.join(format!("case-{test_index:03}.json"));
+        let out = report.dir.join(format!("shrink-{test_index:03}"));
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("cannot read {}", path.display()))?;
+        let case = Case::from_json(&text).with_context(|| path.display().to_string())?;
+        let options = shrink::Options {
+            runs: 3,
+            budget,
+            seed: case.campaign_seed.unwrap_or(report.record.seed),
+        };
+        let result = runtime.block_on(async {
+            let cancel = cancel_on_ctrl_c();
+            shrink::shrink_case(&path, &case, scenario, &options, &out, &cancel, true).await
+        });
+        match result {
+            Ok(r) => lines.push(format!(
+                "| {} | {} → {} | {} → {} | {} → {} | {} → {} | {} | {:.1} s |",
+                out.join(MINIMAL_FILE).display(),
+                r.before.size.commands,
+                r.after.size.commands,
+                r.before.size.segments,
+                r.after.size.segments,
+                r.before.size.faults,
+                r.after.size.faults,
+                r.before.target_segment,
+                r.after.target_segment,
+                r.simulator_runs,
+                r.wall_s
+            )),
+            Err(error) => eprintln!("warning: not shrunk: {error:#}"),
+        }
+    }
+    println!("{}", lines.join("\n"));
+    Ok(())
 }
 
 /// Connects to the car (starting the embedded simulator for `sim`) and runs the campaign,
@@ -88,16 +161,4 @@ async fn campaign_on(
     progress.finish();
     result
         .map_err(|failure| anyhow::Error::new(CampaignFailed::new(failure.error, &config.out_dir)))
-}
-
-fn finish(result: Result<CampaignReport>, wall: Duration) -> Result<ExitCode> {
-    let report = result?;
-    print_report(&report, Some(wall));
-    let summary = report.record.summary.as_ref();
-    let all_passed = summary.is_some_and(|s| s.passed == s.tests && s.tests > 0);
-    Ok(if all_passed {
-        ExitCode::SUCCESS
-    } else {
-        ExitCode::from(1)
-    })
 }
