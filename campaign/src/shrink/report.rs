@@ -36,7 +36,7 @@ pub struct CaseSummary {
     pub runs: Vec<RunResult>,
 }
 
-/// `shrink.json` (see `docs/case-format.md#shrink-reports`).
+/// `shrink.json` (see `docs/case-format.md#shrinking-a-case`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ShrinkReport {
