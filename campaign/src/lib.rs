@@ -27,3 +27,4 @@ pub mod safety;
 pub mod seed;
 pub mod shrink;
 pub mod streaming;
+pub mod sweep;

@@ -122,6 +122,11 @@ pub struct CarOptions {
     /// (default false: the IMU yaw follows the simulated kinematics). Combine with
     /// `gnss.enabled = false` for a bench without a receiver.
     pub imu_on_bench: bool,
+    /// Simulation only: the UWB estimator's largest correction per range, m (`None`: the
+    /// firmware's constant [`crate::uwb::MAX_STEP_M`], 0.2 m). No firmware setting changes it;
+    /// `drivecheck sweep` varies it to show the method's trade-off (larger helps against wheel
+    /// slip, smaller against reflections).
+    pub uwb_step_clamp_m: Option<f32>,
 }
 
 impl Default for CarOptions {
@@ -141,6 +146,7 @@ impl Default for CarOptions {
             preload_anchors: false,
             record_events: false,
             imu_on_bench: false,
+            uwb_step_clamp_m: None,
         }
     }
 }
@@ -302,6 +308,9 @@ impl SimCar {
             options,
         };
         car.place(p);
+        if let Some(clamp) = car.options.uwb_step_clamp_m {
+            car.uwb.set_step_clamp(clamp);
+        }
         if car.options.preload_anchors {
             let world_anchors = car.options.world.anchors.clone();
             for a in world_anchors {

@@ -106,6 +106,8 @@ pub struct SimConfig {
     pub record_events: bool,
     /// HIL-bench fidelity: the IMU does not rotate (see [`CarOptions::imu_on_bench`]).
     pub imu_on_bench: bool,
+    /// Simulation only: the UWB correction clamp (see [`CarOptions::uwb_step_clamp_m`]).
+    pub uwb_step_clamp_m: Option<f32>,
     /// Link impairment.
     pub link: LinkImpairment,
 }
@@ -134,6 +136,7 @@ impl SimConfig {
             preload_anchors: self.preload_anchors,
             record_events: self.record_events,
             imu_on_bench: self.imu_on_bench,
+            uwb_step_clamp_m: self.uwb_step_clamp_m,
         }
     }
 }

@@ -20,8 +20,9 @@ pub const ANTENNA_OFFSET_M: f32 = 0.085;
 pub const EXCHANGES: usize = 5;
 /// 10.x: ranges shorter than predicted by this much or more are ignored, m.
 const GATE_10X_M: f32 = 8.0;
-/// Largest correction per range, m.
-const MAX_STEP_M: f32 = 0.2;
+/// Largest correction per range, m: a compile-time constant of the firmware (both eras), the
+/// method's "correction clamp". A simulation may change it ([`UwbEstimator::set_step_clamp`]).
+pub const MAX_STEP_M: f32 = 0.2;
 /// 12.x yaw history length.
 const YAW_HISTORY: usize = 50;
 /// 12.x stationary clamp speed: 0.5 km/h in m/s.
@@ -326,6 +327,8 @@ pub struct UwbEstimator {
     yaw_history_ptr: usize,
     p_old: (f32, f32),
     range_updates: u32,
+    /// The largest correction per range ([`MAX_STEP_M`] unless a simulation changed it).
+    max_step: f32,
 }
 
 impl UwbEstimator {
@@ -346,7 +349,14 @@ impl UwbEstimator {
             yaw_history_ptr: 0,
             p_old: (0.0, 0.0),
             range_updates: 0,
+            max_step: MAX_STEP_M,
         }
+    }
+
+    /// Changes the largest correction per range (simulation only: the firmware's is the constant
+    /// [`MAX_STEP_M`]); what `drivecheck sweep` varies to show its trade-off.
+    pub fn set_step_clamp(&mut self, metres: f32) {
+        self.max_step = metres;
     }
 
     /// The estimate's position.
@@ -446,7 +456,7 @@ impl UwbEstimator {
         if diff.is_nan() || diff >= GATE_10X_M {
             return false;
         }
-        let step = diff.abs().min(MAX_STEP_M).copysign(diff);
+        let step = diff.abs().min(self.max_step).copysign(diff);
         self.px += step * dx / predicted;
         self.py += step * dy / predicted;
         true
@@ -469,7 +479,7 @@ impl UwbEstimator {
         let c = if diff.abs() < max_corr {
             diff
         } else {
-            MAX_STEP_M.copysign(diff)
+            self.max_step.copysign(diff)
         };
         if !c.is_finite() {
             return false;

@@ -26,6 +26,10 @@ pub enum Command {
     /// Shrink a failing case to the smallest test that still fails the same way every time (on
     /// the embedded simulated car, in virtual time). Exit status: 0 shrunk, 2 error.
     Shrink(ShrinkArgs),
+    /// Drive a case for every value of fault parameters or simulator settings (`--set`) on the
+    /// embedded simulated car and tabulate each segment's largest deviation. Exit status: 0 ran,
+    /// 2 error.
+    Sweep(SweepArgs),
     /// List run directories (campaigns and replays) with their summary, or show one.
     Runs(RunsArgs),
     /// Serve a simulated car over TCP (like the reference bridge) or UDP.
@@ -164,6 +168,38 @@ pub struct ShrinkArgs {
     /// Seed of every candidate's first run (default: the case's campaign seed).
     #[arg(long)]
     pub seed: Option<u64>,
+}
+
+/// Options of `drivecheck sweep`.
+#[derive(Debug, Args)]
+pub struct SweepArgs {
+    /// The case file to sweep.
+    #[arg(value_name = "CASE.json")]
+    pub case: PathBuf,
+    /// `NAME=V1,V2,…`: a parameter and its values; several `--set`s sweep every combination.
+    /// NAME is `fault[i].param`, `fault[i].start` or `fault[i].duration` (the case's i-th fault
+    /// command, from 0), or a setting of the simulated car: `sim.uwb_clamp_m` (the UWB
+    /// estimator's largest correction per range, 0.2 m in the firmware), `sim.anchor_error_m`
+    /// (how far each anchor stands from its surveyed position), `sim.range_sigma_m` (the noise
+    /// of one UWB exchange).
+    #[arg(long, value_name = "NAME=V1,V2,…", required = true)]
+    pub set: Vec<String>,
+    /// Runs of every value (run k with seed + k − 1).
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=50))]
+    pub runs: u32,
+    /// Seed of every value's first run (default: the case's campaign seed).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Print the result as JSON (`drivecheck-sweep`, docs/case-format.md) instead of a table.
+    #[arg(long)]
+    pub json: bool,
+    /// Scenario: a bundled name, a .toml file or a reference .xml (default: the bundled scenario
+    /// the case names).
+    #[arg(long)]
+    pub scenario: Option<String>,
+    /// Sweep even when the scenario's hash differs from the case's (or the case has none).
+    #[arg(long)]
+    pub ignore_scenario_hash: bool,
 }
 
 /// Options of `drivecheck runs`.

@@ -47,7 +47,9 @@ mod report;
 mod tests;
 
 pub use edit::{Edit, FaultField};
-pub use report::{CaseSummary, Ended, MINIMAL_FILE, SHRINK_FILE, SHRINK_FORMAT, ShrinkReport};
+pub use report::{
+    CaseSummary, Confirmation, Ended, MINIMAL_FILE, SHRINK_FILE, SHRINK_FORMAT, ShrinkReport,
+};
 
 use edit::{Joins, neutral, part_way, segment_commands};
 

@@ -36,6 +36,20 @@ pub struct CaseSummary {
     pub runs: Vec<RunResult>,
 }
 
+/// The minimal case driven again with other seeds (those after the candidates' seeds).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Confirmation {
+    /// The runs (they stop at the first that does not fail the same way).
+    pub runs: Vec<RunResult>,
+    /// Every run failed the same way. False only when not even the case itself did (the shrink
+    /// then gives the case back unshrunk).
+    pub confirmed: bool,
+    /// Kept steps undone because the case they gave did not fail the same way with these seeds
+    /// (a candidate that only just fails can be kept because its runs happened to fail).
+    pub stepped_back: usize,
+}
+
 /// `shrink.json` (see `docs/case-format.md#shrinking-a-case`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -64,6 +78,9 @@ pub struct ShrinkReport {
     /// need them?
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub without_faults: Option<Vec<RunResult>>,
+    /// The minimal case confirmed with other seeds (absent when the shrink was interrupted).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub confirmation: Option<Confirmation>,
     /// Every edit tried, in order.
     pub steps: Vec<Step>,
     /// Simulator runs in all (the confirmations of the case and of the minimal one included).

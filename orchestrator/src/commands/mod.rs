@@ -12,6 +12,8 @@ mod scenario;
 mod shared;
 mod shrink;
 mod sim;
+mod simdrive;
+mod sweep;
 
 use std::process::ExitCode;
 
@@ -25,6 +27,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Command::Run(args) => run::run(&args),
         Command::Replay(args) => replay::replay(&args),
         Command::Shrink(args) => shrink::shrink(&args),
+        Command::Sweep(args) => sweep::sweep(&args),
         Command::Runs(args) => runs::runs(&args),
         Command::Sim(args) => sim::serve(&args),
         Command::Area(AreaCommand::Validate(args)) => area::validate(&args),

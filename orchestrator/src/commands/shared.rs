@@ -62,11 +62,17 @@ pub(super) async fn connect(
         seed,
         ..car_sim::SimConfig::from_scenario(scenario)
     };
-    let (stream, sim) = car_sim::spawn_in_process(&sim_config);
+    let (car, sim) = connect_sim(&sim_config).await?;
+    Ok((car, Some(sim)))
+}
+
+/// A fresh embedded simulated car with `config`, with its handle.
+pub(super) async fn connect_sim(config: &car_sim::SimConfig) -> Result<(Car, SimHandle)> {
+    let (stream, sim) = car_sim::spawn_in_process(config);
     let car = Car::over_stream(stream, car_config())
         .await
         .context("cannot connect to the embedded simulated car")?;
-    Ok((car, Some(sim)))
+    Ok((car, sim))
 }
 
 /// The embedded simulator's debug view, as the runner records it.

@@ -14,24 +14,20 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
-use car_link::CarAddress;
 use indicatif::{ProgressBar, ProgressStyle};
 use scenarios::Scenario;
 use tokio_util::sync::CancellationToken;
-use trajgen::{Generator, Strategy};
 
-use super::shared::{
-    CampaignFailed, cancel_on_ctrl_c, check_hash, connect, runtime, scenario_of, sim_view,
-};
+use super::shared::{cancel_on_ctrl_c, check_hash, runtime, scenario_of};
+use super::simdrive::{SimDriver, SimSettings};
 use crate::cli::ShrinkArgs;
-use crate::runner::{ReplaySource, RunConfig, Silent, run_campaign, run_dir_name};
+use crate::runner::run_dir_name;
 use crate::seed::choose_seed;
 use campaign::case::{Case, CommandRecord, ReplayOf, ScenarioRef, tool_version};
-use campaign::model::Campaign;
 use campaign::oracle::FailurePolicy;
 use campaign::shrink::{
-    CaseSummary, Ended, MINIMAL_FILE, RunResult, SHRINK_FILE, SHRINK_FORMAT, ShrinkReport,
-    Shrinker, Size,
+    CaseSummary, Confirmation, Ended, MINIMAL_FILE, RunResult, SHRINK_FILE, SHRINK_FORMAT,
+    ShrinkReport, Shrinker, Size,
 };
 
 /// How a shrink is run.
@@ -94,6 +90,26 @@ pub(super) fn print_summary(report: &ShrinkReport, out: &Path) {
             Ended::Interrupted => "interrupted",
         }
     );
+    if let Some(c) = &report.confirmation {
+        let seeds = c.runs.first().map_or(0, |r| r.seed);
+        println!(
+            "{} with {} other seed(s) from {seeds}{}",
+            if c.confirmed {
+                "the minimal case fails the same way"
+            } else {
+                "NOT CONFIRMED: the case does not fail the same way"
+            },
+            c.runs.len(),
+            if c.stepped_back > 0 {
+                format!(
+                    " (after stepping back {} kept step(s) that only just failed)",
+                    c.stepped_back
+                )
+            } else {
+                String::new()
+            }
+        );
+    }
     if let Some(runs) = &report.without_faults {
         let failed = runs
             .iter()
@@ -130,7 +146,7 @@ pub(super) async fn shrink_case(
         });
     }
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
-    let driver = Driver {
+    let driver = SimDriver {
         scenario,
         policy: case
             .settings
@@ -144,14 +160,17 @@ pub(super) async fn shrink_case(
             no_faults: false,
         },
         scratch: out.join(".scratch"),
-        options,
+        runs: options.runs,
+        seed: options.seed,
         cancel,
-        runs: std::cell::Cell::new(0),
+        count: std::cell::Cell::new(0),
     };
+    let plain = SimSettings::default();
     let bar = spinner(progress);
     bar.set_message(format!("driving {} to confirm its failure", path.display()));
     // The case as it is: it must fail at the same segment in every run.
-    let (before_runs, before_case) = driver.drive_all(case, None).await?;
+    let (before_runs, before_cases) = driver.drive_all(case, None, &plain).await?;
+    let before_case = before_cases.into_iter().next().map(|(_, c)| c);
     let target = match before_runs.first().and_then(|r| r.first_failing_segment) {
         Some(target) if before_runs.iter().all(|r| r.fails_at(target)) => target,
         _ => {
@@ -171,7 +190,13 @@ pub(super) async fn shrink_case(
         target_segment: target,
         runs: before_runs.clone(),
     };
-    let mut minimal = (before_runs, before_case);
+    // Every case kept, the case itself first: the confirmation may step back through them.
+    let mut kept = vec![Kept {
+        case: shrinker.current().clone(),
+        target,
+        runs: before_runs,
+        first: before_case,
+    }];
     let mut ended = Ended::Minimal;
     while let Some(candidate) = shrinker.next_candidate() {
         if cancel.is_cancelled() {
@@ -188,8 +213,8 @@ pub(super) async fn shrink_case(
             candidate.edit,
             shrinker.current().commands.len()
         ));
-        let (runs, first) = match driver
-            .drive_all(&candidate.case, Some(candidate.target))
+        let (runs, cases) = match driver
+            .drive_all(&candidate.case, Some(candidate.target), &plain)
             .await
         {
             Err(_) if cancel.is_cancelled() => {
@@ -199,13 +224,57 @@ pub(super) async fn shrink_case(
             result => result?,
         };
         if shrinker.record(candidate, runs.clone()) {
-            minimal = (runs, first);
+            kept.push(Kept {
+                case: shrinker.current().clone(),
+                target: shrinker.target(),
+                runs,
+                first: cases.into_iter().next().map(|(_, c)| c),
+            });
         }
         bar.tick();
     }
-    let (after_runs, after_case) = minimal;
-    let current = shrinker.current().clone();
-    let target = shrinker.target();
+    // A greedy shrink moves values to where the case only just fails: a case kept because its
+    // runs happened to fail. Confirm the last one with twice as many other seeds; when it does
+    // not fail the same way in all of them, step back to the case kept before it.
+    let confirmer = SimDriver {
+        seed: options.seed.wrapping_add(u64::from(options.runs)),
+        runs: options.runs * 2,
+        count: std::cell::Cell::new(0),
+        scratch: driver.scratch.clone(),
+        of: driver.of.clone(),
+        ..driver
+    };
+    let mut stepped_back = 0;
+    let confirmation = loop {
+        if ended == Ended::Interrupted {
+            break None;
+        }
+        let last = kept.last().expect("the case itself is always kept");
+        bar.set_message(format!(
+            "confirming the minimal case with {} other seeds",
+            confirmer.runs
+        ));
+        let (runs, _) = confirmer
+            .drive_all(&last.case, Some(last.target), &plain)
+            .await?;
+        let confirmed =
+            runs.len() == confirmer.runs as usize && runs.iter().all(|r| r.fails_at(last.target));
+        if confirmed || kept.len() == 1 {
+            break Some(Confirmation {
+                runs,
+                confirmed,
+                stepped_back,
+            });
+        }
+        kept.pop();
+        stepped_back += 1;
+    };
+    let Kept {
+        case: current,
+        target,
+        runs: after_runs,
+        first: after_case,
+    } = kept.pop().expect("the case itself is always kept");
     let has_faults = current
         .commands
         .iter()
@@ -215,7 +284,7 @@ pub(super) async fn shrink_case(
         let mut bare = current.clone();
         bare.commands
             .retain(|c| matches!(c, CommandRecord::RunSegments { .. }));
-        Some(driver.drive_all(&bare, None).await?.0)
+        Some(driver.drive_all(&bare, None, &plain).await?.0)
     } else {
         None
     };
@@ -244,8 +313,9 @@ pub(super) async fn shrink_case(
             runs: after_runs,
         },
         without_faults,
+        confirmation,
         steps: shrinker.steps().to_vec(),
-        simulator_runs: driver.runs.get(),
+        simulator_runs: driver.count.get() + confirmer.count.get(),
         wall_s: started.elapsed().as_secs_f64(),
         replay_on_car: format!(
             "drivecheck replay {} --car tcp://HOST:PORT",
@@ -256,6 +326,14 @@ pub(super) async fn shrink_case(
     std::fs::write(&file, format!("{}\n", report.to_json()?))
         .with_context(|| format!("cannot write {}", file.display()))?;
     Ok(report)
+}
+
+/// A case the shrink kept, with its runs and the case its first run wrote.
+struct Kept {
+    case: Case,
+    target: usize,
+    runs: Vec<RunResult>,
+    first: Option<Case>,
 }
 
 /// A run in words, for the error that a case does not fail the same way.
@@ -279,89 +357,4 @@ fn spinner(show: bool) -> ProgressBar {
     }
     bar.enable_steady_tick(Duration::from_millis(120));
     bar
-}
-
-/// Drives candidates on fresh embedded simulators.
-struct Driver<'a> {
-    scenario: &'a Scenario,
-    policy: FailurePolicy,
-    of: ReplayOf,
-    scratch: PathBuf,
-    options: &'a Options,
-    cancel: &'a CancellationToken,
-    runs: std::cell::Cell<usize>,
-}
-
-impl Driver<'_> {
-    /// Drives `case` up to `options.runs` times (run k with seed + k); with `target`, stops at the
-    /// first run that does not fail there. The results and the first run's case.
-    async fn drive_all(
-        &self,
-        case: &Case,
-        target: Option<usize>,
-    ) -> Result<(Vec<RunResult>, Option<Case>)> {
-        let generator = Generator::new(self.scenario.generator.generator_config(Strategy::Wedge))
-            .context("the scenario's generator settings")?;
-        let plan = case
-            .replay_plan(self.scenario, &generator, self.options.seed, false, 0)
-            .context("the candidate cannot be driven")?;
-        let mut results = Vec::new();
-        let mut first = None;
-        for k in 0..self.options.runs {
-            let seed = self.options.seed.wrapping_add(u64::from(k));
-            let driven = self.drive_once(&plan, seed).await?;
-            let result = RunResult::of(seed, &driven);
-            results.push(result);
-            if first.is_none() {
-                first = Some(driven);
-            }
-            if target.is_some_and(|t| !result.fails_at(t)) {
-                break;
-            }
-        }
-        Ok((results, first))
-    }
-
-    /// One run of `plan` with `seed` on a fresh simulator, unrecorded: the case it wrote.
-    async fn drive_once(&self, plan: &campaign::model::TestPlan, seed: u64) -> Result<Case> {
-        self.runs.set(self.runs.get() + 1);
-        let dir = self.scratch.join("run");
-        let _ = std::fs::remove_dir_all(&dir);
-        let mut config = RunConfig::new(
-            Campaign {
-                seed,
-                tests: 1,
-                no_faults: false,
-            },
-            dir,
-            "sim",
-        );
-        config.replay = Some(ReplaySource {
-            plan: plan.clone(),
-            of: self.of.clone(),
-        });
-        config.policy = self.policy;
-        config.record = false;
-        let (car, sim) = connect(&CarAddress::Sim, self.scenario, seed).await?;
-        let result = run_campaign(
-            &car,
-            self.scenario,
-            &config,
-            self.cancel,
-            &Silent,
-            sim_view(&sim),
-        )
-        .await;
-        if let Some(sim) = sim {
-            sim.shutdown();
-        }
-        let report = result.map_err(|failure| {
-            anyhow::Error::new(CampaignFailed::new(failure.error, &config.out_dir))
-        })?;
-        report
-            .cases
-            .into_iter()
-            .next()
-            .context("the run wrote no case")
-    }
 }

@@ -1,0 +1,147 @@
+//! Driving a case on fresh embedded simulated cars in virtual time, unrecorded, as `shrink` and
+//! `sweep` do: run k with seed + k, each on a simulator of its own, optionally with simulator
+//! settings changed (`sweep`'s `sim.…` parameters).
+
+use std::cell::Cell;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use car_sim::SimConfig;
+use scenarios::Scenario;
+use tokio_util::sync::CancellationToken;
+use trajgen::{Generator, Point, Strategy};
+
+use super::shared::{CampaignFailed, connect_sim, sim_view};
+use crate::runner::{ReplaySource, RunConfig, Silent, run_campaign};
+use campaign::case::{Case, ReplayOf};
+use campaign::model::{Campaign, TestPlan};
+use campaign::oracle::FailurePolicy;
+use campaign::shrink::RunResult;
+
+/// Settings of the simulated car that differ from the scenario's car (simulation only).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(super) struct SimSettings {
+    /// The UWB estimator's largest correction per range, m (the firmware's 0.2 m otherwise).
+    pub uwb_clamp_m: Option<f64>,
+    /// How far every anchor really stands from its surveyed position, m.
+    pub anchor_error_m: Option<f64>,
+    /// Standard deviation of one UWB two-way exchange, m.
+    pub range_sigma_m: Option<f64>,
+}
+
+impl SimSettings {
+    /// The simulator's configuration for `scenario` and `seed` with these settings. Anchor `id`
+    /// is moved by `anchor_error_m` in the direction `id` × the golden angle (a direction of its
+    /// own, the same for every run and value).
+    fn config(&self, scenario: &Scenario, seed: u64) -> SimConfig {
+        let mut config = SimConfig {
+            seed,
+            ..SimConfig::from_scenario(scenario)
+        };
+        config.uwb_step_clamp_m = self.uwb_clamp_m.map(|m| m as f32);
+        if let Some(error) = self.anchor_error_m {
+            const GOLDEN_ANGLE: f64 = 2.399_963_229_728_653;
+            for anchor in &mut config.world.anchors {
+                let angle = f64::from(anchor.id) * GOLDEN_ANGLE;
+                anchor.position =
+                    anchor.position + Point::new(error * angle.cos(), error * angle.sin());
+            }
+        }
+        if let Some(sigma) = self.range_sigma_m {
+            config.radio.exchange_sigma_m = sigma;
+        }
+        config
+    }
+}
+
+/// Drives cases on fresh embedded simulators (see the module doc).
+pub(super) struct SimDriver<'a> {
+    pub scenario: &'a Scenario,
+    /// The failure policy of the case's campaign.
+    pub policy: FailurePolicy,
+    /// The case driven, for the scratch `campaign.json`.
+    pub of: ReplayOf,
+    /// Where the scratch run directory goes (removed by the caller).
+    pub scratch: PathBuf,
+    /// Runs per case.
+    pub runs: u32,
+    /// Seed of run 1.
+    pub seed: u64,
+    pub cancel: &'a CancellationToken,
+    /// Simulator runs so far.
+    pub count: Cell<usize>,
+}
+
+impl SimDriver<'_> {
+    /// Drives `case` up to `runs` times (run k with seed + k) with `settings`; with `target`,
+    /// stops at the first run that does not fail there. Each run's result and case.
+    pub async fn drive_all(
+        &self,
+        case: &Case,
+        target: Option<usize>,
+        settings: &SimSettings,
+    ) -> Result<(Vec<RunResult>, Vec<(u64, Case)>)> {
+        let generator = Generator::new(self.scenario.generator.generator_config(Strategy::Wedge))
+            .context("the scenario's generator settings")?;
+        let plan = case
+            .replay_plan(self.scenario, &generator, self.seed, false, 0)
+            .context("the case cannot be driven")?;
+        let mut results = Vec::new();
+        let mut cases = Vec::new();
+        for k in 0..self.runs {
+            let seed = self.seed.wrapping_add(u64::from(k));
+            let driven = self.drive_once(&plan, seed, settings).await?;
+            let result = RunResult::of(seed, &driven);
+            results.push(result);
+            cases.push((seed, driven));
+            if target.is_some_and(|t| !result.fails_at(t)) {
+                break;
+            }
+        }
+        Ok((results, cases))
+    }
+
+    /// One run of `plan` with `seed` on a fresh simulator, unrecorded: the case it wrote.
+    async fn drive_once(&self, plan: &TestPlan, seed: u64, settings: &SimSettings) -> Result<Case> {
+        self.count.set(self.count.get() + 1);
+        let dir = self.scratch.join("run");
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut config = RunConfig::new(
+            Campaign {
+                seed,
+                tests: 1,
+                no_faults: false,
+            },
+            dir,
+            "sim",
+        );
+        config.replay = Some(ReplaySource {
+            plan: plan.clone(),
+            of: self.of.clone(),
+        });
+        config.policy = self.policy;
+        config.record = false;
+        let (car, sim) = connect_sim(&settings.config(self.scenario, seed)).await?;
+        let sim = Some(sim);
+        let result = run_campaign(
+            &car,
+            self.scenario,
+            &config,
+            self.cancel,
+            &Silent,
+            sim_view(&sim),
+        )
+        .await;
+        if let Some(sim) = sim {
+            sim.shutdown();
+        }
+        let report = result.map_err(|failure| {
+            anyhow::Error::new(CampaignFailed::new(failure.error, &config.out_dir))
+        })?;
+        report
+            .cases
+            .into_iter()
+            .next()
+            .context("the run wrote no case")
+    }
+}

@@ -1,0 +1,128 @@
+//! `drivecheck sweep CASE.json --set NAME=V1,V2,…`: the case driven for every value (or every
+//! combination of several `--set`s) on the embedded simulated car in virtual time, `--runs` times
+//! each (run k with seed + k), and a table of each segment's largest deviation per value (JSON
+//! with `--json`). The pure part (parameters, grid, result) is [`campaign::sweep`].
+
+use std::process::ExitCode;
+
+use anyhow::{Context, Result};
+
+use super::shared::{cancel_on_ctrl_c, check_hash, runtime, scenario_of};
+use super::simdrive::{SimDriver, SimSettings};
+use crate::cli::SweepArgs;
+use crate::seed::choose_seed;
+use campaign::case::{Case, ReplayOf, ScenarioRef, tool_version};
+use campaign::oracle::FailurePolicy;
+use campaign::sweep::{
+    Axis, Parameter, Point, SWEEP_FORMAT, SimSetting, SweepReport, grid, with_fault_values,
+};
+
+/// Runs the sweep and prints its table (or JSON). Exit status 0 when it ran, 2 on an error.
+pub fn sweep(args: &SweepArgs) -> Result<ExitCode> {
+    let path = &args.case;
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let case = Case::from_json(&text).with_context(|| path.display().to_string())?;
+    let axes = args
+        .set
+        .iter()
+        .map(|arg| Axis::parse(arg, &case))
+        .collect::<Result<Vec<_>, _>>()?;
+    let scenario = scenario_of(args.scenario.as_deref(), path, &case)?;
+    check_hash(&case, &scenario, args.ignore_scenario_hash)?;
+    let seed = args
+        .seed
+        .or(case.campaign_seed)
+        .unwrap_or_else(|| choose_seed(None));
+    let points = grid(&axes);
+    eprintln!(
+        "sweeping {} over {} point(s), {} run(s) each, seed {seed}",
+        path.display(),
+        points.len(),
+        args.runs
+    );
+    // The runs' scratch run directories (unrecorded), removed at the end.
+    let scratch = std::env::temp_dir().join(format!("drivecheck-sweep-{}", std::process::id()));
+    let report = runtime(true)?.block_on(async {
+        let cancel = cancel_on_ctrl_c();
+        let driver = SimDriver {
+            scenario: &scenario,
+            policy: case
+                .settings
+                .as_ref()
+                .map_or(FailurePolicy::default(), |s| s.failure_policy),
+            of: ReplayOf {
+                case: path.display().to_string(),
+                campaign_seed: case.campaign_seed,
+                test_index: case.test_index,
+                verdict: case.verdict,
+                no_faults: false,
+            },
+            scratch: scratch.clone(),
+            runs: args.runs,
+            seed,
+            cancel: &cancel,
+            count: std::cell::Cell::new(0),
+        };
+        let mut results = Vec::with_capacity(points.len());
+        for values in points {
+            let swept = with_fault_values(&case, &axes, &values);
+            let settings = sim_settings(&axes, &values);
+            let what = describe(&axes, &values);
+            let (_, driven) = driver
+                .drive_all(&swept, None, &settings)
+                .await
+                .with_context(|| what.clone())?;
+            let point = Point::new(values, &driven);
+            eprintln!(
+                "{what}: {} of {} runs failed",
+                point.failed_runs(),
+                point.runs.len()
+            );
+            results.push(point);
+        }
+        anyhow::Ok(SweepReport {
+            format: SWEEP_FORMAT.to_owned(),
+            schema_version: 1,
+            tool_version: tool_version().to_owned(),
+            case: path.display().to_string(),
+            scenario: ScenarioRef::of(&scenario),
+            seed,
+            runs_per_point: args.runs,
+            axes: axes.clone(),
+            points: results,
+        })
+    });
+    let _ = std::fs::remove_dir_all(&scratch);
+    let report = report?;
+    if args.json {
+        println!("{}", report.to_json()?);
+    } else {
+        print!("{}", report.table());
+        println!("median of each segment's largest deviation over the runs; * a run failed it");
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The simulator settings of a grid point.
+fn sim_settings(axes: &[Axis], values: &[f64]) -> SimSettings {
+    let mut settings = SimSettings::default();
+    for (axis, &value) in axes.iter().zip(values) {
+        if let Parameter::Sim { setting } = axis.parameter {
+            match setting {
+                SimSetting::UwbClampM => settings.uwb_clamp_m = Some(value),
+                SimSetting::AnchorErrorM => settings.anchor_error_m = Some(value),
+                SimSetting::RangeSigmaM => settings.range_sigma_m = Some(value),
+            }
+        }
+    }
+    settings
+}
+
+fn describe(axes: &[Axis], values: &[f64]) -> String {
+    axes.iter()
+        .zip(values)
+        .map(|(a, v)| format!("{}={v}", a.parameter))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
