@@ -162,6 +162,11 @@ pub struct ShrinkArgs {
     /// the same way.
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=50))]
     pub runs: u32,
+    /// Keep a candidate only when every run's largest deviation in the failing segment is this
+    /// far above the threshold, metres (at most the case's own least clear failure): the method
+    /// saw reruns agree within about 0.1 m, so a case failing by less may pass on the car.
+    #[arg(long, value_name = "METRES", default_value_t = 0.1)]
+    pub margin: f64,
     /// Stop after this much wall time with the smallest case found so far.
     #[arg(long, value_name = "DURATION", default_value = "2min", value_parser = humantime::parse_duration)]
     pub budget: std::time::Duration,

@@ -54,13 +54,27 @@ fn a_failing_case_shrinks_to_a_smaller_one_that_fails_every_time() {
             .iter()
             .all(|r| !r.fails_at(report.after.target_segment))
     );
-    // Every kept step failed the same way in all 3 runs; every other step has a run that did
-    // not (or was not drivable).
+    // Every kept step failed the same way in all 3 runs, by the margin above the threshold;
+    // every other step has a run that did not (or was not drivable).
+    assert!(
+        (1.0..=1.1).contains(&report.min_deviation_m),
+        "{}",
+        report.min_deviation_m
+    );
     for step in &report.steps {
-        let all = step.runs.len() == 3 && step.runs.iter().all(|r| r.fails_at(step.target_segment));
+        let all = step.runs.len() == 3
+            && step
+                .runs
+                .iter()
+                .all(|r| r.fails_clearly(step.target_segment, report.min_deviation_m));
         assert_eq!(step.outcome == Outcome::Kept, all, "{step:?}");
     }
     assert!(report.steps.iter().any(|s| s.outcome == Outcome::Kept));
+    // Confirmed with six other seeds.
+    let confirmation = report.confirmation.as_ref().expect("confirmed");
+    assert!(confirmation.confirmed);
+    assert_eq!(confirmation.runs.len(), 6);
+    assert!(confirmation.runs.iter().all(|r| r.seed >= 4));
 
     // Deterministic given the seed.
     let (again, again_report, _) = shrink(&case, &dir.path().join("b"));

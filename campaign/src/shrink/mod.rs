@@ -115,6 +115,14 @@ impl RunResult {
     pub fn fails_at(&self, target: usize) -> bool {
         self.verdict == Some(Verdict::Failed) && self.first_failing_segment == Some(target)
     }
+
+    /// True when the run failed at `target` first with a largest deviation there of at least
+    /// `min_deviation_m`.
+    pub fn fails_clearly(&self, target: usize, min_deviation_m: f64) -> bool {
+        self.fails_at(target)
+            && (min_deviation_m <= 0.0
+                || self.max_deviation_m.is_some_and(|m| m >= min_deviation_m))
+    }
 }
 
 /// How a tried edit ended.
@@ -127,6 +135,8 @@ pub enum Outcome {
     Passed,
     /// A run failed at another segment first.
     FailedElsewhere,
+    /// Every run failed there, but a run by less than the margin above the threshold.
+    FailedBarely,
     /// A run was aborted (or ended without a verdict).
     Aborted,
     /// The candidate's route is not drivable (never driven).
@@ -134,12 +144,15 @@ pub enum Outcome {
 }
 
 impl Outcome {
-    /// The outcome of `runs` for a failure at `target`.
-    pub fn of(runs: &[RunResult], target: usize) -> Self {
+    /// The outcome of `runs` for a failure at `target` by at least `min_deviation_m`.
+    pub fn of(runs: &[RunResult], target: usize, min_deviation_m: f64) -> Self {
         for run in runs {
             match run.verdict {
                 Some(Verdict::Passed) => return Self::Passed,
                 Some(Verdict::Failed) if !run.fails_at(target) => return Self::FailedElsewhere,
+                Some(Verdict::Failed) if !run.fails_clearly(target, min_deviation_m) => {
+                    return Self::FailedBarely;
+                }
                 Some(Verdict::Failed) => {}
                 Some(Verdict::Aborted) | None => return Self::Aborted,
             }
@@ -157,6 +170,7 @@ impl Outcome {
             Self::Kept => "kept",
             Self::Passed => "passed",
             Self::FailedElsewhere => "failed elsewhere",
+            Self::FailedBarely => "failed barely",
             Self::Aborted => "aborted",
             Self::NotDrivable => "not drivable",
         }
@@ -244,6 +258,8 @@ pub struct Shrinker<'a> {
     rejected: HashSet<String>,
     steps: Vec<Step>,
     joins: Joins,
+    /// The largest deviation every run must reach in the target segment.
+    min_deviation_m: f64,
 }
 
 impl<'a> Shrinker<'a> {
@@ -271,7 +287,16 @@ impl<'a> Shrinker<'a> {
             rejected: HashSet::new(),
             steps: Vec::new(),
             joins: Joins::default(),
+            min_deviation_m: 0.0,
         })
+    }
+
+    /// Keeps a candidate only when every run's largest deviation in the target segment is at
+    /// least `metres` (the threshold plus a margin: a case that only just fails is kept by luck
+    /// and passes with other noise).
+    pub fn with_min_deviation(mut self, metres: f64) -> Self {
+        self.min_deviation_m = metres;
+        self
     }
 
     /// The smallest case that kept the failure so far (no results).
@@ -331,7 +356,7 @@ impl<'a> Shrinker<'a> {
 
     /// Records the runs of `candidate`; true when it was kept (it became the current case).
     pub fn record(&mut self, candidate: Candidate, runs: Vec<RunResult>) -> bool {
-        let outcome = Outcome::of(&runs, candidate.target);
+        let outcome = Outcome::of(&runs, candidate.target, self.min_deviation_m);
         let description = candidate.edit.to_string();
         self.steps.push(Step {
             edit: candidate.edit,

@@ -68,6 +68,9 @@ pub struct ShrinkReport {
     pub seed: u64,
     /// Runs per candidate; a candidate is kept only when all of them fail the same way.
     pub runs_per_candidate: u32,
+    /// The largest deviation every run of a kept candidate reached in its failing segment: the
+    /// threshold plus the margin, or the case's own least clear failure if that is less.
+    pub min_deviation_m: f64,
     /// Why it stopped.
     pub ended: Ended,
     /// The case shrunk.

@@ -193,20 +193,33 @@ fn a_candidate_is_kept_only_when_every_run_fails_at_its_target() {
         max_deviation_m: None,
     };
     let failed = run(Verdict::Failed, Some(2));
-    assert_eq!(Outcome::of(&[failed, failed, failed], 2), Outcome::Kept);
     assert_eq!(
-        Outcome::of(&[failed, run(Verdict::Passed, None)], 2),
+        Outcome::of(&[failed, failed, failed], 2, 0.0),
+        Outcome::Kept
+    );
+    assert_eq!(
+        Outcome::of(&[failed, run(Verdict::Passed, None)], 2, 0.0),
         Outcome::Passed
     );
     assert_eq!(
-        Outcome::of(&[failed, run(Verdict::Failed, Some(1))], 2),
+        Outcome::of(&[failed, run(Verdict::Failed, Some(1))], 2, 0.0),
         Outcome::FailedElsewhere
     );
     assert_eq!(
-        Outcome::of(&[run(Verdict::Aborted, None)], 2),
+        Outcome::of(&[run(Verdict::Aborted, None)], 2, 0.0),
         Outcome::Aborted
     );
-    assert_eq!(Outcome::of(&[], 2), Outcome::Aborted);
+    assert_eq!(Outcome::of(&[], 2, 0.0), Outcome::Aborted);
+    // With a margin: a run that failed by too little keeps nothing.
+    let by = |m: f64| RunResult {
+        max_deviation_m: Some(m),
+        ..failed
+    };
+    assert_eq!(Outcome::of(&[by(1.3), by(1.2)], 2, 1.1), Outcome::Kept);
+    assert_eq!(
+        Outcome::of(&[by(1.3), by(1.05)], 2, 1.1),
+        Outcome::FailedBarely
+    );
 }
 
 #[test]

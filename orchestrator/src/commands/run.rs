@@ -120,6 +120,7 @@ fn shrink_failed(report: &CampaignReport, scenario: &Scenario, budget: Duration)
             runs: 3,
             budget,
             seed: case.campaign_seed.unwrap_or(report.record.seed),
+            margin: shrink::DEFAULT_MARGIN_M,
         };
         let result = runtime.block_on(async {
             let cancel = cancel_on_ctrl_c();

@@ -30,6 +30,9 @@ use campaign::shrink::{
     ShrinkReport, Shrinker, Size,
 };
 
+/// `--margin`'s default (and `run --shrink`'s margin), metres.
+pub(super) const DEFAULT_MARGIN_M: f64 = 0.1;
+
 /// How a shrink is run.
 #[derive(Debug, Clone)]
 pub(super) struct Options {
@@ -39,11 +42,20 @@ pub(super) struct Options {
     pub budget: Duration,
     /// Seed of run 1 of every candidate.
     pub seed: u64,
+    /// How far above the threshold every run must fail (at most the case's own smallest
+    /// excess), m.
+    pub margin: f64,
 }
 
 /// `drivecheck shrink`. Exit status: 0 the case was shrunk (or was minimal already), 2 an error
 /// (the case refused, or it does not fail the same way every time).
 pub fn shrink(args: &ShrinkArgs) -> Result<ExitCode> {
+    if !(args.margin.is_finite() && args.margin >= 0.0) {
+        bail!(
+            "--margin {}: must be a finite number of metres, 0 or more",
+            args.margin
+        );
+    }
     let path = &args.case;
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
@@ -61,6 +73,7 @@ pub fn shrink(args: &ShrinkArgs) -> Result<ExitCode> {
         runs: args.runs,
         budget: args.budget,
         seed,
+        margin: args.margin,
     };
     let runtime = runtime(true)?;
     let report = runtime.block_on(async {
@@ -183,8 +196,20 @@ pub(super) async fn shrink_case(
             );
         }
     };
+    // Every run must fail by the margin above the threshold, or by as much as the case itself
+    // did in its least clear run if that is less.
+    let threshold = before_case
+        .as_ref()
+        .and_then(|c| c.segments.iter().find(|s| s.segment_index == target))
+        .map_or(0.0, |s| s.oracle.threshold_m);
+    let least = before_runs
+        .iter()
+        .filter_map(|r| r.max_deviation_m)
+        .fold(f64::INFINITY, f64::min);
+    let min_deviation = (threshold + options.margin).min(least);
     let mut shrinker = Shrinker::new(case, scenario, target, options.seed)
-        .with_context(|| format!("{}: cannot be shrunk", path.display()))?;
+        .with_context(|| format!("{}: cannot be shrunk", path.display()))?
+        .with_min_deviation(min_deviation);
     let before = CaseSummary {
         size: Size::of(case),
         target_segment: target,
@@ -214,7 +239,11 @@ pub(super) async fn shrink_case(
             shrinker.current().commands.len()
         ));
         let (runs, cases) = match driver
-            .drive_all(&candidate.case, Some(candidate.target), &plain)
+            .drive_all(
+                &candidate.case,
+                Some((candidate.target, min_deviation)),
+                &plain,
+            )
             .await
         {
             Err(_) if cancel.is_cancelled() => {
@@ -255,10 +284,12 @@ pub(super) async fn shrink_case(
             confirmer.runs
         ));
         let (runs, _) = confirmer
-            .drive_all(&last.case, Some(last.target), &plain)
+            .drive_all(&last.case, Some((last.target, min_deviation)), &plain)
             .await?;
-        let confirmed =
-            runs.len() == confirmer.runs as usize && runs.iter().all(|r| r.fails_at(last.target));
+        let confirmed = runs.len() == confirmer.runs as usize
+            && runs
+                .iter()
+                .all(|r| r.fails_clearly(last.target, min_deviation));
         if confirmed || kept.len() == 1 {
             break Some(Confirmation {
                 runs,
@@ -305,6 +336,7 @@ pub(super) async fn shrink_case(
         scenario: ScenarioRef::of(scenario),
         seed: options.seed,
         runs_per_candidate: options.runs,
+        min_deviation_m: min_deviation,
         ended,
         before,
         after: CaseSummary {

@@ -73,12 +73,13 @@ pub(super) struct SimDriver<'a> {
 }
 
 impl SimDriver<'_> {
-    /// Drives `case` up to `runs` times (run k with seed + k) with `settings`; with `target`,
-    /// stops at the first run that does not fail there. Each run's result and case.
+    /// Drives `case` up to `runs` times (run k with seed + k) with `settings`; with `target`
+    /// (a segment and a deviation), stops at the first run that does not fail there by that
+    /// much. Each run's result and case.
     pub async fn drive_all(
         &self,
         case: &Case,
-        target: Option<usize>,
+        target: Option<(usize, f64)>,
         settings: &SimSettings,
     ) -> Result<(Vec<RunResult>, Vec<(u64, Case)>)> {
         let generator = Generator::new(self.scenario.generator.generator_config(Strategy::Wedge))
@@ -94,7 +95,7 @@ impl SimDriver<'_> {
             let result = RunResult::of(seed, &driven);
             results.push(result);
             cases.push((seed, driven));
-            if target.is_some_and(|t| !result.fails_at(t)) {
+            if target.is_some_and(|(t, m)| !result.fails_clearly(t, m)) {
                 break;
             }
         }
