@@ -7,7 +7,7 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use campaign::case::{Case, CommandRecord};
-use campaign::shrink::{Outcome, ShrinkReport};
+use campaign::shrink::{Outcome, ShrinkReport, Target};
 use common::{drivecheck, path, text};
 
 fn fixture(name: &str) -> PathBuf {
@@ -35,7 +35,7 @@ fn a_failing_case_shrinks_to_a_smaller_one_that_fails_every_time() {
     let (minimal, report, log) = shrink(&case, &dir.path().join("a"));
     assert!(log.contains("| commands | 7 |"), "{log}");
     assert!(log.contains("drivecheck replay"), "{log}");
-    assert_eq!(report.before.target_segment, 3);
+    assert_eq!(report.before.target, Target::segment(3));
     assert!(
         report.after.size.commands < report.before.size.commands,
         "{:?}",
@@ -49,11 +49,7 @@ fn a_failing_case_shrinks_to_a_smaller_one_that_fails_every_time() {
         .without_faults
         .as_ref()
         .expect("driven without faults");
-    assert!(
-        without
-            .iter()
-            .all(|r| !r.fails_at(report.after.target_segment))
-    );
+    assert!(without.iter().all(|r| !r.fails_at(report.after.target)));
     // Every kept step failed the same way in all 3 runs, by the margin above the threshold;
     // every other step has a run that did not (or was not drivable).
     assert!(
@@ -66,7 +62,7 @@ fn a_failing_case_shrinks_to_a_smaller_one_that_fails_every_time() {
             && step
                 .runs
                 .iter()
-                .all(|r| r.fails_clearly(step.target_segment, report.min_deviation_m));
+                .all(|r| r.fails_clearly(step.target, report.min_deviation_m));
         assert_eq!(step.outcome == Outcome::Kept, all, "{step:?}");
     }
     assert!(report.steps.iter().any(|s| s.outcome == Outcome::Kept));
@@ -105,7 +101,10 @@ fn a_failing_case_shrinks_to_a_smaller_one_that_fails_every_time() {
             .iter()
             .find(|s| s.oracle.verdict == campaign::oracle::SegmentVerdict::Failed)
             .map(|s| s.segment_index);
-        assert_eq!(first_failing, Some(report.after.target_segment), "run {k}");
+        assert!(
+            first_failing.is_some_and(|s| report.after.target.contains(s)),
+            "run {k}"
+        );
     }
     assert!(
         minimal
@@ -116,23 +115,29 @@ fn a_failing_case_shrinks_to_a_smaller_one_that_fails_every_time() {
 }
 
 #[test]
-fn a_case_that_fails_differently_from_run_to_run_is_not_shrunk() {
-    // Without its place the same reflection fails segment 4 in some runs and 5 in others.
+fn a_failure_that_moves_between_neighbouring_segments_shrinks_and_one_that_passes_does_not() {
+    // Without its place the reflection fails segment 4 in some runs and segment 5 in others:
+    // the target is both.
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("s");
-    let run = drivecheck(&[
-        "shrink",
-        path(&fixture("earlier-vs-placed.json")),
-        "--seed",
-        "1",
-        "--out",
-        path(&out),
-    ]);
+    let (minimal, report, _) = shrink(&fixture("earlier-vs-placed.json"), &dir.path().join("a"));
+    assert_eq!(report.before.target, Target { first: 4, last: 5 });
+    assert!(minimal.commands.len() < 7, "{:?}", report.after);
+
+    // The same case without its fault passes: nothing to shrink.
+    let mut case =
+        Case::from_json(&std::fs::read_to_string(fixture("earlier-vs-placed.json")).unwrap())
+            .unwrap();
+    case.commands
+        .retain(|c| matches!(c, CommandRecord::RunSegments { .. }));
+    let file = dir.path().join("passing.json");
+    std::fs::write(&file, case.to_json().unwrap()).unwrap();
+    let out = dir.path().join("b");
+    let run = drivecheck(&["shrink", path(&file), "--seed", "1", "--out", path(&out)]);
     assert_eq!(run.status.code(), Some(2), "{}", text(&run));
     let log = text(&run);
     assert!(
-        log.contains("does not fail the same way in every run"),
+        log.contains("does not fail in every run at one segment"),
         "{log}"
     );
-    assert!(log.contains("seed 2: failed at segment 5"), "{log}");
+    assert!(log.contains("seed 1: passed"), "{log}");
 }

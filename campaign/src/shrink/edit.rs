@@ -12,6 +12,8 @@ use trajgen::{Point, RouteTail};
 use crate::case::{Case, CommandRecord, PlaceRecord, RoutePointRecord};
 use crate::model::{FaultKind, start_tail};
 
+use super::Target;
+
 /// A fault value a shrink moves toward neutral.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -254,14 +256,14 @@ impl Joins {
 
 /// What applying an edit gives: the changed case (results not yet cleared) and where the
 /// failing segment now is.
-pub(super) type Applied = Result<(Case, usize), String>;
+pub(super) type Applied = Result<(Case, Target), String>;
 
 impl Edit {
     /// Applies the edit to `case`, whose failing segment is `target`.
     pub(super) fn apply(
         &self,
         case: &Case,
-        target: usize,
+        target: Target,
         scenario: &Scenario,
         seed: u64,
         joins: &mut Joins,
@@ -286,7 +288,7 @@ impl Edit {
                     }
                 }
                 out.commands = keep;
-                Ok((out, target.min(after_segment)))
+                Ok((out, target))
             }
             Self::DropAllFaults { .. } => {
                 out.commands
@@ -397,7 +399,7 @@ fn tail_before(
 /// planned route (see [`Edit::DropSegments`]).
 fn drop_segments(
     case: &Case,
-    target: usize,
+    target: Target,
     scenario: &Scenario,
     seed: u64,
     joins: &mut Joins,
@@ -478,5 +480,5 @@ fn drop_segments(
     }
     let mut out = case.clone();
     out.commands = commands;
-    Ok((out, target - removed))
+    Ok((out, target.moved_back(removed)))
 }

@@ -8,10 +8,12 @@
 //! minimal case is robust, not lucky.
 //!
 //! **The same failure.** A case fails at its *target*: its first failing segment (the segment
-//! the oracle judged above the threshold first). A run shows the same failure when its verdict is
-//! `failed` (not aborted) and its first failing segment is the target, as edits move it (dropping
-//! earlier segments moves it forward). A candidate that fails earlier, later or not at all is a
-//! different test and is not kept.
+//! the oracle judged above the threshold first), or, for a case whose first failing segment
+//! moves with the sensor noise between two neighbours, those two ([`Target`]). A run shows the
+//! same failure when its verdict is `failed` (not aborted), its first failing segment is in the
+//! target, as edits move it (dropping earlier segments moves it forward), and it failed there by
+//! the required margin. A candidate that fails earlier, later or not at all is a different test
+//! and is not kept.
 //!
 //! **The edits**, tried in this order on the current case, greedily: the first that keeps the
 //! failure is kept and the list is made again for the simpler case; an edit that did not keep it
@@ -68,7 +70,7 @@ pub enum ShrinkError {
     /// The target segment is not among the case's segments.
     #[error("segment {target} is not among the case's {segments} segments")]
     NoSuchSegment {
-        /// The target asked for.
+        /// The target's last segment.
         target: usize,
         /// Segments in the case.
         segments: usize,
@@ -111,17 +113,84 @@ impl RunResult {
         }
     }
 
-    /// True when the run failed at `target` first.
-    pub fn fails_at(&self, target: usize) -> bool {
-        self.verdict == Some(Verdict::Failed) && self.first_failing_segment == Some(target)
+    /// True when the run failed with its first failing segment in `target`.
+    pub fn fails_at(&self, target: Target) -> bool {
+        self.verdict == Some(Verdict::Failed)
+            && self
+                .first_failing_segment
+                .is_some_and(|s| target.contains(s))
     }
 
-    /// True when the run failed at `target` first with a largest deviation there of at least
-    /// `min_deviation_m`.
-    pub fn fails_clearly(&self, target: usize, min_deviation_m: f64) -> bool {
+    /// True when the run failed with its first failing segment in `target` and a largest
+    /// deviation there of at least `min_deviation_m`.
+    pub fn fails_clearly(&self, target: Target, min_deviation_m: f64) -> bool {
         self.fails_at(target)
             && (min_deviation_m <= 0.0
                 || self.max_deviation_m.is_some_and(|m| m >= min_deviation_m))
+    }
+}
+
+/// The segments where a case fails first: one, or two neighbours when the first failing segment
+/// moves with the sensor noise.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Target {
+    /// The first segment of the target.
+    pub first: usize,
+    /// Its last (equal to `first` for one segment).
+    pub last: usize,
+}
+
+impl Target {
+    /// One segment.
+    pub fn segment(segment: usize) -> Self {
+        Self {
+            first: segment,
+            last: segment,
+        }
+    }
+
+    /// The target of runs' first failing segments: the segments from the smallest to the
+    /// largest, when every run failed and they are at most one apart.
+    pub fn of_runs(runs: &[RunResult]) -> Option<Self> {
+        let mut segments = runs.iter().map(|r| match r.verdict {
+            Some(Verdict::Failed) => r.first_failing_segment,
+            _ => None,
+        });
+        let first = segments.next()??;
+        let (mut lo, mut hi) = (first, first);
+        for s in segments {
+            let s = s?;
+            lo = lo.min(s);
+            hi = hi.max(s);
+        }
+        (hi - lo <= 1).then_some(Self {
+            first: lo,
+            last: hi,
+        })
+    }
+
+    /// True when `segment` is in the target.
+    pub fn contains(self, segment: usize) -> bool {
+        (self.first..=self.last).contains(&segment)
+    }
+
+    /// The target after `n` segments before it were removed.
+    pub fn moved_back(self, n: usize) -> Self {
+        Self {
+            first: self.first - n,
+            last: self.last - n,
+        }
+    }
+}
+
+impl std::fmt::Display for Target {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.first == self.last {
+            write!(f, "{}", self.first)
+        } else {
+            write!(f, "{}–{}", self.first, self.last)
+        }
     }
 }
 
@@ -145,7 +214,7 @@ pub enum Outcome {
 
 impl Outcome {
     /// The outcome of `runs` for a failure at `target` by at least `min_deviation_m`.
-    pub fn of(runs: &[RunResult], target: usize, min_deviation_m: f64) -> Self {
+    pub fn of(runs: &[RunResult], target: Target, min_deviation_m: f64) -> Self {
         for run in runs {
             match run.verdict {
                 Some(Verdict::Passed) => return Self::Passed,
@@ -195,8 +264,8 @@ pub struct Step {
     pub runs: Vec<RunResult>,
     /// Commands of the candidate.
     pub commands: usize,
-    /// The candidate's failing segment.
-    pub target_segment: usize,
+    /// The candidate's failing segment(s).
+    pub target: Target,
 }
 
 /// A candidate to drive: a simpler case and where it must fail.
@@ -206,8 +275,8 @@ pub struct Candidate {
     pub edit: Edit,
     /// The case (no results; every segment with its ahead margin).
     pub case: Case,
-    /// The segment that must fail first.
-    pub target: usize,
+    /// The segment(s) that must fail first.
+    pub target: Target,
 }
 
 /// Sizes of a case, for the before/after table.
@@ -253,7 +322,7 @@ pub struct Shrinker<'a> {
     generator: Generator,
     seed: u64,
     current: Case,
-    target: usize,
+    target: Target,
     /// Edits (in words) that did not keep the failure on the current case.
     rejected: HashSet<String>,
     steps: Vec<Step>,
@@ -263,19 +332,22 @@ pub struct Shrinker<'a> {
 }
 
 impl<'a> Shrinker<'a> {
-    /// A shrink of `case`, which fails first at segment `target`, in `scenario`; `seed` seeds the
+    /// A shrink of `case`, which fails first at `target`, in `scenario`; `seed` seeds the
     /// joining routes and the generated ahead margins.
     pub fn new(
         case: &Case,
         scenario: &'a Scenario,
-        target: usize,
+        target: Target,
         seed: u64,
     ) -> Result<Self, ShrinkError> {
         let generator = Generator::new(scenario.generator.generator_config(Strategy::Wedge))
             .map_err(ShrinkError::Generator)?;
         let segments = segment_commands(case).len();
-        if target >= segments {
-            return Err(ShrinkError::NoSuchSegment { target, segments });
+        if target.last >= segments || target.first > target.last {
+            return Err(ShrinkError::NoSuchSegment {
+                target: target.last,
+                segments,
+            });
         }
         let current = prepared(case, scenario, &generator, seed)?;
         Ok(Self {
@@ -304,8 +376,8 @@ impl<'a> Shrinker<'a> {
         &self.current
     }
 
-    /// Its failing segment.
-    pub fn target(&self) -> usize {
+    /// Its failing segment(s).
+    pub fn target(&self) -> Target {
         self.target
     }
 
@@ -345,7 +417,7 @@ impl<'a> Shrinker<'a> {
                         not_drivable: Some(reason),
                         runs: Vec::new(),
                         commands: 0,
-                        target_segment: self.target,
+                        target: self.target,
                     });
                     self.rejected.insert(key);
                 }
@@ -365,7 +437,7 @@ impl<'a> Shrinker<'a> {
             not_drivable: None,
             runs,
             commands: candidate.case.commands.len(),
-            target_segment: candidate.target,
+            target: candidate.target,
         });
         if outcome == Outcome::Kept {
             self.current = candidate.case;
@@ -391,10 +463,10 @@ impl<'a> Shrinker<'a> {
             .map(|(i, _)| i)
             .collect();
         let mut edits = Vec::new();
-        if segments.len() > target + 1 {
+        if segments.len() > target.last + 1 {
             edits.push(Edit::CutTail {
-                after_segment: target,
-                segments_removed: segments.len() - target - 1,
+                after_segment: target.last,
+                segments_removed: segments.len() - target.last - 1,
             });
         }
         if faults.len() > 1 {
@@ -408,14 +480,14 @@ impl<'a> Shrinker<'a> {
                 .rev()
                 .map(|&command_index| Edit::DropFault { command_index }),
         );
-        if target > 1 {
+        if target.first > 1 {
             edits.push(Edit::DropSegments {
                 first: 0,
-                last: target - 1,
+                last: target.first - 1,
             });
         }
         edits.extend(
-            (0..target)
+            (0..target.first)
                 .rev()
                 .map(|k| Edit::DropSegments { first: k, last: k }),
         );
@@ -461,7 +533,7 @@ impl<'a> Shrinker<'a> {
             }
         }
         let slowest = self.scenario.campaign.speed_kmh.min / 3.6;
-        for (segment_index, &command) in segments.iter().enumerate().take(target + 1) {
+        for (segment_index, &command) in segments.iter().enumerate().take(target.last + 1) {
             let CommandRecord::RunSegments { points, .. } = &case.commands[command] else {
                 continue;
             };
@@ -484,14 +556,14 @@ impl<'a> Shrinker<'a> {
                 }
             }
         }
-        if target + 1 == segments.len()
-            && let CommandRecord::RunSegments { points, .. } = &case.commands[segments[target]]
+        if target.last + 1 == segments.len()
+            && let CommandRecord::RunSegments { points, .. } = &case.commands[segments[target.last]]
         {
             let n = points.len();
             for to_points in [n.div_ceil(2), n - 1] {
                 if to_points >= 1 && to_points < n {
                     edits.push(Edit::TrimSegment {
-                        segment_index: target,
+                        segment_index: target.last,
                         from_points: n,
                         to_points,
                     });

@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{RunResult, Size, Step};
+use super::{RunResult, Size, Step, Target};
 use crate::case::{CaseError, ScenarioRef};
 
 /// The `format` of a shrink report.
@@ -30,8 +30,8 @@ pub enum Ended {
 pub struct CaseSummary {
     /// Its size.
     pub size: Size,
-    /// The segment that fails first.
-    pub target_segment: usize,
+    /// The segment(s) that fail first.
+    pub target: Target,
     /// The runs that showed it (all failed there).
     pub runs: Vec<RunResult>,
 }
@@ -134,8 +134,8 @@ impl ShrinkReport {
             ),
             (
                 "failing segment",
-                b.target_segment.to_string(),
-                a.target_segment.to_string(),
+                b.target.to_string(),
+                a.target.to_string(),
             ),
             (
                 "its max deviation (median of runs)",

@@ -46,7 +46,8 @@ fn drivable(case: &Case, s: &Scenario) -> bool {
 /// A stand-in for the simulator: the case fails at its `target`-th segment when it still has a
 /// range fault on anchor 234 with a parameter of at least `threshold` (and enough segments),
 /// otherwise passes.
-fn fake_run(case: &Case, target: usize, threshold: f64, seed: u64) -> RunResult {
+fn fake_run(case: &Case, target: Target, threshold: f64, seed: u64) -> RunResult {
+    let target = target.first;
     let segments = segment_commands(case).len();
     let strong = case.commands.iter().any(|c| {
         matches!(c, CommandRecord::AddFault { probe: Probe::UwbRange(234), param, .. } if *param >= threshold)
@@ -71,7 +72,7 @@ fn shrink_with_fake(
     target: usize,
     threshold: f64,
 ) -> (Case, usize, Vec<Step>) {
-    let mut shrinker = Shrinker::new(case, s, target, 7).unwrap();
+    let mut shrinker = Shrinker::new(case, s, Target::segment(target), 7).unwrap();
     let mut guard = 0;
     while let Some(candidate) = shrinker.next_candidate() {
         assert!(drivable(&candidate.case, s), "{}", candidate.edit);
@@ -85,7 +86,7 @@ fn shrink_with_fake(
     }
     (
         shrinker.current().clone(),
-        shrinker.target(),
+        shrinker.target().first,
         shrinker.steps().to_vec(),
     )
 }
@@ -162,13 +163,13 @@ fn a_failure_without_faults_loses_them_all() {
     let faults = Size::of(&case).faults;
     assert!(faults >= 2, "{faults}");
     let target = segment_commands(&case).len() - 1;
-    let mut shrinker = Shrinker::new(&case, &s, target, 1).unwrap();
+    let mut shrinker = Shrinker::new(&case, &s, Target::segment(target), 1).unwrap();
     let mut tried = 0;
     while let Some(candidate) = shrinker.next_candidate() {
         let run = RunResult {
             seed: 0,
             verdict: Some(Verdict::Failed),
-            first_failing_segment: Some(candidate.target),
+            first_failing_segment: Some(candidate.target.first),
             max_deviation_m: Some(1.2),
         };
         shrinker.record(candidate, vec![run]);
@@ -193,40 +194,56 @@ fn a_candidate_is_kept_only_when_every_run_fails_at_its_target() {
         max_deviation_m: None,
     };
     let failed = run(Verdict::Failed, Some(2));
+    let two = Target::segment(2);
     assert_eq!(
-        Outcome::of(&[failed, failed, failed], 2, 0.0),
+        Outcome::of(&[failed, failed, failed], two, 0.0),
         Outcome::Kept
     );
     assert_eq!(
-        Outcome::of(&[failed, run(Verdict::Passed, None)], 2, 0.0),
+        Outcome::of(&[failed, run(Verdict::Passed, None)], two, 0.0),
         Outcome::Passed
     );
     assert_eq!(
-        Outcome::of(&[failed, run(Verdict::Failed, Some(1))], 2, 0.0),
+        Outcome::of(&[failed, run(Verdict::Failed, Some(1))], two, 0.0),
         Outcome::FailedElsewhere
     );
     assert_eq!(
-        Outcome::of(&[run(Verdict::Aborted, None)], 2, 0.0),
+        Outcome::of(&[run(Verdict::Aborted, None)], two, 0.0),
         Outcome::Aborted
     );
-    assert_eq!(Outcome::of(&[], 2, 0.0), Outcome::Aborted);
+    assert_eq!(Outcome::of(&[], two, 0.0), Outcome::Aborted);
     // With a margin: a run that failed by too little keeps nothing.
     let by = |m: f64| RunResult {
         max_deviation_m: Some(m),
         ..failed
     };
-    assert_eq!(Outcome::of(&[by(1.3), by(1.2)], 2, 1.1), Outcome::Kept);
+    assert_eq!(Outcome::of(&[by(1.3), by(1.2)], two, 1.1), Outcome::Kept);
     assert_eq!(
-        Outcome::of(&[by(1.3), by(1.05)], 2, 1.1),
+        Outcome::of(&[by(1.3), by(1.05)], two, 1.1),
         Outcome::FailedBarely
     );
+    // A target of two neighbours: either may fail first.
+    let first = |segment| run(Verdict::Failed, Some(segment));
+    let pair = Target { first: 2, last: 3 };
+    assert_eq!(Outcome::of(&[first(2), first(3)], pair, 0.0), Outcome::Kept);
+    assert_eq!(
+        Outcome::of(&[first(2), first(4)], pair, 0.0),
+        Outcome::FailedElsewhere
+    );
+    assert_eq!(Target::of_runs(&[first(3), first(2), first(3)]), Some(pair));
+    assert_eq!(Target::of_runs(&[first(2), first(4)]), None);
+    assert_eq!(
+        Target::of_runs(&[first(2), run(Verdict::Passed, None)]),
+        None
+    );
+    assert_eq!(Target::of_runs(&[]), None);
 }
 
 #[test]
 fn a_target_beyond_the_segments_is_refused() {
     let (s, case) = generated(1, 5);
     let segments = segment_commands(&case).len();
-    let error = Shrinker::new(&case, &s, segments, 1).unwrap_err();
+    let error = Shrinker::new(&case, &s, Target::segment(segments), 1).unwrap_err();
     assert!(error.to_string().contains("not among"), "{error}");
 }
 
@@ -245,7 +262,7 @@ proptest! {
         let segments = segment_commands(&case).len();
         let target = segments / 2;
         let before = Size::of(&case);
-        let mut shrinker = Shrinker::new(&case, &s, target, seed).unwrap();
+        let mut shrinker = Shrinker::new(&case, &s, Target::segment(target), seed).unwrap();
         let mut step = 0;
         while let Some(candidate) = shrinker.next_candidate() {
             prop_assert!(drivable(&candidate.case, &s), "{}", candidate.edit);
@@ -254,7 +271,7 @@ proptest! {
             let run = RunResult {
                 seed: 0,
                 verdict: Some(if fails { Verdict::Failed } else { Verdict::Passed }),
-                first_failing_segment: fails.then_some(candidate.target),
+                first_failing_segment: fails.then_some(candidate.target.first),
                 max_deviation_m: None,
             };
             shrinker.record(candidate, vec![run]);
@@ -263,6 +280,6 @@ proptest! {
         }
         let after = Size::of(shrinker.current());
         prop_assert!(after.commands <= before.commands);
-        prop_assert!(shrinker.target() < after.segments);
+        prop_assert!(shrinker.target().last < after.segments);
     }
 }

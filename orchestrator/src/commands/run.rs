@@ -136,8 +136,8 @@ fn shrink_failed(report: &CampaignReport, scenario: &Scenario, budget: Duration)
                 r.after.size.segments,
                 r.before.size.faults,
                 r.after.size.faults,
-                r.before.target_segment,
-                r.after.target_segment,
+                r.before.target,
+                r.after.target,
                 r.simulator_runs,
                 r.wall_s
             )),

@@ -27,7 +27,7 @@ use campaign::case::{Case, CommandRecord, ReplayOf, ScenarioRef, tool_version};
 use campaign::oracle::FailurePolicy;
 use campaign::shrink::{
     CaseSummary, Confirmation, Ended, MINIMAL_FILE, RunResult, SHRINK_FILE, SHRINK_FORMAT,
-    ShrinkReport, Shrinker, Size,
+    ShrinkReport, Shrinker, Size, Target,
 };
 
 /// `--margin`'s default (and `run --shrink`'s margin), metres.
@@ -126,7 +126,7 @@ pub(super) fn print_summary(report: &ShrinkReport, out: &Path) {
     if let Some(runs) = &report.without_faults {
         let failed = runs
             .iter()
-            .filter(|r| r.fails_at(report.after.target_segment))
+            .filter(|r| r.fails_at(report.after.target))
             .count();
         println!(
             "without its faults the minimal case fails the same way in {failed} of {} runs",
@@ -184,13 +184,13 @@ pub(super) async fn shrink_case(
     // The case as it is: it must fail at the same segment in every run.
     let (before_runs, before_cases) = driver.drive_all(case, None, &plain).await?;
     let before_case = before_cases.into_iter().next().map(|(_, c)| c);
-    let target = match before_runs.first().and_then(|r| r.first_failing_segment) {
-        Some(target) if before_runs.iter().all(|r| r.fails_at(target)) => target,
-        _ => {
+    let target = match Target::of_runs(&before_runs) {
+        Some(target) => target,
+        None => {
             let seen: Vec<String> = before_runs.iter().map(describe).collect();
             bail!(
-                "{}: does not fail the same way in every run ({}): nothing to shrink; replay it \
-                 with --vary-seed to see how it varies",
+                "{}: does not fail in every run at one segment or two neighbouring ones ({}): \
+                 nothing to shrink; replay it with --vary-seed to see how it varies",
                 path.display(),
                 seen.join("; ")
             );
@@ -200,7 +200,7 @@ pub(super) async fn shrink_case(
     // did in its least clear run if that is less.
     let threshold = before_case
         .as_ref()
-        .and_then(|c| c.segments.iter().find(|s| s.segment_index == target))
+        .and_then(|c| c.segments.first())
         .map_or(0.0, |s| s.oracle.threshold_m);
     let least = before_runs
         .iter()
@@ -212,7 +212,7 @@ pub(super) async fn shrink_case(
         .with_min_deviation(min_deviation);
     let before = CaseSummary {
         size: Size::of(case),
-        target_segment: target,
+        target,
         runs: before_runs.clone(),
     };
     // Every case kept, the case itself first: the confirmation may step back through them.
@@ -341,7 +341,7 @@ pub(super) async fn shrink_case(
         before,
         after: CaseSummary {
             size: Size::of(&written),
-            target_segment: target,
+            target,
             runs: after_runs,
         },
         without_faults,
@@ -363,7 +363,7 @@ pub(super) async fn shrink_case(
 /// A case the shrink kept, with its runs and the case its first run wrote.
 struct Kept {
     case: Case,
-    target: usize,
+    target: Target,
     runs: Vec<RunResult>,
     first: Option<Case>,
 }

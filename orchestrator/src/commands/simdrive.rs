@@ -16,7 +16,7 @@ use crate::runner::{ReplaySource, RunConfig, Silent, run_campaign};
 use campaign::case::{Case, ReplayOf};
 use campaign::model::{Campaign, TestPlan};
 use campaign::oracle::FailurePolicy;
-use campaign::shrink::RunResult;
+use campaign::shrink::{RunResult, Target};
 
 /// Settings of the simulated car that differ from the scenario's car (simulation only).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -79,7 +79,7 @@ impl SimDriver<'_> {
     pub async fn drive_all(
         &self,
         case: &Case,
-        target: Option<(usize, f64)>,
+        target: Option<(Target, f64)>,
         settings: &SimSettings,
     ) -> Result<(Vec<RunResult>, Vec<(u64, Case)>)> {
         let generator = Generator::new(self.scenario.generator.generator_config(Strategy::Wedge))
