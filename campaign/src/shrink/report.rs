@@ -40,10 +40,17 @@ pub struct CaseSummary {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Confirmation {
-    /// The runs (they stop at the first that does not fail the same way).
+    /// The runs.
     pub runs: Vec<RunResult>,
-    /// Every run failed the same way. False only when not even the case itself did (the shrink
-    /// then gives the case back unshrunk).
+    /// How many of them failed the same way.
+    pub failed: usize,
+    /// How many the case itself failed with the same seeds (driven only when the minimal case
+    /// did not fail in all of them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub case_failed: Option<usize>,
+    /// The minimal case is as robust as the case: it failed in every run, or in at least as many
+    /// as the case itself. False only when the shrink stepped back to the case itself and it is
+    /// less robust than its own first runs showed.
     pub confirmed: bool,
     /// Kept steps undone because the case they gave did not fail the same way with these seeds
     /// (a candidate that only just fails can be kept because its runs happened to fail).

@@ -106,13 +106,12 @@ pub(super) fn print_summary(report: &ShrinkReport, out: &Path) {
     if let Some(c) = &report.confirmation {
         let seeds = c.runs.first().map_or(0, |r| r.seed);
         println!(
-            "{} with {} other seed(s) from {seeds}{}",
-            if c.confirmed {
-                "the minimal case fails the same way"
-            } else {
-                "NOT CONFIRMED: the case does not fail the same way"
-            },
+            "the minimal case fails the same way in {} of {} other seed(s) from {seeds}{}{}",
+            c.failed,
             c.runs.len(),
+            c.case_failed
+                .map(|n| format!(" (the case itself: {n})"))
+                .unwrap_or_default(),
             if c.stepped_back > 0 {
                 format!(
                     " (after stepping back {} kept step(s) that only just failed)",
@@ -274,6 +273,7 @@ pub(super) async fn shrink_case(
         ..driver
     };
     let mut stepped_back = 0;
+    let mut case_failed: Option<usize> = None;
     let confirmation = loop {
         if ended == Ended::Interrupted {
             break None;
@@ -283,17 +283,26 @@ pub(super) async fn shrink_case(
             "confirming the minimal case with {} other seeds",
             confirmer.runs
         ));
-        let (runs, _) = confirmer
-            .drive_all(&last.case, Some((last.target, min_deviation)), &plain)
-            .await?;
-        let confirmed = runs.len() == confirmer.runs as usize
-            && runs
-                .iter()
-                .all(|r| r.fails_clearly(last.target, min_deviation));
-        if confirmed || kept.len() == 1 {
+        let failed_runs = |runs: &[RunResult], target| {
+            runs.iter()
+                .filter(|r| r.fails_clearly(target, min_deviation))
+                .count()
+        };
+        let (runs, _) = confirmer.drive_all(&last.case, None, &plain).await?;
+        let failed = failed_runs(&runs, last.target);
+        if failed < runs.len() && case_failed.is_none() {
+            // Not every run failed: how robust is the case itself with these seeds?
+            let case = &kept[0];
+            let (case_runs, _) = confirmer.drive_all(&case.case, None, &plain).await?;
+            case_failed = Some(failed_runs(&case_runs, case.target));
+        }
+        let as_robust = failed == runs.len() || case_failed.is_some_and(|c| failed >= c);
+        if as_robust || kept.len() == 1 {
             break Some(Confirmation {
                 runs,
-                confirmed,
+                failed,
+                case_failed,
+                confirmed: as_robust,
                 stepped_back,
             });
         }
