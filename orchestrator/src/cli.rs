@@ -89,6 +89,9 @@ pub struct RunArgs {
     /// The run directory (default `runs/<UTC timestamp>-<scenario>-<seed>/`).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Also write the campaign's tests as JUnit XML to FILE (one testcase per test), for CI.
+    #[arg(long, value_name = "FILE")]
+    pub junit: Option<PathBuf>,
 }
 
 /// What a campaign does after a failing segment.
@@ -138,6 +141,9 @@ pub struct ReplayArgs {
     /// writes a run directory `run-1/`, `run-2/`, … inside it, the comparison `replay.json`.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Also write the runs as JUnit XML to FILE (one testcase per run), for CI.
+    #[arg(long, value_name = "FILE")]
+    pub junit: Option<PathBuf>,
 }
 
 /// Options of `drivecheck shrink`.

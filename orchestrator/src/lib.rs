@@ -12,6 +12,7 @@
 
 pub mod cli;
 pub mod commands;
+pub mod junit;
 pub mod recording;
 pub mod runner;
 mod scenario_arg;

@@ -542,6 +542,20 @@ pub struct Case {
     /// Where each fault the car added was meant to act and where it did (version 2).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub fault_places: Vec<FaultPlacement>,
+    /// How long the reset and the drive took on the runner's clock (simulated time for the
+    /// embedded simulated car in virtual time).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub timing: Option<TestTiming>,
+}
+
+/// How long a test took, seconds on the runner's clock.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TestTiming {
+    /// The reset: the return route and the start route driven.
+    pub reset_s: f64,
+    /// The test's drive, its safe stop included.
+    pub drive_s: f64,
 }
 
 /// How a test's segments were streamed to the car.
@@ -585,6 +599,7 @@ impl Case {
             abort: None,
             streaming: None,
             fault_places: Vec::new(),
+            timing: None,
         }
     }
 

@@ -107,6 +107,7 @@ pub fn replay(args: &ReplayArgs) -> Result<ExitCode> {
     }
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
     let started = Instant::now();
+    let started_at = rfc3339_now();
     let job = Job {
         args,
         address: &address,
@@ -122,6 +123,9 @@ pub fn replay(args: &ReplayArgs) -> Result<ExitCode> {
     let file = out.join(REPLAY_FILE);
     std::fs::write(&file, format!("{}\n", comparison.to_json()?))
         .with_context(|| format!("cannot write {}", file.display()))?;
+    if let Some(junit_file) = &args.junit {
+        write_junit(&runs, &of, &scenario, &out, &started_at, junit_file)?;
+    }
     print!("{}", comparison.table());
     println!(
         "{:.1} s wall time; replay directory: {} ({REPLAY_FILE} written {})",
@@ -258,4 +262,50 @@ impl Job<'_> {
 /// The worst deviation of a run, for messages.
 fn worst(case: &Case) -> String {
     metres(TestSummary::of(0, String::new(), case).worst_deviation_m)
+}
+
+/// Writes the replay's runs as JUnit XML to `file`: one testcase per run that wrote a case.
+fn write_junit(
+    runs: &[(ReplayRun, Option<Case>)],
+    of: &ReplayOf,
+    scenario: &Scenario,
+    out: &Path,
+    started_at: &str,
+    file: &Path,
+) -> Result<()> {
+    let cases = runs
+        .iter()
+        .filter_map(|(run, case)| {
+            case.as_ref().map(|case| crate::junit::TestCase {
+                name: run.dir.replace('-', " "),
+                case,
+                file: out
+                    .join(&run.dir)
+                    .join("case-000.json")
+                    .display()
+                    .to_string(),
+            })
+        })
+        .collect();
+    let suite = crate::junit::Suite {
+        name: format!("replay of {} on {}", of.case, scenario.name),
+        classname: format!("drivecheck.{}", scenario.name),
+        timestamp: started_at.to_owned(),
+        properties: vec![
+            ("case".to_owned(), of.case.clone()),
+            ("scenario".to_owned(), scenario.name.clone()),
+            ("scenario_hash".to_owned(), scenario.hash()),
+            ("no_faults".to_owned(), of.no_faults.to_string()),
+            (
+                "tool_version".to_owned(),
+                campaign::case::tool_version().to_owned(),
+            ),
+            ("replay_directory".to_owned(), out.display().to_string()),
+        ],
+        cases,
+    };
+    let xml = crate::junit::to_xml(&[suite]).context("cannot write the JUnit XML")?;
+    std::fs::write(file, xml).with_context(|| format!("cannot write {}", file.display()))?;
+    eprintln!("JUnit XML: {}", file.display());
+    Ok(())
 }

@@ -15,6 +15,7 @@ use super::shared::{
 };
 use super::shrink;
 use crate::cli::{OnFailure, RunArgs};
+use crate::junit;
 use crate::runner::{CampaignReport, RunConfig, run_campaign, run_dir_name};
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::choose_seed;
@@ -77,6 +78,9 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     let wall = started.elapsed();
     let report = result?;
     print_report(&report, Some(wall));
+    if let Some(file) = &args.junit {
+        write_junit(&report, file)?;
+    }
     if args.shrink {
         shrink_failed(&report, &scenario, args.shrink_budget)?;
     }
@@ -87,6 +91,46 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     } else {
         ExitCode::from(1)
     })
+}
+
+/// Writes the campaign's tests as JUnit XML to `file`.
+fn write_junit(report: &CampaignReport, file: &std::path::Path) -> Result<()> {
+    let record = &report.record;
+    let cases: Vec<junit::TestCase<'_>> = report
+        .tests
+        .iter()
+        .zip(&report.cases)
+        .map(|(test, case)| junit::TestCase {
+            name: format!("test {:03}", test.test_index),
+            case,
+            file: report.dir.join(&test.file).display().to_string(),
+        })
+        .collect();
+    let mut properties = vec![
+        ("seed".to_owned(), record.seed.to_string()),
+        ("scenario".to_owned(), record.scenario.name.clone()),
+        ("car".to_owned(), record.car.clone()),
+        ("tool_version".to_owned(), record.tool_version.clone()),
+        ("no_faults".to_owned(), record.no_faults.to_string()),
+        ("run_directory".to_owned(), report.dir.display().to_string()),
+    ];
+    if let Some(hash) = &record.scenario.hash {
+        properties.push(("scenario_hash".to_owned(), hash.clone()));
+    }
+    if let Some(firmware) = &record.car_firmware_version {
+        properties.push(("car_firmware_version".to_owned(), firmware.clone()));
+    }
+    let suite = junit::Suite {
+        name: format!("campaign seed {} on {}", record.seed, record.scenario.name),
+        classname: format!("drivecheck.{}", record.scenario.name),
+        timestamp: record.started_at.clone(),
+        properties,
+        cases,
+    };
+    let xml = junit::to_xml(&[suite]).context("cannot write the JUnit XML")?;
+    std::fs::write(file, xml).with_context(|| format!("cannot write {}", file.display()))?;
+    eprintln!("JUnit XML: {}", file.display());
+    Ok(())
 }
 
 /// Shrinks every failed test's case file into `shrink-NNN/` of the run directory and prints a

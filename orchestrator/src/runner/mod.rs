@@ -60,7 +60,9 @@ use crate::recording::{
     DEFAULT_CHUNK_INTERVAL, FaultRecord, OracleRecord, PlannedSegment, Recorder, RecordingError,
     RecordingStart, SafetyRecord, TestEvent, TestEventKind,
 };
-use campaign::case::{Case, CaseError, CommandRecord, ReplayOf, RoutePointRecord, Settings};
+use campaign::case::{
+    Case, CaseError, CommandRecord, ReplayOf, RoutePointRecord, Settings, TestTiming,
+};
 use campaign::drive::DriveSettings;
 use campaign::model::{Campaign, Command, ModelError, ProbeRates, TestPlan, TestPlanner};
 use campaign::oracle::{FailurePolicy, Verdict};
@@ -492,10 +494,20 @@ async fn run_test(
     generation: Duration,
 ) -> TestEnd {
     let test_index = plan.test_index;
+    let started = tokio::time::Instant::now();
+    let seconds = |d: Duration| d.as_millis() as f64 / 1000.0;
     let reset = match reset::reset(ctx, telemetry, test_index).await {
         Ok(reset) => reset,
-        Err(stopped) => return record_stop_before_drive(ctx.journal, case, stopped, test_index),
+        Err(stopped) => {
+            case.timing = Some(TestTiming {
+                reset_s: seconds(started.elapsed()),
+                drive_s: 0.0,
+            });
+            return record_stop_before_drive(ctx.journal, case, stopped, test_index);
+        }
     };
+    let reset_s = seconds(started.elapsed());
+    let driving = tokio::time::Instant::now();
     record_test_start(ctx.journal, plan);
     case.return_route = reset
         .return_route
@@ -507,6 +519,10 @@ async fn run_test(
         (reset.clearance_m < ctx.scenario.generator.clearance_m).then_some(reset.clearance_m);
     let (outcome, error) = drive::drive(ctx, telemetry, plan, reset.standing, generation).await;
     outcome.write_into(case, error.as_ref().map(ToString::to_string).as_deref());
+    case.timing = Some(TestTiming {
+        reset_s,
+        drive_s: seconds(driving.elapsed()),
+    });
     match error {
         Some(error) => TestEnd::Stop(error),
         None if outcome
