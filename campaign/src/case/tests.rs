@@ -189,6 +189,7 @@ fn check_refuses_unusable_values() {
         abort: None,
         streaming: None,
         fault_places: Vec::new(),
+        timing: None,
     };
     let point = |speed| RoutePointRecord {
         x: 0.0,

@@ -261,6 +261,7 @@ mod tests {
             abort: None,
             streaming: None,
             fault_places: Vec::new(),
+            timing: None,
         }
     }
 
