@@ -36,11 +36,14 @@ pub(super) fn runtime(virtual_time: bool) -> Result<tokio::runtime::Runtime> {
     runtime.context("cannot start the async runtime")
 }
 
-/// How the runner talks to any car: round trips on a radio link can exceed the 250 ms default.
+/// How the runner talks to any car: round trips on a radio link can exceed the 250 ms default,
+/// and a lossy one (30 % each way) loses about half the round trips, so an acked request gets 10
+/// tries (all lost together about once in a thousand).
 pub(super) fn car_config() -> LinkConfig {
     LinkConfig {
         request_timeout: Duration::from_secs(1),
         terminal_timeout: Duration::from_secs(2),
+        tries: 10,
         ..LinkConfig::default()
     }
 }

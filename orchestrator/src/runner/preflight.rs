@@ -16,8 +16,8 @@
 
 use std::time::Duration;
 
-use car_link::Car;
 use car_link::message::Anchor;
+use car_link::{Car, CarError};
 use scenarios::Scenario;
 use trajgen::Point;
 
@@ -29,6 +29,8 @@ use car_link::firmware::MAX_STALE_LIMIT;
 
 /// GET_STATE requests the round trip is measured over.
 const RTT_PROBES: usize = 20;
+/// Round-trip probes sent per probe wanted, at most (a lossy link loses some).
+const RTT_PROBE_TRIES: usize = 4;
 /// Samples lost in a row (a request or its reply) that the stale-telemetry limit tolerates.
 const LOST_IN_A_ROW: u32 = 2;
 
@@ -206,17 +208,41 @@ async fn check_inside_fence(
 }
 
 /// The median and the 99th-percentile round trip of GET_STATE, one request at a time.
+///
+/// A lossy link loses some probes: each is tried once, and up to [`RTT_PROBE_TRIES`] times
+/// [`RTT_PROBES`] are sent to get [`RTT_PROBES`] answers; with fewer than half of them answered
+/// the link is refused with its measured loss.
 async fn measure_round_trip(
     car: &Car,
     journal: &Journal<'_>,
 ) -> Result<(Duration, Duration), RunError> {
     let mut rtts = Vec::with_capacity(RTT_PROBES);
-    for _ in 0..RTT_PROBES {
-        let sample = retried(|| car.state())
-            .await
-            .map_err(|e| RunError::car("measuring the round trip", e))?;
-        journal.state(&sample);
-        rtts.push(sample.rtt());
+    let mut sent = 0;
+    let mut last_error = None;
+    while rtts.len() < RTT_PROBES && sent < RTT_PROBES * RTT_PROBE_TRIES {
+        sent += 1;
+        match car.state().await {
+            Ok(sample) => {
+                journal.state(&sample);
+                rtts.push(sample.rtt());
+            }
+            Err(CarError::LinkLost) => {
+                return Err(RunError::car(
+                    "measuring the round trip",
+                    CarError::LinkLost,
+                ));
+            }
+            Err(error) => last_error = Some(error),
+        }
+    }
+    if rtts.len() < RTT_PROBES / 2 {
+        let lost = sent - rtts.len();
+        let error = last_error.map_or_else(String::new, |e| format!(" (last: {e})"));
+        return Err(RunError::Preflight(format!(
+            "measuring the round trip: {lost} of {sent} state requests got no answer ({:.0} % \
+             lost{error}); the link is too lossy to drive on",
+            100.0 * lost as f64 / sent as f64
+        )));
     }
     rtts.sort_unstable();
     let rank = (rtts.len() * 99).div_ceil(100).clamp(1, rtts.len());
