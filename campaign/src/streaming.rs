@@ -168,10 +168,14 @@ pub fn p99(values: &VecDeque<Duration>) -> Option<Duration> {
     trajgen::stats::nearest_rank(&sorted, 0.99)
 }
 
-/// Measured link round trips and generation times (the most recent `window` of each).
+/// Measured link round trips, append confirmation delays and generation times (the most recent
+/// `window` of each).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Delays {
     round_trips: VecDeque<Duration>,
+    /// From deciding an append to the car's confirmation: on a lossy link the retries of the
+    /// upload, which a state sample's round trip does not show.
+    appends: VecDeque<Duration>,
     generations: VecDeque<Duration>,
     window: usize,
 }
@@ -181,6 +185,7 @@ impl Delays {
     pub fn new(window: usize) -> Self {
         Self {
             round_trips: VecDeque::new(),
+            appends: VecDeque::new(),
             generations: VecDeque::new(),
             window: window.max(1),
         }
@@ -191,15 +196,24 @@ impl Delays {
         push_bounded(&mut self.round_trips, d, self.window);
     }
 
+    /// One append's delay from decision to the car's confirmation.
+    pub fn append(&mut self, d: Duration) {
+        push_bounded(&mut self.appends, d, self.window);
+    }
+
     /// One measured segment generation time.
     pub fn generation(&mut self, d: Duration) {
         push_bounded(&mut self.generations, d, self.window);
     }
 
-    /// The lead time: p99 round trip + p99 generation + margin (configured initial values until
-    /// measured).
+    /// The lead time: the larger of the p99 round trip and the p99 append confirmation delay, +
+    /// p99 generation + margin (configured initial values until measured). On a lossy link an
+    /// upload needs retries: its confirmation delay, not a state sample's round trip, is what the
+    /// car's remaining route must cover.
     pub fn lead_time(&self, config: &StreamingConfig) -> Duration {
-        let round_trip = p99(&self.round_trips).unwrap_or(config.initial_round_trip);
+        let round_trip = p99(&self.round_trips)
+            .unwrap_or(config.initial_round_trip)
+            .max(p99(&self.appends).unwrap_or_default());
         let generation = p99(&self.generations).unwrap_or(config.initial_generation);
         round_trip
             .saturating_add(generation)
@@ -352,7 +366,9 @@ impl Streamer {
     /// The car confirmed append `index` at `now`. Unknown indices are ignored.
     pub fn confirmed(&mut self, index: usize, now: Duration) {
         if let Some(append) = self.appends.get_mut(index) {
-            append.confirmed_after = Some(now.saturating_sub(append.decided_at));
+            let delay = now.saturating_sub(append.decided_at);
+            append.confirmed_after = Some(delay);
+            self.delays.append(delay);
         }
     }
 
@@ -458,6 +474,21 @@ mod tests {
         assert_eq!(p99(&values), Some(ms(198)));
         assert_eq!(p99(&VecDeque::new()), None);
         assert_eq!(p99(&[ms(7)].into_iter().collect()), Some(ms(7)));
+    }
+
+    #[test]
+    fn a_slow_append_confirmation_raises_the_lead_time() {
+        let config = StreamingConfig::default();
+        let mut delays = Delays::new(config.window);
+        for _ in 0..100 {
+            delays.round_trip(ms(40));
+        }
+        delays.generation(ms(3));
+        assert_eq!(delays.lead_time(&config), ms(40 + 3 + 1000));
+        // An upload that needed retries on a lossy link took 4.2 s to be confirmed.
+        delays.append(ms(300));
+        delays.append(ms(4200));
+        assert_eq!(delays.lead_time(&config), ms(4200 + 3 + 1000));
     }
 
     #[test]
