@@ -233,18 +233,8 @@ pub fn with_fault_values(case: &Case, axes: &[Axis], point: &[f64]) -> Case {
         let Parameter::Fault { index, field } = axis.parameter else {
             continue;
         };
-        if let Some(CommandRecord::AddFault {
-            param,
-            start,
-            duration,
-            ..
-        }) = faults.get(index).and_then(|&i| out.commands.get_mut(i))
-        {
-            match field {
-                FaultField::Param => *param = value,
-                FaultField::Start => *start = value as u32,
-                FaultField::Duration => *duration = value as u32,
-            }
+        if let Some(command) = faults.get(index).and_then(|&i| out.commands.get_mut(i)) {
+            field.set(command, value);
         }
     }
     out

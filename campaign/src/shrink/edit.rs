@@ -27,6 +27,26 @@ pub enum FaultField {
 }
 
 impl FaultField {
+    /// Sets this value of `command` to `value` (start and duration: whole probe calls); false
+    /// when `command` is not a fault.
+    pub fn set(self, command: &mut CommandRecord, value: f64) -> bool {
+        let CommandRecord::AddFault {
+            param,
+            start,
+            duration,
+            ..
+        } = command
+        else {
+            return false;
+        };
+        match self {
+            Self::Param => *param = value,
+            Self::Start => *start = value as u32,
+            Self::Duration => *duration = value as u32,
+        }
+        true
+    }
+
     fn name(self) -> &'static str {
         match self {
             Self::Param => "param",
@@ -314,21 +334,15 @@ impl Edit {
                 to,
                 ..
             } => {
-                let Some(CommandRecord::AddFault {
-                    param,
-                    start,
-                    duration,
-                    ..
-                }) = out.commands.get_mut(command_index)
-                else {
-                    return Err(format!("commands[{command_index}] is not a fault"));
-                };
-                match field {
-                    FaultField::Param => *param = to,
-                    FaultField::Start => *start = to as u32,
-                    FaultField::Duration => *duration = to as u32,
+                let set = out
+                    .commands
+                    .get_mut(command_index)
+                    .is_some_and(|command| field.set(command, to));
+                if set {
+                    Ok((out, target))
+                } else {
+                    Err(format!("commands[{command_index}] is not a fault"))
                 }
-                Ok((out, target))
             }
             Self::SlowSegment {
                 segment_index,

@@ -1,8 +1,6 @@
 use proptest::prelude::*;
-use trajgen::{Point, check_route};
 
 use super::*;
-use crate::case::RoutePointRecord;
 use crate::case::tests::scenario;
 use crate::model::{Campaign, FaultKind, Probe, plan_test, start_tail};
 use crate::oracle::FailurePolicy;
@@ -21,26 +19,14 @@ fn generated(seed: u64, index: usize) -> (Scenario, Case) {
     (s, case)
 }
 
-/// Every segment of `case` with its margin continues the route drivably from the start route.
+/// Every segment of `case` has its ahead margin and, with it, continues the route drivably from
+/// the start route.
 fn drivable(case: &Case, s: &Scenario) -> bool {
-    let mut tail = start_tail(s).unwrap();
-    for command in &case.commands {
-        let CommandRecord::RunSegments { points, margin, .. } = command else {
-            continue;
-        };
-        let driven: Vec<Point> = points.iter().map(RoutePointRecord::position).collect();
-        let route: Vec<Point> = std::iter::once(tail.end)
-            .chain(driven.iter().copied())
-            .chain(margin.iter().map(|&p| Point::from(p)))
-            .collect();
-        if margin.is_empty()
-            || check_route(&s.area, &route, &s.constraints(), Some(tail.heading)).is_err()
-        {
-            return false;
-        }
-        tail = tail.advanced(&driven);
-    }
-    true
+    let margins = case.commands.iter().all(|c| match c {
+        CommandRecord::RunSegments { margin, .. } => !margin.is_empty(),
+        CommandRecord::AddFault { .. } => true,
+    });
+    margins && case.check_route(s).is_ok()
 }
 
 /// A stand-in for the simulator: the case fails at its `target`-th segment when it still has a

@@ -23,8 +23,7 @@ use super::simdrive::{SimDriver, SimSettings};
 use crate::cli::ShrinkArgs;
 use crate::runner::run_dir_name;
 use crate::seed::choose_seed;
-use campaign::case::{Case, CommandRecord, ReplayOf, ScenarioRef, tool_version};
-use campaign::oracle::FailurePolicy;
+use campaign::case::{Case, CommandRecord, ScenarioRef, tool_version};
 use campaign::shrink::{
     CaseSummary, Confirmation, Ended, MINIMAL_FILE, RunResult, SHRINK_FILE, SHRINK_FORMAT,
     ShrinkReport, Shrinker, Size, Target,
@@ -158,25 +157,14 @@ pub(super) async fn shrink_case(
         });
     }
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
-    let driver = SimDriver {
+    let driver = SimDriver::new(
         scenario,
-        policy: case
-            .settings
-            .as_ref()
-            .map_or(FailurePolicy::default(), |s| s.failure_policy),
-        of: ReplayOf {
-            case: path.display().to_string(),
-            campaign_seed: case.campaign_seed,
-            test_index: case.test_index,
-            verdict: case.verdict,
-            no_faults: false,
-        },
-        scratch: out.join(".scratch"),
-        runs: options.runs,
-        seed: options.seed,
+        path,
+        case,
+        out.join(".scratch"),
+        (options.runs, options.seed),
         cancel,
-        count: std::cell::Cell::new(0),
-    };
+    );
     let plain = SimSettings::default();
     let bar = spinner(progress);
     bar.set_message(format!("driving {} to confirm its failure", path.display()));

@@ -72,7 +72,38 @@ pub(super) struct SimDriver<'a> {
     pub count: Cell<usize>,
 }
 
-impl SimDriver<'_> {
+impl<'a> SimDriver<'a> {
+    /// A driver of `case` (read from `path`) in `scenario`: its failure policy, `runs` runs from
+    /// `seed`, scratch run directories in `scratch`.
+    pub fn new(
+        scenario: &'a Scenario,
+        path: &std::path::Path,
+        case: &Case,
+        scratch: PathBuf,
+        (runs, seed): (u32, u64),
+        cancel: &'a CancellationToken,
+    ) -> Self {
+        Self {
+            scenario,
+            policy: case
+                .settings
+                .as_ref()
+                .map_or(FailurePolicy::default(), |s| s.failure_policy),
+            of: ReplayOf {
+                case: path.display().to_string(),
+                campaign_seed: case.campaign_seed,
+                test_index: case.test_index,
+                verdict: case.verdict,
+                no_faults: false,
+            },
+            scratch,
+            runs,
+            seed,
+            cancel,
+            count: Cell::new(0),
+        }
+    }
+
     /// Drives `case` up to `runs` times (run k with seed + k) with `settings`; with `target`
     /// (a segment and a deviation), stops at the first run that does not fail there by that
     /// much. Each run's result and case.

@@ -11,8 +11,7 @@ use super::shared::{cancel_on_ctrl_c, check_hash, runtime, scenario_of};
 use super::simdrive::{SimDriver, SimSettings};
 use crate::cli::SweepArgs;
 use crate::seed::choose_seed;
-use campaign::case::{Case, ReplayOf, ScenarioRef, tool_version};
-use campaign::oracle::FailurePolicy;
+use campaign::case::{Case, ScenarioRef, tool_version};
 use campaign::sweep::{
     Axis, Parameter, Point, SWEEP_FORMAT, SimSetting, SweepReport, grid, with_fault_values,
 };
@@ -45,25 +44,14 @@ pub fn sweep(args: &SweepArgs) -> Result<ExitCode> {
     let scratch = std::env::temp_dir().join(format!("drivecheck-sweep-{}", std::process::id()));
     let report = runtime(true)?.block_on(async {
         let cancel = cancel_on_ctrl_c();
-        let driver = SimDriver {
-            scenario: &scenario,
-            policy: case
-                .settings
-                .as_ref()
-                .map_or(FailurePolicy::default(), |s| s.failure_policy),
-            of: ReplayOf {
-                case: path.display().to_string(),
-                campaign_seed: case.campaign_seed,
-                test_index: case.test_index,
-                verdict: case.verdict,
-                no_faults: false,
-            },
-            scratch: scratch.clone(),
-            runs: args.runs,
-            seed,
-            cancel: &cancel,
-            count: std::cell::Cell::new(0),
-        };
+        let driver = SimDriver::new(
+            &scenario,
+            path,
+            &case,
+            scratch.clone(),
+            (args.runs, seed),
+            &cancel,
+        );
         let mut results = Vec::with_capacity(points.len());
         for values in points {
             let swept = with_fault_values(&case, &axes, &values);
