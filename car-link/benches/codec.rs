@@ -106,9 +106,46 @@ fn add_points(c: &mut Criterion) {
     group.finish();
 }
 
+/// Garbage of 64 KiB decoded by the host's decoder: random bytes, and bytes crafted so that every
+/// byte opens a long-form candidate with a valid length and end byte (all `0x03`: length 771, end
+/// byte `0x03`), which makes the decoder check a checksum for every byte. The ratio of the two is
+/// what `issues #13` bounds (crafted within 10× of random).
+fn garbage(c: &mut Criterion) {
+    const LEN: usize = 64 * 1024;
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let random: Vec<u8> = (0..LEN)
+        .map(|_| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 24) as u8
+        })
+        .collect();
+    let crafted = vec![0x03u8; LEN];
+    let mut group = c.benchmark_group("decode_garbage_64k");
+    group.throughput(Throughput::Bytes(LEN as u64));
+    for (name, bytes) in [("random", &random), ("all_0x03", &crafted)] {
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                let mut decoder = FrameDecoder::host();
+                let mut items = 0usize;
+                for chunk in bytes.chunks(256) {
+                    decoder.push(black_box(chunk));
+                    while let Some(item) = decoder.next_frame() {
+                        items += usize::from(item.is_err());
+                    }
+                }
+                while decoder.expire().is_some() {}
+                black_box(items)
+            })
+        });
+    }
+    group.finish();
+}
+
 criterion_group! {
     name = codec;
     config = Criterion::default().warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(2));
-    targets = get_state_reply, add_points
+    targets = get_state_reply, add_points, garbage
 }
 criterion_main!(codec);

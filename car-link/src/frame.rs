@@ -41,7 +41,7 @@ use std::collections::VecDeque;
 use bytes::{Buf, BufMut, Bytes, BytesMut};
 use thiserror::Error;
 
-use crate::crc::checksum;
+use crate::crc::{self, checksum};
 
 /// Start byte of the short form (1-byte length).
 pub const START_SHORT: u8 = 0x02;
@@ -313,6 +313,11 @@ struct Scanner {
     /// bytes that are not garbage when they are let go of.
     delivered: VecDeque<(u64, u64)>,
     skipped: u64,
+    /// The running checksum at each buffered offset: entry `k` is the checksum of the bytes from some earlier
+    /// origin up to stream offset `offset + k`, so a candidate's checksum takes a constant number of steps
+    /// ([`crc::range`]) however long its payload: garbage crafted so that every byte opens a long candidate
+    /// costs about as much as random bytes.
+    running: VecDeque<u16>,
 }
 
 /// A candidate frame waiting for more bytes.
@@ -388,9 +393,12 @@ impl Scanner {
         let Some(frame) = bytes.get(..total) else {
             return Candidate::Wait(Some(total));
         };
-        let payload = &frame[header..header + len];
         let received = u16::from_be_bytes([frame[total - 3], frame[total - 2]]);
-        let computed = checksum(payload);
+        let from = self.index(start) + header;
+        let computed = match (self.running.get(from), self.running.get(from + len)) {
+            (Some(&at_from), Some(&at_to)) => crc::range(at_from, at_to, len),
+            _ => checksum(&frame[header..header + len]),
+        };
         if received != computed {
             return Candidate::Invalid(FrameError::Checksum {
                 offset: start,
@@ -412,6 +420,7 @@ impl Scanner {
     /// The next valid frame or dropped candidate in `buf`; `None` when more bytes are needed.
     fn next(&mut self, buf: &mut BytesMut) -> Option<Result<Frame, FrameError>> {
         self.check_buffer(buf);
+        self.extend_running(buf);
         let item = self.resolve_pending(buf).or_else(|| self.scan_new(buf));
         self.release(buf);
         item
@@ -487,6 +496,7 @@ impl Scanner {
             self.release_to(buf, start + header as u64);
             let payload = buf.split_to(len.min(buf.len())).freeze();
             self.offset += payload.len() as u64;
+            self.drop_running(payload.len());
             payload
         } else {
             let from = self.index(start) + header;
@@ -523,8 +533,30 @@ impl Scanner {
             self.delivered.pop_front();
         }
         self.skipped += garbage;
-        buf.advance(self.index(to));
+        let dropped = self.index(to);
+        buf.advance(dropped);
         self.offset = to;
+        self.drop_running(dropped);
+    }
+
+    /// Extends the running checksums to the end of the buffer.
+    fn extend_running(&mut self, buf: &[u8]) {
+        if self.running.is_empty() {
+            self.running.push_back(0);
+        }
+        while let Some(&byte) = buf.get(self.running.len() - 1) {
+            let last = self.running.back().copied().unwrap_or_default();
+            self.running.push_back(crc::update(last, byte));
+        }
+    }
+
+    /// Forgets the running checksums of the first `bytes` buffered bytes (they left the buffer).
+    fn drop_running(&mut self, bytes: usize) {
+        if bytes >= self.running.len() {
+            self.running.clear();
+        } else {
+            self.running.drain(..bytes);
+        }
     }
 
     /// Abandons the oldest waiting candidate; the bytes after its start byte have been scanned already.
@@ -550,6 +582,8 @@ impl Scanner {
             self.pending.retain(|p| p.start < available);
             self.delivered.clear();
         }
+        // Entry k covers offset + k: a shortened buffer has fewer.
+        self.running.truncate(buf.len() + 1);
     }
 }
 
