@@ -197,6 +197,30 @@ async fn a_second_tcp_client_is_accepted_and_closed_at_once() {
 }
 
 #[tokio::test]
+async fn a_silent_tcp_client_is_disconnected_after_the_idle_timeout_and_frees_the_slot() {
+    let config = SimConfig {
+        idle_timeout: Some(Duration::from_millis(300)),
+        ..SimConfig::default()
+    };
+    let sim = serve_tcp(loopback(), &config).await.expect("bind");
+    let addr = sim.local_addr().expect("bound");
+    // A client that connects and never speaks.
+    let mut silent = TcpStream::connect(addr).await.expect("connect");
+    let mut buf = [0u8; 16];
+    let n = timeout(Duration::from_secs(3), silent.read(&mut buf)).await;
+    assert!(matches!(n, Ok(Ok(0)) | Ok(Err(_))), "disconnected: {n:?}");
+    // A client that speaks now and then keeps its connection past the timeout.
+    let mut next = TcpStream::connect(addr).await.expect("the slot is free");
+    for _ in 0..4 {
+        assert_eq!(
+            exchange(&mut next, &frame(b"\x01\x01ping")).await,
+            frame(b"\x01\x00pong\n")
+        );
+        tokio::time::sleep(Duration::from_millis(150)).await;
+    }
+}
+
+#[tokio::test]
 async fn udp_carries_one_bare_payload_per_datagram_and_replies_to_port_plus_one() {
     // Find a port p with p + 1 free for the client's listener.
     let (sim, client) = loop {

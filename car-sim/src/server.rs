@@ -108,6 +108,10 @@ pub struct SimConfig {
     pub imu_on_bench: bool,
     /// Simulation only: the UWB correction clamp (see [`CarOptions::uwb_step_clamp_m`]).
     pub uwb_step_clamp_m: Option<f32>,
+    /// Over TCP: close a client's connection after this long without a byte from it, so that a
+    /// client that went silent (or never spoke) does not hold the only slot forever (`None`:
+    /// never). A live client sends at least every 500 ms (the keepalive feeding the watchdog).
+    pub idle_timeout: Option<Duration>,
     /// Link impairment.
     pub link: LinkImpairment,
 }
@@ -383,6 +387,7 @@ async fn serve_stream<S>(
     stream: S,
     core: mpsc::Sender<CoreMsg>,
     disconnect_after: Option<Duration>,
+    idle_timeout: Option<Duration>,
     hop: Hop,
 ) where
     S: AsyncRead + AsyncWrite + Unpin,
@@ -396,6 +401,7 @@ async fn serve_stream<S>(
     let mut decoder = FrameDecoder::firmware();
     let encoder = FrameEncoder::to_firmware();
     let mut buf = vec![0u8; 4096];
+    let mut last_byte = Instant::now();
     loop {
         let disconnect = async {
             match deadline {
@@ -403,8 +409,15 @@ async fn serve_stream<S>(
                 None => std::future::pending().await,
             }
         };
+        let idle = async {
+            match idle_timeout {
+                Some(idle) => sleep_until(last_byte + idle).await,
+                None => std::future::pending().await,
+            }
+        };
         tokio::select! {
             () = disconnect => return,
+            () = idle => return,
             out = rx.recv() => {
                 let Some(payload) = out else { return };
                 if !hop.forwards(&payload) {
@@ -420,6 +433,7 @@ async fn serve_stream<S>(
             read = timeout(hop.byte_timeout(), reader.read(&mut buf)) => match read {
                 Ok(Ok(0)) | Ok(Err(_)) => return,
                 Ok(Ok(n)) => {
+                    last_byte = Instant::now();
                     decoder.push(&buf[..n]);
                     if !forward_frames(&mut decoder, &core).await {
                         return;
@@ -465,6 +479,7 @@ pub fn spawn_in_process(config: &SimConfig) -> (DuplexStream, SimHandle) {
         pipe.car,
         core,
         config.link.disconnect_after,
+        None,
         Hop::Direct,
     ));
     let handle = SimHandle {
@@ -477,7 +492,8 @@ pub fn spawn_in_process(config: &SimConfig) -> (DuplexStream, SimHandle) {
 
 /// Serves a simulated car over TCP at `addr` as the reference bridge would (it listens on port
 /// 8300; bind loopback unless exposing it is intended). One client at a time: a second
-/// connection is accepted and closed at once. Like the bridge, replies stamped with id 254 are
+/// connection is accepted and closed at once; a client silent for `config.idle_timeout` is
+/// disconnected, freeing the slot. Like the bridge, replies stamped with id 254 are
 /// not forwarded (PRINTF excepted) and the parser waits 500 ms for a frame's next byte. The car
 /// keeps running between connections.
 ///
@@ -490,6 +506,7 @@ pub async fn serve_tcp(addr: SocketAddr, config: &SimConfig) -> io::Result<SimHa
     let local_addr = listener.local_addr()?;
     let (core, shared, core_task) = start_core(config);
     let disconnect_after = config.link.disconnect_after;
+    let idle_timeout = config.idle_timeout;
     let acceptor = tokio::spawn(async move {
         let busy = Arc::new(AtomicBool::new(false));
         while let Ok((stream, _)) = listener.accept().await {
@@ -500,7 +517,7 @@ pub async fn serve_tcp(addr: SocketAddr, config: &SimConfig) -> io::Result<SimHa
             let _ = stream.set_nodelay(true);
             let (core, busy) = (core.clone(), busy.clone());
             tokio::spawn(async move {
-                serve_stream(stream, core, disconnect_after, Hop::Bridge).await;
+                serve_stream(stream, core, disconnect_after, idle_timeout, Hop::Bridge).await;
                 busy.store(false, Ordering::SeqCst);
             });
         }

@@ -262,6 +262,10 @@ pub struct SimArgs {
     /// Probability that a payload is lost, for example `2%` or `0.02`.
     #[arg(long, value_parser = parse_probability)]
     pub link_loss: Option<f64>,
+    /// Over TCP, disconnect a client that sent nothing for this long, so a silent client does not
+    /// hold the car's only connection forever (`0s`: never).
+    #[arg(long, value_name = "DURATION", default_value = "30s", value_parser = humantime::parse_duration)]
+    pub idle_timeout: std::time::Duration,
 }
 
 /// Parses `2%` or `0.02` into a probability in 0..=1.

@@ -37,6 +37,7 @@ fn sim_config(args: &SimArgs, scenario: &scenarios::Scenario) -> Result<SimConfi
             loss: args.link_loss.unwrap_or_default(),
             ..LinkImpairment::default()
         },
+        idle_timeout: (!args.idle_timeout.is_zero()).then_some(args.idle_timeout),
         ..SimConfig::from_scenario(scenario)
     })
 }
