@@ -58,8 +58,8 @@ pub struct RunArgs {
     /// `serial:///dev/ttyACM0`.
     #[arg(long, default_value = "sim")]
     pub car: String,
-    /// Tests in the campaign (default: the scenario's, 10 for the bundled ones).
-    #[arg(long)]
+    /// Tests in the campaign (default: the scenario's, 10 for the bundled ones; at most 1,000,000).
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=scenarios::MAX_TESTS as u64))]
     pub tests: Option<usize>,
     /// The campaign's seed (printed when not given).
     #[arg(long)]

@@ -137,6 +137,30 @@ pub enum Problem {
     /// A polygon is not simple.
     #[error("{0}")]
     Polygon(PolygonError),
+    /// A polygon has more vertices than any test area needs (a bound on the cost of checking it).
+    #[error("{count} vertices: at most {max} are accepted (a real test area has tens)")]
+    TooManyVertices {
+        /// Vertices given.
+        count: usize,
+        /// The limit.
+        max: usize,
+    },
+    /// A scenario file larger than any scenario needs (a bound on the cost of reading it).
+    #[error("{bytes} bytes: at most {max} are accepted")]
+    TooLarge {
+        /// The file's size.
+        bytes: u64,
+        /// The limit.
+        max: u64,
+    },
+    /// A count above its limit.
+    #[error("{count}: at most {max}")]
+    TooMany {
+        /// The count given.
+        count: usize,
+        /// The limit.
+        max: usize,
+    },
     /// A cutout reaches outside the fence.
     #[error("not entirely inside the fence")]
     CutoutOutsideFence,

@@ -91,6 +91,18 @@ impl Format {
 pub fn load(path: impl AsRef<Path>) -> Result<Loaded, ScenarioError> {
     let path = path.as_ref();
     let source_name = path.display().to_string();
+    if let Ok(meta) = std::fs::metadata(path)
+        && meta.len() > MAX_SCENARIO_BYTES
+    {
+        return Err(ScenarioError::in_source(
+            &source_name,
+            None,
+            Problem::TooLarge {
+                bytes: meta.len(),
+                max: MAX_SCENARIO_BYTES,
+            },
+        ));
+    }
     let text = std::fs::read_to_string(path)
         .map_err(|e| ScenarioError::in_source(&source_name, None, Problem::Read(e)))?;
     match Format::detect(path, &text) {
@@ -104,6 +116,15 @@ pub fn load(path: impl AsRef<Path>) -> Result<Loaded, ScenarioError> {
         }
     }
 }
+
+/// The largest scenario file [`load`] reads, bytes (8 MiB: a scenario of the largest polygons
+/// accepted is about 4 MiB).
+pub const MAX_SCENARIO_BYTES: u64 = 8 * 1024 * 1024;
+/// The most vertices a fence or cutout may have (a real test area has tens; checking one of this
+/// size takes well under a second).
+pub const MAX_POLYGON_VERTICES: usize = 100_000;
+/// The most tests a campaign may have (`campaign.tests`, `drivecheck run --tests`).
+pub const MAX_TESTS: usize = 1_000_000;
 
 /// Parses and validates a TOML scenario; `source_name` names it in errors (and, when the file has
 /// no `name`, gives the name: its file stem).
@@ -160,6 +181,46 @@ recovery_route = [
     { x = 2.0, y = 3.2, speed = 1.0 },
 ]
 "#;
+
+    #[test]
+    fn costs_are_bounded_by_documented_limits() {
+        // A fence of more vertices than the limit is refused before it is checked.
+        let n = MAX_POLYGON_VERTICES + 1;
+        let fence: String = (0..n)
+            .map(|k| {
+                let t = std::f64::consts::TAU * k as f64 / n as f64;
+                format!(
+                    "{{x={:.4},y={:.4}}},",
+                    5.0 + 5.0 * t.cos(),
+                    5.0 + 5.0 * t.sin()
+                )
+            })
+            .collect();
+        let text = SQUARE.replacen(
+            "fence = [{ x = 0.0, y = 0.0 }, { x = 10.0, y = 0.0 }, { x = 10.0, y = 10.0 }, { x = 0.0, y = 10.0 }]",
+            &format!("fence = [{fence}]"),
+            1,
+        );
+        let error = from_toml_str(&text, "big.toml").unwrap_err().to_string();
+        assert!(
+            error.contains("fence: 100001 vertices: at most 100000"),
+            "{error}"
+        );
+        // More tests than the limit.
+        let text = format!("{SQUARE}\n[campaign]\ntests = 4294967297\n");
+        let error = from_toml_str(&text, "many.toml").unwrap_err().to_string();
+        assert!(
+            error.contains("campaign.tests: 4294967297: at most 1000000"),
+            "{error}"
+        );
+        // A file larger than the limit is not read.
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("huge.toml");
+        let huge = vec![b'#'; usize::try_from(MAX_SCENARIO_BYTES).unwrap() + 1];
+        std::fs::write(&file, huge).unwrap();
+        let error = load(&file).unwrap_err().to_string();
+        assert!(error.contains("8388609 bytes: at most 8388608"), "{error}");
+    }
 
     #[test]
     fn format_is_detected_by_extension_then_content() {

@@ -181,6 +181,15 @@ fn point(p: &RawPoint, field: &str) -> Result<Point, FieldProblem> {
 }
 
 fn polygon(vertices: &[RawPoint], field: &str) -> Result<Polygon, FieldProblem> {
+    if vertices.len() > crate::MAX_POLYGON_VERTICES {
+        return Err((
+            field.to_owned(),
+            Problem::TooManyVertices {
+                count: vertices.len(),
+                max: crate::MAX_POLYGON_VERTICES,
+            },
+        ));
+    }
     let points = vertices
         .iter()
         .enumerate()

@@ -160,6 +160,15 @@ fn check_generator(g: &GeneratorSettings) -> Check {
 
 fn check_campaign(c: &CampaignSettings) -> Check {
     at_least_one(c.tests, "campaign.tests")?;
+    if c.tests > crate::MAX_TESTS {
+        return Err((
+            "campaign.tests".into(),
+            Problem::TooMany {
+                count: c.tests,
+                max: crate::MAX_TESTS,
+            },
+        ));
+    }
     counts(c.test_size, "campaign.test_size")?;
     counts(c.points_per_segment, "campaign.points_per_segment")?;
     ordered(c.speed_kmh, "campaign.speed_kmh")?;

@@ -417,27 +417,109 @@ fn closed_edges(vertices: &[Point]) -> impl Iterator<Item = (Point, Point)> + '_
 
 /// The first pair of edges `(i, j)`, `i < j`, that make the closed polyline non-simple: edges that
 /// are not neighbours and meet, or neighbours that overlap beyond their shared vertex.
+///
+/// Near-linear for the polygons of real areas: edges are put in the cells of a uniform grid their
+/// bounding boxes cover (about one cell per edge), and only edges sharing a cell are compared
+/// (edges that meet share a cell). Small polygons compare every pair.
 pub fn first_self_intersection(vertices: &[Point]) -> Option<(usize, usize)> {
     let n = vertices.len();
     let edges: Vec<(Point, Point)> = closed_edges(vertices).collect();
+    let bad = |i: usize, j: usize| {
+        let (a, b) = edges[i];
+        let (c, d) = edges[j];
+        if j == i + 1 || (i == 0 && j == n - 1) {
+            // Neighbours share one vertex; they are bad only when they fold back on each other.
+            let (shared, p, q) = if j == i + 1 { (b, a, d) } else { (a, b, c) };
+            orient(p, shared, q) == 0.0 && (p - shared).dot(q - shared) > 0.0
+        } else {
+            segments_intersect(a, b, c, d)
+        }
+    };
+    let grid = (n >= GRID_FROM_EDGES)
+        .then(|| EdgeGrid::new(&edges))
+        .flatten();
+    let Some(grid) = grid else {
+        return (0..n).find_map(|i| ((i + 1)..n).find(|&j| bad(i, j)).map(|j| (i, j)));
+    };
+    // For each edge, its later neighbours in the grid, in order: the first bad pair found is the
+    // first in (i, j) order.
+    let mut seen = vec![usize::MAX; n];
+    let mut candidates = Vec::new();
     for i in 0..n {
-        for j in (i + 1)..n {
-            let (a, b) = edges[i];
-            let (c, d) = edges[j];
-            let neighbours = j == i + 1 || (i == 0 && j == n - 1);
-            let bad = if neighbours {
-                // Neighbours share one vertex; they are bad only when they fold back on each other.
-                let (shared, p, q) = if j == i + 1 { (b, a, d) } else { (a, b, c) };
-                orient(p, shared, q) == 0.0 && (p - shared).dot(q - shared) > 0.0
-            } else {
-                segments_intersect(a, b, c, d)
-            };
-            if bad {
-                return Some((i, j));
+        candidates.clear();
+        for cell in grid.cells_of(edges[i]) {
+            for &j in &grid.cells[cell] {
+                if j > i && seen[j] != i {
+                    seen[j] = i;
+                    candidates.push(j);
+                }
             }
+        }
+        candidates.sort_unstable();
+        if let Some(&j) = candidates.iter().find(|&&j| bad(i, j)) {
+            return Some((i, j));
         }
     }
     None
+}
+
+/// Polygons with this many edges or more are checked through an [`EdgeGrid`].
+const GRID_FROM_EDGES: usize = 64;
+
+/// A uniform grid over a polyline's bounding box with the edges whose bounding boxes cover each
+/// cell.
+struct EdgeGrid {
+    origin: Point,
+    cell: f64,
+    columns: usize,
+    rows: usize,
+    cells: Vec<Vec<usize>>,
+}
+
+impl EdgeGrid {
+    /// About one cell per edge; `None` for a degenerate or non-finite extent (the caller then
+    /// compares every pair).
+    fn new(edges: &[(Point, Point)]) -> Option<Self> {
+        let bbox = BBox::around(edges.iter().map(|e| e.0))?;
+        let extent = (bbox.max.x - bbox.min.x).max(bbox.max.y - bbox.min.y);
+        if !extent.is_finite() || extent <= 0.0 {
+            return None;
+        }
+        let per_side = (edges.len() as f64).sqrt().ceil().max(1.0);
+        let cell = extent / per_side;
+        let count = |span: f64| ((span / cell).floor() as usize).saturating_add(1);
+        let columns = count(bbox.max.x - bbox.min.x);
+        let rows = count(bbox.max.y - bbox.min.y);
+        let mut grid = Self {
+            origin: bbox.min,
+            cell,
+            columns,
+            rows,
+            cells: vec![Vec::new(); columns.checked_mul(rows)?],
+        };
+        for (k, &edge) in edges.iter().enumerate() {
+            for c in grid.cells_of(edge).collect::<Vec<_>>() {
+                grid.cells[c].push(k);
+            }
+        }
+        Some(grid)
+    }
+
+    /// The cells the bounding box of `edge` covers.
+    fn cells_of(&self, (a, b): (Point, Point)) -> impl Iterator<Item = usize> + '_ {
+        let index = |v: f64, origin: f64, last: usize| {
+            (((v - origin) / self.cell).floor().max(0.0) as usize).min(last)
+        };
+        let (x0, x1) = (
+            index(a.x.min(b.x), self.origin.x, self.columns - 1),
+            index(a.x.max(b.x), self.origin.x, self.columns - 1),
+        );
+        let (y0, y1) = (
+            index(a.y.min(b.y), self.origin.y, self.rows - 1),
+            index(a.y.max(b.y), self.origin.y, self.rows - 1),
+        );
+        (y0..=y1).flat_map(move |y| (x0..=x1).map(move |x| y * self.columns + x))
+    }
 }
 
 /// Why a fence and its cutouts do not form a valid area.
@@ -638,6 +720,58 @@ fn polygons_touch(p: &Polygon, q: &Polygon) -> bool {
 
 #[cfg(test)]
 mod tests {
+    use proptest::prelude::*;
+
+    /// Every pair compared: what the grid must agree with.
+    fn first_self_intersection_by_every_pair(vertices: &[Point]) -> Option<(usize, usize)> {
+        let n = vertices.len();
+        let edges: Vec<(Point, Point)> = closed_edges(vertices).collect();
+        for i in 0..n {
+            for j in (i + 1)..n {
+                let (a, b) = edges[i];
+                let (c, d) = edges[j];
+                let bad = if j == i + 1 || (i == 0 && j == n - 1) {
+                    let (shared, p, q) = if j == i + 1 { (b, a, d) } else { (a, b, c) };
+                    orient(p, shared, q) == 0.0 && (p - shared).dot(q - shared) > 0.0
+                } else {
+                    segments_intersect(a, b, c, d)
+                };
+                if bad {
+                    return Some((i, j));
+                }
+            }
+        }
+        None
+    }
+
+    proptest! {
+        /// The grid finds the same first pair as comparing every pair: on star-shaped polygons
+        /// (simple, or not when a spike crosses) and on random vertices (crossing everywhere).
+        #[test]
+        fn the_grid_finds_the_same_first_self_intersection(
+            n in 64usize..400,
+            radii in proptest::collection::vec(1.0f64..10.0, 400),
+            jitter in proptest::collection::vec(-0.2f64..0.2, 400),
+            random in proptest::collection::vec((-5i32..5, -5i32..5), 400),
+            star in any::<bool>(),
+        ) {
+            let vertices: Vec<Point> = if star {
+                (0..n)
+                    .map(|k| {
+                        let t = std::f64::consts::TAU * (k as f64 + jitter[k]) / n as f64;
+                        Point::new(radii[k] * t.cos(), radii[k] * t.sin())
+                    })
+                    .collect()
+            } else {
+                random[..n].iter().map(|&(x, y)| Point::new(f64::from(x), f64::from(y))).collect()
+            };
+            prop_assert_eq!(
+                first_self_intersection(&vertices),
+                first_self_intersection_by_every_pair(&vertices)
+            );
+        }
+    }
+
     use super::*;
 
     fn square(x0: f64, y0: f64, side: f64) -> Polygon {
