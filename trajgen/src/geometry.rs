@@ -445,9 +445,9 @@ pub fn first_self_intersection(vertices: &[Point]) -> Option<(usize, usize)> {
     // first in (i, j) order.
     let mut seen = vec![usize::MAX; n];
     let mut candidates = Vec::new();
-    for i in 0..n {
+    for (i, &edge) in edges.iter().enumerate() {
         candidates.clear();
-        for cell in grid.cells_of(edges[i]) {
+        for cell in grid.cells_of(edge) {
             for &j in &grid.cells[cell] {
                 if j > i && seen[j] != i {
                     seen[j] = i;
