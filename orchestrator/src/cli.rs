@@ -438,6 +438,10 @@ pub enum ScenarioCommand {
 pub struct ImportArgs {
     /// The reference XML file.
     pub xml: PathBuf,
+    /// A reference XML file that holds only the anchors (`<routes><anchors>…</anchors></routes>`),
+    /// merged into the imported area (which must then have none of its own).
+    #[arg(long, value_name = "ANCHORS.xml")]
+    pub anchors: Option<PathBuf>,
     /// Where to write the scenario TOML (standard output when not given).
     #[arg(short, long, value_name = "FILE")]
     pub output: Option<PathBuf>,

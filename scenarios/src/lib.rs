@@ -139,6 +139,31 @@ pub fn from_xml_str(text: &str, source_name: &str, name: &str) -> Result<Loaded,
     finish(raw, source_name, |field| index.locate(text, field))
 }
 
+/// Parses and validates a scenario in the reference route XML (`text`) with its anchors from a
+/// second reference XML file that holds only anchors (`anchors_text`), as the published
+/// experiments kept them. An area file that has anchors itself is refused: anchors come from one
+/// file.
+pub fn from_xml_with_anchors(
+    (text, source_name): (&str, &str),
+    (anchors_text, anchors_source): (&str, &str),
+    name: &str,
+) -> Result<Loaded, ScenarioError> {
+    let anchors = xml::parse_anchors(anchors_text, anchors_source)?;
+    let (mut raw, index) = xml::parse_xml(text, source_name, name)?;
+    if !raw.anchors.is_empty() {
+        return Err(ScenarioError::in_field(
+            source_name,
+            "anchors".to_owned(),
+            Problem::Schema(format!(
+                "{} anchor(s) here and more in {anchors_source}: give the anchors in one file",
+                raw.anchors.len()
+            )),
+        ));
+    }
+    raw.anchors = anchors;
+    finish(raw, source_name, |field| index.locate(text, field))
+}
+
 /// Builds and validates the scenario; an error in a field gets the line and column where the
 /// field is written (`locate`), when the parser did not give one.
 fn finish(

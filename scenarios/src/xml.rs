@@ -141,6 +141,41 @@ pub(crate) fn parse_xml(
     Ok((scenario, index))
 }
 
+/// The anchors of a reference XML file that holds only anchors (`<routes><anchors>…</anchors>
+/// </routes>`; any routes in it are refused, so that an area file given by mistake says so).
+pub(crate) fn parse_anchors(
+    text: &str,
+    source_name: &str,
+) -> Result<Vec<RawAnchor>, ScenarioError> {
+    let index = check_well_formed(text, source_name)?;
+    let routes: XmlRoutes = quick_xml::de::from_str(text).map_err(|e| {
+        ScenarioError::in_source(source_name, None, Problem::XmlSyntax(e.to_string()))
+    })?;
+    if !routes.routes.is_empty() {
+        return Err(ScenarioError::in_source(
+            source_name,
+            None,
+            Problem::Schema(format!(
+                "an anchors file holds only <anchors>; this one has {} route(s)",
+                routes.routes.len()
+            )),
+        ));
+    }
+    let list = routes.anchors.map(|a| a.anchors).unwrap_or_default();
+    if list.is_empty() {
+        return Err(ScenarioError::in_source(
+            source_name,
+            None,
+            Problem::Schema("no <anchor> in <anchors>".to_owned()),
+        ));
+    }
+    anchors(&list).map_err(|(field, problem)| {
+        let mut error = ScenarioError::in_field(source_name, field.clone(), problem);
+        error.place.location = index.locate(text, &field);
+        error
+    })
+}
+
 /// Reads every event once so that syntax errors carry a line and column, checks the root, and
 /// notes where each element starts.
 fn check_well_formed(text: &str, source_name: &str) -> Result<XmlIndex, ScenarioError> {
@@ -345,6 +380,44 @@ mod tests {
             route("0", &[(2., 2.), (3.5, 2.), (5., 2.)]),
             route("1", &[(2., 6.), (2., 4.5), (2., 3.2)]),
         )
+    }
+
+    #[test]
+    fn anchors_from_a_file_of_their_own_are_merged_into_an_area_without_any() {
+        let with = square("");
+        let anchors_start = with.find("<anchors>").unwrap();
+        let anchors_end = with.find("</anchors>").unwrap() + "</anchors>".len();
+        let area = format!("{}{}", &with[..anchors_start], &with[anchors_end..]);
+        let only = "<routes>\n<anchors>\n<anchor><x>3</x><y>4</y><height>2</height><id>50</id></anchor>\n\
+                    <anchor><x>8</x><y>4</y><height>2</height><id>234</id></anchor>\n</anchors>\n</routes>";
+        let loaded =
+            crate::from_xml_with_anchors((&area, "area.xml"), (only, "anchors.xml"), "lot")
+                .unwrap();
+        let ids: Vec<u8> = loaded.scenario.anchors.iter().map(|a| a.id).collect();
+        assert_eq!(ids, [50, 234]);
+        assert_eq!(loaded.scenario.name, "lot");
+        // The area has anchors of its own: refused, naming both files.
+        let error = crate::from_xml_with_anchors((&with, "area.xml"), (only, "anchors.xml"), "lot")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            error.contains("area.xml") && error.contains("anchors.xml"),
+            "{error}"
+        );
+        // An area file given as the anchors file: refused.
+        let error = crate::from_xml_with_anchors((&area, "area.xml"), (&area, "b.xml"), "lot")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            error.contains("b.xml") && error.contains("route(s)"),
+            "{error}"
+        );
+        // A bad number in the anchors file names its line.
+        let bad = only.replace("<x>8</x>", "<x>eight</x>");
+        let error = crate::from_xml_with_anchors((&area, "area.xml"), (&bad, "anchors.xml"), "lot")
+            .unwrap_err();
+        assert_eq!(error.field(), Some("anchors[1].x"));
+        assert!(error.to_string().contains("anchors.xml:"), "{error}");
     }
 
     #[test]

@@ -9,7 +9,26 @@ use crate::scenario_arg::{load_scenario, print_warnings};
 
 /// Converts a reference XML file into scenario TOML.
 pub fn import(args: &ImportArgs) -> Result<ExitCode> {
-    let loaded = scenarios::load(&args.xml)?;
+    let loaded = match &args.anchors {
+        None => scenarios::load(&args.xml)?,
+        Some(anchors) => {
+            let read = |path: &std::path::Path| {
+                std::fs::read_to_string(path)
+                    .with_context(|| format!("cannot read {}", path.display()))
+            };
+            let (area, anchors_text) = (read(&args.xml)?, read(anchors)?);
+            let name = args
+                .xml
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            scenarios::from_xml_with_anchors(
+                (&area, &args.xml.display().to_string()),
+                (&anchors_text, &anchors.display().to_string()),
+                &name,
+            )?
+        }
+    };
     print_warnings(&loaded);
     let toml = loaded.scenario.to_toml();
     match &args.output {
