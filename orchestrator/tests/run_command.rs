@@ -134,3 +134,19 @@ fn a_run_directory_is_never_reused() {
     let fresh = run(&["--seed", "3", "--tests", "1", "--no-faults"], &empty);
     assert_eq!(fresh.status.code(), Some(0), "{}", text(&fresh));
 }
+
+#[test]
+fn a_simulated_campaign_records_the_simulators_debug_channels() {
+    use orchestrator::recording::{Recording, Topic};
+    let dir = tempfile::tempdir().unwrap();
+    let run = common::campaign(dir.path(), 2, 2, &[], 0);
+    let recording = Recording::read(&run.join("campaign.mcap")).unwrap();
+    // Every simulated range, and (seed 2 has faults) every fault application inside the car.
+    assert!(
+        recording.count(Topic::SimRanges) > 100,
+        "{}",
+        recording.count(Topic::SimRanges)
+    );
+    assert!(recording.count(Topic::SimFaults) > 0);
+    assert!(recording.count(Topic::SimTruth) > 100);
+}

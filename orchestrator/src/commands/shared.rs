@@ -61,8 +61,11 @@ pub(super) async fn connect(
             .with_context(|| format!("cannot connect to the car at {address}"))?;
         return Ok((car, None));
     }
+    // The simulator's debug events (ranges, fault applications, watchdog) are recorded on the
+    // `/sim/…` channels of the campaign's MCAP.
     let sim_config = car_sim::SimConfig {
         seed,
+        record_events: true,
         ..car_sim::SimConfig::from_scenario(scenario)
     };
     let (car, sim) = connect_sim(&sim_config).await?;
