@@ -97,18 +97,81 @@ pub(super) fn sim_view(sim: &Option<SimHandle>) -> Option<&dyn SimulatorView> {
     sim.as_ref().map(|sim| sim as &dyn SimulatorView)
 }
 
-/// A token cancelled when the operator presses Ctrl-C (the runner then stops the car safely).
-/// Call it inside the runtime.
+/// A token cancelled at the first SIGINT (Ctrl-C), SIGTERM (`timeout`, systemd, a cancelled CI
+/// job) or SIGHUP (a closed terminal): the runner then stops the car safely, records the running
+/// test as aborted (`interrupted`), completes the run directory and the recording, and the command
+/// exits with status 2. A second signal ends the process at once with status 2 (the car's 2 s
+/// watchdog brakes it). Call it inside the runtime.
 pub(super) fn cancel_on_ctrl_c() -> CancellationToken {
     let cancel = CancellationToken::new();
-    let on_ctrl_c = cancel.clone();
+    let on_signal = cancel.clone();
     tokio::spawn(async move {
-        if tokio::signal::ctrl_c().await.is_ok() {
-            eprintln!("interrupted: stopping the car safely");
-            on_ctrl_c.cancel();
-        }
+        let mut signals = Signals::new();
+        let first = signals.next().await;
+        eprintln!("{first}: stopping the car safely (send it again to stop at once)");
+        on_signal.cancel();
+        let second = signals.next().await;
+        eprintln!("{second} again: stopping at once; the car's watchdog brakes it within 2 s");
+        std::process::exit(2);
     });
     cancel
+}
+
+/// The signals that stop a command: SIGINT, and on Unix SIGTERM and SIGHUP.
+struct Signals {
+    #[cfg(unix)]
+    term: Option<tokio::signal::unix::Signal>,
+    #[cfg(unix)]
+    hup: Option<tokio::signal::unix::Signal>,
+}
+
+impl Signals {
+    fn new() -> Self {
+        #[cfg(unix)]
+        {
+            use tokio::signal::unix::{SignalKind, signal};
+            Self {
+                term: signal(SignalKind::terminate()).ok(),
+                hup: signal(SignalKind::hangup()).ok(),
+            }
+        }
+        #[cfg(not(unix))]
+        {
+            Self {}
+        }
+    }
+
+    /// Waits for the next signal; its name.
+    async fn next(&mut self) -> &'static str {
+        #[cfg(unix)]
+        {
+            async fn on(signal: &mut Option<tokio::signal::unix::Signal>) {
+                match signal {
+                    Some(signal) => {
+                        signal.recv().await;
+                    }
+                    None => std::future::pending().await,
+                }
+            }
+            tokio::select! {
+                () = ctrl_c() => "interrupted (SIGINT)",
+                () = on(&mut self.term) => "terminated (SIGTERM)",
+                () = on(&mut self.hup) => "hung up (SIGHUP)",
+            }
+        }
+        #[cfg(not(unix))]
+        {
+            ctrl_c().await;
+            "interrupted"
+        }
+    }
+}
+
+/// Ctrl-C; never, if its handler cannot be installed.
+async fn ctrl_c() {
+    if tokio::signal::ctrl_c().await.is_err() {
+        std::future::pending::<()>().await;
+    }
 }
 
 /// A campaign's progress on the terminal: a bar of the tests run, the test running, each

@@ -1,0 +1,90 @@
+//! SIGTERM and SIGHUP stop a campaign as Ctrl-C does: the car is stopped safely, the running test
+//! is recorded as aborted (`interrupted`), the run directory and the recording are complete, and
+//! the exit status is 2.
+
+#![cfg(unix)]
+
+mod common;
+
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use campaign::case::{CampaignRecord, Case};
+use campaign::oracle::Verdict;
+use common::path;
+use orchestrator::recording::Recording;
+
+fn stop_with(signal: &str) {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    // The simulated car against the wall clock: the first reset alone takes seconds.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
+        .args([
+            "run",
+            "--realtime",
+            "--tests",
+            "3",
+            "--seed",
+            "1",
+            "--out",
+            path(&out),
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("drivecheck starts");
+    std::thread::sleep(Duration::from_millis(2500));
+    let killed = Command::new("kill")
+        .args([&format!("-{signal}"), &child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(killed.success());
+    let started = Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "drivecheck did not stop after SIG{signal}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(child.stderr.as_mut().unwrap(), &mut stderr).unwrap();
+    assert_eq!(status.code(), Some(2), "SIG{signal}: {stderr}");
+    assert!(stderr.contains(&format!("SIG{signal}")), "{stderr}");
+    // A complete run directory: the record has its end and summary, the interrupted test its case.
+    let record =
+        CampaignRecord::from_json(&std::fs::read_to_string(out.join("campaign.json")).unwrap())
+            .unwrap();
+    assert!(record.ended_at.is_some());
+    let summary = record.summary.expect("a summary");
+    assert!(summary.aborted >= 1, "{summary:?}");
+    let last = summary.tests - 1;
+    let case = Case::from_json(
+        &std::fs::read_to_string(out.join(format!("case-{last:03}.json"))).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(case.verdict, Some(Verdict::Aborted));
+    assert!(
+        case.reason
+            .as_deref()
+            .is_some_and(|r| r.contains("interrupted")),
+        "{:?}",
+        case.reason
+    );
+    // The recording was finished.
+    let recording = Recording::read(&out.join("campaign.mcap")).unwrap();
+    assert!(recording.is_complete(), "{:?}", recording.cut_short());
+}
+
+#[test]
+fn sigterm_stops_the_car_safely_and_completes_the_run_directory() {
+    stop_with("TERM");
+}
+
+#[test]
+fn sighup_stops_the_car_safely_and_completes_the_run_directory() {
+    stop_with("HUP");
+}
