@@ -79,6 +79,10 @@ pub struct RunArgs {
     /// `continue` driving it and record every segment.
     #[arg(long, value_enum, default_value_t = OnFailure::Stop)]
     pub on_failure: OnFailure,
+    /// Run in a scenario without anchors: without them the UWB estimate is dead reckoning only,
+    /// so the tests say nothing about UWB positioning (campaign.json's summary says so).
+    #[arg(long)]
+    pub allow_no_anchors: bool,
     /// At the end, shrink every failed test's case (as `drivecheck shrink` does, on the embedded
     /// simulated car in virtual time) into `shrink-NNN/` of the run directory.
     #[arg(long)]

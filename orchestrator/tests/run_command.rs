@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::text;
+use common::{campaign, drivecheck, path, text};
 
 use std::process::{Command, Output};
 
@@ -139,7 +139,7 @@ fn a_run_directory_is_never_reused() {
 fn a_simulated_campaign_records_the_simulators_debug_channels() {
     use orchestrator::recording::{Recording, Topic};
     let dir = tempfile::tempdir().unwrap();
-    let run = common::campaign(dir.path(), 2, 2, &[], 0);
+    let run = campaign(dir.path(), 2, 2, &[], 0);
     let recording = Recording::read(&run.join("campaign.mcap")).unwrap();
     // Every simulated range, and (seed 2 has faults) every fault application inside the car.
     assert!(
@@ -149,4 +149,35 @@ fn a_simulated_campaign_records_the_simulators_debug_channels() {
     );
     assert!(recording.count(Topic::SimFaults) > 0);
     assert!(recording.count(Topic::SimTruth) > 100);
+}
+
+#[test]
+fn a_scenario_without_anchors_runs_only_when_allowed_and_says_uwb_was_not_tested() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("refused");
+    let refused = drivecheck(&[
+        "run",
+        "--scenario",
+        "courtyard",
+        "--tests",
+        "1",
+        "--out",
+        path(&out),
+    ]);
+    assert_eq!(refused.status.code(), Some(2), "{}", text(&refused));
+    assert!(text(&refused).contains("--allow-no-anchors"));
+    assert!(!out.exists(), "nothing written");
+    let run = campaign(
+        dir.path(),
+        1,
+        1,
+        &["--scenario", "courtyard", "--allow-no-anchors"],
+        0,
+    );
+    let record = campaign::case::CampaignRecord::from_json(
+        &std::fs::read_to_string(run.join("campaign.json")).unwrap(),
+    )
+    .unwrap();
+    let why = record.summary.unwrap().uwb_not_tested.expect("said");
+    assert!(why.contains("no anchors"), "{why}");
 }

@@ -153,6 +153,17 @@ pub enum Problem {
         /// The limit.
         max: u64,
     },
+    /// An oracle threshold no deviation inside the area can exceed.
+    #[error(
+        "{threshold} m is at least the area's diameter ({diameter:.1} m): no UWB estimate inside \
+         the area can be that far from RTK, so every test would pass"
+    )]
+    ThresholdTestsNothing {
+        /// The threshold, m.
+        threshold: f64,
+        /// The fence's bounding-box diagonal, m.
+        diameter: f64,
+    },
     /// A count above its limit.
     #[error("{count}: at most {max}")]
     TooMany {

@@ -231,6 +231,15 @@ recovery_route = [
             error.contains("fence: 100001 vertices: at most 100000"),
             "{error}"
         );
+        // A threshold no deviation inside the area can exceed (the square's diagonal is 14.1 m).
+        let text = format!("{SQUARE}\n[campaign]\noracle_threshold_m = 1e9\n");
+        let error = from_toml_str(&text, "wide.toml").unwrap_err().to_string();
+        assert!(
+            error.contains(
+                "campaign.oracle_threshold_m: 1000000000 m is at least the area's diameter (14.1 m)"
+            ),
+            "{error}"
+        );
         // More tests than the limit.
         let text = format!("{SQUARE}\n[campaign]\ntests = 4294967297\n");
         let error = from_toml_str(&text, "many.toml").unwrap_err().to_string();

@@ -45,6 +45,7 @@ fn check(s: &Scenario) -> Check {
     check_vehicle(&s.vehicle)?;
     check_generator(&s.generator)?;
     check_campaign(&s.campaign)?;
+    check_threshold(s)?;
     check_route(&s.area, &s.start_route, "start_route")?;
     check_route(&s.area, &s.recovery_route, "recovery_route")?;
     check_join(s)?;
@@ -297,6 +298,26 @@ fn check_route(area: &Area, route: &Route, field: &str) -> Check {
                 Problem::SegmentLeavesArea { segment },
             ));
         }
+    }
+    Ok(())
+}
+
+/// A threshold at least the area's diameter (its fence's bounding-box diagonal) tests nothing: no
+/// UWB estimate inside the area can be that far from RTK, so every test would pass.
+fn check_threshold(s: &Scenario) -> Check {
+    let Some(bbox) = trajgen::BBox::around(s.area.fence().vertices().iter().copied()) else {
+        return Ok(());
+    };
+    let diameter = bbox.min.dist(bbox.max);
+    let threshold = s.campaign.oracle_threshold_m;
+    if threshold >= diameter {
+        return Err((
+            "campaign.oracle_threshold_m".into(),
+            Problem::ThresholdTestsNothing {
+                threshold,
+                diameter,
+            },
+        ));
     }
     Ok(())
 }

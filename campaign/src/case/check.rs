@@ -34,6 +34,31 @@ impl Case {
     }
 
     fn check_results(&self) -> Result<(), CaseError> {
+        // A recorded verdict must agree with the case's own segment results: replay compares
+        // with it, and a `passed` written over a failed segment would read as a pass.
+        let failed = self
+            .segments
+            .iter()
+            .any(|s| s.oracle.verdict == crate::oracle::SegmentVerdict::Failed);
+        let all_passed = self
+            .segments
+            .iter()
+            .all(|s| s.oracle.verdict == crate::oracle::SegmentVerdict::Passed);
+        match self.verdict {
+            Some(crate::oracle::Verdict::Passed) if !all_passed || self.segments.is_empty() => {
+                return Err(invalid(
+                    "verdict",
+                    "`passed`, but not every segment in `segments` passed",
+                ));
+            }
+            Some(crate::oracle::Verdict::Failed) if !failed => {
+                return Err(invalid(
+                    "verdict",
+                    "`failed`, but no segment in `segments` failed",
+                ));
+            }
+            _ => {}
+        }
         for (i, result) in self.segments.iter().enumerate() {
             let is_segment = matches!(
                 self.commands.get(result.command_index),

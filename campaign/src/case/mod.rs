@@ -688,6 +688,10 @@ pub struct CampaignSummary {
     pub worst_deviation_m: Option<f64>,
     /// Case files of the failed and aborted tests, relative to the run directory.
     pub failing_cases: Vec<String>,
+    /// Why the UWB positioning was not tested, when it was not (an area without anchors: the
+    /// estimate is dead reckoning only, so a pass says nothing about UWB).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uwb_not_tested: Option<String>,
 }
 
 impl CampaignRecord {

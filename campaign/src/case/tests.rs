@@ -101,6 +101,7 @@ fn a_campaign_record_survives_a_round_trip_through_json() {
             aborted: 1,
             worst_deviation_m: Some(1.42),
             failing_cases: vec!["case-003.json".to_owned(), "case-007.json".to_owned()],
+            uwb_not_tested: None,
         }),
         replay_of: None,
     };
@@ -284,4 +285,29 @@ fn a_segment_outside_the_area_is_not_drivable() {
         case.check_route(&s),
         Err(CaseError::NotDrivable { command: 0, .. })
     ));
+}
+
+#[test]
+fn a_recorded_verdict_that_contradicts_the_segments_is_refused() {
+    let (_, case) = run_case();
+    assert!(case.check().is_ok(), "failed, with a failed segment");
+    let mut passed = case.clone();
+    passed.verdict = Some(Verdict::Passed);
+    let error = passed.check().unwrap_err().to_string();
+    assert!(
+        error.starts_with("verdict: `passed`, but not every segment"),
+        "{error}"
+    );
+    let mut failed = case.clone();
+    failed.segments.clear();
+    let error = failed.check().unwrap_err().to_string();
+    assert!(
+        error.starts_with("verdict: `failed`, but no segment"),
+        "{error}"
+    );
+    // An aborted test may have any results; a hand-written case none.
+    failed.verdict = Some(Verdict::Aborted);
+    assert!(failed.check().is_ok());
+    failed.verdict = None;
+    assert!(failed.check().is_ok());
 }

@@ -31,6 +31,14 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     let loaded = load_scenario(&args.scenario)?;
     print_warnings(&loaded);
     let scenario = loaded.scenario;
+    if scenario.anchors.is_empty() && !args.allow_no_anchors {
+        anyhow::bail!(
+            "{}: the scenario has no anchors, so the car's UWB estimate would be dead reckoning \
+             only and every test would say nothing about UWB positioning; add its anchors \
+             (`scenario import --anchors`) or pass --allow-no-anchors",
+            loaded.source
+        );
+    }
     let address: CarAddress = args
         .car
         .parse()

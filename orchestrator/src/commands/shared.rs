@@ -268,6 +268,9 @@ pub(super) fn print_report(report: &CampaignReport, wall: Option<Duration>) {
             w.as_secs_f64()
         ))
     );
+    if let Some(why) = &s.uwb_not_tested {
+        println!("UWB NOT TESTED: {why}");
+    }
     for file in &s.failing_cases {
         println!("  {}", report.dir.join(file).display());
     }

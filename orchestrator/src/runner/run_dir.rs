@@ -62,6 +62,8 @@ pub(crate) struct RunDirectory {
     record: CampaignRecord,
     tests: Vec<TestSummary>,
     cases: Vec<Case>,
+    /// The scenario has no anchors: UWB is not tested.
+    no_anchors: bool,
 }
 
 impl RunDirectory {
@@ -96,6 +98,7 @@ impl RunDirectory {
             record,
             tests: Vec::new(),
             cases: Vec::new(),
+            no_anchors: scenario.anchors.is_empty(),
         };
         dir.write_record()?;
         Ok(dir)
@@ -167,6 +170,11 @@ impl RunDirectory {
                 .filter(|t| t.verdict != Some(Verdict::Passed))
                 .map(|t| t.file.clone())
                 .collect(),
+            uwb_not_tested: self.no_anchors.then(|| {
+                "the scenario has no anchors: the UWB estimate was dead reckoning only, so no \
+                 test says anything about UWB positioning"
+                    .to_owned()
+            }),
         }
     }
 
