@@ -10,6 +10,7 @@
 //! geometry and generation (`trajgen`), scenario files (`scenarios`), the wire protocol
 //! (`car-link`).
 
+pub mod atomic;
 pub mod cli;
 pub mod commands;
 pub mod junit;

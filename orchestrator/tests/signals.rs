@@ -88,3 +88,42 @@ fn sigterm_stops_the_car_safely_and_completes_the_run_directory() {
 fn sighup_stops_the_car_safely_and_completes_the_run_directory() {
     stop_with("HUP");
 }
+
+#[test]
+fn after_kill_9_runs_show_says_how_to_read_the_unfinished_recording() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
+        .args([
+            "run",
+            "--realtime",
+            "--tests",
+            "2",
+            "--seed",
+            "1",
+            "--out",
+            path(&out),
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("drivecheck starts");
+    std::thread::sleep(Duration::from_millis(2500));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    // Every file drivecheck wrote is whole: campaign.json reads (without an end).
+    let record =
+        CampaignRecord::from_json(&std::fs::read_to_string(out.join("campaign.json")).unwrap())
+            .unwrap();
+    assert!(record.ended_at.is_none());
+    let show = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
+        .args(["runs", "show", path(&out)])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&show.stdout);
+    assert!(text.contains("(did not end)"), "{text}");
+    assert!(
+        text.contains("unfinished") && text.contains("mcap recover"),
+        "{text}"
+    );
+}

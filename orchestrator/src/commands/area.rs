@@ -88,7 +88,7 @@ pub fn validate(args: &ValidateArgs) -> Result<ExitCode> {
     bar.finish_and_clear();
 
     if let Some(path) = &args.svg {
-        std::fs::write(path, area_picture(scenario, &report))
+        crate::atomic::write(path, area_picture(scenario, &report))
             .with_context(|| format!("cannot write {}", path.display()))?;
         eprintln!("wrote {}", path.display());
     }

@@ -121,7 +121,7 @@ pub fn replay(args: &ReplayArgs) -> Result<ExitCode> {
     let (runs, error) = runtime(virtual_time)?.block_on(job.run_all());
     let comparison = Comparison::new(&case, of.clone(), ScenarioRef::of(&scenario), &runs);
     let file = out.join(REPLAY_FILE);
-    std::fs::write(&file, format!("{}\n", comparison.to_json()?))
+    crate::atomic::write(&file, format!("{}\n", comparison.to_json()?))
         .with_context(|| format!("cannot write {}", file.display()))?;
     if let Some(junit_file) = &args.junit {
         write_junit(&runs, &of, &scenario, &out, &started_at, junit_file)?;
@@ -305,7 +305,7 @@ fn write_junit(
         cases,
     };
     let xml = crate::junit::to_xml(&[suite]).context("cannot write the JUnit XML")?;
-    std::fs::write(file, xml).with_context(|| format!("cannot write {}", file.display()))?;
+    crate::atomic::write(file, xml).with_context(|| format!("cannot write {}", file.display()))?;
     eprintln!("JUnit XML: {}", file.display());
     Ok(())
 }

@@ -136,7 +136,7 @@ fn write_junit(report: &CampaignReport, file: &std::path::Path) -> Result<()> {
         cases,
     };
     let xml = junit::to_xml(&[suite]).context("cannot write the JUnit XML")?;
-    std::fs::write(file, xml).with_context(|| format!("cannot write {}", file.display()))?;
+    crate::atomic::write(file, xml).with_context(|| format!("cannot write {}", file.display()))?;
     eprintln!("JUnit XML: {}", file.display());
     Ok(())
 }

@@ -231,6 +231,7 @@ fn show_campaign(dir: &Path, record: CampaignRecord) -> Result<()> {
         record.started_at,
         record.ended_at.as_deref().unwrap_or("- (did not end)")
     );
+    describe_recording(dir);
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("cannot read {}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -263,4 +264,29 @@ fn show_campaign(dir: &Path, record: CampaignRecord) -> Result<()> {
         None,
     );
     Ok(())
+}
+
+/// Says whether the run's recording is complete and, when the process was killed before it was
+/// finished (kill -9, a power cut), how to read it: drivecheck's reader, Foxglove and `mcap
+/// recover` read an unfinished file up to its last complete chunk.
+fn describe_recording(dir: &Path) {
+    let file = dir.join(crate::runner::RECORDING_FILE);
+    if !file.exists() {
+        return;
+    }
+    match crate::recording::Recording::read(&file) {
+        Ok(recording) if recording.is_complete() => {}
+        Ok(recording) => println!(
+            "recording {}: unfinished (the process was killed before it ended{}); {} messages \
+             read up to the last complete chunk. Streaming readers (Foxglove) read it as it is; `mcap recover {} \
+             -o recovered.mcap` (the mcap CLI) writes a finished copy",
+            file.display(),
+            recording
+                .cut_short()
+                .map_or_else(String::new, |why| format!(": {why}")),
+            recording.message_count(),
+            file.display()
+        ),
+        Err(error) => println!("recording {}: unreadable: {error}", file.display()),
+    }
 }

@@ -33,7 +33,7 @@ pub fn import(args: &ImportArgs) -> Result<ExitCode> {
     let toml = loaded.scenario.to_toml();
     match &args.output {
         Some(path) => {
-            std::fs::write(path, &toml)
+            crate::atomic::write(path, &toml)
                 .with_context(|| format!("cannot write {}", path.display()))?;
             eprintln!(
                 "wrote {} (scenario {}, {} warning(s))",

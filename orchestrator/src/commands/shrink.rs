@@ -323,7 +323,7 @@ pub(super) async fn shrink_case(
     written.campaign_seed = case.campaign_seed.or(Some(options.seed));
     written.test_index = case.test_index;
     let minimal_file = out.join(MINIMAL_FILE);
-    std::fs::write(&minimal_file, format!("{}\n", written.to_json()?))
+    crate::atomic::write(&minimal_file, format!("{}\n", written.to_json()?))
         .with_context(|| format!("cannot write {}", minimal_file.display()))?;
     let report = ShrinkReport {
         format: SHRINK_FORMAT.to_owned(),
@@ -352,7 +352,7 @@ pub(super) async fn shrink_case(
         ),
     };
     let file = out.join(SHRINK_FILE);
-    std::fs::write(&file, format!("{}\n", report.to_json()?))
+    crate::atomic::write(&file, format!("{}\n", report.to_json()?))
         .with_context(|| format!("cannot write {}", file.display()))?;
     Ok(report)
 }

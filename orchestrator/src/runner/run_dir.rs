@@ -209,7 +209,7 @@ fn summarise(test_index: usize, file: String, case: &Case) -> TestSummary {
 }
 
 fn write(path: &Path, text: &str) -> Result<(), RunError> {
-    std::fs::write(path, format!("{text}\n")).map_err(|source| RunError::Io {
+    crate::atomic::write(path, format!("{text}\n")).map_err(|source| RunError::Io {
         path: path.to_owned(),
         source,
     })
