@@ -38,9 +38,7 @@ pub(crate) struct Sample {
 pub(crate) enum Origin {
     /// The answer to the test's `set_autopilot` (the runner starts the test's clock then).
     Autopilot,
-    /// The test's end event minus its drive time (`timing.drive_s`).
-    EndMinusDrive,
-    /// The test's start event (before the start route was uploaded: times are a little late).
+    /// The test's start event (a few round trips earlier: the start route's upload).
     StartEvent,
 }
 
@@ -302,7 +300,7 @@ struct Times {
 /// and end events (`/tests`), timed from the test's beginning. The runner starts a test's clock
 /// (the time base of `fault_places` and `abort.at`) once the car acknowledged the test's
 /// `set_autopilot`, right after uploading the start route; that acknowledgement's log time is
-/// `t = 0` (or, when it is missing, the end event minus the case's drive time).
+/// `t = 0` (or, when it is missing, the start event, a few round trips earlier).
 fn split_tracks(
     recording: &Recording,
     tests: &[TestData],
@@ -360,10 +358,8 @@ fn split_tracks(
                 .min()
                 .unwrap_or(u64::MAX)
         });
-        let drive_ns = test.case.timing.map(|t| (t.drive_s * 1e9) as u64);
-        let (zero, origin) = match (t.autopilot, t.ended, drive_ns) {
-            (Some(at), _, _) if at >= started && at <= ended => (at, Origin::Autopilot),
-            (_, Some(end), Some(drive)) if end >= drive => (end - drive, Origin::EndMinusDrive),
+        let (zero, origin) = match t.autopilot {
+            Some(at) if at >= started && at <= ended => (at, Origin::Autopilot),
             _ => (started, Origin::StartEvent),
         };
         let from = states.partition_point(|s| s.received_at_ns < started);

@@ -222,11 +222,9 @@ fn plot_legend(out: &mut String, origin: Origin) {
         Origin::Autopilot => {
             "t = 0 when the car acknowledged the test's set_autopilot, the runner's test clock"
         }
-        Origin::EndMinusDrive => {
-            "t = 0 found as the test's end minus its drive time (no set_autopilot answer recorded)"
-        }
         Origin::StartEvent => {
-            "t = 0 at the test's start event (no better mark recorded: times are a little late)"
+            "t = 0 at the test's start event (no set_autopilot answer recorded): the samples are drawn \
+             up to a few round trips late against the fault windows"
         }
     };
     let _ = writeln!(
