@@ -582,11 +582,11 @@ pub(crate) fn deviation_svg(input: &PlotInput<'_>) -> Result<Option<String>, Rep
         chart
             .draw_series([Text::new(
                 format!("threshold {threshold:.2} m"),
-                (t1, threshold),
+                (t0, threshold),
                 ("sans-serif", 11)
                     .into_font()
                     .color(&RED_ABOVE)
-                    .pos(Pos::new(HPos::Right, VPos::Bottom)),
+                    .pos(Pos::new(HPos::Left, VPos::Bottom)),
             )])
             .map_err(draw_error)?;
         let runs = coloured_runs(

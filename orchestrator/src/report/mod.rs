@@ -12,8 +12,8 @@
 //!   recorded).
 //!
 //! The tracks come from the recording's `/car/state` samples, split by the `/tests` events and
-//! timed on the test's clock (see [`data`]); the pictures are drawn with `plotters`' SVG backend
-//! ([`draw`]) and put inline into the page ([`html`]). The scenario for the maps is the one the
+//! timed on the test's clock (see `data`); the pictures are drawn with `plotters`' SVG backend
+//! (`draw`) and put inline into the page (`html`). The scenario for the maps is the one the
 //! caller gives, else the recording's copy, else the bundled scenario of the record's name.
 //!
 //! Not here: reading the command line (`commands::report`).
