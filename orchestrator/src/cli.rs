@@ -32,6 +32,9 @@ pub enum Command {
     Sweep(SweepArgs),
     /// List run directories (campaigns and replays) with their summary, or show one.
     Runs(RunsArgs),
+    /// Write a self-contained HTML report of a run, replay or shrink directory (maps, deviation
+    /// plots, tables; inline SVG, no network or script needed). Exit status: 0 written, 2 error.
+    Report(ReportArgs),
     /// Serve a simulated car over TCP (like the reference bridge) or UDP.
     Sim(SimArgs),
     /// Check a test area before any car drives in it.
@@ -96,6 +99,9 @@ pub struct RunArgs {
     /// Also write the campaign's tests as JUnit XML to FILE (one testcase per test), for CI.
     #[arg(long, value_name = "FILE")]
     pub junit: Option<PathBuf>,
+    /// At the end, also write `report.html` into the run directory (as `drivecheck report`).
+    #[arg(long)]
+    pub report: bool,
 }
 
 /// What a campaign does after a failing segment.
@@ -148,6 +154,9 @@ pub struct ReplayArgs {
     /// Also write the runs as JUnit XML to FILE (one testcase per run), for CI.
     #[arg(long, value_name = "FILE")]
     pub junit: Option<PathBuf>,
+    /// At the end, also write `report.html` into the replay directory (as `drivecheck report`).
+    #[arg(long)]
+    pub report: bool,
 }
 
 /// Options of `drivecheck shrink`.
@@ -215,6 +224,22 @@ pub struct SweepArgs {
     /// Sweep even when the scenario's hash differs from the case's (or the case has none).
     #[arg(long)]
     pub ignore_scenario_hash: bool,
+}
+
+/// Options of `drivecheck report`.
+#[derive(Debug, Args)]
+pub struct ReportArgs {
+    /// The run directory (`campaign.json`), replay directory (`replay.json`) or shrink directory
+    /// (`shrink.json`).
+    #[arg(value_name = "RUN_DIR")]
+    pub dir: PathBuf,
+    /// Where to write the page (default `RUN_DIR/report.html`).
+    #[arg(long, value_name = "FILE")]
+    pub out: Option<PathBuf>,
+    /// Scenario to draw the maps in: a bundled name, a .toml file or a reference .xml (default:
+    /// the scenario stored in the recording, else the bundled one the run names).
+    #[arg(long)]
+    pub scenario: Option<String>,
 }
 
 /// Options of `drivecheck runs`.

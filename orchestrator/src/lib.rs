@@ -15,6 +15,7 @@ pub mod cli;
 pub mod commands;
 pub mod junit;
 pub mod recording;
+pub mod report;
 pub mod runner;
 mod scenario_arg;
 mod seed;

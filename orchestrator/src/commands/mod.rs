@@ -4,6 +4,7 @@ mod area;
 mod bench;
 mod bench_recovery;
 mod replay;
+mod report;
 mod route;
 mod route_return;
 mod run;
@@ -29,6 +30,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Command::Shrink(args) => shrink::shrink(&args),
         Command::Sweep(args) => sweep::sweep(&args),
         Command::Runs(args) => runs::runs(&args),
+        Command::Report(args) => report::report(&args),
         Command::Sim(args) => sim::serve(&args),
         Command::Area(AreaCommand::Validate(args)) => area::validate(&args),
         Command::Route(RouteCommand::Generate(args)) => route::generate(&args),

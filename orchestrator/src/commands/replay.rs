@@ -22,6 +22,7 @@ use super::shared::{
     CampaignFailed, cancel_on_ctrl_c, check_hash, connect, metres, runtime, scenario_of, sim_view,
 };
 use crate::cli::ReplayArgs;
+use crate::report::REPORT_FILE;
 use crate::runner::{
     ReplaySource, RunConfig, Silent, TestSummary, rfc3339_now, run_campaign, run_dir_name,
 };
@@ -125,6 +126,9 @@ pub fn replay(args: &ReplayArgs) -> Result<ExitCode> {
         .with_context(|| format!("cannot write {}", file.display()))?;
     if let Some(junit_file) = &args.junit {
         write_junit(&runs, &of, &scenario, &out, &started_at, junit_file)?;
+    }
+    if args.report {
+        super::report::write(&out, &out.join(REPORT_FILE), Some(&scenario))?;
     }
     print!("{}", comparison.table());
     println!(

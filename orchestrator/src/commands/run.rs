@@ -16,6 +16,7 @@ use super::shared::{
 use super::shrink;
 use crate::cli::{OnFailure, RunArgs};
 use crate::junit;
+use crate::report::REPORT_FILE;
 use crate::runner::{CampaignReport, RunConfig, run_campaign, run_dir_name};
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::choose_seed;
@@ -91,6 +92,9 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     }
     if args.shrink {
         shrink_failed(&report, &scenario, args.shrink_budget)?;
+    }
+    if args.report {
+        super::report::write(&report.dir, &report.dir.join(REPORT_FILE), Some(&scenario))?;
     }
     let summary = report.record.summary.as_ref();
     let all_passed = summary.is_some_and(|s| s.passed == s.tests && s.tests > 0);

@@ -1,0 +1,46 @@
+//! `drivecheck report RUN_DIR`: the self-contained HTML page of a run, replay or shrink
+//! directory ([`crate::report`]); also what `run --report` and `replay --report` call at the end.
+
+use std::path::Path;
+use std::process::ExitCode;
+
+use anyhow::Result;
+
+use crate::cli::ReportArgs;
+use crate::report::{self, REPORT_FILE, ReportKind};
+use crate::scenario_arg::{load_scenario, print_warnings};
+
+/// Writes the report. Exit status 0, or 2 on an error (not a run directory, a file that cannot
+/// be read or written).
+pub fn report(args: &ReportArgs) -> Result<ExitCode> {
+    let scenario = match &args.scenario {
+        Some(arg) => {
+            let loaded = load_scenario(arg)?;
+            print_warnings(&loaded);
+            Some(loaded.scenario)
+        }
+        None => None,
+    };
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| args.dir.join(REPORT_FILE));
+    write(&args.dir, &out, scenario.as_ref())?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Writes `dir`'s report to `out` and says so on standard error.
+pub(super) fn write(dir: &Path, out: &Path, scenario: Option<&scenarios::Scenario>) -> Result<()> {
+    let written = report::write(dir, out, scenario)?;
+    let items = match written.kind {
+        ReportKind::Campaign => format!("{} tests", written.items),
+        ReportKind::Replay => format!("{} runs", written.items),
+        ReportKind::Shrink => format!("{} steps, no maps", written.items),
+    };
+    eprintln!(
+        "report: {} ({items}, {:.1} kB)",
+        written.path.display(),
+        written.bytes as f64 / 1000.0
+    );
+    Ok(())
+}

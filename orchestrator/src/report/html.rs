@@ -1,0 +1,1069 @@
+//! The page: HTML with inline CSS and the SVG pictures inline, no script and no external
+//! reference, so it opens from a file anywhere.
+
+use std::fmt::Write;
+
+use scenarios::Scenario;
+
+use super::ReportError;
+use super::data::{CampaignData, Origin, ReplayData, Sample, ShrinkData, TestData, short};
+use super::draw::{
+    AMBER, Colouring, FAULT, FaultMark, GREEN, MAX_TRACK_POINTS, MapLayers, PlotInput, RED_ABOVE,
+    RUN_COLOURS, TrackLayer, Window, css, decimate, deviation_svg, map_svg,
+};
+use super::route::{boundaries, point_along, segments};
+use crate::runner::TestSummary;
+use campaign::case::{Case, CommandRecord};
+use campaign::oracle::{SegmentVerdict, Verdict};
+use campaign::shrink::RunResult;
+
+const CSS: &str = r#"
+body { font-family: system-ui, -apple-system, "Segoe UI", Roboto, sans-serif; margin: 0 auto;
+  max-width: 1100px; padding: 16px 24px 48px; color: #1d1d1d; background: #fff; }
+h1 { font-size: 1.6em; margin: 0.4em 0 0.1em; }
+h2 { font-size: 1.25em; margin: 1.6em 0 0.4em; border-bottom: 1px solid #ddd; padding-bottom: 4px; }
+h3 { font-size: 1.05em; margin: 1.2em 0 0.3em; }
+.sub { color: #555; margin: 0 0 1em; }
+table { border-collapse: collapse; margin: 0.4em 0 0.8em; font-size: 0.92em; }
+th, td { border: 1px solid #d8d8d8; padding: 3px 8px; text-align: left; vertical-align: top; }
+th { background: #f3f3f3; font-weight: 600; }
+td.num { text-align: right; font-variant-numeric: tabular-nums; }
+table.facts th { width: 13em; }
+.verdict { display: inline-block; padding: 1px 8px; border-radius: 9px; color: #fff;
+  font-size: 0.85em; font-weight: 600; }
+.passed { background: #1a9850; } .failed { background: #d7191c; } .aborted { background: #e68a00; }
+.notrun { background: #888; }
+td.above { color: #d7191c; font-weight: 600; }
+.figure { margin: 0.5em 0; overflow-x: auto; }
+.figure svg { max-width: 100%; height: auto; border: 1px solid #e4e4e4; }
+.legend { font-size: 0.85em; color: #444; margin: 0.2em 0 1em; }
+.legend span.sw { display: inline-block; width: 22px; height: 4px; vertical-align: middle;
+  margin: 0 4px 0 12px; }
+.legend span.dot { display: inline-block; width: 10px; height: 10px; border-radius: 5px;
+  vertical-align: middle; margin: 0 4px 0 12px; }
+.notes { background: #fff8e1; border: 1px solid #f0d890; padding: 6px 12px 6px 28px; }
+.test { border-top: 3px solid #eee; margin-top: 2em; }
+a { color: #1f5fae; }
+code { background: #f4f4f4; padding: 0 3px; }
+footer { margin-top: 3em; color: #777; font-size: 0.85em; }
+"#;
+
+/// Escapes text for HTML.
+pub(crate) fn escape(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&#39;"),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+fn metres(value: Option<f64>) -> String {
+    value.map_or_else(|| "–".to_owned(), |m| format!("{m:.2} m"))
+}
+
+fn seconds(value: f64) -> String {
+    if value < 120.0 {
+        format!("{value:.1} s")
+    } else {
+        format!("{:.0} min {:.0} s", (value / 60.0).floor(), value % 60.0)
+    }
+}
+
+fn badge(verdict: Option<Verdict>) -> String {
+    let (class, text) = match verdict {
+        Some(Verdict::Passed) => ("passed", "passed"),
+        Some(Verdict::Failed) => ("failed", "failed"),
+        Some(Verdict::Aborted) => ("aborted", "aborted"),
+        None => ("notrun", "not run"),
+    };
+    format!(r#"<span class="verdict {class}">{text}</span>"#)
+}
+
+fn head(out: &mut String, title: &str) {
+    let _ = write!(
+        out,
+        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n\
+         <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n\
+         <title>{}</title>\n<style>{CSS}</style>\n</head>\n<body>\n",
+        escape(title)
+    );
+}
+
+fn notes(out: &mut String, notes: &[String]) {
+    if notes.is_empty() {
+        return;
+    }
+    out.push_str("<ul class=\"notes\">\n");
+    for note in notes {
+        let _ = writeln!(out, "<li>{}</li>", escape(note));
+    }
+    out.push_str("</ul>\n");
+}
+
+fn foot(out: &mut String, dir: &std::path::Path) {
+    let _ = write!(
+        out,
+        "<footer>Written by drivecheck {} from <code>{}</code>. Every picture is inline SVG; the \
+         page needs no network and no script.</footer>\n</body>\n</html>\n",
+        escape(campaign::case::tool_version()),
+        escape(&dir.display().to_string())
+    );
+}
+
+fn fact(out: &mut String, name: &str, value: &str) {
+    let _ = writeln!(out, "<tr><th>{}</th><td>{value}</td></tr>", escape(name));
+}
+
+/// Seconds between two RFC 3339 times, when both parse.
+fn wall_seconds(started: &str, ended: Option<&str>) -> Option<f64> {
+    let start = humantime::parse_rfc3339_weak(started).ok()?;
+    let end = humantime::parse_rfc3339_weak(ended?).ok()?;
+    end.duration_since(start).ok().map(|d| d.as_secs_f64())
+}
+
+/// The fault command of a placement.
+fn probe_of(case: &Case, command_index: usize) -> String {
+    match case.commands.get(command_index) {
+        Some(CommandRecord::AddFault { probe, .. }) => probe.to_string(),
+        _ => format!("command {command_index}"),
+    }
+}
+
+fn threshold_of(case: &Case, fallback: f64) -> f64 {
+    case.segments
+        .first()
+        .map(|s| s.oracle.threshold_m)
+        .or_else(|| case.settings.as_ref().map(|s| s.oracle_threshold_m))
+        .unwrap_or(fallback)
+}
+
+/// The faults of a test on the map: the car's place when each was added, and the RTK track
+/// while it acted.
+fn fault_marks(scenario: &Scenario, case: &Case, samples: &[Sample]) -> Vec<FaultMark> {
+    let segs = segments(case);
+    case.fault_places
+        .iter()
+        .filter_map(|place| {
+            let along = place.actual_along_m.unwrap_or(place.planned_along_m);
+            let at = point_along(scenario, &segs, place.segment_index, along)?;
+            let window = samples
+                .iter()
+                .filter(|s| s.t_s >= place.acts_from_s && s.t_s <= place.acts_to_s)
+                .map(|s| s.rtk)
+                .collect();
+            Some(FaultMark {
+                at,
+                label: probe_of(case, place.command_index),
+                window,
+            })
+        })
+        .collect()
+}
+
+/// How many segments the car drove: up to the last one judged.
+fn driven(case: &Case) -> usize {
+    case.segments
+        .iter()
+        .map(|s| s.segment_index + 1)
+        .max()
+        .unwrap_or(0)
+}
+
+fn windows(case: &Case) -> Vec<Window> {
+    case.fault_places
+        .iter()
+        .map(|p| Window {
+            from_s: p.acts_from_s,
+            to_s: p.acts_to_s,
+            label: probe_of(case, p.command_index),
+        })
+        .collect()
+}
+
+fn map_legend(out: &mut String, deviation: bool) {
+    out.push_str("<div class=\"legend\">");
+    out.push_str(
+        "<span class=\"sw\" style=\"background:#000\"></span>fence \
+         <span class=\"sw\" style=\"background:#9a9a9a;height:10px\"></span>cutout \
+         <span class=\"sw\" style=\"background:#b0b0b0\"></span>start route \
+         <span class=\"sw\" style=\"background:repeating-linear-gradient(90deg,#4a7fc1 0 6px,transparent 6px 10px)\"></span>planned segments (s0, s1, …; faint: not driven) \
+         <span class=\"sw\" style=\"background:#252525;height:1px\"></span>RTK track ",
+    );
+    if deviation {
+        let _ = write!(
+            out,
+            "UWB track: <span class=\"sw\" style=\"background:{}\"></span>below half the threshold \
+             <span class=\"sw\" style=\"background:{}\"></span>up to the threshold \
+             <span class=\"sw\" style=\"background:{}\"></span>above it ",
+            css(GREEN),
+            css(AMBER),
+            css(RED_ABOVE)
+        );
+    }
+    let _ = writeln!(
+        out,
+        "<span class=\"dot\" style=\"border:2px solid {f};width:8px;height:8px\"></span>fault \
+         added (where the car was; probe named) \
+         <span class=\"sw\" style=\"background:{f};opacity:0.35;height:9px\"></span>where it \
+         acted ▲ anchor</div>",
+        f = css(FAULT)
+    );
+}
+
+fn plot_legend(out: &mut String, origin: Origin) {
+    let origin = match origin {
+        Origin::Autopilot => {
+            "t = 0 when the car acknowledged the test's set_autopilot, the runner's test clock"
+        }
+        Origin::StartEvent => {
+            "t = 0 at the test's start event (no set_autopilot answer recorded): the samples are drawn \
+             up to a few round trips late against the fault windows"
+        }
+    };
+    let _ = writeln!(
+        out,
+        "<div class=\"legend\">Deviation per state sample, coloured as on the map; \
+         <span class=\"sw\" style=\"background:repeating-linear-gradient(90deg,{r} 0 8px,transparent 8px 13px)\"></span>threshold \
+         <span class=\"sw\" style=\"background:#888;width:2px;height:12px\"></span>segment entered (s0, s1, …; located on the route from the samples as the runner does) and left (end) \
+         <span class=\"sw\" style=\"background:{f};opacity:0.25;height:12px\"></span>fault window (fault_places acts_from_s–acts_to_s). {origin}.</div>",
+        r = css(RED_ABOVE),
+        f = css(FAULT),
+    );
+}
+
+fn segments_table(out: &mut String, case: &Case) {
+    if case.segments.is_empty() {
+        return;
+    }
+    out.push_str(
+        "<table><tr><th>segment</th><th>command</th><th>samples</th><th>max</th><th>RMS</th>\
+         <th>p95</th><th>verdict</th><th>faults before it</th></tr>\n",
+    );
+    for s in &case.segments {
+        let o = &s.oracle;
+        let (samples, max, rms, p95) = o.stats.map_or_else(
+            || ("0".to_owned(), None, None, None),
+            |st| {
+                (
+                    st.samples.to_string(),
+                    Some(st.max_m),
+                    Some(st.rms_m),
+                    Some(st.p95_m),
+                )
+            },
+        );
+        let above = max.is_some_and(|m| m > o.threshold_m);
+        let verdict = match o.verdict {
+            SegmentVerdict::Passed => "passed",
+            SegmentVerdict::Failed => "FAILED",
+            SegmentVerdict::NoSamples => "no samples",
+        };
+        let faults: Vec<String> = s
+            .faults_preceding
+            .iter()
+            .map(|&i| format!("{} (cmd {i})", probe_of(case, i)))
+            .collect();
+        let _ = writeln!(
+            out,
+            "<tr><td class=\"num\">s{}</td><td class=\"num\">{}</td><td class=\"num\">{samples}</td>\
+             <td class=\"num{}\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td><td>{verdict}</td><td>{}</td></tr>",
+            s.segment_index,
+            s.command_index,
+            if above { " above" } else { "" },
+            metres(max),
+            metres(rms),
+            metres(p95),
+            escape(&faults.join(", "))
+        );
+    }
+    out.push_str("</table>\n");
+}
+
+fn faults_table(out: &mut String, case: &Case) {
+    if case.fault_places.is_empty() {
+        return;
+    }
+    out.push_str(
+        "<table><tr><th>command</th><th>fault</th><th>segment</th><th>planned place</th>\
+         <th>actual place</th><th>added</th><th>acted</th></tr>\n",
+    );
+    for p in &case.fault_places {
+        let fault = match case.commands.get(p.command_index) {
+            Some(CommandRecord::AddFault {
+                probe,
+                kind,
+                param,
+                start,
+                duration,
+                ..
+            }) => format!("{probe} {kind} {param:.3}, start {start}, duration {duration}"),
+            _ => "?".to_owned(),
+        };
+        let _ = writeln!(
+            out,
+            "<tr><td class=\"num\">{}</td><td>{}</td><td class=\"num\">s{}</td>\
+             <td class=\"num\">{:.2} m</td><td class=\"num\">{}</td><td class=\"num\">{:.2} s</td>\
+             <td class=\"num\">{:.2}–{:.2} s</td></tr>",
+            p.command_index,
+            escape(&fault),
+            p.segment_index,
+            p.planned_along_m,
+            p.actual_along_m
+                .map_or_else(|| "–".to_owned(), |a| format!("{a:.2} m")),
+            p.added_s,
+            p.acts_from_s,
+            p.acts_to_s
+        );
+    }
+    out.push_str("</table>\n");
+}
+
+fn figure(out: &mut String, svg: Option<String>, missing: &str) {
+    match svg {
+        Some(svg) => {
+            out.push_str("<div class=\"figure\">\n");
+            out.push_str(&svg);
+            out.push_str("</div>\n");
+        }
+        None => {
+            let _ = writeln!(out, "<p class=\"sub\">{}</p>", escape(missing));
+        }
+    }
+}
+
+/// The section of one test (or one run of a replay): facts, map, plot, tables.
+fn test_section(
+    out: &mut String,
+    id: &str,
+    title: &str,
+    test: &TestData,
+    scenario: Option<&Scenario>,
+    fallback_threshold: f64,
+    draw_map: bool,
+) -> Result<(), ReportError> {
+    let case = &test.case;
+    let summary = TestSummary::of(test.index, test.file.clone(), case);
+    let _ = writeln!(
+        out,
+        "<section class=\"test\" id=\"{id}\">\n<h2>{} {}</h2>",
+        escape(title),
+        badge(case.verdict)
+    );
+    if let Some(reason) = &case.reason {
+        let _ = writeln!(out, "<p><strong>{}</strong></p>", escape(reason));
+    }
+    let segments_count = segments(case).len();
+    let faults = case
+        .commands
+        .iter()
+        .filter(|c| matches!(c, CommandRecord::AddFault { .. }))
+        .count();
+    let timing = case.timing.map_or_else(String::new, |t| {
+        format!(
+            " · reset {}, drive {}",
+            seconds(t.reset_s),
+            seconds(t.drive_s)
+        )
+    });
+    let _ = writeln!(
+        out,
+        "<p class=\"sub\"><code>{}</code> · {} commands, {segments_count} segments ({} driven), \
+         {faults} faults · worst deviation {}{timing}</p>",
+        escape(&test.file),
+        case.commands.len(),
+        case.segments.len(),
+        metres(summary.worst_deviation_m)
+    );
+    let threshold = threshold_of(case, fallback_threshold);
+    let samples = test
+        .track
+        .as_ref()
+        .map(|t| decimate(&t.samples, MAX_TRACK_POINTS))
+        .unwrap_or_default();
+    if draw_map {
+        let layers = MapLayers {
+            segments: segments(case),
+            driven: driven(case),
+            tracks: vec![TrackLayer {
+                samples: &samples,
+                colouring: Colouring::ByDeviation { threshold },
+                rtk: true,
+            }],
+            faults: scenario.map_or_else(Vec::new, |s| fault_marks(s, case, &samples)),
+        };
+        out.push_str("<h3>Map</h3>\n");
+        figure(
+            out,
+            map_svg(scenario, &layers)?,
+            "No map: neither the scenario nor a track is known.",
+        );
+        map_legend(out, true);
+    }
+    out.push_str("<h3>Deviation against time</h3>\n");
+    let bounds = match scenario {
+        Some(s) => boundaries(s, case, &samples),
+        None => Vec::new(),
+    };
+    let windows = windows(case);
+    let plot = deviation_svg(&PlotInput {
+        samples: &samples,
+        threshold,
+        boundaries: &bounds,
+        windows: &windows,
+    })?;
+    let has_plot = plot.is_some();
+    figure(
+        out,
+        plot,
+        "No plot: the recording has no state samples of this test.",
+    );
+    if has_plot && let Some(track) = &test.track {
+        plot_legend(out, track.origin);
+    }
+    out.push_str("<h3>Segments</h3>\n");
+    segments_table(out, case);
+    if !case.fault_places.is_empty() {
+        out.push_str("<h3>Faults</h3>\n");
+        faults_table(out, case);
+    }
+    out.push_str("</section>\n");
+    Ok(())
+}
+
+/// A campaign's page.
+pub(crate) fn campaign_page(
+    data: &CampaignData,
+    scenario: Option<&Scenario>,
+    mut page_notes: Vec<String>,
+) -> Result<String, ReportError> {
+    let record = &data.record;
+    let mut out = String::new();
+    let title = format!(
+        "drivecheck campaign seed {} on {}",
+        record.seed, record.scenario.name
+    );
+    head(&mut out, &title);
+    let _ = writeln!(
+        out,
+        "<h1>Campaign seed {} on {}</h1>\n<p class=\"sub\">Run directory <code>{}</code></p>",
+        record.seed,
+        escape(&record.scenario.name),
+        escape(&data.dir.display().to_string())
+    );
+    page_notes.extend(data.notes.iter().cloned());
+    notes(&mut out, &page_notes);
+    out.push_str("<section id=\"summary\">\n<h2>Summary</h2>\n<table class=\"facts\">\n");
+    fact(&mut out, "seed", &record.seed.to_string());
+    fact(
+        &mut out,
+        "scenario",
+        &format!(
+            "{} (hash {})",
+            escape(&record.scenario.name),
+            record.scenario.hash.as_deref().map_or("–", short)
+        ),
+    );
+    fact(&mut out, "drivecheck", &escape(&record.tool_version));
+    fact(
+        &mut out,
+        "car",
+        &format!(
+            "{}, firmware {}",
+            escape(&record.car),
+            escape(record.car_firmware_version.as_deref().unwrap_or("unknown"))
+        ),
+    );
+    if let Some(of) = &record.replay_of {
+        fact(&mut out, "replay of", &escape(&of.case));
+    }
+    if record.no_faults {
+        fact(&mut out, "faults", "none (--no-faults)");
+    }
+    let counts = |v| {
+        data.tests
+            .iter()
+            .filter(|t| t.case.verdict == Some(v))
+            .count()
+    };
+    let (tests, passed, failed, aborted) = match &record.summary {
+        Some(s) => (s.tests, s.passed, s.failed, s.aborted),
+        None => (
+            data.tests.len(),
+            counts(Verdict::Passed),
+            counts(Verdict::Failed),
+            counts(Verdict::Aborted),
+        ),
+    };
+    fact(
+        &mut out,
+        "tests",
+        &format!(
+            "<span id=\"count-tests\">{tests}</span>: \
+             <span class=\"verdict passed\" id=\"count-passed\">{passed}</span> passed, \
+             <span class=\"verdict failed\" id=\"count-failed\">{failed}</span> failed, \
+             <span class=\"verdict aborted\" id=\"count-aborted\">{aborted}</span> aborted"
+        ),
+    );
+    let worst = record
+        .summary
+        .as_ref()
+        .and_then(|s| s.worst_deviation_m)
+        .or_else(|| {
+            data.tests
+                .iter()
+                .filter_map(|t| TestSummary::of(t.index, String::new(), &t.case).worst_deviation_m)
+                .max_by(f64::total_cmp)
+        });
+    fact(
+        &mut out,
+        "worst deviation",
+        &format!(
+            "<span id=\"worst-deviation\">{}</span> (threshold {:.2} m)",
+            metres(worst),
+            record.settings.oracle_threshold_m
+        ),
+    );
+    fact(
+        &mut out,
+        "started, ended",
+        &format!(
+            "{}, {}",
+            escape(&record.started_at),
+            escape(record.ended_at.as_deref().unwrap_or("– (did not end)"))
+        ),
+    );
+    match wall_seconds(&record.started_at, record.ended_at.as_deref()) {
+        Some(s) if s < 1.0 => fact(&mut out, "wall time", "under a second"),
+        Some(s) => fact(&mut out, "wall time", &seconds(s)),
+        None => fact(&mut out, "wall time", "unknown"),
+    }
+    let timed: Vec<_> = data.tests.iter().filter_map(|t| t.case.timing).collect();
+    if !timed.is_empty() {
+        let drive: f64 = timed.iter().map(|t| t.drive_s).sum();
+        let reset: f64 = timed.iter().map(|t| t.reset_s).sum();
+        let clock = if record.car == "sim" {
+            " (simulated time)"
+        } else {
+            ""
+        };
+        fact(
+            &mut out,
+            "driven",
+            &format!(
+                "{} in tests, {} in resets{clock}{}",
+                seconds(drive),
+                seconds(reset),
+                if timed.len() < data.tests.len() {
+                    format!(", {} of {} tests timed", timed.len(), data.tests.len())
+                } else {
+                    String::new()
+                }
+            ),
+        );
+    }
+    out.push_str("</table>\n</section>\n");
+    out.push_str(
+        "<section id=\"tests\">\n<h2>Tests</h2>\n<table><tr><th>test</th><th>verdict</th>\
+         <th>worst deviation</th><th>segments driven</th><th>faults</th><th>drive</th>\
+         <th>failing segment or reason</th></tr>\n",
+    );
+    let threshold = record.settings.oracle_threshold_m;
+    for t in &data.tests {
+        let s = TestSummary::of(t.index, t.file.clone(), &t.case);
+        let above = s.worst_deviation_m.is_some_and(|w| w > threshold);
+        let _ = writeln!(
+            out,
+            "<tr><td><a href=\"#test-{i:03}\">test {i:03}</a></td><td>{}</td>\
+             <td class=\"num{}\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td>\
+             <td class=\"num\">{}</td><td>{}</td></tr>",
+            badge(t.case.verdict),
+            if above { " above" } else { "" },
+            metres(s.worst_deviation_m),
+            t.case.segments.len(),
+            t.case.fault_places.len(),
+            t.case
+                .timing
+                .map_or_else(|| "–".to_owned(), |t| seconds(t.drive_s)),
+            escape(t.case.reason.as_deref().unwrap_or("")),
+            i = t.index
+        );
+    }
+    out.push_str("</table>\n</section>\n");
+    for t in &data.tests {
+        test_section(
+            &mut out,
+            &format!("test-{:03}", t.index),
+            &format!("Test {:03}", t.index),
+            t,
+            scenario,
+            threshold,
+            true,
+        )?;
+    }
+    foot(&mut out, &data.dir);
+    Ok(out)
+}
+
+/// A replay's page: the runs on one map, the comparison, a plot per run.
+pub(crate) fn replay_page(
+    data: &ReplayData,
+    scenario: Option<&Scenario>,
+    mut page_notes: Vec<String>,
+) -> Result<String, ReportError> {
+    let c = &data.comparison;
+    let mut out = String::new();
+    let title = format!(
+        "drivecheck replay of {} on {}",
+        c.replay_of.case, c.scenario.name
+    );
+    head(&mut out, &title);
+    let _ = writeln!(
+        out,
+        "<h1>Replay of <code>{}</code></h1>\n<p class=\"sub\">Replay directory <code>{}</code></p>",
+        escape(&c.replay_of.case),
+        escape(&data.dir.display().to_string())
+    );
+    page_notes.extend(data.notes.iter().cloned());
+    for (_, run) in &data.runs {
+        if let Some(run) = run {
+            page_notes.extend(run.notes.iter().cloned());
+        }
+    }
+    notes(&mut out, &page_notes);
+    out.push_str("<section id=\"summary\">\n<h2>Summary</h2>\n<table class=\"facts\">\n");
+    fact(
+        &mut out,
+        "scenario",
+        &format!(
+            "{} (hash {})",
+            escape(&c.scenario.name),
+            c.scenario.hash.as_deref().map_or("–", short)
+        ),
+    );
+    let of = &c.replay_of;
+    fact(
+        &mut out,
+        "case",
+        &format!(
+            "<code>{}</code>{}{}, recorded verdict {}",
+            escape(&of.case),
+            of.campaign_seed
+                .map_or_else(String::new, |s| format!(", campaign seed {s}")),
+            of.test_index
+                .map_or_else(String::new, |i| format!(", test {i}")),
+            of.verdict.map_or("–", Verdict::as_str)
+        ),
+    );
+    if of.no_faults {
+        fact(&mut out, "faults", "left out (--no-faults)");
+    }
+    let count = |v| c.runs.iter().filter(|r| r.verdict == Some(v)).count();
+    fact(
+        &mut out,
+        "runs",
+        &format!(
+            "<span id=\"count-tests\">{}</span>: {} passed, {} failed, {} aborted",
+            c.runs.len(),
+            count(Verdict::Passed),
+            count(Verdict::Failed),
+            count(Verdict::Aborted)
+        ),
+    );
+    fact(
+        &mut out,
+        "same verdict every run",
+        yes_no(Some(c.same_verdict)),
+    );
+    fact(&mut out, "same as the case", yes_no(c.same_as_original));
+    if c.failure_disappeared.is_some() {
+        fact(
+            &mut out,
+            "failure disappeared without faults",
+            yes_no(c.failure_disappeared),
+        );
+    }
+    fact(
+        &mut out,
+        "largest difference from the mean",
+        &metres(c.max_abs_diff_m),
+    );
+    out.push_str("</table>\n</section>\n");
+    out.push_str(
+        "<section id=\"runs\">\n<h2>Runs</h2>\n<table><tr><th>run</th><th>seed</th>\
+         <th>verdict</th><th>worst deviation</th><th>reason</th></tr>\n",
+    );
+    for (run, data) in &data.runs {
+        let worst = data
+            .as_ref()
+            .and_then(|d| d.tests.first())
+            .and_then(|t| TestSummary::of(0, String::new(), &t.case).worst_deviation_m);
+        let _ = writeln!(
+            out,
+            "<tr><td><a href=\"#{d}\">{d}</a></td><td class=\"num\">{}</td><td>{}</td>\
+             <td class=\"num\">{}</td><td>{}</td></tr>",
+            run.seed,
+            badge(run.verdict),
+            metres(worst),
+            escape(run.reason.as_deref().unwrap_or("")),
+            d = escape(&run.dir)
+        );
+    }
+    out.push_str("</table>\n");
+    comparison_table(&mut out, c);
+    out.push_str("</section>\n");
+    // The runs overlaid on one map.
+    let threshold = data
+        .runs
+        .iter()
+        .filter_map(|(_, d)| d.as_ref()?.tests.first())
+        .map(|t| threshold_of(&t.case, 1.0))
+        .next()
+        .unwrap_or(1.0);
+    let decimated: Vec<(usize, &TestData, Vec<Sample>)> = data
+        .runs
+        .iter()
+        .enumerate()
+        .filter_map(|(k, (_, d))| {
+            let test = d.as_ref()?.tests.first()?;
+            let samples = test
+                .track
+                .as_ref()
+                .map(|t| decimate(&t.samples, MAX_TRACK_POINTS))
+                .unwrap_or_default();
+            Some((k, test, samples))
+        })
+        .collect();
+    if let Some((_, first, _)) = decimated.first() {
+        let layers = MapLayers {
+            segments: segments(&first.case),
+            driven: decimated
+                .iter()
+                .map(|(_, t, _)| driven(&t.case))
+                .max()
+                .unwrap_or(0),
+            tracks: decimated
+                .iter()
+                .map(|(k, _, samples)| TrackLayer {
+                    samples,
+                    colouring: Colouring::Run {
+                        colour: RUN_COLOURS[k % RUN_COLOURS.len()],
+                        threshold,
+                    },
+                    rtk: true,
+                })
+                .collect(),
+            faults: scenario.map_or_else(Vec::new, |s| {
+                decimated
+                    .iter()
+                    .flat_map(|(k, test, samples)| {
+                        // The runs' places nearly coincide: the first run's are named.
+                        let mut marks = fault_marks(s, &test.case, samples);
+                        if *k > 0 {
+                            marks.iter_mut().for_each(|m| m.label.clear());
+                        }
+                        marks
+                    })
+                    .collect()
+            }),
+        };
+        out.push_str("<section id=\"map\">\n<h2>The runs on the map</h2>\n");
+        figure(
+            &mut out,
+            map_svg(scenario, &layers)?,
+            "No map: neither the scenario nor a track is known.",
+        );
+        map_legend(&mut out, false);
+        out.push_str("<div class=\"legend\">UWB track of ");
+        for (k, _, _) in &decimated {
+            let _ = write!(
+                out,
+                "<span class=\"sw\" style=\"background:{}\"></span>run {} ",
+                css(RUN_COLOURS[k % RUN_COLOURS.len()]),
+                k + 1
+            );
+        }
+        let _ = writeln!(
+            out,
+            "<span class=\"dot\" style=\"background:{}\"></span>UWB above the threshold</div>\n</section>",
+            css(RED_ABOVE)
+        );
+    }
+    for (k, test, _) in &decimated {
+        let dir = &data.runs[*k].0.dir;
+        test_section(
+            &mut out,
+            &escape(dir),
+            &format!("Run {} ({dir}/{})", k + 1, test.file),
+            test,
+            scenario,
+            threshold,
+            false,
+        )?;
+    }
+    foot(&mut out, &data.dir);
+    Ok(out)
+}
+
+fn yes_no(value: Option<bool>) -> &'static str {
+    match value {
+        Some(true) => "yes",
+        Some(false) => "no",
+        None => "–",
+    }
+}
+
+fn comparison_table(out: &mut String, c: &campaign::replay::Comparison) {
+    out.push_str("<h3>Per segment: each run's largest deviation</h3>\n<table><tr><th>segment</th><th>case</th>");
+    for run in &c.runs {
+        let _ = write!(out, "<th>{}</th>", escape(&run.dir));
+    }
+    out.push_str("<th>mean</th>");
+    for run in &c.runs {
+        let _ = write!(out, "<th>{} − mean</th>", escape(&run.dir));
+    }
+    out.push_str("</tr>\n");
+    for s in &c.segments {
+        let _ = write!(
+            out,
+            "<tr><td class=\"num\">s{}</td><td class=\"num\">{}</td>",
+            s.segment_index,
+            metres(s.original_max_m)
+        );
+        for m in &s.max_m {
+            let _ = write!(out, "<td class=\"num\">{}</td>", metres(*m));
+        }
+        let _ = write!(out, "<td class=\"num\">{}</td>", metres(s.mean_m));
+        for d in &s.diff_from_mean_m {
+            let text = d.map_or_else(|| "–".to_owned(), |d| format!("{d:+.2} m"));
+            let _ = write!(out, "<td class=\"num\">{text}</td>");
+        }
+        out.push_str("</tr>\n");
+    }
+    out.push_str("</table>\n");
+}
+
+fn runs_cell(runs: &[RunResult]) -> String {
+    runs.iter()
+        .map(|r| {
+            format!(
+                "seed {}: {}{}{}",
+                r.seed,
+                r.verdict.map_or("–", Verdict::as_str),
+                r.first_failing_segment
+                    .map_or_else(String::new, |s| format!(" at s{s}")),
+                r.max_deviation_m
+                    .map_or_else(String::new, |m| format!(" ({m:.2} m)"))
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("<br>")
+}
+
+fn json_name<T: serde::Serialize>(value: &T) -> String {
+    serde_json::to_value(value)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_owned))
+        .unwrap_or_else(|| "?".to_owned())
+}
+
+/// A shrink's page: before and after, the steps; no maps (a shrink's runs are not recorded).
+pub(crate) fn shrink_page(data: &ShrinkData, page_notes: Vec<String>) -> String {
+    let r = &data.report;
+    let mut out = String::new();
+    head(&mut out, &format!("drivecheck shrink of {}", r.case));
+    let _ = writeln!(
+        out,
+        "<h1>Shrink of <code>{}</code></h1>\n<p class=\"sub\">Shrink directory <code>{}</code></p>",
+        escape(&r.case),
+        escape(&data.dir.display().to_string())
+    );
+    let mut all = page_notes;
+    all.extend(data.notes.iter().cloned());
+    notes(&mut out, &all);
+    let _ = writeln!(
+        out,
+        "<p>No maps or plots on this page: a shrink drives its candidates on the simulated car \
+         without recording them (there is no MCAP). To see the minimal case's tracks, replay it: \
+         <code>drivecheck replay {} --report</code>.</p>",
+        escape(
+            &data
+                .dir
+                .join(campaign::shrink::MINIMAL_FILE)
+                .display()
+                .to_string()
+        )
+    );
+    out.push_str("<section id=\"summary\">\n<h2>Summary</h2>\n<table class=\"facts\">\n");
+    fact(
+        &mut out,
+        "scenario",
+        &format!(
+            "{} (hash {})",
+            escape(&r.scenario.name),
+            r.scenario.hash.as_deref().map_or("–", short)
+        ),
+    );
+    fact(&mut out, "drivecheck", &escape(&r.tool_version));
+    fact(
+        &mut out,
+        "seed, runs per candidate",
+        &format!("{}, {}", r.seed, r.runs_per_candidate),
+    );
+    fact(
+        &mut out,
+        "kept when every run fails by",
+        &format!("at least {:.2} m", r.min_deviation_m),
+    );
+    fact(&mut out, "ended", &json_name(&r.ended));
+    fact(
+        &mut out,
+        "simulator runs, wall time",
+        &format!("{}, {}", r.simulator_runs, seconds(r.wall_s)),
+    );
+    if let Some(conf) = &r.confirmation {
+        fact(
+            &mut out,
+            "confirmation",
+            &format!(
+                "{} of {} other seeds failed the same way{}; {}{}",
+                conf.failed,
+                conf.runs.len(),
+                conf.case_failed
+                    .map_or_else(String::new, |n| format!(" (the case itself: {n})")),
+                if conf.confirmed {
+                    "confirmed"
+                } else {
+                    "not confirmed"
+                },
+                if conf.stepped_back > 0 {
+                    format!(", {} step(s) undone", conf.stepped_back)
+                } else {
+                    String::new()
+                }
+            ),
+        );
+    }
+    fact(
+        &mut out,
+        "replay on the car",
+        &format!("<code>{}</code>", escape(&r.replay_on_car)),
+    );
+    out.push_str("</table>\n</section>\n");
+    out.push_str(
+        "<section id=\"before-after\">\n<h2>Before and after</h2>\n<table><tr><th></th>\
+         <th>before</th><th>after</th></tr>\n",
+    );
+    let (b, a) = (&r.before, &r.after);
+    let rows = [
+        ("commands", b.size.commands, a.size.commands),
+        ("segments", b.size.segments, a.size.segments),
+        ("faults", b.size.faults, a.size.faults),
+        ("route points", b.size.points, a.size.points),
+    ];
+    for (name, before, after) in rows {
+        let _ = writeln!(
+            out,
+            "<tr><th>{name}</th><td class=\"num\">{before}</td><td class=\"num\">{after}</td></tr>"
+        );
+    }
+    let _ = writeln!(
+        out,
+        "<tr><th>failing segment</th><td>{}</td><td>{}</td></tr>\n\
+         <tr><th>runs</th><td>{}</td><td>{}</td></tr>",
+        escape(&b.target.to_string()),
+        escape(&a.target.to_string()),
+        runs_cell(&b.runs),
+        runs_cell(&a.runs)
+    );
+    if let Some(runs) = &r.without_faults {
+        let _ = writeln!(
+            out,
+            "<tr><th>minimal case without its faults</th><td></td><td>{}</td></tr>",
+            runs_cell(runs)
+        );
+    }
+    out.push_str("</table>\n</section>\n");
+    if let Some(minimal) = &data.minimal {
+        out.push_str("<section id=\"minimal\">\n<h2>The minimal case's segments</h2>\n");
+        let _ = writeln!(
+            out,
+            "<p class=\"sub\"><code>minimal.json</code>: {} commands, verdict {}{}</p>",
+            minimal.commands.len(),
+            minimal.verdict.map_or("–", Verdict::as_str),
+            minimal
+                .reason
+                .as_deref()
+                .map_or_else(String::new, |r| format!(" ({})", escape(r)))
+        );
+        segments_table(&mut out, minimal);
+        faults_table(&mut out, minimal);
+        out.push_str("</section>\n");
+    }
+    out.push_str(
+        "<section id=\"steps\">\n<h2>Steps</h2>\n<table><tr><th>#</th><th>edit</th>\
+         <th>outcome</th><th>commands</th><th>target</th><th>runs</th></tr>\n",
+    );
+    for (i, step) in r.steps.iter().enumerate() {
+        let outcome = json_name(&step.outcome);
+        let detail = step
+            .not_drivable
+            .as_deref()
+            .map_or_else(String::new, |why| format!(": {}", escape(why)));
+        let class = if outcome == "kept" {
+            " class=\"kept\""
+        } else {
+            ""
+        };
+        let _ = writeln!(
+            out,
+            "<tr{class}><td class=\"num\">{}</td><td>{}</td><td>{}{detail}</td>\
+             <td class=\"num\">{}</td><td>{}</td><td>{}</td></tr>",
+            i + 1,
+            escape(&step.description),
+            if outcome == "kept" {
+                "<strong>kept</strong>".to_owned()
+            } else {
+                escape(&outcome)
+            },
+            step.commands,
+            escape(&step.target.to_string()),
+            runs_cell(&step.runs)
+        );
+    }
+    out.push_str("</table>\n</section>\n");
+    foot(&mut out, &data.dir);
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn text_is_escaped() {
+        assert_eq!(
+            escape("<a href=\"x\">&'"),
+            "&lt;a href=&quot;x&quot;&gt;&amp;&#39;"
+        );
+    }
+
+    #[test]
+    fn wall_time_needs_both_ends() {
+        assert_eq!(
+            wall_seconds("2026-11-22T10:55:21Z", Some("2026-11-22T10:56:02Z")),
+            Some(41.0)
+        );
+        assert_eq!(wall_seconds("2026-11-22T10:55:21Z", None), None);
+        assert_eq!(
+            wall_seconds("yesterday", Some("2026-11-22T10:56:02Z")),
+            None
+        );
+    }
+}

@@ -1,0 +1,163 @@
+//! `report.html`: a self-contained page of a run directory (`drivecheck report`, `run --report`,
+//! `replay --report`), readable from a file without network or script.
+//!
+//! - A campaign's run directory: a summary (seed, scenario, tool, car and firmware, the verdict
+//!   counts, the worst deviation, wall and driven time), a table of the tests linking to each
+//!   test's section, and per test a map (fence, cutouts, anchors, the planned route, the RTK
+//!   track and the UWB track coloured by deviation, where each fault was added and where it
+//!   acted) and a plot of the deviation against time (threshold, segment boundaries, the faults'
+//!   windows), with its segments and faults as tables.
+//! - A replay directory: the runs on one map, a plot per run, the per-segment comparison.
+//! - A shrink directory: the before/after and steps tables (no pictures: its runs are not
+//!   recorded).
+//!
+//! The tracks come from the recording's `/car/state` samples, split by the `/tests` events and
+//! timed on the test's clock (see `data`); the pictures are drawn with `plotters`' SVG backend
+//! (`draw`) and put inline into the page (`html`). The scenario for the maps is the one the
+//! caller gives, else the recording's copy, else the bundled scenario of the record's name.
+//!
+//! Not here: reading the command line (`commands::report`).
+
+mod data;
+mod draw;
+mod html;
+mod route;
+
+use std::path::{Path, PathBuf};
+
+use scenarios::Scenario;
+use thiserror::Error;
+
+use data::{Directory, scenario_for};
+
+/// The report's file name in the directory it describes.
+pub const REPORT_FILE: &str = "report.html";
+
+/// Why a report could not be written.
+#[derive(Debug, Error)]
+pub enum ReportError {
+    /// The path is not a directory.
+    #[error("{dir} is not a directory")]
+    NotADirectory {
+        /// The path.
+        dir: PathBuf,
+    },
+    /// The directory holds neither a campaign, a replay nor a shrink.
+    #[error(
+        "{dir} is not a run directory: it has no campaign.json (nor replay.json or shrink.json)"
+    )]
+    NotARunDirectory {
+        /// The directory.
+        dir: PathBuf,
+    },
+    /// A file could not be read.
+    #[error("cannot read {path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// What the system said.
+        source: std::io::Error,
+    },
+    /// A file is not what its name says.
+    #[error("{path}: {message}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// A picture could not be drawn.
+    #[error("cannot draw a picture: {0}")]
+    Draw(String),
+    /// The page could not be written.
+    #[error("cannot write {path}: {source}")]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// What the system said.
+        source: std::io::Error,
+    },
+}
+
+/// What kind of directory a report describes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ReportKind {
+    /// A campaign's run directory (or one run of a replay).
+    Campaign,
+    /// A replay directory.
+    Replay,
+    /// A shrink directory.
+    Shrink,
+}
+
+/// A report written.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Written {
+    /// Where.
+    pub path: PathBuf,
+    /// Its size, bytes.
+    pub bytes: usize,
+    /// What it describes.
+    pub kind: ReportKind,
+    /// Tests (campaign) or runs (replay) shown; steps for a shrink.
+    pub items: usize,
+}
+
+/// The page of directory `dir` (see the module doc) and what it describes. `scenario`, when
+/// given, is the scenario to draw the maps in (checked against the recorded hash: a mismatch is
+/// noted on the page).
+pub fn render(
+    dir: &Path,
+    scenario: Option<&Scenario>,
+) -> Result<(String, ReportKind, usize), ReportError> {
+    match Directory::read(dir)? {
+        Directory::Campaign(data) => {
+            let (scenario, notes) = scenario_for(
+                &data.record.scenario.name,
+                data.record.scenario.hash.as_deref(),
+                scenario,
+                data.recorded_scenario.as_deref(),
+            );
+            let page = html::campaign_page(&data, scenario.as_ref(), notes)?;
+            Ok((page, ReportKind::Campaign, data.tests.len()))
+        }
+        Directory::Replay(data) => {
+            let recorded = data
+                .runs
+                .iter()
+                .find_map(|(_, d)| d.as_ref()?.recorded_scenario.clone());
+            let c = &data.comparison;
+            let (scenario, notes) = scenario_for(
+                &c.scenario.name,
+                c.scenario.hash.as_deref(),
+                scenario,
+                recorded.as_deref(),
+            );
+            let page = html::replay_page(&data, scenario.as_ref(), notes)?;
+            Ok((page, ReportKind::Replay, data.runs.len()))
+        }
+        Directory::Shrink(data) => {
+            let steps = data.report.steps.len();
+            Ok((
+                html::shrink_page(&data, Vec::new()),
+                ReportKind::Shrink,
+                steps,
+            ))
+        }
+    }
+}
+
+/// Writes the page of `dir` to `out` (see [`render`]).
+pub fn write(dir: &Path, out: &Path, scenario: Option<&Scenario>) -> Result<Written, ReportError> {
+    let (page, kind, items) = render(dir, scenario)?;
+    std::fs::write(out, &page).map_err(|source| ReportError::Write {
+        path: out.to_owned(),
+        source,
+    })?;
+    Ok(Written {
+        path: out.to_owned(),
+        bytes: page.len(),
+        kind,
+        items,
+    })
+}
