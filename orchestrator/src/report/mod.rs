@@ -150,7 +150,7 @@ pub fn render(
 /// Writes the page of `dir` to `out` (see [`render`]).
 pub fn write(dir: &Path, out: &Path, scenario: Option<&Scenario>) -> Result<Written, ReportError> {
     let (page, kind, items) = render(dir, scenario)?;
-    std::fs::write(out, &page).map_err(|source| ReportError::Write {
+    crate::atomic::write(out, &page).map_err(|source| ReportError::Write {
         path: out.to_owned(),
         source,
     })?;
