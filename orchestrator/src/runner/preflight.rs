@@ -91,6 +91,8 @@ impl Preflight {
             .await
             .map_err(|e| RunError::car("resetting the UWB position", e))?;
         let (rtt_p50, rtt_p99) = measure_round_trip(car, journal).await?;
+        check_round_trip(rtt_p50, rtt_p99, car.config().request_timeout)
+            .map_err(RunError::Preflight)?;
         Ok(Self::from_round_trip(
             rtt_p50,
             rtt_p99,
@@ -207,6 +209,25 @@ async fn check_inside_fence(
     Ok(())
 }
 
+/// Refuses a link whose round trips come near the per-try timeout of the car's commands: their
+/// acknowledgements would arrive after the try gave up, be taken for later ones, and an upload
+/// would fail in ways that read like a firmware fault. Says what was measured and what it takes.
+fn check_round_trip(p50: Duration, p99: Duration, per_try: Duration) -> Result<(), String> {
+    let limit = per_try.mul_f64(0.8);
+    if p99 <= limit {
+        return Ok(());
+    }
+    Err(format!(
+        "the link is too slow: state requests took {} ms (median) and {} ms (p99) to be answered, \
+         and the car's commands give up a try after {} ms; drive over a link whose round trips \
+         stay under {} ms",
+        p50.as_millis(),
+        p99.as_millis(),
+        per_try.as_millis(),
+        limit.as_millis()
+    ))
+}
+
 /// The median and the 99th-percentile round trip of GET_STATE, one request at a time.
 ///
 /// A lossy link loses some probes: each is tried once, and up to [`RTT_PROBE_TRIES`] times
@@ -259,6 +280,18 @@ mod tests {
 
     fn ms(ms: u64) -> Duration {
         Duration::from_millis(ms)
+    }
+
+    #[test]
+    fn a_link_as_slow_as_the_per_try_timeout_is_refused_with_what_was_measured() {
+        assert_eq!(check_round_trip(ms(340), ms(380), ms(1000)), Ok(()));
+        let error = check_round_trip(ms(1001), ms(1040), ms(1000)).unwrap_err();
+        assert!(
+            error.contains("1001 ms (median) and 1040 ms (p99)")
+                && error.contains("after 1000 ms")
+                && error.contains("under 800 ms"),
+            "{error}"
+        );
     }
 
     #[test]
