@@ -19,7 +19,8 @@ use tokio_util::sync::CancellationToken;
 use trajgen::{Generator, Strategy};
 
 use super::shared::{
-    CampaignFailed, cancel_on_ctrl_c, check_hash, connect, metres, runtime, scenario_of, sim_view,
+    CampaignFailed, cancel_on_ctrl_c, check_hash, connect, metres, read_case, runtime, scenario_of,
+    sim_view,
 };
 use crate::cli::ReplayArgs;
 use crate::report::REPORT_FILE;
@@ -38,9 +39,7 @@ use campaign::replay::{Comparison, REPLAY_FILE, ReplayRun};
 /// or was aborted, 2 an error (the case refused, the link lost, interrupted, …).
 pub fn replay(args: &ReplayArgs) -> Result<ExitCode> {
     let path = &args.case;
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let case = Case::from_json(&text).with_context(|| path.display().to_string())?;
+    let case = read_case(path)?;
     let unplaced = case
         .commands
         .iter()

@@ -282,6 +282,13 @@ pub(super) fn metres(value: Option<f64>) -> String {
     value.map_or_else(|| "-".to_owned(), |m| format!("{m:.2} m"))
 }
 
+/// The case file at `path`, read and parsed; errors name the file (and the field).
+pub(super) fn read_case(path: &Path) -> Result<Case> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    Case::from_json(&text).with_context(|| path.display().to_string())
+}
+
 /// The scenario a case is driven in: `--scenario`, or the bundled one the case names.
 pub(super) fn scenario_of(
     scenario: Option<&str>,

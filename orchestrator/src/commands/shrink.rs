@@ -18,7 +18,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use scenarios::Scenario;
 use tokio_util::sync::CancellationToken;
 
-use super::shared::{cancel_on_ctrl_c, check_hash, runtime, scenario_of};
+use super::shared::{cancel_on_ctrl_c, check_hash, read_case, runtime, scenario_of};
 use super::simdrive::{SimDriver, SimSettings};
 use crate::cli::ShrinkArgs;
 use crate::runner::run_dir_name;
@@ -56,9 +56,7 @@ pub fn shrink(args: &ShrinkArgs) -> Result<ExitCode> {
         );
     }
     let path = &args.case;
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let case = Case::from_json(&text).with_context(|| path.display().to_string())?;
+    let case = read_case(path)?;
     let scenario = scenario_of(args.scenario.as_deref(), path, &case)?;
     check_hash(&case, &scenario, args.ignore_scenario_hash)?;
     let seed = args

@@ -7,11 +7,11 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result};
 
-use super::shared::{cancel_on_ctrl_c, check_hash, runtime, scenario_of};
+use super::shared::{cancel_on_ctrl_c, check_hash, read_case, runtime, scenario_of};
 use super::simdrive::{SimDriver, SimSettings};
 use crate::cli::SweepArgs;
 use crate::seed::choose_seed;
-use campaign::case::{Case, ScenarioRef, tool_version};
+use campaign::case::{ScenarioRef, tool_version};
 use campaign::sweep::{
     Axis, Parameter, Point, SWEEP_FORMAT, SimSetting, SweepReport, grid, with_fault_values,
 };
@@ -19,9 +19,7 @@ use campaign::sweep::{
 /// Runs the sweep and prints its table (or JSON). Exit status 0 when it ran, 2 on an error.
 pub fn sweep(args: &SweepArgs) -> Result<ExitCode> {
     let path = &args.case;
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let case = Case::from_json(&text).with_context(|| path.display().to_string())?;
+    let case = read_case(path)?;
     let axes = args
         .set
         .iter()
