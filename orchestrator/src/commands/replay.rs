@@ -15,11 +15,10 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use car_link::{Car, CarAddress};
 use scenarios::Scenario;
-use tokio_util::sync::CancellationToken;
 use trajgen::{Generator, Strategy};
 
 use super::shared::{
-    CampaignFailed, cancel_on_ctrl_c, check_hash, connect, metres, read_case, runtime, scenario_of,
+    CampaignFailed, Interrupt, check_hash, connect, metres, read_case, runtime, scenario_of,
     sim_view,
 };
 use crate::cli::ReplayArgs;
@@ -165,7 +164,7 @@ struct Job<'a> {
 impl Job<'_> {
     /// Drives every run; stops early at the first run that ended with an error (returned).
     async fn run_all(&self) -> (Vec<(ReplayRun, Option<Case>)>, Option<anyhow::Error>) {
-        let cancel = cancel_on_ctrl_c();
+        let interrupt = Interrupt::listen();
         // A real car is connected once; the simulated one is fresh for every run.
         let mut shared: Option<Car> = None;
         let mut runs = Vec::new();
@@ -176,7 +175,7 @@ impl Job<'_> {
                 self.seed
             };
             let dir = format!("run-{}", k + 1);
-            let (case, result) = self.run_one(&mut shared, seed, &dir, &cancel).await;
+            let (case, result) = self.run_one(&mut shared, seed, &dir, &interrupt).await;
             let run = ReplayRun {
                 dir,
                 seed,
@@ -207,7 +206,7 @@ impl Job<'_> {
         shared: &mut Option<Car>,
         seed: u64,
         dir: &str,
-        cancel: &CancellationToken,
+        interrupt: &Interrupt,
     ) -> (Option<Case>, Result<()>) {
         let mut config = RunConfig::new(
             Campaign {
@@ -237,11 +236,12 @@ impl Job<'_> {
                 Err(error) => return (None, Err(error)),
             },
         };
+        let _brake = interrupt.brake_on_second(&car);
         let result = run_campaign(
             &car,
             self.scenario,
             &config,
-            cancel,
+            interrupt.token(),
             &Silent,
             sim_view(&sim),
         )

@@ -11,7 +11,7 @@ use car_link::firmware::{MAX_STALE_LIMIT, WATCHDOG};
 use scenarios::Scenario;
 
 use super::shared::{
-    CampaignFailed, Progress, cancel_on_ctrl_c, connect, print_report, runtime, sim_view,
+    CampaignFailed, Interrupt, Progress, cancel_on_ctrl_c, connect, print_report, runtime, sim_view,
 };
 use super::shrink;
 use crate::cli::{OnFailure, RunArgs};
@@ -212,9 +212,18 @@ async fn campaign_on(
     config: &RunConfig,
 ) -> Result<CampaignReport, anyhow::Error> {
     let (car, sim) = connect(address, scenario, config.campaign.seed).await?;
-    let cancel = cancel_on_ctrl_c();
+    let interrupt = Interrupt::listen();
+    let _brake = interrupt.brake_on_second(&car);
     let progress = Progress::new(config.campaign.tests);
-    let result = run_campaign(&car, scenario, config, &cancel, &progress, sim_view(&sim)).await;
+    let result = run_campaign(
+        &car,
+        scenario,
+        config,
+        interrupt.token(),
+        &progress,
+        sim_view(&sim),
+    )
+    .await;
     progress.finish();
     result
         .map_err(|failure| anyhow::Error::new(CampaignFailed::new(failure.error, &config.out_dir)))

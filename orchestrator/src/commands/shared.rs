@@ -4,6 +4,7 @@
 //! a campaign's tests.
 
 use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use anyhow::{Context, Result};
@@ -100,21 +101,97 @@ pub(super) fn sim_view(sim: &Option<SimHandle>) -> Option<&dyn SimulatorView> {
 /// A token cancelled at the first SIGINT (Ctrl-C), SIGTERM (`timeout`, systemd, a cancelled CI
 /// job) or SIGHUP (a closed terminal): the runner then stops the car safely, records the running
 /// test as aborted (`interrupted`), completes the run directory and the recording, and the command
-/// exits with status 2. A second signal ends the process at once with status 2 (the car's 2 s
-/// watchdog brakes it). Call it inside the runtime.
+/// exits with status 2. A second signal brakes the car registered with
+/// [`Interrupt::brake_on_second`] at once and ends the process with status 2. Call it inside the
+/// runtime.
 pub(super) fn cancel_on_ctrl_c() -> CancellationToken {
-    let cancel = CancellationToken::new();
-    let on_signal = cancel.clone();
-    tokio::spawn(async move {
-        let mut signals = Signals::new();
-        let first = signals.next().await;
-        eprintln!("{first}: stopping the car safely (send it again to stop at once)");
-        on_signal.cancel();
-        let second = signals.next().await;
-        eprintln!("{second} again: stopping at once; the car's watchdog brakes it within 2 s");
-        std::process::exit(2);
-    });
-    cancel
+    Interrupt::listen().cancel
+}
+
+/// The interrupt path of a command that drives (see [`cancel_on_ctrl_c`]): the token the first
+/// signal cancels, and the car the second signal brakes.
+#[derive(Debug, Clone)]
+pub(super) struct Interrupt {
+    cancel: CancellationToken,
+    car: Arc<Mutex<Option<Car>>>,
+}
+
+/// The brake the second signal sends, as the runner's safe stop does.
+const SECOND_SIGNAL_BRAKE_A: f64 = 50.0;
+
+/// How long the process lives after the second signal's brake was queued, so that the link's
+/// writer sends it (a brake has no reply; RC_CONTROL is fire and forget).
+const BRAKE_FLUSH: Duration = Duration::from_millis(100);
+
+/// At most this long for the brake to find room in the link's send queue; the car's 2 s watchdog
+/// brakes it in any case once the process is gone.
+const BRAKE_SEND_LIMIT: Duration = Duration::from_millis(500);
+
+impl Interrupt {
+    /// Listens for SIGINT, SIGTERM and SIGHUP from now on. Call it inside the runtime.
+    pub(super) fn listen() -> Self {
+        let interrupt = Self {
+            cancel: CancellationToken::new(),
+            car: Arc::new(Mutex::new(None)),
+        };
+        let listener = interrupt.clone();
+        tokio::spawn(async move {
+            let mut signals = Signals::new();
+            let first = signals.next().await;
+            eprintln!("{first}: stopping the car safely (send it again to brake at once and exit)");
+            listener.cancel.cancel();
+            let second = signals.next().await;
+            eprintln!("{second} again: braking at once and exiting");
+            listener.brake_now().await;
+            std::process::exit(2);
+        });
+        interrupt
+    }
+
+    /// The token the first signal cancels.
+    pub(super) fn token(&self) -> &CancellationToken {
+        &self.cancel
+    }
+
+    /// Registers `car` as the one the second signal brakes, until the returned guard is dropped
+    /// (a registered car keeps its link, and so its keepalive, alive).
+    pub(super) fn brake_on_second(&self, car: &Car) -> BrakeOnSecond {
+        *lock(&self.car) = Some(car.clone());
+        BrakeOnSecond {
+            car: Arc::clone(&self.car),
+        }
+    }
+
+    /// Brakes the registered car, if any, and gives the link a moment to send the command.
+    async fn brake_now(&self) {
+        let Some(car) = lock(&self.car).clone() else {
+            return;
+        };
+        match tokio::time::timeout(BRAKE_SEND_LIMIT, car.brake(SECOND_SIGNAL_BRAKE_A)).await {
+            Ok(Ok(())) => tokio::time::sleep(BRAKE_FLUSH).await,
+            Ok(Err(error)) => eprintln!("cannot brake: {error}"),
+            Err(_) => eprintln!("cannot brake: the link's send queue stayed full"),
+        }
+    }
+}
+
+/// While it lives, the second signal brakes the car registered with
+/// [`Interrupt::brake_on_second`].
+#[derive(Debug)]
+pub(super) struct BrakeOnSecond {
+    car: Arc<Mutex<Option<Car>>>,
+}
+
+impl Drop for BrakeOnSecond {
+    fn drop(&mut self) {
+        *lock(&self.car) = None;
+    }
+}
+
+/// The slot's car, whether or not a thread panicked while holding it.
+fn lock(slot: &Mutex<Option<Car>>) -> std::sync::MutexGuard<'_, Option<Car>> {
+    slot.lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 /// The signals that stop a command: SIGINT, and on Unix SIGTERM and SIGHUP.
@@ -339,4 +416,58 @@ pub(super) fn check_hash(case: &Case, scenario: &Scenario, ignore: bool) -> Resu
 
 fn short(hash: &str) -> &str {
     hash.get(..12).unwrap_or(hash)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use car_link::message::{RcControl, RcMode};
+
+    /// Drives the embedded simulated car at 1.5 m/s (the speed controller) for 3 s, then, when
+    /// `brake`, registers it with an interrupt and brakes as the second signal does; the car's
+    /// speed 0.5 s later.
+    async fn speed_after(brake: bool) -> f64 {
+        let scenario = scenarios::bundled::load("parking-lot-2anchors")
+            .expect("bundled")
+            .scenario;
+        let (car, sim) = connect_sim(&car_sim::SimConfig::from_scenario(&scenario))
+            .await
+            .expect("the simulated car");
+        let drive = RcControl {
+            mode: RcMode::Pid,
+            throttle: 1.5,
+            steering: 0.0,
+        };
+        for _ in 0..30 {
+            car.rc_control(drive).await.expect("sent");
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+        assert!(sim.truth().speed > 1.0, "the car drives: {:?}", sim.truth());
+        let interrupt = Interrupt {
+            cancel: CancellationToken::new(),
+            car: Arc::new(Mutex::new(None)),
+        };
+        let guard = interrupt.brake_on_second(&car);
+        if brake {
+            interrupt.brake_now().await;
+        }
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        drop(guard);
+        assert!(
+            lock(&interrupt.car).is_none(),
+            "the guard unregisters the car"
+        );
+        sim.truth().speed
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn the_second_signal_brakes_the_registered_car() {
+        let coasting = speed_after(false).await;
+        let braked = speed_after(true).await;
+        assert!(
+            coasting > 1.0,
+            "without the brake it still drives: {coasting}"
+        );
+        assert!(braked < 0.3, "the brake stops it: {braked}");
+    }
 }
