@@ -456,9 +456,24 @@ impl Car {
         self.shared().identity().car_id
     }
 
-    /// The configuration in force.
+    /// The configuration the handle was made with (the per-try timeout in force is
+    /// [`Car::request_timeout`]).
     pub fn config(&self) -> &LinkConfig {
         &self.shared().config
+    }
+
+    /// The per-try timeout of requests in force: `config().request_timeout` until
+    /// [`Car::set_request_timeout`] changes it.
+    pub fn request_timeout(&self) -> Duration {
+        self.shared().request_timeout()
+    }
+
+    /// Sets the per-try timeout of every request sent from now on, by every clone of this handle: a
+    /// client that has measured the link's round trip sets it to what the link needs (a try that gives
+    /// up before its reply can arrive is answered by the late reply of an earlier one; a try that
+    /// waits far longer than the round trip makes every loss cost that long).
+    pub fn set_request_timeout(&self, per_try: Duration) {
+        self.shared().set_request_timeout(per_try);
     }
 
     /// Link health: round trips (p50, p99), timeouts, reconnects, strays and drops.
@@ -496,6 +511,14 @@ impl Car {
         self.shared().state(1).await
     }
 
+    /// One GET_STATE that waits up to `per_try` for its reply, whatever the per-try timeout in force:
+    /// to measure a link whose round trip may exceed it.
+    ///
+    /// Timeout: `per_try`, then [`CarError::NoReply`]. Cancellation: as [`Car::state`].
+    pub async fn state_within(&self, per_try: Duration) -> Result<StateSample, CarError> {
+        self.shared().state_with(1, per_try).await
+    }
+
     /// A stream of states polled at `period`, pipelined: [`Car::poll_states`] with
     /// [`StatePolling::new`]`(period, request_timeout)`, so that on a link whose round trip is longer than
     /// `period` a sample still comes every `period`.
@@ -505,7 +528,7 @@ impl Car {
         &self,
         period: Duration,
     ) -> impl Stream<Item = Result<StateSample, CarError>> + Send + 'static {
-        self.poll_states(StatePolling::new(period, self.config().request_timeout))
+        self.poll_states(StatePolling::new(period, self.request_timeout()))
     }
 
     /// A stream of states: a GET_STATE request every `polling.period` without waiting for the replies (a late
@@ -599,7 +622,7 @@ impl Car {
                 Request::AddPoints(packet.to_vec())
             };
             let tries = shared
-                .acked_after(&request, shared.config.request_timeout)
+                .acked_after(&request, shared.request_timeout())
                 .await?;
             retried |= tries > 1;
             shared.remember_first_point(&packet[0]);
@@ -614,7 +637,23 @@ impl Car {
 
     /// Reads the last `points.len()` points of the car's route and compares their (x, y) with `points`;
     /// when this client knows how many points the car should hold, checks the route's length too.
+    ///
+    /// Reads carry nothing that names the read they answer: after a retried read, the late reply of an
+    /// earlier one (another part of the route) can answer the next. So a read-back that disagrees is read
+    /// again once, after a per-try timeout in which such late replies arrive; only a second disagreement
+    /// is an error.
     async fn check_route_ends_with(&self, points: &[RoutePoint]) -> Result<(), CarError> {
+        match self.compare_route_end(points).await {
+            Err(CarError::RouteLength { .. } | CarError::RouteNotStored { .. }) => {
+                tokio::time::sleep(self.request_timeout()).await;
+                self.compare_route_end(points).await
+            }
+            other => other,
+        }
+    }
+
+    /// One read-back of [`Car::check_route_ends_with`].
+    async fn compare_route_end(&self, points: &[RoutePoint]) -> Result<(), CarError> {
         let route_len = self.route_part(0, 0).await?.route_len;
         let held = usize::try_from(route_len).unwrap_or(0);
         let expected = lock(&self.shared().route)
@@ -662,7 +701,7 @@ impl Car {
     pub async fn clear_route(&self) -> Result<(), CarError> {
         let shared = self.shared();
         shared
-            .acked(&Request::ClearPoints, shared.config.request_timeout)
+            .acked(&Request::ClearPoints, shared.request_timeout())
             .await?;
         *lock(&shared.route) = RouteMemory {
             sent_since_empty: Some(0),
@@ -677,7 +716,7 @@ impl Car {
     pub async fn remove_last_point(&self) -> Result<(), CarError> {
         let shared = self.shared();
         shared
-            .acked(&Request::RemoveLastPoint, shared.config.request_timeout)
+            .acked(&Request::RemoveLastPoint, shared.request_timeout())
             .await
     }
 
@@ -690,7 +729,7 @@ impl Car {
         shared
             .acked(
                 &Request::SetActive { active, reset },
-                shared.config.request_timeout,
+                shared.request_timeout(),
             )
             .await?;
         let mut route = lock(&shared.route);
@@ -730,7 +769,7 @@ impl Car {
     pub async fn set_pos(&self, pose: Pose) -> Result<(), CarError> {
         let shared = self.shared();
         shared
-            .acked(&Request::SetPosAck(pose), shared.config.request_timeout)
+            .acked(&Request::SetPosAck(pose), shared.request_timeout())
             .await
     }
 
@@ -740,10 +779,7 @@ impl Car {
     pub async fn set_enu_ref(&self, reference: EnuRef) -> Result<(), CarError> {
         let shared = self.shared();
         shared
-            .acked(
-                &Request::SetEnuRef(reference),
-                shared.config.request_timeout,
-            )
+            .acked(&Request::SetEnuRef(reference), shared.request_timeout())
             .await
     }
 
@@ -755,7 +791,7 @@ impl Car {
         match shared
             .exchange(
                 &Request::GetEnuRef,
-                shared.config.request_timeout,
+                shared.request_timeout(),
                 shared.config.tries,
             )
             .await?
@@ -789,14 +825,11 @@ impl Car {
         }
         let shared = self.shared();
         shared
-            .acked(&Request::ClearUwbAnchors, shared.config.request_timeout)
+            .acked(&Request::ClearUwbAnchors, shared.request_timeout())
             .await?;
         for anchor in anchors {
             shared
-                .acked(
-                    &Request::AddUwbAnchor(*anchor),
-                    shared.config.request_timeout,
-                )
+                .acked(&Request::AddUwbAnchor(*anchor), shared.request_timeout())
                 .await?;
         }
         Ok(())
@@ -814,7 +847,7 @@ impl Car {
         let shared = self.shared();
         let request = Request::GetRoutePart { first, num };
         match shared
-            .exchange(&request, shared.config.request_timeout, shared.config.tries)
+            .exchange(&request, shared.request_timeout(), shared.config.tries)
             .await?
             .0
             .reply
@@ -833,7 +866,7 @@ impl Car {
     pub async fn sync_point(&self, sync: SyncPoint) -> Result<(), CarError> {
         let shared = self.shared();
         shared
-            .acked(&Request::SyncPoint(sync), shared.config.request_timeout)
+            .acked(&Request::SyncPoint(sync), shared.request_timeout())
             .await
     }
 
@@ -845,7 +878,7 @@ impl Car {
         match shared
             .exchange(
                 &Request::GetMainConfig,
-                shared.config.request_timeout,
+                shared.request_timeout(),
                 shared.config.tries,
             )
             .await?

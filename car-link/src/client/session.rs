@@ -125,6 +125,8 @@ pub(super) struct Shared {
     /// One route upload at a time, so that packets of two uploads never interleave.
     pub(super) uploads: tokio::sync::Mutex<()>,
     pub(super) latest: watch::Sender<Option<StateSample>>,
+    /// The per-try timeout in force, ns: `config.request_timeout` until [`Shared::set_request_timeout`].
+    pub(super) request_timeout_ns: AtomicU64,
 }
 
 /// Locks a std mutex, ignoring poisoning (no code here panics while holding one).
@@ -154,7 +156,6 @@ impl Shared {
                 version: FirmwareVersion::default(),
             }),
             keepalive_on: AtomicBool::new(config.keepalive.is_some()),
-            config,
             outgoing: Mutex::new(None),
             waiters: Mutex::new(HashMap::new()),
             garbled: Mutex::new(HashMap::new()),
@@ -168,7 +169,20 @@ impl Shared {
             route: Mutex::new(RouteMemory::default()),
             uploads: tokio::sync::Mutex::new(()),
             latest: watch::channel(None).0,
+            request_timeout_ns: AtomicU64::new(duration_ns(config.request_timeout)),
+            config,
         }
+    }
+
+    /// The per-try timeout of requests in force (see [`Car::set_request_timeout`](super::Car::set_request_timeout)).
+    pub(super) fn request_timeout(&self) -> Duration {
+        Duration::from_nanos(self.request_timeout_ns.load(Ordering::Relaxed))
+    }
+
+    /// Sets the per-try timeout of requests from now on.
+    pub(super) fn set_request_timeout(&self, per_try: Duration) {
+        self.request_timeout_ns
+            .store(duration_ns(per_try), Ordering::Relaxed);
     }
 
     pub(super) fn identity(&self) -> Identity {
@@ -461,7 +475,15 @@ impl Shared {
     /// without a state stream running only one GET_STATE is in flight and its round trip is unambiguous (what
     /// a round-trip measurement needs); a stream's requests do not wait for them.
     pub(super) async fn state(&self, tries: u32) -> Result<StateSample, CarError> {
-        let per_try = self.config.request_timeout;
+        self.state_with(tries, self.request_timeout()).await
+    }
+
+    /// [`Shared::state`] with its own per-try timeout.
+    pub(super) async fn state_with(
+        &self,
+        tries: u32,
+        per_try: Duration,
+    ) -> Result<StateSample, CarError> {
         let lane = self.lane(
             CommandId::GetState
                 .code(self.identity().version)
@@ -665,4 +687,9 @@ pub(super) async fn keep_alive(shared: Arc<Shared>, period: Duration, cancel: Ca
             }
         }
     }
+}
+
+/// A duration in nanoseconds, saturating (about 584 years).
+fn duration_ns(duration: Duration) -> u64 {
+    u64::try_from(duration.as_nanos()).unwrap_or(u64::MAX)
 }

@@ -141,7 +141,7 @@ async fn run(
             let link = LinkStatus {
                 rtt_p99: health.rtt_p99,
                 lossy: telemetry.unanswered() > 0 || health.timeouts > 0,
-                request_timeout: ctx.car.config().request_timeout,
+                request_timeout: ctx.car.request_timeout(),
             };
             let asked = Instant::now();
             let next = machine.next_operation(t0.elapsed(), link);
@@ -330,10 +330,10 @@ async fn wait_op(op: &mut Option<InFlight>) -> (Recorded, OpResult) {
 }
 
 /// Tries of a fault command whose reply was lost.
-const FAULT_TRIES: u32 = 3;
+const FAULT_TRIES: u32 = 5;
 
-/// Adds `fault` to the car, which holds `before` faults on its probe. When the reply is lost,
-/// asks the car for its faults (`fi_print_faults`): a fault more on the probe means the command
+/// Adds `fault` to the car, which holds `before` faults on its probe. When the reply is lost
+/// (or so much of it that it reads as neither success nor a refusal), asks the car for its faults (`fi_print_faults`): a fault more on the probe means the command
 /// took effect; otherwise it is sent again (up to [`FAULT_TRIES`] times in all). So a lost reply
 /// neither aborts the test nor adds the fault twice. `Ok(true)`: added, found in the car's list
 /// after a lost reply.
@@ -354,7 +354,11 @@ async fn add_fault_once(car: &Car, fault: Fault, before: usize) -> OpResult {
             )
             .await;
         match result {
-            Err(CarError::Fault(FaultError::NoReply)) if tries < FAULT_TRIES => {
+            // A reply that is lost, or partly lost (a lossy link drops some of its lines, and
+            // what is left reads as neither success nor a refusal), says nothing of the car.
+            Err(CarError::Fault(FaultError::NoReply | FaultError::Unexpected(_)))
+                if tries < FAULT_TRIES =>
+            {
                 let listed = super::retried(|| car.list_faults()).await?;
                 let id = probe.to_string();
                 if listed.iter().filter(|f| f.probe == id).count() > before {

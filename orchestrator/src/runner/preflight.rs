@@ -74,6 +74,10 @@ impl Preflight {
             )));
         }
         let rates = ProbeRates::for_major(version.major, scenario.anchors.len());
+        // The round trip first: every command after it waits what the link needs.
+        let (rtt_p50, rtt_p99) = measure_round_trip(car, journal).await?;
+        let per_try = per_try_timeout(rtt_p50, rtt_p99).map_err(RunError::Preflight)?;
+        car.set_request_timeout(per_try);
         let switched_off = prepare_configuration(car).await?;
         let anchors = anchors(scenario);
         retried(|| car.upload_anchors(&anchors))
@@ -90,9 +94,6 @@ impl Preflight {
         retried(|| journal.call(None, CarCommand::ResetUwbPos, car.reset_uwb_pos()))
             .await
             .map_err(|e| RunError::car("resetting the UWB position", e))?;
-        let (rtt_p50, rtt_p99) = measure_round_trip(car, journal).await?;
-        check_round_trip(rtt_p50, rtt_p99, car.config().request_timeout)
-            .map_err(RunError::Preflight)?;
         Ok(Self::from_round_trip(
             rtt_p50,
             rtt_p99,
@@ -209,42 +210,83 @@ async fn check_inside_fence(
     Ok(())
 }
 
-/// Refuses a link whose round trips come near the per-try timeout of the car's commands: their
-/// acknowledgements would arrive after the try gave up, be taken for later ones, and an upload
-/// would fail in ways that read like a firmware fault. Says what was measured and what it takes.
-fn check_round_trip(p50: Duration, p99: Duration, per_try: Duration) -> Result<(), String> {
-    let limit = per_try.mul_f64(0.8);
-    if p99 <= limit {
-        return Ok(());
+/// The longest per-try timeout drivecheck gives a command: a link whose round trips need more is
+/// refused (a lost packet would then cost seconds, and a car waits at most 2 s for a command
+/// before its watchdog brakes it).
+pub(crate) const MAX_PER_TRY: Duration = Duration::from_secs(4);
+/// The shortest per-try timeout: the car answers within milliseconds, but a host under load
+/// may not read its reply at once.
+const MIN_PER_TRY: Duration = Duration::from_millis(250);
+
+/// The per-try timeout of the car's commands for a link with these round trips:
+/// `2 × p99 + 100 ms`, at least 250 ms. A try must outlast its round trip, or the late reply of a
+/// try that gave up answers the next one (and an upload's read-back compares the wrong points);
+/// it should not outlast it by much, or every lost packet costs that long (a 1 s per-try on a
+/// loopback link made one upload take 10 s at 30 % loss). A link whose round trips need more than
+/// [`MAX_PER_TRY`] is refused, saying what was measured and what it takes.
+fn per_try_timeout(p50: Duration, p99: Duration) -> Result<Duration, String> {
+    let needed = p99.saturating_mul(2) + Duration::from_millis(100);
+    if needed <= MAX_PER_TRY {
+        return Ok(needed.max(MIN_PER_TRY));
     }
+    let limit = (MAX_PER_TRY - Duration::from_millis(100)) / 2;
     Err(format!(
-        "the link is too slow: state requests took {} ms (median) and {} ms (p99) to be answered, \
-         and the car's commands give up a try after {} ms; drive over a link whose round trips \
-         stay under {} ms",
+        "the link is too slow: state requests took {} ms (median) and {} ms (p99) to be answered; \
+         the car's commands would have to wait {} ms per try, and drivecheck waits at most {} ms \
+         (a car brakes 2 s after its last command): drive over a link whose round trips stay \
+         under {} ms",
         p50.as_millis(),
         p99.as_millis(),
-        per_try.as_millis(),
+        needed.as_millis(),
+        MAX_PER_TRY.as_millis(),
         limit.as_millis()
     ))
 }
 
 /// The median and the 99th-percentile round trip of GET_STATE, one request at a time.
 ///
-/// A lossy link loses some probes: each is tried once, and up to [`RTT_PROBE_TRIES`] times
-/// [`RTT_PROBES`] are sent to get [`RTT_PROBES`] answers; with fewer than half of them answered
-/// the link is refused with its measured loss.
+/// Replies to GET_STATE carry nothing that names their request: a reply is taken for the oldest
+/// request still waiting, so the late reply of a request that gave up is taken for the next one,
+/// which then reads a round trip far too short (on a link of 500 ms each way, 1 s tries measured
+/// 0.4 s). So the keepalive is off while measuring (the probes feed the watchdog), after any
+/// timeout since the link opened the measurement first waits until late replies have arrived, and
+/// after a probe that got no answer the next is sent only after as long again. The link's round
+/// trip is not known yet: the first probe waits the per-try timeout in force, doubled after every
+/// probe that got no answer, up to [`MAX_PER_TRY`]; the others wait three times the first round
+/// trip. A lossy link loses some probes: up to [`RTT_PROBE_TRIES`] × [`RTT_PROBES`] are sent to
+/// get [`RTT_PROBES`] answers; with fewer than half of them answered the link is refused with its
+/// measured loss.
 async fn measure_round_trip(
     car: &Car,
     journal: &Journal<'_>,
 ) -> Result<(Duration, Duration), RunError> {
+    car.set_keepalive(false);
+    let measured = probe_round_trips(car, journal).await;
+    car.set_keepalive(true);
+    measured
+}
+
+/// The probes of [`measure_round_trip`], with the keepalive off.
+async fn probe_round_trips(
+    car: &Car,
+    journal: &Journal<'_>,
+) -> Result<(Duration, Duration), RunError> {
+    if car.health().timeouts > 0 {
+        tokio::time::sleep(MAX_PER_TRY).await;
+    }
     let mut rtts = Vec::with_capacity(RTT_PROBES);
     let mut sent = 0;
     let mut last_error = None;
+    let mut per_try = car.request_timeout().min(MAX_PER_TRY);
     while rtts.len() < RTT_PROBES && sent < RTT_PROBES * RTT_PROBE_TRIES {
         sent += 1;
-        match car.state().await {
+        match car.state_within(per_try).await {
             Ok(sample) => {
                 journal.state(&sample);
+                if rtts.is_empty() {
+                    per_try = (sample.rtt().saturating_mul(3) + Duration::from_millis(100))
+                        .clamp(MIN_PER_TRY, MAX_PER_TRY);
+                }
                 rtts.push(sample.rtt());
             }
             Err(CarError::LinkLost) => {
@@ -253,7 +295,13 @@ async fn measure_round_trip(
                     CarError::LinkLost,
                 ));
             }
-            Err(error) => last_error = Some(error),
+            Err(error) => {
+                last_error = Some(error);
+                tokio::time::sleep(per_try).await;
+                if rtts.is_empty() {
+                    per_try = per_try.saturating_mul(2).min(MAX_PER_TRY);
+                }
+            }
         }
     }
     if rtts.len() < RTT_PROBES / 2 {
@@ -283,13 +331,19 @@ mod tests {
     }
 
     #[test]
-    fn a_link_as_slow_as_the_per_try_timeout_is_refused_with_what_was_measured() {
-        assert_eq!(check_round_trip(ms(340), ms(380), ms(1000)), Ok(()));
-        let error = check_round_trip(ms(1001), ms(1040), ms(1000)).unwrap_err();
+    fn the_per_try_timeout_follows_the_round_trip_and_a_link_too_slow_for_it_is_refused() {
+        // A loopback link: the floor, not the 1 s a radio link needed.
+        assert_eq!(per_try_timeout(ms(1), ms(3)), Ok(ms(250)));
+        // 150 ms + up to 40 ms each way.
+        assert_eq!(per_try_timeout(ms(340), ms(380)), Ok(ms(860)));
+        // 500 ms each way: 1 s round trips get 2.16 s per try (the 1 s of before was answered
+        // by the late replies of earlier tries).
+        assert_eq!(per_try_timeout(ms(1010), ms(1030)), Ok(ms(2160)));
+        let error = per_try_timeout(ms(1900), ms(2100)).unwrap_err();
         assert!(
-            error.contains("1001 ms (median) and 1040 ms (p99)")
-                && error.contains("after 1000 ms")
-                && error.contains("under 800 ms"),
+            error.contains("1900 ms (median) and 2100 ms (p99)")
+                && error.contains("4300 ms per try")
+                && error.contains("under 1950 ms"),
             "{error}"
         );
     }
