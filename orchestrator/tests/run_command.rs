@@ -181,3 +181,35 @@ fn a_scenario_without_anchors_runs_only_when_allowed_and_says_uwb_was_not_tested
     let why = record.summary.unwrap().uwb_not_tested.expect("said");
     assert!(why.contains("no anchors"), "{why}");
 }
+
+/// A real area whose recovery route ends 3.77 m from the start route (the straight step may be
+/// 3 m): it loads with a warning, and every reset drives a planned join onto the start route, so
+/// the tests run as in the full area. Before, the scenario was refused at load.
+#[test]
+fn a_recovery_route_ending_far_from_the_start_route_is_joined_by_a_planned_route() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenario = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/fixtures/short-recovery.toml"
+    );
+    let out = run(
+        &[
+            "--scenario",
+            scenario,
+            "--seed",
+            "1",
+            "--tests",
+            "2",
+            "--no-faults",
+        ],
+        dir.path(),
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("the recovery route ends 3.77 m from start_route[0]")
+            && stderr.contains("the reset plans a route between them"),
+        "{}",
+        text(&out)
+    );
+}

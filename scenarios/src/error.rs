@@ -207,17 +207,6 @@ pub enum Problem {
         /// Index of the segment.
         segment: usize,
     },
-    /// The recovery route ends too far from the start route.
-    #[error(
-        "the recovery route ends {gap:.2} m from start_route[0]; it must end within {limit:.2} m \
-         (1.5 × generator.segment_max_m)"
-    )]
-    RecoveryDoesNotReachStart {
-        /// Distance from the recovery route's last point to the start route's first, metres.
-        gap: f64,
-        /// The allowed distance, metres.
-        limit: f64,
-    },
     /// The segment from the recovery route's end to the start route's first point leaves the area.
     #[error("the join from the recovery route's last point to start_route[0] leaves the area")]
     JoinLeavesArea,
@@ -339,6 +328,18 @@ pub enum WarningKind {
         min: f64,
         /// The generator's longest segment, metres.
         max: f64,
+    },
+    /// The recovery route ends farther from the start route than a straight step may be: the
+    /// runner plans the join with the return-route planner.
+    #[error(
+        "the recovery route ends {gap:.2} m from start_route[0], more than {limit:.2} m \
+         (1.5 × generator.segment_max_m): the reset plans a route between them"
+    )]
+    JoinPlanned {
+        /// Distance from the recovery route's last point to the start route's first, metres.
+        gap: f64,
+        /// The longest straight step, metres.
+        limit: f64,
     },
     /// A hand-drawn route segment comes closer to an edge than the generator's clearance.
     #[error(

@@ -45,7 +45,7 @@ pub use settings::{
 /// The area geometry of [`trajgen`], re-exported for crates that see scenarios but not the generator.
 pub use trajgen::geometry;
 pub use trajgen::{Area, Constraints, Point, Polygon, Waypoint};
-pub use validate::{MAX_ANCHORS, MAX_SPEED_KMH};
+pub use validate::{MAX_ANCHORS, MAX_SPEED_KMH, needs_planned_join};
 pub use write::to_toml;
 
 /// A validated scenario with its warnings and where it came from.

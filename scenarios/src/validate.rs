@@ -322,19 +322,17 @@ fn check_threshold(s: &Scenario) -> Check {
     Ok(())
 }
 
-/// The recovery route must end near the start route's first point, by a step inside the area.
+/// A recovery route that ends near the start route's first point joins it by a straight step,
+/// which must stay inside the area. One that ends farther away is joined by a planned route (the
+/// runner plans it with the return-route planner; a warning says so).
 fn check_join(s: &Scenario) -> Check {
     let (Some(end), Some(start)) = (s.recovery_route.last(), s.start_route.first()) else {
         return Ok(());
     };
     let (end, start) = (end.position, start.position);
     let gap = end.dist(start);
-    let limit = s.generator.recovery_join_max_m();
-    if gap > limit {
-        return Err((
-            "recovery_route".into(),
-            Problem::RecoveryDoesNotReachStart { gap, limit },
-        ));
+    if needs_planned_join(s) {
+        return Ok(());
     }
     if gap > 0.0 && s.area.segment_meets_boundary(end, start) {
         return Err(("recovery_route".into(), Problem::JoinLeavesArea));
@@ -443,19 +441,38 @@ fn approach(s: &Scenario) -> (Vec<Vertex>, Option<usize>) {
     (chain, join)
 }
 
+/// Whether the recovery route ends farther from the start route's first point than
+/// [`GeneratorSettings::recovery_join_max_m`]: the runner then plans the join (a warning says so).
+pub fn needs_planned_join(s: &Scenario) -> bool {
+    match (s.recovery_route.last(), s.start_route.first()) {
+        (Some(end), Some(start)) => {
+            end.position.dist(start.position) > s.generator.recovery_join_max_m()
+        }
+        _ => false,
+    }
+}
+
 /// The soft problems of a valid scenario, in order: anchors, then along the approach.
 pub(crate) fn warnings(s: &Scenario, source_name: &str) -> Vec<Warning> {
     let mut found: Vec<(String, WarningKind)> = Vec::new();
     if s.anchors.is_empty() {
         found.push(("anchors".into(), WarningKind::NoAnchors));
     }
+    let planned = needs_planned_join(s);
     let (chain, join) = approach(s);
     for k in 0..chain.len() {
-        if k > 0 && k + 1 < chain.len() {
+        let around_join = join.is_some_and(|j| k == j || k == j + 1);
+        if k > 0 && k + 1 < chain.len() && !(planned && around_join) {
             found.extend(turn_warning(&s.generator, &chain[k - 1..=k + 1]));
         }
         if k + 1 < chain.len() {
-            found.extend(segment_warnings(s, chain[k], chain[k + 1], join == Some(k)));
+            if planned && join == Some(k) {
+                let gap = chain[k].position.dist(chain[k + 1].position);
+                let limit = s.generator.recovery_join_max_m();
+                found.push((chain[k].field(), WarningKind::JoinPlanned { gap, limit }));
+            } else {
+                found.extend(segment_warnings(s, chain[k], chain[k + 1], join == Some(k)));
+            }
         }
     }
     found
@@ -574,6 +591,41 @@ mod tests {
             found
                 .iter()
                 .any(|(f, k)| f == "start_route[0]" && matches!(k, WarningKind::SharpTurn { .. }))
+        );
+    }
+
+    #[test]
+    fn a_recovery_route_ending_far_from_the_start_route_is_accepted_with_a_planned_join() {
+        // The recovery route ends 3.5 m from start_route[0] (the limit is 3 m), across a cutout
+        // that a straight step would cross: the runner plans the join.
+        let text = SQUARE
+            .replace(
+                "    { x = 2.0, y = 4.5, speed = 1.0 },\n    { x = 2.0, y = 3.2, speed = 1.0 },\n",
+                "",
+            )
+            .replace(
+                "{ x = 2.0, y = 6.0, speed = 1.0 }",
+                "{ x = 4.0, y = 7.0, speed = 1.0 },\n    { x = 2.0, y = 5.5, speed = 1.0 }",
+            )
+            + "cutouts = [[{ x = 1.5, y = 3.5 }, { x = 2.5, y = 3.5 }, { x = 2.5, y = 3.8 }]]\n";
+        let loaded = from_toml_str(&text, "s.toml").unwrap();
+        assert!(crate::needs_planned_join(&loaded.scenario));
+        let found: Vec<(String, WarningKind)> = loaded
+            .warnings
+            .into_iter()
+            .map(|w| (w.field, w.kind))
+            .collect();
+        assert!(
+            found.iter().any(|(f, k)| f == "recovery_route[1]"
+                && matches!(k, WarningKind::JoinPlanned { gap, limit }
+                    if (gap - 3.5).abs() < 1e-9 && (limit - 3.0).abs() < 1e-9)),
+            "{found:?}"
+        );
+        assert!(
+            !found
+                .iter()
+                .any(|(_, k)| matches!(k, WarningKind::JoinLength { .. })),
+            "{found:?}"
         );
     }
 

@@ -67,11 +67,6 @@ const MALFORMED: &[(&str, &str)] = &[
         ":17:5: recovery_route[1]: segment 1 leaves the area (it meets the fence or a cutout)",
     ),
     (
-        "recovery-far-from-start.toml",
-        ":15:18: recovery_route: the recovery route ends 7.07 m from start_route[0]; it must end \
-         within 3.00 m (1.5 × generator.segment_max_m)",
-    ),
-    (
         "route-one-point.toml",
         ":10:15: start_route: a route needs at least 2 points, found 1",
     ),
@@ -427,4 +422,21 @@ fn the_reference_page_example_loads_without_warnings_and_with_the_defaults() {
     assert_eq!(s.generator, scenarios::GeneratorSettings::default());
     assert_eq!(s.campaign, scenarios::CampaignSettings::default());
     assert_eq!(s.vehicle, scenarios::Vehicle::default());
+}
+
+/// A recovery route that ends far from the start route (7.07 m here) was refused; it is accepted
+/// with a warning that names where, and the runner plans the join.
+#[test]
+fn a_recovery_route_far_from_the_start_route_loads_with_a_planned_join_warning() {
+    let path = fixtures("warnings").join("recovery-far-from-start.toml");
+    let loaded = scenarios::load(&path).unwrap();
+    let warnings: Vec<String> = loaded.warnings.iter().map(ToString::to_string).collect();
+    assert!(
+        warnings.iter().any(|w| w.ends_with(
+            "recovery_route[1]: the recovery route ends 7.07 m from start_route[0], more than \
+             3.00 m (1.5 × generator.segment_max_m): the reset plans a route between them"
+        )),
+        "{warnings:?}"
+    );
+    assert!(scenarios::needs_planned_join(&loaded.scenario));
 }

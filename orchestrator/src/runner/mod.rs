@@ -54,7 +54,7 @@ use car_link::{Car, CarError};
 use scenarios::Scenario;
 use thiserror::Error;
 use tokio_util::sync::CancellationToken;
-use trajgen::{GenerationError, Generator, Strategy};
+use trajgen::{GenerationError, Generator, Point, Strategy};
 
 use crate::recording::{
     DEFAULT_CHUNK_INTERVAL, FaultRecord, OracleRecord, PlannedSegment, Recorder, RecordingError,
@@ -175,6 +175,9 @@ pub enum RunError {
         /// The planner's reason.
         source: recovery::RecoveryError,
     },
+    /// The recovery route ends far from the start route and no route joins them.
+    #[error("no route from the recovery route's end to start_route[0]: {0}")]
+    StartJoin(#[source] recovery::RecoveryError),
     /// The reset drive did not end at the recovery route's end.
     #[error("test {test_index}: reset: {reason}")]
     Reset {
@@ -262,6 +265,9 @@ pub(crate) struct Context<'a> {
     pub(crate) rates: ProbeRates,
     pub(crate) cancel: &'a CancellationToken,
     pub(crate) journal: &'a Journal<'a>,
+    /// What the reset drives after the recovery route's end to reach `start_route[0]` when the
+    /// scenario needs a planned join ([`reset::plan_start_join`]); empty otherwise.
+    pub(crate) start_join: Vec<Point>,
 }
 
 impl Context<'_> {
@@ -395,7 +401,14 @@ async fn run_tests(inputs: &Inputs<'_>, dir: &mut RunDirectory) -> Result<(), Ru
         rates: preflight.rates,
         cancel,
         journal,
+        start_join: reset::plan_start_join(scenario, config.campaign.seed)?,
     };
+    if !ctx.start_join.is_empty() {
+        observer.note(&format!(
+            "the recovery route ends far from start_route[0]: every reset drives a planned join of {} points",
+            ctx.start_join.len()
+        ));
+    }
     let planner = TestPlanner::new(scenario)?;
     let start_tail = campaign::model::start_tail(scenario)?;
     let mut telemetry = Telemetry::start(car, config.state_period, ctx.sample_timeout);

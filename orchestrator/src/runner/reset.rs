@@ -103,6 +103,7 @@ pub(crate) async fn reset(
     });
     let mut drive = return_route.clone();
     drive.extend(recovery_rest(ctx, &route));
+    drive.extend(ctx.start_join.iter().map(|&p| Waypoint::new(p, speed)));
     // Re-entering, the car may first have to turn away from the boundary.
     let slack = entry.map_or(0.0, |_| MAX_REENTRY_M);
     let safety = SafetyConfig {
@@ -201,6 +202,46 @@ fn plan_return(ctx: &Context<'_>, from: Pose, test_index: usize) -> Result<Retur
             &mut rng,
         )
         .map_err(|source| Stopped::Error(RunError::Recovery { test_index, source }))
+}
+
+/// How far back along the start route's first segment the planned join aims, metres: the car
+/// arrives at `start_route[0]` heading along the start route.
+const JOIN_LEAD_IN_M: f64 = 1.0;
+
+/// The route from the recovery route's end to `start_route[0]` for a scenario whose recovery
+/// route ends farther from it than a straight step may be ([`scenarios::needs_planned_join`]):
+/// planned once per campaign with the return-route planner, from the recovery route's end (heading
+/// along its last segment) to a lead-in that ends at `start_route[0]` along the start route's
+/// first segment. The points after the recovery route's end, `start_route[0]` last; empty when
+/// the straight step is used. Deterministic from the campaign seed.
+pub(crate) fn plan_start_join(
+    scenario: &scenarios::Scenario,
+    seed: u64,
+) -> Result<Vec<Point>, RunError> {
+    if !scenarios::needs_planned_join(scenario) {
+        return Ok(Vec::new());
+    }
+    let recovery = scenario.recovery_route.positions();
+    let start = scenario.start_route.positions();
+    let (&[.., before_end, end], &[first, second, ..]) = (recovery.as_slice(), start.as_slice())
+    else {
+        return Ok(Vec::new());
+    };
+    let along = (second - first) * (1.0 / first.dist(second));
+    let lead_in = first - along * JOIN_LEAD_IN_M;
+    let target = [lead_in, first];
+    let from = Pose::new(end, (end - before_end).heading());
+    let mut rng = crate::seed::rng(seed);
+    let route = PlanConfig::default()
+        .plan_with_fallback(
+            &scenario.area,
+            from,
+            &target,
+            &scenario.constraints(),
+            &mut rng,
+        )
+        .map_err(RunError::StartJoin)?;
+    Ok(route.joined(&target).into_iter().skip(1).collect())
 }
 
 /// The speed of the reset drive: the recovery route's (its first point's).
@@ -377,6 +418,39 @@ mod tests {
         ])
         .unwrap();
         Area::new(fence, vec![]).unwrap()
+    }
+
+    #[test]
+    fn a_recovery_route_ending_far_from_the_start_route_gets_a_drivable_planned_join() {
+        let text = include_str!("../../tests/fixtures/short-recovery.toml");
+        let scenario = scenarios::from_toml_str(text, "short-recovery.toml")
+            .unwrap()
+            .scenario;
+        let join = plan_start_join(&scenario, 7).unwrap();
+        let recovery = scenario.recovery_route.positions();
+        let start = scenario.start_route.positions();
+        let end = *recovery.last().unwrap();
+        assert!(end.dist(start[0]) > 3.0, "the fixture needs a planned join");
+        assert_eq!(join.last(), Some(&start[0]), "{join:?}");
+        // From the recovery route's end, along its last heading, onto the start route: a route
+        // the car can drive, turning onto the start route no sharper than the generator may.
+        let mut route = vec![end];
+        route.extend(&join);
+        route.push(start[1]);
+        let heading = (end - recovery[recovery.len() - 2]).heading();
+        let mut constraints = scenario.constraints();
+        constraints.clearance = 0.0;
+        trajgen::check_route(&scenario.area, &route, &constraints, Some(heading)).unwrap();
+        assert_eq!(
+            plan_start_join(&scenario, 7).unwrap(),
+            join,
+            "deterministic"
+        );
+        // A scenario whose recovery route ends near the start route needs none.
+        let bundled = scenarios::bundled::load("parking-lot-2anchors")
+            .unwrap()
+            .scenario;
+        assert!(plan_start_join(&bundled, 7).unwrap().is_empty());
     }
 
     #[test]
