@@ -22,8 +22,10 @@
 //!   The car's distance at that time is interpolated between the samples around it; the
 //!   difference from the place is the placement's error.
 //!
-//! One fault command is in flight at a time. Segments are streamed by the time-based rule
-//! independently: a fault never delays a segment.
+//! One fault command is in flight at a time (a run of faults placed closer together than the car
+//! drives in a round trip is sent a round trip apart, centred on their places: see
+//! [`Placer::due`]). Segments are streamed by the time-based rule independently: a fault never
+//! delays a segment.
 
 use std::collections::VecDeque;
 use std::time::Duration;
@@ -242,16 +244,38 @@ impl Placer {
 
     /// When the next fault should be sent (seconds since the test began), if one's place is
     /// known and none is in flight: half a round trip before the car is predicted to reach it.
+    ///
+    /// One fault command is in flight at a time, and it takes a round trip. When the faults after
+    /// it are placed so close that the car reaches their places sooner than that (their ideal
+    /// sending times less than a round trip apart), the later ones can only go late. The run of
+    /// such faults is then sent a round trip apart, centred on their ideal times: the first goes
+    /// as early as the last goes late, which halves the largest placement error (a fault placed
+    /// 0.71 m after another on a 2.5 m/s segment was added 0.44 m late on a 0.35 s link).
     pub fn due(&self) -> Option<Duration> {
         if self.in_flight.is_some() {
             return None;
         }
-        let next = self.next()?;
         let seen = self.seen?;
-        let target = next.target_s?;
         let speed = seen.speed.max(MIN_SPEED_MPS);
-        let half_rtt = self.median_round_trip().as_secs_f64() / 2.0;
-        let at = seen.car_time + (target - seen.s).max(0.0) / speed - half_rtt;
+        let round_trip = self.median_round_trip().as_secs_f64();
+        let ideal =
+            |target: f64| seen.car_time + (target - seen.s).max(0.0) / speed - round_trip / 2.0;
+        let mut targets: Vec<f64> = self.pending.iter().filter_map(|p| p.target_s).collect();
+        targets.sort_by(f64::total_cmp);
+        let first = ideal(*targets.first()?);
+        // The run of faults after the first whose ideal times are less than a round trip
+        // apart, each shifted back by its place in the run: the schedule a round trip apart that
+        // starts at `c` is late by `c - shifted` for each; minimax is the middle of the range.
+        let (mut lowest, mut previous) = (first, first);
+        for (k, &target) in targets.iter().enumerate().skip(1) {
+            let at = ideal(target);
+            if at - previous >= round_trip {
+                break;
+            }
+            lowest = lowest.min(at - k as f64 * round_trip);
+            previous = at;
+        }
+        let at = first.min((lowest + first) / 2.0);
         Some(Duration::from_secs_f64(at.max(0.0)))
     }
 
