@@ -425,7 +425,7 @@ impl Car {
             cancel.clone(),
         ));
         let sample = shared
-            .state(shared.config.tries)
+            .state(shared.tries())
             .await
             .map_err(|e| CarError::Handshake(Box::new(e)))?;
         // The version was taken from the reply by `state`; a broadcast handshake also learns the car's id.
@@ -474,6 +474,17 @@ impl Car {
     /// waits far longer than the round trip makes every loss cost that long).
     pub fn set_request_timeout(&self, per_try: Duration) {
         self.shared().set_request_timeout(per_try);
+    }
+
+    /// The tries of an acked request in force: `config().tries` until [`Car::set_tries`] changes it.
+    pub fn tries(&self) -> u32 {
+        self.shared().tries()
+    }
+
+    /// Sets how many times every acked request sent from now on is tried (at least once), by every
+    /// clone of this handle: with a shorter per-try timeout, more tries keep the same time budget.
+    pub fn set_tries(&self, tries: u32) {
+        self.shared().set_tries(tries);
     }
 
     /// Link health: round trips (p50, p99), timeouts, reconnects, strays and drops.
@@ -792,7 +803,7 @@ impl Car {
             .exchange(
                 &Request::GetEnuRef,
                 shared.request_timeout(),
-                shared.config.tries,
+                shared.tries(),
             )
             .await?
             .0
@@ -847,7 +858,7 @@ impl Car {
         let shared = self.shared();
         let request = Request::GetRoutePart { first, num };
         match shared
-            .exchange(&request, shared.request_timeout(), shared.config.tries)
+            .exchange(&request, shared.request_timeout(), shared.tries())
             .await?
             .0
             .reply
@@ -879,7 +890,7 @@ impl Car {
             .exchange(
                 &Request::GetMainConfig,
                 shared.request_timeout(),
-                shared.config.tries,
+                shared.tries(),
             )
             .await?
             .0

@@ -156,6 +156,16 @@ pub enum FaultError {
     /// No reply text arrived.
     #[error("no reply to the fault-injection command")]
     NoReply,
+    /// The reply to `fi_add_fault` was lost and the car's fault list, which would tell whether it
+    /// took effect, could not be read either (why, in words).
+    #[error(
+        "the reply to the fault command was lost, and whether it took effect cannot be told: the \
+         car's fault list could not be read ({0})"
+    )]
+    Unconfirmed(String),
+    /// Part of the reply arrived, not all of it (a lossy link lost some of its lines).
+    #[error("the reply to {0} arrived incomplete (some of its lines were lost on the link)")]
+    Incomplete(&'static str),
 }
 
 /// The terminal command adding a fault. `param` is written with a decimal point, as in the protocol's vector.
@@ -266,7 +276,7 @@ pub fn parse_print_faults_reply(lines: &[String]) -> Result<Vec<ListedFault>, Fa
         return Err(FaultError::NoReply);
     }
     if !print_faults_complete(lines) {
-        return Err(FaultError::Unexpected(lines.concat()));
+        return Err(FaultError::Incomplete(PRINT_FAULTS_COMMAND));
     }
     lines[1..lines.len() - 1]
         .iter()

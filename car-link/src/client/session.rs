@@ -15,7 +15,7 @@
 //! [`CarError::UndecodableReply`] and its cause rather than a bare "no reply".
 
 use std::collections::{HashMap, VecDeque};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
@@ -127,6 +127,8 @@ pub(super) struct Shared {
     pub(super) latest: watch::Sender<Option<StateSample>>,
     /// The per-try timeout in force, ns: `config.request_timeout` until [`Shared::set_request_timeout`].
     pub(super) request_timeout_ns: AtomicU64,
+    /// The tries of an acked request in force: `config.tries` until [`Shared::set_tries`].
+    pub(super) tries: AtomicU32,
 }
 
 /// Locks a std mutex, ignoring poisoning (no code here panics while holding one).
@@ -170,6 +172,7 @@ impl Shared {
             uploads: tokio::sync::Mutex::new(()),
             latest: watch::channel(None).0,
             request_timeout_ns: AtomicU64::new(duration_ns(config.request_timeout)),
+            tries: AtomicU32::new(config.tries),
             config,
         }
     }
@@ -177,6 +180,16 @@ impl Shared {
     /// The per-try timeout of requests in force (see [`Car::set_request_timeout`](super::Car::set_request_timeout)).
     pub(super) fn request_timeout(&self) -> Duration {
         Duration::from_nanos(self.request_timeout_ns.load(Ordering::Relaxed))
+    }
+
+    /// The tries of an acked request in force.
+    pub(super) fn tries(&self) -> u32 {
+        self.tries.load(Ordering::Relaxed)
+    }
+
+    /// Sets the tries of acked requests from now on.
+    pub(super) fn set_tries(&self, tries: u32) {
+        self.tries.store(tries.max(1), Ordering::Relaxed);
     }
 
     /// Sets the per-try timeout of requests from now on.
@@ -458,7 +471,7 @@ impl Shared {
         request: &Request,
         per_try: Duration,
     ) -> Result<u32, CarError> {
-        let (answer, _, tries) = self.exchange(request, per_try, self.config.tries).await?;
+        let (answer, _, tries) = self.exchange(request, per_try, self.tries()).await?;
         let command = request.command(self.identity().version);
         match answer.reply {
             Reply::Ack(acked) if Some(acked) == command => Ok(tries),
