@@ -1006,6 +1006,23 @@ impl Car {
         Ok(fault::parse_print_faults_reply(&lines)?)
     }
 
+    /// The faults of whatever part of the `fi_print_faults` reply arrived
+    /// ([`fault::parse_print_faults_part`]): on a lossy link, where a whole list may rarely
+    /// arrive, several of these show every fault the car holds between them.
+    ///
+    /// Timeout and cancellation: as [`Car::terminal`]; nothing at all is [`FaultError::NoReply`].
+    pub async fn list_faults_part(&self) -> Result<Vec<fault::ListedFault>, CarError> {
+        let lines = self
+            .shared()
+            .terminal_lines(
+                fault::PRINT_FAULTS_COMMAND,
+                fault::is_print_faults_reply,
+                fault::print_faults_complete,
+            )
+            .await?;
+        Ok(fault::parse_print_faults_part(&lines)?)
+    }
+
     /// Frees every probe and fault slot and zeroes the counters (`fi_clear_faults`).
     ///
     /// Timeout and cancellation: as [`Car::terminal`].

@@ -284,6 +284,21 @@ pub fn parse_print_faults_reply(lines: &[String]) -> Result<Vec<ListedFault>, Fa
         .collect()
 }
 
+/// The fault blocks of whatever part of a `fi_print_faults` reply arrived: on a lossy link a
+/// reply may lack its header, its last line or some blocks, but a block that arrived whole is
+/// a fault the car holds (lines are lost, never made up). Complete or not, what it shows.
+/// [`FaultError::NoReply`] when nothing arrived.
+pub fn parse_print_faults_part(lines: &[String]) -> Result<Vec<ListedFault>, FaultError> {
+    if lines.is_empty() {
+        return Err(FaultError::NoReply);
+    }
+    Ok(lines
+        .iter()
+        .filter(|l| l.starts_with("\nProbe"))
+        .filter_map(|block| parse_listed_fault(block))
+        .collect())
+}
+
 fn parse_listed_fault(block: &str) -> Option<ListedFault> {
     let mut fields = block
         .split('\n')
@@ -441,6 +456,16 @@ mod tests {
             parse_print_faults_reply(&garbled),
             Err(FaultError::Unexpected(_))
         ));
+        // A part of the list: the header and the first block lost, the others as they came.
+        assert_eq!(
+            parse_print_faults_reply(&lines[2..]),
+            Err(FaultError::Incomplete(PRINT_FAULTS_COMMAND))
+        );
+        let part = parse_print_faults_part(&lines[2..]).unwrap();
+        assert_eq!(part.len(), 1);
+        assert_eq!(part[0].probe, "uwb_yaw");
+        assert_eq!(parse_print_faults_part(&garbled).unwrap().len(), 1);
+        assert_eq!(parse_print_faults_part(&[]), Err(FaultError::NoReply));
     }
 
     #[test]

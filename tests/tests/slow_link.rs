@@ -67,3 +67,73 @@ async fn a_campaign_over_half_a_second_each_way_drives_its_tests() {
         );
     }
 }
+
+/// At 30 % loss each way (half the round trips fail) on a fast link, a 3-test campaign starts
+/// (preflight measures the round trip from the probes that were answered) and ends with every
+/// test judged or aborted with a reason that says what happened, never a misread reply. Before,
+/// preflight gave up ("no reply to GetState after 1 tries"), then tests aborted on a partly lost
+/// fault reply ("unexpected fault-injection reply \" \"") and on a fault added twice ("too many
+/// faults on this probe", after a fault list that lost a line looked complete).
+#[tokio::test(start_paused = true)]
+async fn a_campaign_at_thirty_percent_loss_ends_every_test_judged_or_with_a_clear_reason() {
+    let scenario = scenarios::bundled::load("parking-lot-2anchors")
+        .unwrap()
+        .scenario;
+    for seed in [1, 2] {
+        let sim_config = SimConfig {
+            seed,
+            link: LinkImpairment {
+                loss: 0.3,
+                ..LinkImpairment::default()
+            },
+            ..SimConfig::from_scenario(&scenario)
+        };
+        let (stream, sim) = car_sim::spawn_in_process(&sim_config);
+        let link_config = LinkConfig {
+            request_timeout: Duration::from_secs(1),
+            terminal_timeout: Duration::from_secs(2),
+            tries: 10,
+            ..LinkConfig::default()
+        };
+        let car = Car::over_stream(stream, link_config).await.unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let campaign = Campaign {
+            seed: 5,
+            tests: 3,
+            no_faults: false,
+        };
+        let mut config = RunConfig::new(campaign, dir.path().join("run"), "sim");
+        config.safety.stale_after = Duration::from_secs(1);
+        let report = run_campaign(
+            &car,
+            &scenario,
+            &config,
+            &CancellationToken::new(),
+            &Silent,
+            Some(&sim as &dyn SimulatorView),
+        )
+        .await
+        .unwrap_or_else(|failure| panic!("seed {seed}: {}", failure.error));
+        assert_eq!(report.cases.len(), 3);
+        let judged = report
+            .cases
+            .iter()
+            .filter(|c| matches!(c.verdict, Some(Verdict::Passed | Verdict::Failed)))
+            .count();
+        // Every one today; before, one or two of three aborted.
+        assert!(judged >= 2, "seed {seed}: {judged} of 3 judged");
+        for case in &report.cases {
+            match case.verdict {
+                Some(Verdict::Passed | Verdict::Failed) => {}
+                Some(Verdict::Aborted) => {
+                    let reason = case.reason.as_deref().unwrap_or_default();
+                    assert!(
+                        !reason.contains("unexpected") && !reason.contains("too many faults"),
+                        "seed {seed}: {reason}"
+                    );
+                }
+                None => panic!("seed {seed}: a test without a verdict"),
+            }
+        }
+    }
+}

@@ -331,24 +331,57 @@ async fn wait_op(op: &mut Option<InFlight>) -> (Recorded, OpResult) {
 
 /// Tries of a fault command whose reply was lost.
 const FAULT_TRIES: u32 = 5;
-/// Reads of the car's fault list that decide whether a fault command took effect.
-const FAULT_LIST_READS: usize = 3;
+/// Reads of the car's fault list, at most, that decide whether a fault command took effect.
+const FAULT_LIST_READS: usize = 8;
 
-/// How many faults the car holds on `probe`: the most any of [`FAULT_LIST_READS`] reads of its
-/// fault list shows. A lossy link loses lines of a reply but never adds any, and the list has no
-/// count of its own: a read can look complete (its header and its last line arrived) and miss
-/// the very fault in question, which would then be added twice (seen at 30 % loss: "too many
-/// faults on this probe"). With 30 % of lines lost, three reads all miss it about once in 40.
-async fn faults_on(car: &Car, probe: &car_link::Probe) -> Result<usize, CarError> {
+/// Whether the car holds more than `before` faults on `probe`: the distinct faults of that probe
+/// that up to [`FAULT_LIST_READS`] reads of its fault list show between them, complete or not.
+/// A lossy link loses lines of a reply but never adds any, and the list has no count of its own:
+/// a read can look complete (its header and last line arrived) and miss the very fault in
+/// question, which would then be added twice (seen at 30 % loss: "too many faults on this
+/// probe"); and at 30 % loss a list of a few faults arrives whole in under one read of ten.
+/// Each block that arrives is a fault the car holds; at 30 % loss a given one shows in a read
+/// about half the time, so eight reads all miss it about once in 200. `Ok(false)` after eight
+/// reads without it; an error when no read got any answer.
+async fn holds_more_than(
+    car: &Car,
+    probe: &car_link::Probe,
+    before: usize,
+) -> Result<bool, CarError> {
     let id = probe.to_string();
-    let mut most = 0;
+    let mut seen: Vec<car_link::fault::ListedFault> = Vec::new();
+    let mut answered = false;
+    let mut last_error = None;
     for _ in 0..FAULT_LIST_READS {
-        let listed = super::retried(|| car.list_faults())
-            .await
-            .map_err(|error| FaultError::Unconfirmed(error.to_string()))?;
-        most = most.max(listed.iter().filter(|f| f.probe == id).count());
+        match car.list_faults_part().await {
+            Ok(listed) => {
+                answered = true;
+                for fault in listed.into_iter().filter(|f| f.probe == id) {
+                    if !seen.iter().any(|s| same_fault(s, &fault)) {
+                        seen.push(fault);
+                    }
+                }
+                if seen.len() > before {
+                    return Ok(true);
+                }
+            }
+            Err(CarError::LinkLost) => return Err(CarError::LinkLost),
+            Err(error) => last_error = Some(error),
+        }
     }
-    Ok(most)
+    match (answered, last_error) {
+        (false, Some(error)) => Err(FaultError::Unconfirmed(error.to_string()).into()),
+        _ => Ok(false),
+    }
+}
+
+/// Whether two listed faults are the same slot (the iteration counter moves on between reads).
+fn same_fault(a: &car_link::fault::ListedFault, b: &car_link::fault::ListedFault) -> bool {
+    a.probe == b.probe
+        && a.kind == b.kind
+        && a.param == b.param
+        && a.start == b.start
+        && a.duration == b.duration
 }
 
 /// Adds `fault` to the car, which holds `before` faults on its probe. When the reply is lost
@@ -378,7 +411,7 @@ async fn add_fault_once(car: &Car, fault: Fault, before: usize) -> OpResult {
             Err(CarError::Fault(FaultError::NoReply | FaultError::Unexpected(_)))
                 if tries < FAULT_TRIES =>
             {
-                if faults_on(car, &probe).await? > before {
+                if holds_more_than(car, &probe, before).await? {
                     return Ok(true);
                 }
                 tries += 1;
