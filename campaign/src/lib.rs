@@ -20,6 +20,7 @@
 
 pub mod case;
 pub mod drive;
+pub mod explain;
 pub mod model;
 pub mod oracle;
 pub mod replay;

@@ -35,6 +35,10 @@ pub enum Command {
     /// Write a self-contained HTML report of a run, replay or shrink directory (maps, deviation
     /// plots, tables; inline SVG, no network or script needed). Exit status: 0 written, 2 error.
     Report(ReportArgs),
+    /// Explain why segments failed: the ranked causes of the UWB error's growth (a fault, an
+    /// anchor's ranges, the odometry, the heading), from the recorded samples. Exit status: 0
+    /// explained, 2 error.
+    Explain(ExplainArgs),
     /// Serve a simulated car over TCP (like the reference bridge) or UDP.
     Sim(SimArgs),
     /// Check a test area before any car drives in it.
@@ -240,6 +244,45 @@ pub struct ReportArgs {
     /// the scenario stored in the recording, else the bundled one the run names).
     #[arg(long)]
     pub scenario: Option<String>,
+}
+
+/// Options of `drivecheck explain`.
+#[derive(Debug, Args)]
+pub struct ExplainArgs {
+    /// A case file of a run directory (`case-NNN.json`), or the run directory (every test).
+    #[arg(value_name = "CASE.json|RUN_DIR")]
+    pub target: PathBuf,
+    /// Print the explanations as JSON (`{"cases": [{"case": …, "segments": [...]}]}`).
+    #[arg(long)]
+    pub json: bool,
+    /// Explain every judged segment, not only the failing ones.
+    #[arg(long)]
+    pub all_segments: bool,
+    /// Also score the explanations against the simulated car's hidden truth (which fault
+    /// applied, which range was reflected) and print the confusion matrix: for a run directory
+    /// recorded against the embedded simulated car.
+    #[arg(long)]
+    pub score: bool,
+    /// Scenario of the run (default: the one stored in the recording, else the bundled one the
+    /// run names).
+    #[arg(long)]
+    pub scenario: Option<String>,
+    /// Calibrate instead: print the nominal level and the least growth that a fault-free run
+    /// (`drivecheck run --no-faults`) gives at the false-alarm budget, for `--nominal` and
+    /// `--min-growth`.
+    #[arg(long)]
+    pub calibrate: bool,
+    /// The false-alarm budget of `--calibrate`: the share of fault-free samples above the
+    /// nominal level, and of fault-free segments with a cause.
+    #[arg(long, default_value_t = 0.01)]
+    pub budget: f64,
+    /// The error level taken as nominal, metres: the growth explained starts where the error
+    /// last was at or below it.
+    #[arg(long, value_name = "M")]
+    pub nominal: Option<f64>,
+    /// A cause that explains less growth than this, metres, is left to `unexplained`.
+    #[arg(long, value_name = "M")]
+    pub min_growth: Option<f64>,
 }
 
 /// Options of `drivecheck runs`.

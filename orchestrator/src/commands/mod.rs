@@ -3,6 +3,7 @@
 mod area;
 mod bench;
 mod bench_recovery;
+mod explain;
 mod replay;
 mod report;
 mod route;
@@ -31,6 +32,7 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Command::Sweep(args) => sweep::sweep(&args),
         Command::Runs(args) => runs::runs(&args),
         Command::Report(args) => report::report(&args),
+        Command::Explain(args) => explain::explain(&args),
         Command::Sim(args) => sim::serve(&args),
         Command::Area(AreaCommand::Validate(args)) => area::validate(&args),
         Command::Route(RouteCommand::Generate(args)) => route::generate(&args),

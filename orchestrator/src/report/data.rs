@@ -49,6 +49,8 @@ pub(crate) struct Track {
     pub samples: Vec<Sample>,
     /// How `t_s = 0` was found.
     pub origin: Origin,
+    /// `t_s = 0` on the recording's clock (log time, ns since the campaign started).
+    pub zero_ns: u64,
 }
 
 /// A test: its case file and its samples.
@@ -373,7 +375,14 @@ fn split_tracks(
                 deviation_m: s.deviation_m.filter(|d| d.is_finite()),
             })
             .collect();
-        tracks.insert(test.index, Track { samples, origin });
+        tracks.insert(
+            test.index,
+            Track {
+                samples,
+                origin,
+                zero_ns: zero,
+            },
+        );
     }
     Ok(tracks)
 }

@@ -20,6 +20,7 @@
 
 mod data;
 mod draw;
+pub mod explain;
 mod html;
 mod route;
 

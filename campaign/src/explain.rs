@@ -1,0 +1,558 @@
+//! Why a segment failed: the ranked causes of the growth of its UWB error, from residuals.
+//!
+//! Inputs are what a real car reports and what the campaign knows: the state samples (RTK and
+//! UWB positions; the heading is the direction the RTK track moves), the anchors, and the fault
+//! schedule (each fault's estimated window, from its place and the probe's call rate). The
+//! simulated car's hidden truth is never used here (only to score the result, elsewhere).
+//!
+//! **The method.** The UWB error is `e(t) = UWB − RTK`. The firmware's estimator moves the
+//! estimate in three kinds of direction, so each kind of cause leaves its own signature in how
+//! `e` changes from one sample to the next:
+//!
+//! - a range from anchor *A* corrects the estimate along the line from *A* (at most 0.2 m a
+//!   correction): a wrong range (a reflection, a range fault) moves `e` along `u_A`, the unit
+//!   vector from *A* to the estimate;
+//! - a wrong travelled distance (wheel slip, an odometry fault) moves it along the heading `h`;
+//! - a wrong yaw (a yaw fault, a heading error) moves it across the heading, along `n`.
+//!
+//! For a failing segment the growth interval is the stretch before the first sample above the
+//! threshold during which the error grew from its last nominal level (at most
+//! [`ExplainConfig::lookback_s`]). Each step between two samples in which the error grows
+//! (`Δe · e/|e| > 0`) gives its growth to the direction its `Δe` is most aligned with, when that
+//! alignment (|cos|) reaches [`ExplainConfig::min_alignment`]; otherwise to `unexplained`. A
+//! direction's growth goes to an injected fault when the fault's window (widened by
+//! [`ExplainConfig::window_slack_s`]) covers the step and the fault acts in that direction (a
+//! range fault on *A* along `u_A`, a `uwb_travel_dist` fault along `h`, a `uwb_yaw` fault along
+//! `n`); else to the anchor's range, the odometry or the heading. A cause's share is its growth
+//! over the whole growth; causes below [`ExplainConfig::min_growth_m`] are left to
+//! `unexplained` (the threshold a fault-free calibration sets: see `docs/explain.md`).
+//!
+//! **What it cannot tell apart.** Two directions closer than the alignment's resolution (an
+//! anchor straight ahead or behind looks like odometry; one abeam looks like the heading): such
+//! a step is credited to the best-aligned and the cause records the runner-up in `ambiguous_with`.
+//! Growth that happened before the growth interval (a standing offset) is not explained.
+
+use serde::{Deserialize, Serialize};
+use trajgen::Point;
+
+use car_link::Probe;
+
+/// One state sample on the test's clock.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExplainSample {
+    /// Seconds since the test began.
+    pub t_s: f64,
+    /// The RTK (fused) position.
+    pub rtk: Point,
+    /// The UWB position.
+    pub uwb: Point,
+}
+
+/// An anchor of the area.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExplainAnchor {
+    /// Its id.
+    pub id: u16,
+    /// Its position.
+    pub position: Point,
+}
+
+/// An injected fault and when it is estimated to act.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExplainFault {
+    /// Its command's index in the case.
+    pub command_index: usize,
+    /// The probe it acts on.
+    pub probe: Probe,
+    /// When it is estimated to begin acting, seconds since the test began.
+    pub acts_from_s: f64,
+    /// When it is estimated to stop.
+    pub acts_to_s: f64,
+}
+
+/// A segment to explain: when the car drove it and how the oracle judged it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExplainSegment {
+    /// Its index among the test's segments.
+    pub segment_index: usize,
+    /// When the car entered it, seconds since the test began.
+    pub from_s: f64,
+    /// When it left it (or the test ended).
+    pub to_s: f64,
+    /// Whether the oracle failed it.
+    pub failed: bool,
+}
+
+/// The method's settings (see the module doc).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ExplainConfig {
+    /// The oracle's threshold, metres.
+    pub threshold_m: f64,
+    /// The error level taken as nominal: the growth interval starts where the error last was
+    /// at or below it, metres. The default, 0.49 m, is the calibration (`drivecheck explain
+    /// --calibrate`, 1 % budget) on 100 fault-free tests of the bundled two-anchor lot (seed 1:
+    /// 0.486 m; seed 2: 0.483 m).
+    pub nominal_m: f64,
+    /// The growth interval's longest extent, seconds.
+    pub lookback_s: f64,
+    /// The least |cos| between a step's `Δe` and a direction for the step to count for it.
+    pub min_alignment: f64,
+    /// How much wider than its estimated window a fault is taken to act, seconds each side (the
+    /// window is estimated from probe rates; a range probe is called only when a range arrives).
+    pub window_slack_s: f64,
+    /// A cause below this growth, metres, is left to `unexplained`. The default, 0.08 m, is the
+    /// same calibration's (seed 1: 0.076 m; seed 2: 0.081 m).
+    pub min_growth_m: f64,
+    /// Directions closer than this |cos| to the best one are named as ambiguous with it.
+    pub ambiguity_cos: f64,
+}
+
+impl Default for ExplainConfig {
+    fn default() -> Self {
+        Self {
+            threshold_m: 1.0,
+            nominal_m: 0.49,
+            lookback_s: 6.0,
+            min_alignment: 0.8,
+            window_slack_s: 1.0,
+            min_growth_m: 0.08,
+            ambiguity_cos: 0.95,
+        }
+    }
+}
+
+/// Where a cause comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "source")]
+pub enum Source {
+    /// An injected fault.
+    Fault {
+        /// Its command's index in the case.
+        command_index: usize,
+    },
+    /// An anchor's ranges (a reflection, a blocked line of sight, a wrong survey).
+    Anchor {
+        /// Its id.
+        anchor_id: u16,
+    },
+    /// The travelled distance fed to dead reckoning (wheel slip).
+    Odometry,
+    /// The yaw fed to dead reckoning.
+    Heading,
+    /// What no direction explains, and what stays below the threshold.
+    Unexplained,
+}
+
+/// One cause of a segment's error growth.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Cause {
+    /// Where it comes from.
+    #[serde(flatten)]
+    pub source: Source,
+    /// Its share of the growth, 0–1.
+    pub share: f64,
+    /// The growth it explains, metres.
+    pub growth_m: f64,
+    /// Steps credited to it.
+    pub steps: usize,
+    /// For an anchor or a fault on a range probe: `range`; odometry `travel`; heading `yaw`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kind: Option<String>,
+    /// Another cause whose direction was nearly the same in a step credited to this one (it
+    /// cannot be told apart there), the most often such.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ambiguous_with: Option<Source>,
+}
+
+/// A segment's explanation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SegmentExplanation {
+    /// The segment's index.
+    pub segment_index: usize,
+    /// `failed` or `passed`.
+    pub verdict: String,
+    /// The growth interval, seconds since the test began.
+    pub from_s: f64,
+    /// Its end: the first sample above the threshold (or the segment's largest error).
+    pub to_s: f64,
+    /// |e| at the start of the interval, metres.
+    pub error_from_m: f64,
+    /// |e| at its end.
+    pub error_to_m: f64,
+    /// The causes, most growth first; `unexplained` last.
+    pub causes: Vec<Cause>,
+}
+
+impl SegmentExplanation {
+    /// The first cause, if any is not `unexplained`.
+    pub fn top(&self) -> Option<&Cause> {
+        self.causes
+            .first()
+            .filter(|c| c.source != Source::Unexplained)
+    }
+}
+
+/// The directions a step's error change is compared with, and the sources behind them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Direction {
+    Anchor(u16),
+    Travel,
+    Yaw,
+}
+
+impl Direction {
+    fn kind(self) -> &'static str {
+        match self {
+            Direction::Anchor(_) => "range",
+            Direction::Travel => "travel",
+            Direction::Yaw => "yaw",
+        }
+    }
+
+    /// Whether `probe` moves the estimate in this direction.
+    fn moved_by(self, probe: Probe) -> bool {
+        match (self, probe) {
+            (Direction::Anchor(id), Probe::UwbRange(p)) => id == p,
+            (Direction::Travel, Probe::UwbTravelDist) => true,
+            (Direction::Yaw, Probe::UwbYaw) => true,
+            _ => false,
+        }
+    }
+}
+
+/// Explains `segment` from the test's `samples` (time order), its `anchors` and `faults`.
+/// `None` without samples in the segment.
+pub fn explain_segment(
+    segment: &ExplainSegment,
+    samples: &[ExplainSample],
+    anchors: &[ExplainAnchor],
+    faults: &[ExplainFault],
+    config: &ExplainConfig,
+) -> Option<SegmentExplanation> {
+    let error = |s: &ExplainSample| (s.uwb - s.rtk).norm();
+    let usable: Vec<&ExplainSample> = samples
+        .iter()
+        .filter(|s| s.rtk.is_finite() && s.uwb.is_finite())
+        .collect();
+    let inside: Vec<usize> = (0..usable.len())
+        .filter(|&i| (segment.from_s..=segment.to_s).contains(&usable[i].t_s))
+        .collect();
+    inside.first()?;
+    let last = *inside.last()?;
+    // The end: the first sample above the threshold, else the segment's largest error.
+    let end = inside
+        .iter()
+        .copied()
+        .find(|&i| error(usable[i]) > config.threshold_m)
+        .unwrap_or_else(|| {
+            inside
+                .iter()
+                .copied()
+                .max_by(|&a, &b| error(usable[a]).total_cmp(&error(usable[b])))
+                .unwrap_or(last)
+        });
+    let earliest = usable[end].t_s - config.lookback_s;
+    let mut start = end;
+    while start > 0 && usable[start - 1].t_s >= earliest && error(usable[start]) > config.nominal_m
+    {
+        start -= 1;
+    }
+    let mut credit: Vec<Credit> = Vec::new();
+    let mut unexplained = 0.0;
+    let mut unexplained_steps = 0;
+    for j in start..end {
+        let (a, b) = (usable[j], usable[j + 1]);
+        let e0 = a.uwb - a.rtk;
+        let e1 = b.uwb - b.rtk;
+        let de = e1 - e0;
+        let norm0 = e0.norm();
+        if norm0 <= 1e-9 || de.norm() <= 1e-9 {
+            continue;
+        }
+        let growth = de.dot(e0) / norm0;
+        if growth <= 0.0 {
+            continue;
+        }
+        let Some(heading) = heading_at(&usable, j) else {
+            unexplained += growth;
+            unexplained_steps += 1;
+            continue;
+        };
+        let mid_t = (a.t_s + b.t_s) / 2.0;
+        let mut directions: Vec<(Direction, Point)> = anchors
+            .iter()
+            .filter_map(|anchor| {
+                let away = b.uwb - anchor.position;
+                let length = away.norm();
+                (length > 1e-6).then(|| (Direction::Anchor(anchor.id), away * (1.0 / length)))
+            })
+            .collect();
+        directions.push((Direction::Travel, heading));
+        directions.push((Direction::Yaw, Point::new(-heading.y, heading.x)));
+        let length = de.norm();
+        let mut ranked: Vec<(Direction, f64)> = directions
+            .iter()
+            .map(|&(d, u)| (d, (de.dot(u) / length).abs()))
+            .collect();
+        ranked.sort_by(|x, y| y.1.total_cmp(&x.1));
+        let (best, alignment) = ranked[0];
+        if alignment < config.min_alignment {
+            unexplained += growth;
+            unexplained_steps += 1;
+            continue;
+        }
+        // Of the faults acting in this direction whose widened window covers the step, the
+        // one whose estimated window is nearest (inside it: distance 0).
+        let source_of = |d: Direction| {
+            faults
+                .iter()
+                .filter(|f| d.moved_by(f.probe))
+                .map(|f| {
+                    let distance = (f.acts_from_s - mid_t).max(mid_t - f.acts_to_s).max(0.0);
+                    (f, distance)
+                })
+                .filter(|(_, distance)| *distance <= config.window_slack_s)
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .map(|(f, _)| f)
+                .map_or(
+                    match d {
+                        Direction::Anchor(id) => Source::Anchor { anchor_id: id },
+                        Direction::Travel => Source::Odometry,
+                        Direction::Yaw => Source::Heading,
+                    },
+                    |f| Source::Fault {
+                        command_index: f.command_index,
+                    },
+                )
+        };
+        let source = source_of(best);
+        // The runner-up is as well aligned: this step cannot tell the two apart.
+        let ambiguous = ranked
+            .get(1)
+            .filter(|(_, cos)| *cos >= config.ambiguity_cos && alignment - cos < AMBIGUITY_GAP)
+            .map(|&(d, _)| source_of(d))
+            .filter(|s| *s != source);
+        let index = match credit.iter().position(|c| c.source == source) {
+            Some(index) => index,
+            None => {
+                credit.push(Credit {
+                    source,
+                    growth: 0.0,
+                    steps: 0,
+                    ambiguous: Vec::new(),
+                    kind: best.kind(),
+                });
+                credit.len() - 1
+            }
+        };
+        let c = &mut credit[index];
+        c.growth += growth;
+        c.steps += 1;
+        if let Some(other) = ambiguous {
+            match c.ambiguous.iter_mut().find(|a| a.0 == other) {
+                Some(a) => a.1 += 1,
+                None => c.ambiguous.push((other, 1)),
+            }
+        }
+    }
+    let total: f64 = credit.iter().map(|c| c.growth).sum::<f64>() + unexplained;
+    let mut causes: Vec<Cause> = Vec::new();
+    for c in credit {
+        if c.growth < config.min_growth_m {
+            unexplained += c.growth;
+            unexplained_steps += c.steps;
+            continue;
+        }
+        // Named when at least half of the cause's steps could not tell it from that one.
+        let ambiguous_with = c
+            .ambiguous
+            .iter()
+            .max_by_key(|a| a.1)
+            .filter(|a| 2 * a.1 >= c.steps)
+            .map(|a| a.0);
+        causes.push(Cause {
+            source: c.source,
+            share: share(c.growth, total),
+            growth_m: c.growth,
+            steps: c.steps,
+            kind: Some(c.kind.to_owned()),
+            ambiguous_with,
+        });
+    }
+    causes.sort_by(|a, b| b.growth_m.total_cmp(&a.growth_m));
+    if unexplained > 0.0 || causes.is_empty() {
+        causes.push(Cause {
+            source: Source::Unexplained,
+            share: share(unexplained, total),
+            growth_m: unexplained,
+            steps: unexplained_steps,
+            kind: None,
+            ambiguous_with: None,
+        });
+    }
+    Some(SegmentExplanation {
+        segment_index: segment.segment_index,
+        verdict: if segment.failed { "failed" } else { "passed" }.to_owned(),
+        from_s: usable[start].t_s,
+        to_s: usable[end].t_s,
+        error_from_m: error(usable[start]),
+        error_to_m: error(usable[end]),
+        causes,
+    })
+}
+
+/// How much less aligned than the best a direction may be to be named as ambiguous with it.
+const AMBIGUITY_GAP: f64 = 0.03;
+
+/// What a source has been credited with so far.
+struct Credit {
+    source: Source,
+    growth: f64,
+    steps: usize,
+    /// Other sources a step could not tell this one from, with how many steps.
+    ambiguous: Vec<(Source, usize)>,
+    kind: &'static str,
+}
+
+fn share(part: f64, total: f64) -> f64 {
+    if total > 0.0 { part / total } else { 0.0 }
+}
+
+/// The unit heading of the RTK track around sample `j`: from the sample before to the one after
+/// (`None` while the car stands).
+fn heading_at(samples: &[&ExplainSample], j: usize) -> Option<Point> {
+    let before = samples[j.saturating_sub(1)].rtk;
+    let after = samples[(j + 2).min(samples.len() - 1)].rtk;
+    let moved = after - before;
+    let length = moved.norm();
+    (length > 0.02).then(|| moved * (1.0 / length))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A car driving east at 1 m/s, 20 samples a second, for `seconds`, with the UWB error that
+    /// `error` gives at each time.
+    fn drive(seconds: f64, error: impl Fn(f64) -> Point) -> Vec<ExplainSample> {
+        (0..=(seconds * 20.0) as usize)
+            .map(|k| {
+                let t = k as f64 / 20.0;
+                let rtk = Point::new(t, 0.0);
+                ExplainSample {
+                    t_s: t,
+                    rtk,
+                    uwb: rtk + error(t),
+                }
+            })
+            .collect()
+    }
+
+    fn segment(to_s: f64) -> ExplainSegment {
+        ExplainSegment {
+            segment_index: 2,
+            from_s: 0.0,
+            to_s,
+            failed: true,
+        }
+    }
+
+    /// An anchor due north of the track, far away: its direction is across the heading (as the
+    /// yaw's); one due east, ahead: along it (as the odometry's).
+    fn anchors() -> Vec<ExplainAnchor> {
+        vec![
+            ExplainAnchor {
+                id: 50,
+                position: Point::new(3.0, -40.0),
+            },
+            ExplainAnchor {
+                id: 234,
+                position: Point::new(-30.0, 30.0),
+            },
+        ]
+    }
+
+    #[test]
+    fn an_error_growing_along_the_heading_in_a_slip_faults_window_names_the_fault() {
+        // 0.3 m of standing error across, then from 2 s to 4 s 0.5 m/s of drift ahead.
+        let samples = drive(6.0, |t| {
+            Point::new(0.0, 0.3) + Point::new(0.5 * (t - 2.0).clamp(0.0, 2.0), 0.0)
+        });
+        let slip = ExplainFault {
+            command_index: 3,
+            probe: Probe::UwbTravelDist,
+            acts_from_s: 2.0,
+            acts_to_s: 4.0,
+        };
+        let explained = explain_segment(
+            &segment(6.0),
+            &samples,
+            &anchors(),
+            &[slip],
+            &ExplainConfig::default(),
+        )
+        .unwrap();
+        assert_eq!(
+            explained.top().map(|c| c.source),
+            Some(Source::Fault { command_index: 3 }),
+            "{explained:?}"
+        );
+        // Without the fault, the same growth is the odometry's.
+        let unfaulted = explain_segment(
+            &segment(6.0),
+            &samples,
+            &anchors(),
+            &[],
+            &ExplainConfig::default(),
+        )
+        .unwrap();
+        assert_eq!(unfaulted.top().map(|c| c.source), Some(Source::Odometry));
+        assert!(unfaulted.top().unwrap().share > 0.9, "{unfaulted:?}");
+    }
+
+    #[test]
+    fn corrections_pushing_the_estimate_away_from_an_anchor_name_that_anchors_range() {
+        // Steps of 0.1 m every 0.2 s away from anchor 234 (north-west of the track): a reflected,
+        // too long range corrected a little at a time.
+        let samples = drive(4.0, |t| {
+            let steps = (t / 0.2).floor().min(12.0);
+            let away = Point::new(1.0, -1.0) * (1.0 / 2f64.sqrt());
+            Point::new(0.2, 0.0) + away * (0.1 * steps)
+        });
+        let explained = explain_segment(
+            &segment(4.0),
+            &samples,
+            &anchors(),
+            &[],
+            &ExplainConfig::default(),
+        )
+        .unwrap();
+        let top = explained.top().unwrap();
+        assert_eq!(
+            top.source,
+            Source::Anchor { anchor_id: 234 },
+            "{explained:?}"
+        );
+        assert_eq!(top.kind.as_deref(), Some("range"));
+        assert!(explained.error_to_m > 1.0);
+    }
+
+    #[test]
+    fn noise_below_the_threshold_is_unexplained() {
+        // A wobble of a few centimetres: no cause reaches the least growth.
+        let samples = drive(4.0, |t| Point::new(0.3 + 0.03 * (t * 7.0).sin(), 0.2));
+        let explained = explain_segment(
+            &ExplainSegment {
+                failed: false,
+                ..segment(4.0)
+            },
+            &samples,
+            &anchors(),
+            &[],
+            &ExplainConfig::default(),
+        )
+        .unwrap();
+        assert_eq!(explained.top(), None, "{explained:?}");
+        assert_eq!(explained.verdict, "passed");
+    }
+}

@@ -1,0 +1,241 @@
+//! `drivecheck explain CASE.json|RUN_DIR`: why segments failed ([`crate::report::explain`],
+//! the method in `campaign::explain`); with `--score`, how right that is against the simulated
+//! car's hidden truth.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, bail};
+
+use crate::cli::ExplainArgs;
+use crate::report::explain::{
+    CaseExplanation, ExplainOptions, Explanations, Scored, calibrate, explain_run, score_run,
+};
+use crate::scenario_arg::{load_scenario, print_warnings};
+use campaign::case::{Case, CommandRecord};
+use campaign::explain::{Cause, Source};
+
+/// Explains the target's failing segments (see the module doc). Exit status 0, or 2 on an error.
+pub fn explain(args: &ExplainArgs) -> Result<ExitCode> {
+    let scenario = match &args.scenario {
+        Some(arg) => {
+            let loaded = load_scenario(arg)?;
+            print_warnings(&loaded);
+            Some(loaded.scenario)
+        }
+        None => None,
+    };
+    let (dir, only) = if args.target.is_dir() {
+        (args.target.clone(), None)
+    } else if args.target.is_file() {
+        let dir = args
+            .target
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."))
+            .to_owned();
+        (dir, Some(args.target.as_path()))
+    } else {
+        bail!(
+            "{}: no such case file or run directory",
+            args.target.display()
+        );
+    };
+    if args.calibrate {
+        if only.is_some() {
+            bail!("--calibrate takes a fault-free run directory");
+        }
+        if !(args.budget > 0.0 && args.budget < 1.0) {
+            bail!("--budget {}: must be between 0 and 1", args.budget);
+        }
+        let c = calibrate(&dir, scenario.as_ref(), args.budget)
+            .with_context(|| format!("cannot calibrate on {}", dir.display()))?;
+        if args.json {
+            println!("{}", serde_json::to_string_pretty(&c)?);
+        } else {
+            println!(
+                "{} samples and {} segments of a fault-free run, false-alarm budget {:.1} %:\n\
+                 --nominal {:.3} --min-growth {:.3}",
+                c.samples,
+                c.segments,
+                c.budget * 100.0,
+                c.nominal_m,
+                c.min_growth_m
+            );
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
+    let mut options = ExplainOptions {
+        all_segments: args.all_segments,
+        ..ExplainOptions::default()
+    };
+    for (value, name) in [
+        (args.nominal, "--nominal"),
+        (args.min_growth, "--min-growth"),
+    ] {
+        if value.is_some_and(|v| !(v.is_finite() && v >= 0.0)) {
+            bail!("{name}: must be a length in metres, 0 or more");
+        }
+    }
+    if let Some(nominal) = args.nominal {
+        options.config.nominal_m = nominal;
+    }
+    if let Some(min_growth) = args.min_growth {
+        options.config.min_growth_m = min_growth;
+    }
+    if args.score {
+        if only.is_some() {
+            bail!("--score takes a run directory (every failing segment of the run is scored)");
+        }
+        let (explanations, scored) = score_run(&dir, scenario.as_ref(), &options)
+            .with_context(|| format!("cannot score {}", dir.display()))?;
+        if args.json {
+            let out = serde_json::json!({ "cases": explanations.cases, "scored": scored });
+            println!("{}", serde_json::to_string_pretty(&out)?);
+        } else {
+            print!("{}", score_table(&scored));
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
+    let explanations = explain_run(&dir, only, scenario.as_ref(), &options)
+        .with_context(|| format!("cannot explain {}", dir.display()))?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&explanations)?);
+    } else {
+        print!("{}", text(&explanations));
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The explanations as text: per segment, its growth and the causes in order.
+fn text(explanations: &Explanations) -> String {
+    let mut out = String::new();
+    for case in &explanations.cases {
+        let commands = read_case(case);
+        for segment in &case.segments {
+            let _ = writeln!(
+                out,
+                "{} segment {} ({}): |UWB − RTK| {:.2} → {:.2} m from {:.1} s to {:.1} s",
+                case.case.display(),
+                segment.segment_index,
+                segment.verdict,
+                segment.error_from_m,
+                segment.error_to_m,
+                segment.from_s,
+                segment.to_s
+            );
+            for (k, cause) in segment.causes.iter().enumerate() {
+                let _ = writeln!(
+                    out,
+                    "  {}. {} — {:.0} % of the growth ({:.2} m, {} steps){}",
+                    k + 1,
+                    describe(&cause.source, commands.as_ref()),
+                    cause.share * 100.0,
+                    cause.growth_m,
+                    cause.steps,
+                    ambiguity(cause, commands.as_ref())
+                );
+            }
+        }
+    }
+    if explanations.cases.iter().all(|c| c.segments.is_empty()) {
+        out.push_str("no failing segment to explain\n");
+    }
+    for note in &explanations.notes {
+        let _ = writeln!(out, "note: {note}");
+    }
+    out
+}
+
+fn read_case(case: &CaseExplanation) -> Option<Case> {
+    let text = std::fs::read_to_string(&case.case).ok()?;
+    Case::from_json(&text).ok()
+}
+
+/// A cause in words: a fault with its command.
+fn describe(source: &Source, case: Option<&Case>) -> String {
+    match source {
+        Source::Fault { command_index } => {
+            let what = case
+                .and_then(|c| c.commands.get(*command_index))
+                .and_then(|c| match c {
+                    CommandRecord::AddFault {
+                        probe, kind, param, ..
+                    } => Some(format!(" ({probe} {kind} {param:.2})")),
+                    CommandRecord::RunSegments { .. } => None,
+                });
+            format!("fault: command {command_index}{}", what.unwrap_or_default())
+        }
+        Source::Anchor { anchor_id } => format!("anchor {anchor_id}'s range"),
+        Source::Odometry => "odometry (travelled distance)".to_owned(),
+        Source::Heading => "heading (yaw)".to_owned(),
+        Source::Unexplained => "unexplained".to_owned(),
+    }
+}
+
+fn ambiguity(cause: &Cause, case: Option<&Case>) -> String {
+    cause
+        .ambiguous_with
+        .map(|other| {
+            format!(
+                "; cannot always be told apart from {}",
+                describe(&other, case)
+            )
+        })
+        .unwrap_or_default()
+}
+
+/// The scores as text: per class of truth, what was named first; then the share right.
+fn score_table(scored: &[Scored]) -> String {
+    let named_class = |s: &Scored| match s.named {
+        Some(Source::Fault { .. }) if s.right => "that fault".to_owned(),
+        Some(Source::Fault { .. }) => "another fault".to_owned(),
+        Some(Source::Anchor { anchor_id }) => format!("anchor {anchor_id}"),
+        Some(Source::Odometry) => "odometry".to_owned(),
+        Some(Source::Heading) => "heading".to_owned(),
+        Some(Source::Unexplained) | None => "unexplained".to_owned(),
+    };
+    let mut matrix: BTreeMap<String, BTreeMap<String, usize>> = BTreeMap::new();
+    let mut columns: Vec<String> = Vec::new();
+    for s in scored {
+        let column = named_class(s);
+        if !columns.contains(&column) {
+            columns.push(column.clone());
+        }
+        *matrix
+            .entry(s.truth_class.clone())
+            .or_default()
+            .entry(column)
+            .or_default() += 1;
+    }
+    columns.sort();
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "| truth \\ named first | {} | right |",
+        columns.join(" | ")
+    );
+    let _ = writeln!(out, "|---|{}---|", "---|".repeat(columns.len()));
+    for (truth, row) in &matrix {
+        let total: usize = row.values().sum();
+        let right = scored
+            .iter()
+            .filter(|s| &s.truth_class == truth && s.right)
+            .count();
+        let cells: Vec<String> = columns
+            .iter()
+            .map(|c| row.get(c).copied().unwrap_or(0).to_string())
+            .collect();
+        let _ = writeln!(out, "| {truth} | {} | {right}/{total} |", cells.join(" | "));
+    }
+    let right = scored.iter().filter(|s| s.right).count();
+    let _ = writeln!(
+        out,
+        "\n{} failing segments; the first cause named is the truth in {right} ({:.0} %)",
+        scored.len(),
+        100.0 * right as f64 / scored.len().max(1) as f64
+    );
+    out
+}

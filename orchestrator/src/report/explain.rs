@@ -1,0 +1,466 @@
+//! The explanations of a run directory's tests (`drivecheck explain`): each test's samples from
+//! the recording, its segments' times located on its route (as the report's plot finds them),
+//! its faults' estimated windows and the scenario's anchors, handed to `campaign::explain`.
+
+use std::path::{Path, PathBuf};
+
+use scenarios::Scenario;
+use serde::{Deserialize, Serialize};
+
+use super::ReportError;
+use super::data::{CampaignData, TestData, read_campaign, scenario_for};
+use super::route::boundaries;
+use campaign::case::{Case, CommandRecord};
+use campaign::explain::{
+    ExplainAnchor, ExplainConfig, ExplainFault, ExplainSample, ExplainSegment, SegmentExplanation,
+    explain_segment,
+};
+use campaign::oracle::SegmentVerdict;
+
+/// Every explained case of a run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Explanations {
+    /// The cases, in test order.
+    pub cases: Vec<CaseExplanation>,
+    /// What could not be explained, and why.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
+}
+
+/// One case's explained segments.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CaseExplanation {
+    /// The case file.
+    pub case: PathBuf,
+    /// Its test index.
+    pub test_index: usize,
+    /// The failing segments (every judged one with `all`), in order.
+    pub segments: Vec<SegmentExplanation>,
+}
+
+/// What to explain.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ExplainOptions {
+    /// Every judged segment, not only the failing ones.
+    pub all_segments: bool,
+    /// The method's settings (the threshold is the case's own).
+    pub config: ExplainConfig,
+}
+
+/// Explains the tests of the run directory `dir`, or only the case file `case` in it.
+pub fn explain_run(
+    dir: &Path,
+    only: Option<&Path>,
+    scenario: Option<&Scenario>,
+    options: &ExplainOptions,
+) -> Result<Explanations, ReportError> {
+    let data = read_campaign(dir)?;
+    let (scenario, mut notes) = scenario_for(
+        &data.record.scenario.name,
+        data.record.scenario.hash.as_deref(),
+        scenario,
+        data.recorded_scenario.as_deref(),
+    );
+    notes.extend(data.notes.iter().cloned());
+    let Some(scenario) = scenario else {
+        notes.push("no scenario: the anchors and the route are unknown".to_owned());
+        return Ok(Explanations {
+            cases: Vec::new(),
+            notes,
+        });
+    };
+    let wanted = only.and_then(|p| p.file_name()).and_then(|n| n.to_str());
+    let mut cases = Vec::new();
+    for test in &data.tests {
+        if wanted.is_some_and(|w| w != test.file) {
+            continue;
+        }
+        match explain_test(&data, test, &scenario, options) {
+            Ok(explained) => cases.push(explained),
+            Err(why) => notes.push(format!("{}: {why}", test.file)),
+        }
+    }
+    if let Some(w) = wanted
+        && !data.tests.iter().any(|t| t.file == w)
+    {
+        notes.push(format!("{w} is not a case file of {}", dir.display()));
+    }
+    Ok(Explanations { cases, notes })
+}
+
+fn explain_test(
+    data: &CampaignData,
+    test: &TestData,
+    scenario: &Scenario,
+    options: &ExplainOptions,
+) -> Result<CaseExplanation, String> {
+    let case = &test.case;
+    let track = test
+        .track
+        .as_ref()
+        .ok_or("the recording has no samples of this test")?;
+    let samples: Vec<ExplainSample> = track
+        .samples
+        .iter()
+        .map(|s| ExplainSample {
+            t_s: s.t_s,
+            rtk: s.rtk,
+            uwb: s.uwb,
+        })
+        .collect();
+    let bounds = boundaries(scenario, case, &track.samples);
+    let anchors: Vec<ExplainAnchor> = scenario
+        .anchors
+        .iter()
+        .map(|a| ExplainAnchor {
+            id: u16::from(a.id),
+            position: trajgen::Point::new(a.x, a.y),
+        })
+        .collect();
+    let faults = faults_of(case);
+    let mut segments = Vec::new();
+    for result in &case.segments {
+        let failed = result.oracle.verdict == SegmentVerdict::Failed;
+        if !failed && !options.all_segments {
+            continue;
+        }
+        let k = result.segment_index;
+        let at = |label: &str| bounds.iter().find(|b| b.label == label).map(|b| b.t_s);
+        let from_s = at(&format!("s{k}"));
+        let to_s = at(&format!("s{}", k + 1))
+            .or_else(|| at("end"))
+            .or_else(|| samples.last().map(|s| s.t_s));
+        let (Some(from_s), Some(to_s)) = (from_s, to_s) else {
+            continue;
+        };
+        let segment = ExplainSegment {
+            segment_index: k,
+            from_s,
+            to_s,
+            failed,
+        };
+        let config = ExplainConfig {
+            threshold_m: result.oracle.threshold_m,
+            ..options.config
+        };
+        segments.extend(explain_segment(
+            &segment, &samples, &anchors, &faults, &config,
+        ));
+    }
+    Ok(CaseExplanation {
+        case: data.dir.join(&test.file),
+        test_index: test.index,
+        segments,
+    })
+}
+
+/// The case's faults with their estimated windows (faults the car confirmed).
+pub(crate) fn faults_of(case: &Case) -> Vec<ExplainFault> {
+    case.fault_places
+        .iter()
+        .filter_map(|place| match case.commands.get(place.command_index) {
+            Some(CommandRecord::AddFault { probe, .. }) => Some(ExplainFault {
+                command_index: place.command_index,
+                probe: *probe,
+                acts_from_s: place.acts_from_s,
+                acts_to_s: place.acts_to_s,
+            }),
+            _ => None,
+        })
+        .collect()
+}
+
+/// What really made a failing segment's error grow, from a simulated run's hidden truth.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "truth")]
+pub enum TrueCause {
+    /// An injected fault applied during the growth (the one that moved the estimate most).
+    Fault {
+        /// Its command's index in the case.
+        command_index: usize,
+    },
+    /// No fault applied, and this anchor's ranges came over a reflected path.
+    Reflection {
+        /// The anchor.
+        anchor_id: u16,
+    },
+    /// Neither: dead reckoning's own drift and range noise.
+    Nominal,
+}
+
+/// One failing segment: what the explanation named first, and the truth.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Scored {
+    /// The case file.
+    pub case: PathBuf,
+    /// The segment.
+    pub segment_index: usize,
+    /// The first cause named (`None`: only `unexplained`).
+    pub named: Option<campaign::explain::Source>,
+    /// The truth.
+    pub truth: TrueCause,
+    /// The class of the truth, for the confusion matrix (`range offset`, `wheel slip`, …).
+    pub truth_class: String,
+    /// Whether the first cause named is the truth (a fault: that very command; a reflection:
+    /// that anchor's range; nominal: no fault and no anchor).
+    pub right: bool,
+}
+
+/// The truth of each failing segment of a simulated run, next to its explanation.
+pub fn score_run(
+    dir: &Path,
+    scenario: Option<&Scenario>,
+    options: &ExplainOptions,
+) -> Result<(Explanations, Vec<Scored>), ReportError> {
+    use crate::recording::{Recording, SimFault, SimRange, TruthRecord};
+    let explanations = explain_run(dir, None, scenario, options)?;
+    let data = read_campaign(dir)?;
+    let path = dir.join(crate::runner::RECORDING_FILE);
+    let recording = Recording::read(&path).map_err(|e| invalid(&path, e))?;
+    let read = |e: crate::recording::RecordingError| invalid(&path, e);
+    if recording
+        .messages::<TruthRecord>()
+        .map_err(read)?
+        .is_empty()
+    {
+        return Err(invalid(
+            &path,
+            "the recording has no simulator truth (/sim/truth): only a simulated run can be \
+             scored",
+        ));
+    }
+    let faults = recording.messages::<SimFault>().map_err(read)?;
+    let ranges = recording.messages::<SimRange>().map_err(read)?;
+    let mut scored = Vec::new();
+    for case in &explanations.cases {
+        let Some(test) = data.tests.iter().find(|t| t.index == case.test_index) else {
+            continue;
+        };
+        let Some(track) = &test.track else { continue };
+        let t_of = |log_ns: u64| (log_ns as f64 - track.zero_ns as f64) / 1e9;
+        for segment in case.segments.iter().filter(|s| s.verdict == "failed") {
+            let (a, b) = (segment.from_s - TRUTH_SLACK_S, segment.to_s);
+            let inside = |log_ns: u64| (a..=b).contains(&t_of(log_ns));
+            // Faults: how far each (probe, slot) moved the estimate, metres.
+            let mut moved: Vec<(usize, f64)> = Vec::new();
+            for applied in faults.iter().filter(|f| inside(f.log_time_ns)) {
+                let f = &applied.message;
+                let delta = (f.after - f.before).abs();
+                let metres = match f.probe.as_str() {
+                    "uwb_travel_dist" => delta,
+                    "uwb_yaw" => delta.to_radians() * YAW_LEVER_M,
+                    _ => delta.min(MAX_CORRECTION_M),
+                };
+                for slot in 0..8 {
+                    if f.slots & (1 << slot) == 0 {
+                        continue;
+                    }
+                    if let Some(command) = command_of_slot(&test.case, &f.probe, slot) {
+                        match moved.iter_mut().find(|m| m.0 == command) {
+                            Some(m) => m.1 += metres,
+                            None => moved.push((command, metres)),
+                        }
+                    }
+                }
+            }
+            moved.sort_by(|x, y| y.1.total_cmp(&x.1));
+            let truth = match moved.first() {
+                Some(&(command_index, metres)) if metres >= FAULT_MOVED_M => {
+                    TrueCause::Fault { command_index }
+                }
+                _ => {
+                    let mut reflected: Vec<(u16, f64)> = Vec::new();
+                    for request in ranges.iter().filter(|r| inside(r.log_time_ns)) {
+                        if let SimRange::Request {
+                            anchor,
+                            path: Some(p),
+                            true_range_m: Some(truth),
+                            range_m: Some(range),
+                            ..
+                        } = &request.message
+                            && p.kind == crate::recording::RadioPathKind::Reflected
+                        {
+                            let excess = (range - truth).max(0.0);
+                            let id = u16::from(*anchor);
+                            match reflected.iter_mut().find(|r| r.0 == id) {
+                                Some(r) => r.1 += excess,
+                                None => reflected.push((id, excess)),
+                            }
+                        }
+                    }
+                    reflected.sort_by(|x, y| y.1.total_cmp(&x.1));
+                    match reflected.first() {
+                        Some(&(anchor_id, excess)) if excess >= REFLECTED_EXCESS_M => {
+                            TrueCause::Reflection { anchor_id }
+                        }
+                        _ => TrueCause::Nominal,
+                    }
+                }
+            };
+            use campaign::explain::Source;
+            let named = segment.top().map(|c| c.source);
+            let right = match (truth, named) {
+                (TrueCause::Fault { command_index }, Some(Source::Fault { command_index: n })) => {
+                    command_index == n
+                }
+                (TrueCause::Reflection { anchor_id }, Some(Source::Anchor { anchor_id: n })) => {
+                    anchor_id == n
+                }
+                (TrueCause::Nominal, named) => {
+                    !matches!(named, Some(Source::Fault { .. } | Source::Anchor { .. }))
+                }
+                _ => false,
+            };
+            scored.push(Scored {
+                case: case.case.clone(),
+                segment_index: segment.segment_index,
+                named,
+                truth,
+                truth_class: truth_class(&test.case, truth),
+                right,
+            });
+        }
+    }
+    Ok((explanations, scored))
+}
+
+/// The truth looks this far before the growth interval (a fault's last applications before
+/// the error crossed the nominal level still count), seconds.
+const TRUTH_SLACK_S: f64 = 0.5;
+/// The firmware's largest correction per range, metres.
+const MAX_CORRECTION_M: f64 = 0.2;
+/// What a yaw error of one radian moves the estimate per odometry tick at about 2 m/s, metres.
+const YAW_LEVER_M: f64 = 0.02;
+/// A fault that moved the estimate less than this is not the truth, metres.
+const FAULT_MOVED_M: f64 = 0.05;
+/// Reflected ranges longer than the direct path by less than this in all are not the truth,
+/// metres.
+const REFLECTED_EXCESS_M: f64 = 0.3;
+
+/// The command index of the fault in slot `slot` of `probe`: the car fills a probe's slots in
+/// the order it adds faults, which is the order of the case's `fault_places`.
+fn command_of_slot(case: &Case, probe: &str, slot: usize) -> Option<usize> {
+    case.fault_places
+        .iter()
+        .filter(|place| {
+            matches!(case.commands.get(place.command_index),
+                Some(CommandRecord::AddFault { probe: p, .. }) if p.to_string() == probe)
+        })
+        .nth(slot)
+        .map(|place| place.command_index)
+}
+
+/// The class of a truth, for the confusion matrix.
+fn truth_class(case: &Case, truth: TrueCause) -> String {
+    match truth {
+        TrueCause::Fault { command_index } => match case.commands.get(command_index) {
+            Some(CommandRecord::AddFault { probe, kind, .. }) => match probe {
+                car_link::Probe::UwbRange(_) => {
+                    format!("range {}", kind.to_string().to_lowercase())
+                }
+                car_link::Probe::UwbTravelDist => "wheel slip".to_owned(),
+                car_link::Probe::UwbYaw => "yaw".to_owned(),
+                car_link::Probe::Px => "px".to_owned(),
+            },
+            _ => "fault".to_owned(),
+        },
+        TrueCause::Reflection { anchor_id } => format!("reflection on {anchor_id}"),
+        TrueCause::Nominal => "nominal".to_owned(),
+    }
+}
+
+fn invalid(path: &Path, error: impl std::fmt::Display) -> ReportError {
+    ReportError::Invalid {
+        path: path.to_owned(),
+        message: error.to_string(),
+    }
+}
+
+/// Thresholds for `campaign::explain` from a fault-free run, at a false-alarm budget.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Calibration {
+    /// Samples of |UWB − RTK| read.
+    pub samples: usize,
+    /// Judged segments read.
+    pub segments: usize,
+    /// The budget: the share of fault-free samples above `nominal_m`, and of fault-free segments
+    /// with a cause above `min_growth_m`.
+    pub budget: f64,
+    /// The error level `1 − budget` of the fault-free samples stay at or below, metres.
+    pub nominal_m: f64,
+    /// The growth a cause of `1 − budget` of the fault-free segments stays below (with that
+    /// nominal level), metres.
+    pub min_growth_m: f64,
+}
+
+/// Calibrates the nominal level and the least growth on the fault-free run `dir`: the
+/// `1 − budget` quantile of its |UWB − RTK| samples, then of the largest growth any cause gets
+/// in each of its judged segments with that nominal level and no least growth.
+pub fn calibrate(
+    dir: &Path,
+    scenario: Option<&Scenario>,
+    budget: f64,
+) -> Result<Calibration, ReportError> {
+    let data = read_campaign(dir)?;
+    if data.tests.iter().any(|t| {
+        t.case
+            .commands
+            .iter()
+            .any(|c| matches!(c, CommandRecord::AddFault { .. }))
+    }) {
+        return Err(invalid(
+            dir,
+            "the run has fault commands: calibrate on a fault-free run (drivecheck run --no-faults)",
+        ));
+    }
+    let mut errors: Vec<f64> = data
+        .tests
+        .iter()
+        .filter_map(|t| t.track.as_ref())
+        .flat_map(|track| track.samples.iter().filter_map(|s| s.deviation_m))
+        .collect();
+    if errors.is_empty() {
+        return Err(invalid(dir, "the recording has no samples to calibrate on"));
+    }
+    errors.sort_by(f64::total_cmp);
+    let nominal_m = quantile(&errors, 1.0 - budget);
+    let options = ExplainOptions {
+        all_segments: true,
+        config: ExplainConfig {
+            nominal_m,
+            min_growth_m: 0.0,
+            ..ExplainConfig::default()
+        },
+    };
+    let explained = explain_run(dir, None, scenario, &options)?;
+    let mut largest: Vec<f64> = explained
+        .cases
+        .iter()
+        .flat_map(|c| c.segments.iter())
+        .map(|s| {
+            s.causes
+                .iter()
+                .filter(|c| c.source != campaign::explain::Source::Unexplained)
+                .map(|c| c.growth_m)
+                .fold(0.0, f64::max)
+        })
+        .collect();
+    largest.sort_by(f64::total_cmp);
+    Ok(Calibration {
+        samples: errors.len(),
+        segments: largest.len(),
+        budget,
+        nominal_m,
+        min_growth_m: if largest.is_empty() {
+            0.0
+        } else {
+            quantile(&largest, 1.0 - budget)
+        },
+    })
+}
+
+/// The nearest-rank `q` quantile of sorted, non-empty `values`.
+fn quantile(values: &[f64], q: f64) -> f64 {
+    let rank = ((q * values.len() as f64).ceil() as usize).clamp(1, values.len());
+    values[rank - 1]
+}

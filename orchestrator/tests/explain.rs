@@ -1,0 +1,89 @@
+//! `drivecheck explain` end to end: a campaign on the rock lot without faults (a rock hides anchor
+//! 234 for part of the lot and a wall reflects its signal) is explained from its recording, scored
+//! against the simulator's truth, and calibrated on; a case file alone is explained too.
+
+mod common;
+
+use common::{campaign, drivecheck, path, text};
+
+#[test]
+fn the_rock_lots_failures_are_explained_by_anchor_234s_reflected_range() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = campaign(
+        dir.path(),
+        1,
+        4,
+        &[
+            "--scenario",
+            "parking-lot-rock",
+            "--no-faults",
+            "--on-failure",
+            "continue",
+        ],
+        1,
+    );
+    let out = drivecheck(&["explain", path(&run), "--json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let segments: Vec<&serde_json::Value> = json["cases"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|c| c["segments"].as_array().unwrap())
+        .collect();
+    assert!(!segments.is_empty(), "{json}");
+    let named_234 = segments
+        .iter()
+        .filter(|s| s["causes"][0]["source"] == "anchor" && s["causes"][0]["anchor_id"] == 234)
+        .count();
+    assert!(
+        named_234 * 10 >= segments.len() * 9,
+        "{named_234} of {} name anchor 234 first",
+        segments.len()
+    );
+    assert!(segments.iter().all(|s| s["verdict"] == "failed"));
+    // Scored against the truth the simulator recorded: a table and the share right.
+    let scored = drivecheck(&["explain", path(&run), "--score"]);
+    assert_eq!(scored.status.code(), Some(0), "{}", text(&scored));
+    let table = String::from_utf8_lossy(&scored.stdout);
+    assert!(
+        table.contains("| reflection on 234 |") && table.contains("failing segments"),
+        "{table}"
+    );
+    // One case file alone, as text.
+    let case = json["cases"][0]["case"].as_str().unwrap().to_owned();
+    let one = drivecheck(&["explain", &case]);
+    assert_eq!(one.status.code(), Some(0), "{}", text(&one));
+    assert!(
+        String::from_utf8_lossy(&one.stdout).contains("anchor 234's range"),
+        "{}",
+        text(&one)
+    );
+    // Calibration wants a fault-free run: this one is.
+    let calibrated = drivecheck(&["explain", path(&run), "--calibrate"]);
+    assert_eq!(calibrated.status.code(), Some(0), "{}", text(&calibrated));
+    assert!(String::from_utf8_lossy(&calibrated.stdout).contains("--nominal"));
+}
+
+#[test]
+fn a_run_with_faults_is_explained_by_them_and_cannot_be_calibrated_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = campaign(dir.path(), 1, 6, &["--on-failure", "continue"], 1);
+    let out = drivecheck(&["explain", path(&run), "--score", "--json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let scored = json["scored"].as_array().unwrap();
+    assert!(!scored.is_empty(), "{json}");
+    let right = scored.iter().filter(|s| s["right"] == true).count();
+    assert!(
+        right * 10 >= scored.len() * 8,
+        "{right} of {} right",
+        scored.len()
+    );
+    let calibrated = drivecheck(&["explain", path(&run), "--calibrate"]);
+    assert_eq!(calibrated.status.code(), Some(2), "{}", text(&calibrated));
+    assert!(String::from_utf8_lossy(&calibrated.stderr).contains("fault-free"));
+    let missing = drivecheck(&["explain", "no-such-dir"]);
+    assert_eq!(missing.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&missing.stderr).contains("no-such-dir"));
+}
