@@ -69,6 +69,21 @@ fn the_rock_lots_failures_are_explained_by_anchor_234s_reflected_range() {
 fn a_run_with_faults_is_explained_by_them_and_cannot_be_calibrated_on() {
     let dir = tempfile::tempdir().unwrap();
     let run = campaign(dir.path(), 1, 6, &["--on-failure", "continue"], 1);
+    // `run` wrote each failed case's explanation into its case file.
+    let explained: Vec<campaign::case::Case> = std::fs::read_dir(&run)
+        .unwrap()
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.file_name()
+                .unwrap()
+                .to_string_lossy()
+                .starts_with("case-")
+        })
+        .map(|p| campaign::case::Case::from_json(&std::fs::read_to_string(p).unwrap()).unwrap())
+        .filter(|c| c.verdict == Some(campaign::oracle::Verdict::Failed))
+        .collect();
+    assert!(!explained.is_empty());
+    assert!(explained.iter().all(|c| !c.explanation.is_empty()));
     let out = drivecheck(&["explain", path(&run), "--score", "--json"]);
     assert_eq!(out.status.code(), Some(0), "{}", text(&out));
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();

@@ -546,6 +546,10 @@ pub struct Case {
     /// embedded simulated car in virtual time).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub timing: Option<TestTiming>,
+    /// Why each failing segment failed (`drivecheck explain`, `docs/explain.md`): written by
+    /// `drivecheck run` after the campaign, from the recording.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub explanation: Vec<crate::explain::SegmentExplanation>,
 }
 
 /// How long a test took, seconds on the runner's clock.
@@ -600,6 +604,7 @@ impl Case {
             streaming: None,
             fault_places: Vec::new(),
             timing: None,
+            explanation: Vec::new(),
         }
     }
 

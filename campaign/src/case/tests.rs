@@ -191,6 +191,7 @@ fn check_refuses_unusable_values() {
         streaming: None,
         fault_places: Vec::new(),
         timing: None,
+        explanation: Vec::new(),
     };
     let point = |speed| RoutePointRecord {
         x: 0.0,

@@ -262,6 +262,7 @@ mod tests {
             streaming: None,
             fault_places: Vec::new(),
             timing: None,
+            explanation: Vec::new(),
         }
     }
 

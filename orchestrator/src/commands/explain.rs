@@ -154,6 +154,12 @@ fn read_case(case: &CaseExplanation) -> Option<Case> {
     Case::from_json(&text).ok()
 }
 
+/// A cause of test `test_index` in words (the campaign's `cases` give the fault's command).
+pub(super) fn describe_source(source: &Source, cases: &[Case], test_index: usize) -> String {
+    let case = cases.iter().find(|c| c.test_index == Some(test_index));
+    describe(source, case)
+}
+
 /// A cause in words: a fault with its command.
 fn describe(source: &Source, case: Option<&Case>) -> String {
     match source {

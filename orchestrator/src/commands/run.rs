@@ -13,10 +13,11 @@ use scenarios::Scenario;
 use super::shared::{
     CampaignFailed, Interrupt, Progress, cancel_on_ctrl_c, connect, print_report, runtime, sim_view,
 };
-use super::shrink;
+use super::{explain, shrink};
 use crate::cli::{OnFailure, RunArgs};
 use crate::junit;
 use crate::report::REPORT_FILE;
+use crate::report::explain::{ExplainOptions, explain_run};
 use crate::runner::{CampaignReport, RunConfig, run_campaign, run_dir_name};
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::choose_seed;
@@ -87,6 +88,7 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     let wall = started.elapsed();
     let report = result?;
     print_report(&report, Some(wall));
+    explain_failed(&report, &scenario);
     if let Some(file) = &args.junit {
         write_junit(&report, file)?;
     }
@@ -103,6 +105,64 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     } else {
         ExitCode::from(1)
     })
+}
+
+/// Explains every failing segment from the recording (`drivecheck explain`), writes each case's
+/// `explanation` into its case file and prints the first cause per segment. What cannot be
+/// explained (no recording) is a warning: the campaign's results stand without it.
+fn explain_failed(report: &CampaignReport, scenario: &Scenario) {
+    if !report
+        .cases
+        .iter()
+        .any(|c| c.verdict == Some(Verdict::Failed))
+    {
+        return;
+    }
+    let explained = match explain_run(
+        &report.dir,
+        None,
+        Some(scenario),
+        &ExplainOptions::default(),
+    ) {
+        Ok(explained) => explained,
+        Err(error) => {
+            eprintln!("warning: the failures are not explained: {error}");
+            return;
+        }
+    };
+    for case in explained.cases.iter().filter(|c| !c.segments.is_empty()) {
+        let written = std::fs::read_to_string(&case.case)
+            .map_err(anyhow::Error::from)
+            .and_then(|text| Ok(Case::from_json(&text)?))
+            .and_then(|mut on_disk| {
+                on_disk.explanation = case.segments.clone();
+                crate::atomic::write(&case.case, on_disk.to_json()?)?;
+                Ok(())
+            });
+        if let Err(error) = written {
+            eprintln!(
+                "warning: {}: the explanation is not written: {error}",
+                case.case.display()
+            );
+        }
+        for segment in &case.segments {
+            let Some(top) = segment.causes.first() else {
+                continue;
+            };
+            println!(
+                "why test {:03} segment {} failed: {} ({:.0} % of the growth{})",
+                case.test_index,
+                segment.segment_index,
+                explain::describe_source(&top.source, &report.cases, case.test_index),
+                top.share * 100.0,
+                if segment.causes.len() > 1 {
+                    "; drivecheck explain for the rest"
+                } else {
+                    ""
+                }
+            );
+        }
+    }
 }
 
 /// Writes the campaign's tests as JUnit XML to `file`.

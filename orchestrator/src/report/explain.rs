@@ -94,6 +94,20 @@ fn explain_test(
     scenario: &Scenario,
     options: &ExplainOptions,
 ) -> Result<CaseExplanation, String> {
+    Ok(CaseExplanation {
+        case: data.dir.join(&test.file),
+        test_index: test.index,
+        segments: explain_segments(test, scenario, options)?,
+    })
+}
+
+/// The explained segments of one test (the failing ones; every judged one with
+/// `options.all_segments`); an error when the recording has no samples of it.
+pub(crate) fn explain_segments(
+    test: &TestData,
+    scenario: &Scenario,
+    options: &ExplainOptions,
+) -> Result<Vec<SegmentExplanation>, String> {
     let case = &test.case;
     let track = test
         .track
@@ -147,11 +161,7 @@ fn explain_test(
             &segment, &samples, &anchors, &faults, &config,
         ));
     }
-    Ok(CaseExplanation {
-        case: data.dir.join(&test.file),
-        test_index: test.index,
-        segments,
-    })
+    Ok(segments)
 }
 
 /// The case's faults with their estimated windows (faults the car confirmed).

@@ -11,9 +11,11 @@ use super::draw::{
     AMBER, Colouring, FAULT, FaultMark, GREEN, MAX_TRACK_POINTS, MapLayers, PlotInput, RED_ABOVE,
     RUN_COLOURS, TrackLayer, Window, css, decimate, deviation_svg, map_svg,
 };
+use super::explain::{ExplainOptions, explain_segments};
 use super::route::{boundaries, point_along, segments};
 use crate::runner::TestSummary;
 use campaign::case::{Case, CommandRecord};
+use campaign::explain::{SegmentExplanation, Source};
 use campaign::oracle::{SegmentVerdict, Verdict};
 use campaign::shrink::RunResult;
 
@@ -338,6 +340,65 @@ fn figure(out: &mut String, svg: Option<String>, missing: &str) {
     }
 }
 
+/// The causes of each failing segment's error growth (`drivecheck explain`), most first.
+fn causes_table(out: &mut String, case: &Case, explained: &[SegmentExplanation]) {
+    out.push_str(
+        "<table>\n<tr><th>segment</th><th>|UWB − RTK|</th><th>cause</th><th>share</th>\
+         <th>growth</th></tr>\n",
+    );
+    for segment in explained {
+        let rows = segment.causes.len();
+        for (k, cause) in segment.causes.iter().enumerate() {
+            let first = if k == 0 {
+                format!(
+                    "<td rowspan=\"{rows}\">s{}</td><td rowspan=\"{rows}\">{:.2} → {:.2} m, \
+                     {:.1}–{:.1} s</td>",
+                    segment.segment_index,
+                    segment.error_from_m,
+                    segment.error_to_m,
+                    segment.from_s,
+                    segment.to_s
+                )
+            } else {
+                String::new()
+            };
+            let ambiguous = cause.ambiguous_with.map_or_else(String::new, |other| {
+                format!(
+                    " (cannot always be told apart from {})",
+                    cause_words(&other, case)
+                )
+            });
+            let _ = writeln!(
+                out,
+                "<tr>{first}<td>{}{}</td><td>{:.0} %</td><td>{:.2} m</td></tr>",
+                escape(&cause_words(&cause.source, case)),
+                escape(&ambiguous),
+                cause.share * 100.0,
+                cause.growth_m
+            );
+        }
+    }
+    out.push_str(
+        "</table>\n<p class=\"sub\">Each step's change of UWB − RTK is credited to the \
+         direction it follows: an anchor's line (its range), the heading (odometry) or across it \
+         (yaw), and to the fault acting that way in its window (docs/explain.md).</p>\n",
+    );
+}
+
+/// A cause in words, with its fault command's probe.
+fn cause_words(source: &Source, case: &Case) -> String {
+    match source {
+        Source::Fault { command_index } => format!(
+            "fault: command {command_index} ({})",
+            probe_of(case, *command_index)
+        ),
+        Source::Anchor { anchor_id } => format!("anchor {anchor_id}'s range"),
+        Source::Odometry => "odometry".to_owned(),
+        Source::Heading => "heading".to_owned(),
+        Source::Unexplained => "unexplained".to_owned(),
+    }
+}
+
 /// The section of one test (or one run of a replay): facts, map, plot, tables.
 fn test_section(
     out: &mut String,
@@ -426,6 +487,20 @@ fn test_section(
     );
     if has_plot && let Some(track) = &test.track {
         plot_legend(out, track.origin);
+    }
+    if let Some(scenario) = scenario
+        && case
+            .segments
+            .iter()
+            .any(|s| s.oracle.verdict == SegmentVerdict::Failed)
+    {
+        out.push_str("<h3>Why it failed</h3>\n");
+        match explain_segments(test, scenario, &ExplainOptions::default()) {
+            Ok(explained) => causes_table(out, case, &explained),
+            Err(why) => {
+                let _ = writeln!(out, "<p class=\"sub\">Not explained: {}.</p>", escape(&why));
+            }
+        }
     }
     out.push_str("<h3>Segments</h3>\n");
     segments_table(out, case);
