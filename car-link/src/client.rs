@@ -995,14 +995,7 @@ impl Car {
     ///
     /// Timeout and cancellation: as [`Car::terminal`]; no reply at all is [`FaultError::NoReply`].
     pub async fn list_faults(&self) -> Result<Vec<fault::ListedFault>, CarError> {
-        let lines = self
-            .shared()
-            .terminal_lines(
-                fault::PRINT_FAULTS_COMMAND,
-                fault::is_print_faults_reply,
-                fault::print_faults_complete,
-            )
-            .await?;
+        let lines = self.print_faults_lines().await?;
         Ok(fault::parse_print_faults_reply(&lines)?)
     }
 
@@ -1012,15 +1005,19 @@ impl Car {
     ///
     /// Timeout and cancellation: as [`Car::terminal`]; nothing at all is [`FaultError::NoReply`].
     pub async fn list_faults_part(&self) -> Result<Vec<fault::ListedFault>, CarError> {
-        let lines = self
-            .shared()
+        let lines = self.print_faults_lines().await?;
+        Ok(fault::parse_print_faults_part(&lines)?)
+    }
+
+    /// The reply lines of `fi_print_faults` that arrived.
+    async fn print_faults_lines(&self) -> Result<Vec<String>, CarError> {
+        self.shared()
             .terminal_lines(
                 fault::PRINT_FAULTS_COMMAND,
                 fault::is_print_faults_reply,
                 fault::print_faults_complete,
             )
-            .await?;
-        Ok(fault::parse_print_faults_part(&lines)?)
+            .await
     }
 
     /// Frees every probe and fault slot and zeroes the counters (`fi_clear_faults`).

@@ -27,3 +27,13 @@ pub fn print_warnings(loaded: &Loaded) {
         eprintln!("warning: {warning}");
     }
 }
+
+/// The scenario of an optional `--scenario` argument, loaded with its warnings printed.
+pub fn optional_scenario(arg: Option<&str>) -> Result<Option<scenarios::Scenario>> {
+    arg.map(|arg| {
+        let loaded = load_scenario(arg)?;
+        print_warnings(&loaded);
+        Ok(loaded.scenario)
+    })
+    .transpose()
+}

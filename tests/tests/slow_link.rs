@@ -8,47 +8,16 @@ use campaign::model::Campaign;
 use campaign::oracle::Verdict;
 use car_link::{Car, LinkConfig};
 use car_sim::{LinkImpairment, SimConfig};
-use orchestrator::runner::{RunConfig, Silent, SimulatorView, run_campaign};
+use orchestrator::runner::{CampaignReport, RunConfig, Silent, SimulatorView, run_campaign};
 use tokio_util::sync::CancellationToken;
 
 #[tokio::test(start_paused = true)]
 async fn a_campaign_over_half_a_second_each_way_drives_its_tests() {
-    let scenario = scenarios::bundled::load("parking-lot-2anchors")
-        .unwrap()
-        .scenario;
-    let sim_config = SimConfig {
-        seed: 5,
-        link: LinkImpairment {
-            latency: Duration::from_millis(500),
-            ..LinkImpairment::default()
-        },
-        ..SimConfig::from_scenario(&scenario)
+    let link = LinkImpairment {
+        latency: Duration::from_millis(500),
+        ..LinkImpairment::default()
     };
-    let (stream, sim) = car_sim::spawn_in_process(&sim_config);
-    let link_config = LinkConfig {
-        request_timeout: Duration::from_secs(1),
-        terminal_timeout: Duration::from_secs(2),
-        tries: 10,
-        ..LinkConfig::default()
-    };
-    let car = Car::over_stream(stream, link_config).await.unwrap();
-    let dir = tempfile::tempdir().unwrap();
-    let campaign = Campaign {
-        seed: 5,
-        tests: 2,
-        no_faults: false,
-    };
-    let config = RunConfig::new(campaign, dir.path().join("run"), "sim");
-    let report = run_campaign(
-        &car,
-        &scenario,
-        &config,
-        &CancellationToken::new(),
-        &Silent,
-        Some(&sim as &dyn SimulatorView),
-    )
-    .await
-    .unwrap_or_else(|failure| panic!("{}", failure.error));
+    let (car, report) = campaign_over(link, 5, 2, None).await;
     // Round trips of a little over 1 s: 2 × p99 + 100 ms per try (before, the late replies of
     // 1 s tries made them read 0.4 s, and the read-back of an upload compared the wrong points).
     let per_try = car.request_timeout();
@@ -76,44 +45,12 @@ async fn a_campaign_over_half_a_second_each_way_drives_its_tests() {
 /// faults on this probe", after a fault list that lost a line looked complete).
 #[tokio::test(start_paused = true)]
 async fn a_campaign_at_thirty_percent_loss_ends_every_test_judged_or_with_a_clear_reason() {
-    let scenario = scenarios::bundled::load("parking-lot-2anchors")
-        .unwrap()
-        .scenario;
     for seed in [1, 2] {
-        let sim_config = SimConfig {
-            seed,
-            link: LinkImpairment {
-                loss: 0.3,
-                ..LinkImpairment::default()
-            },
-            ..SimConfig::from_scenario(&scenario)
+        let link = LinkImpairment {
+            loss: 0.3,
+            ..LinkImpairment::default()
         };
-        let (stream, sim) = car_sim::spawn_in_process(&sim_config);
-        let link_config = LinkConfig {
-            request_timeout: Duration::from_secs(1),
-            terminal_timeout: Duration::from_secs(2),
-            tries: 10,
-            ..LinkConfig::default()
-        };
-        let car = Car::over_stream(stream, link_config).await.unwrap();
-        let dir = tempfile::tempdir().unwrap();
-        let campaign = Campaign {
-            seed: 5,
-            tests: 3,
-            no_faults: false,
-        };
-        let mut config = RunConfig::new(campaign, dir.path().join("run"), "sim");
-        config.safety.stale_after = Duration::from_secs(1);
-        let report = run_campaign(
-            &car,
-            &scenario,
-            &config,
-            &CancellationToken::new(),
-            &Silent,
-            Some(&sim as &dyn SimulatorView),
-        )
-        .await
-        .unwrap_or_else(|failure| panic!("seed {seed}: {}", failure.error));
+        let (_, report) = campaign_over(link, seed, 3, Some(Duration::from_secs(1))).await;
         assert_eq!(report.cases.len(), 3);
         let judged = report
             .cases
@@ -136,4 +73,52 @@ async fn a_campaign_at_thirty_percent_loss_ends_every_test_judged_or_with_a_clea
             }
         }
     }
+}
+
+/// A campaign of `tests` tests (seed 5) on a fresh embedded simulated car seeded with `seed`
+/// behind `link`, over a link configured as drivecheck's commands configure it; the car (for its
+/// per-try timeout) and the report.
+async fn campaign_over(
+    link: LinkImpairment,
+    seed: u64,
+    tests: usize,
+    stale_after: Option<Duration>,
+) -> (Car, CampaignReport) {
+    let scenario = scenarios::bundled::load("parking-lot-2anchors")
+        .unwrap()
+        .scenario;
+    let sim_config = SimConfig {
+        seed,
+        link,
+        ..SimConfig::from_scenario(&scenario)
+    };
+    let (stream, sim) = car_sim::spawn_in_process(&sim_config);
+    let link_config = LinkConfig {
+        request_timeout: Duration::from_secs(1),
+        terminal_timeout: Duration::from_secs(2),
+        tries: 10,
+        ..LinkConfig::default()
+    };
+    let car = Car::over_stream(stream, link_config).await.unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = Campaign {
+        seed: 5,
+        tests,
+        no_faults: false,
+    };
+    let mut config = RunConfig::new(campaign, dir.path().join("run"), "sim");
+    if let Some(stale_after) = stale_after {
+        config.safety.stale_after = stale_after;
+    }
+    let report = run_campaign(
+        &car,
+        &scenario,
+        &config,
+        &CancellationToken::new(),
+        &Silent,
+        Some(&sim as &dyn SimulatorView),
+    )
+    .await
+    .unwrap_or_else(|failure| panic!("seed {seed}: {}", failure.error));
+    (car, report)
 }

@@ -13,20 +13,13 @@ use crate::cli::ExplainArgs;
 use crate::report::explain::{
     CaseExplanation, ExplainOptions, Explanations, Scored, calibrate, explain_run, score_run,
 };
-use crate::scenario_arg::{load_scenario, print_warnings};
+use crate::scenario_arg::optional_scenario;
 use campaign::case::{Case, CommandRecord};
 use campaign::explain::{Cause, Source};
 
 /// Explains the target's failing segments (see the module doc). Exit status 0, or 2 on an error.
 pub fn explain(args: &ExplainArgs) -> Result<ExitCode> {
-    let scenario = match &args.scenario {
-        Some(arg) => {
-            let loaded = load_scenario(arg)?;
-            print_warnings(&loaded);
-            Some(loaded.scenario)
-        }
-        None => None,
-    };
+    let scenario = optional_scenario(args.scenario.as_deref())?;
     let (dir, only) = if args.target.is_dir() {
         (args.target.clone(), None)
     } else if args.target.is_file() {

@@ -8,19 +8,12 @@ use anyhow::Result;
 
 use crate::cli::ReportArgs;
 use crate::report::{self, REPORT_FILE, ReportKind};
-use crate::scenario_arg::{load_scenario, print_warnings};
+use crate::scenario_arg::optional_scenario;
 
 /// Writes the report. Exit status 0, or 2 on an error (not a run directory, a file that cannot
 /// be read or written).
 pub fn report(args: &ReportArgs) -> Result<ExitCode> {
-    let scenario = match &args.scenario {
-        Some(arg) => {
-            let loaded = load_scenario(arg)?;
-            print_warnings(&loaded);
-            Some(loaded.scenario)
-        }
-        None => None,
-    };
+    let scenario = optional_scenario(args.scenario.as_deref())?;
     let out = args
         .out
         .clone()
