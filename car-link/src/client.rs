@@ -980,11 +980,16 @@ impl Car {
         }
         let command = fault::add_fault_command(probe, kind, param, start, duration);
         let success = format!("successfully added to probe {probe}.");
+        // One fault command per probe at a time; those for different probes may be in flight together
+        // (their success lines name their probes).
         let lines = self
             .shared()
-            .terminal_lines(&command, fault::is_fault_reply, |lines| {
-                lines.iter().any(|l| l.contains(&success))
-            })
+            .terminal_lines_in(
+                Some(&format!("fi_add_fault {id}")),
+                &command,
+                |line| fault::is_add_fault_reply(line, probe),
+                |lines| lines.iter().any(|l| l.contains(&success)),
+            )
             .await?;
         Ok(fault::parse_add_fault_reply(&lines, probe)?)
     }

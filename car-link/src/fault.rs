@@ -231,9 +231,24 @@ fn outcome(lines: &[String], success: impl Fn(&str) -> bool) -> Result<(), Fault
 }
 
 /// Parses the reply lines of `fi_add_fault` for `probe`: success only on `successfully added to probe <probe>`.
+/// The car prints either that line or refusals, never both: with fault commands for other probes in flight
+/// at the same time, a refusal next to this probe's success line is another command's.
 pub fn parse_add_fault_reply(lines: &[String], probe: &Probe) -> Result<(), FaultError> {
-    let expected = format!("successfully added to probe {probe}.");
+    let expected = add_fault_success(probe);
+    if lines.iter().any(|l| l.contains(&expected)) {
+        return Ok(());
+    }
     outcome(lines, |l| l.contains(&expected))
+}
+
+/// Whether a PRINTF line may answer `fi_add_fault` for `probe`: its success line, or a refusal (which names no
+/// probe).
+pub fn is_add_fault_reply(line: &str, probe: &Probe) -> bool {
+    line.contains(&add_fault_success(probe)) || rejection(line).is_some()
+}
+
+fn add_fault_success(probe: &Probe) -> String {
+    format!("successfully added to probe {probe}.")
 }
 
 /// The terminal command listing the faults added since the last clear.
@@ -412,6 +427,15 @@ mod tests {
             parse_add_fault_reply(&full, &Probe::Px),
             Err(FaultError::Rejected(vec![FaultRejection::TooManyFaults]))
         );
+        // Another probe's command in flight was refused; this one's succeeded.
+        let mixed = lines(&[
+            "Too many faults on this probe, fault not added.\n",
+            "Fault OFFSET with parameter 2.00 successfully added to probe uwb_yaw.\n",
+        ]);
+        assert_eq!(parse_add_fault_reply(&mixed, &Probe::UwbYaw), Ok(()));
+        assert!(is_add_fault_reply(&mixed[1], &Probe::UwbYaw));
+        assert!(!is_add_fault_reply(&mixed[1], &Probe::UwbRange(50)));
+        assert!(is_add_fault_reply(&mixed[0], &Probe::UwbRange(50)));
         let probes = lines(&["Too many probes in use, fault not added.\n"]);
         assert_eq!(
             parse_add_fault_reply(&probes, &Probe::UwbYaw),

@@ -112,9 +112,11 @@ pub enum Event {
     Sample(Sample),
     /// The operation in flight (a segment or the safe stop's extension) ended.
     Reply(Reply),
-    /// The fault command in flight ended; `resent`: its reply was lost and the car's list of
+    /// A fault command in flight ended; `resent`: its reply was lost and the car's list of
     /// faults showed it added (so its reply's time does not say when).
     FaultReply {
+        /// The fault command's index in the plan.
+        command_index: usize,
         /// How it ended.
         reply: Reply,
         /// Whether the reply was lost and the fault found in the car's list.
@@ -177,7 +179,7 @@ pub enum Action {
     Stop(Abort),
     /// The drive stopped with an operation in flight: drop it and record it as abandoned.
     Abandon,
-    /// The drive stopped with a fault command in flight: drop it and record it as abandoned.
+    /// The drive stopped with fault commands in flight: drop them and record them as abandoned.
     AbandonFault,
     /// Send one brake command; if it finds the link lost, feed [`Event::LinkLost`].
     Brake,
@@ -426,8 +428,8 @@ impl<'a> TestDrive<'a> {
         }
     }
 
-    /// The next fault command to start at `now`, if one is due (see [`Placer`]); `None` while
-    /// one is in flight, and once the test is stopping for a failure or a stop demanded.
+    /// The next fault command to start at `now`, if one is due (see [`Placer`]; call again for
+    /// the next); `None` once the test is stopping for a failure or a stop demanded.
     pub fn next_fault(&mut self, now: Duration) -> Option<Operation> {
         if !self.faults_wanted() {
             return None;
@@ -485,7 +487,11 @@ impl<'a> TestDrive<'a> {
                     self.op_done(op, reply, now);
                 }
             }
-            Event::FaultReply { reply, resent } => self.fault_done(reply, resent, now),
+            Event::FaultReply {
+                command_index,
+                reply,
+                resent,
+            } => self.fault_done(command_index, reply, resent, now),
             Event::Sample(sample) => self.on_sample(now, sample),
             Event::LinkLost => {
                 let abort = self.safety.link_lost(now);
@@ -499,7 +505,7 @@ impl<'a> TestDrive<'a> {
             self.actions.push(Action::Abandon);
         }
         if matches!(self.phase, Phase::Braking | Phase::Done) && self.placer.in_flight() {
-            self.placer.dropped();
+            self.placer.dropped_all();
             self.actions.push(Action::AbandonFault);
         }
         if std::mem::take(&mut self.stopping.brake_now) {
@@ -771,21 +777,23 @@ impl<'a> TestDrive<'a> {
         }
     }
 
-    fn fault_done(&mut self, reply: Reply, resent: bool, now: Duration) {
+    fn fault_done(&mut self, command_index: usize, reply: Reply, resent: bool, now: Duration) {
         match reply {
             Reply::Done => {
-                if let Some(added) = self.placer.confirmed(now, resent, &self.settings.rates) {
+                if let Some(added) =
+                    self.placer
+                        .confirmed(command_index, now, resent, &self.settings.rates)
+                {
                     self.faults.push(added);
                 }
             }
             Reply::LinkLost => {
-                self.placer.dropped();
+                self.placer.dropped(command_index);
                 let abort = self.safety.link_lost(now);
                 self.on_abort(abort, now);
             }
             Reply::Failed(error) => {
-                let command_index = self.placer.in_flight_command().unwrap_or_default();
-                self.placer.dropped();
+                self.placer.dropped(command_index);
                 self.detail = Some(format!("command {command_index}: {error}"));
                 let abort = self
                     .safety

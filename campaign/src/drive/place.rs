@@ -22,10 +22,10 @@
 //!   The car's distance at that time is interpolated between the samples around it; the
 //!   difference from the place is the placement's error.
 //!
-//! One fault command is in flight at a time (a run of faults placed closer together than the car
-//! drives in a round trip is sent a round trip apart, centred on their places: see
-//! [`Placer::due`]). Segments are streamed by the time-based rule independently: a fault never
-//! delays a segment.
+//! Fault commands for different probes are in flight together; one probe's wait for each other
+//! (a run of them placed closer together than the car drives in a round trip is sent a round trip
+//! apart, centred on their places: see [`Placer::due`]). Segments are streamed by the time-based
+//! rule independently: a fault never delays a segment.
 
 use std::collections::VecDeque;
 use std::time::Duration;
@@ -43,6 +43,8 @@ pub const EARLIER_TOOL_POINTS_LEFT: usize = 4;
 const ROUND_TRIPS: usize = 9;
 /// Samples kept to interpolate where the car was.
 const HISTORY: usize = 64;
+/// Fault commands in flight at once at most (each for another probe).
+pub const MAX_IN_FLIGHT: usize = 3;
 /// The slowest speed a prediction assumes, m/s (a standing car's place is never predicted).
 const MIN_SPEED_MPS: f64 = 0.05;
 
@@ -98,7 +100,7 @@ struct Pending {
     target_s: Option<f64>,
 }
 
-/// The fault command in flight.
+/// A fault command in flight.
 #[derive(Debug, Clone, Copy)]
 struct InFlight {
     pending: Pending,
@@ -126,7 +128,7 @@ pub struct Placer {
     /// The car's route index of each appended segment's first point.
     segment_first: Vec<usize>,
     pending: Vec<Pending>,
-    in_flight: Option<InFlight>,
+    in_flight: Vec<InFlight>,
     placements: Vec<FaultPlacement>,
     /// Placements whose actual place waits for a sample after the car added the fault.
     unresolved: Vec<usize>,
@@ -168,7 +170,7 @@ impl Placer {
             route_end: None,
             segment_first: Vec::new(),
             pending,
-            in_flight: None,
+            in_flight: Vec::new(),
             placements: Vec::new(),
             unresolved: Vec::new(),
             history: VecDeque::new(),
@@ -243,16 +245,16 @@ impl Placer {
     }
 
     /// When the next fault should be sent (seconds since the test began), if one's place is
-    /// known and none is in flight: half a round trip before the car is predicted to reach it.
+    /// known: half a round trip before the car is predicted to reach it.
     ///
-    /// One fault command is in flight at a time, and it takes a round trip. When the faults after
-    /// it are placed so close that the car reaches their places sooner than that (their ideal
-    /// sending times less than a round trip apart), the later ones can only go late. The run of
-    /// such faults is then sent a round trip apart, centred on their ideal times: the first goes
-    /// as early as the last goes late, which halves the largest placement error (a fault placed
-    /// 0.71 m after another on a 2.5 m/s segment was added 0.44 m late on a 0.35 s link).
+    /// Fault commands for different probes are in flight together (up to [`MAX_IN_FLIGHT`]),
+    /// one per probe. A fault whose probe has a command in flight waits for it, a round trip.
+    /// When the next faults on one probe are placed so close that the car reaches their places
+    /// sooner than that (their ideal sending times less than a round trip apart), the later ones
+    /// can only go late: the run of them is sent a round trip apart, centred on their ideal
+    /// times, so the first goes as early as the last goes late.
     pub fn due(&self) -> Option<Duration> {
-        if self.in_flight.is_some() {
+        if self.in_flight.len() >= MAX_IN_FLIGHT {
             return None;
         }
         let seen = self.seen?;
@@ -260,12 +262,18 @@ impl Placer {
         let round_trip = self.median_round_trip().as_secs_f64();
         let ideal =
             |target: f64| seen.car_time + (target - seen.s).max(0.0) / speed - round_trip / 2.0;
-        let mut targets: Vec<f64> = self.pending.iter().filter_map(|p| p.target_s).collect();
+        let next = self.next()?;
+        let mut targets: Vec<f64> = self
+            .pending
+            .iter()
+            .filter(|p| p.fault.probe == next.fault.probe)
+            .filter_map(|p| p.target_s)
+            .collect();
         targets.sort_by(f64::total_cmp);
-        let first = ideal(*targets.first()?);
-        // The run of faults after the first whose ideal times are less than a round trip
-        // apart, each shifted back by its place in the run: the schedule a round trip apart that
-        // starts at `c` is late by `c - shifted` for each; minimax is the middle of the range.
+        let first = ideal(next.target_s?);
+        // The run of faults on the probe after the first whose ideal times are less than a round
+        // trip apart, each shifted back by its place in the run: the schedule a round trip apart
+        // that starts at `c` is late by `c - shifted` for each; minimax is the middle.
         let (mut lowest, mut previous) = (first, first);
         for (k, &target) in targets.iter().enumerate().skip(1) {
             let at = ideal(target);
@@ -279,7 +287,7 @@ impl Placer {
         Some(Duration::from_secs_f64(at.max(0.0)))
     }
 
-    /// The fault to send at `now`, if one is due; it is then in flight.
+    /// The fault to send at `now`, if one is due; it is then in flight. Call again for the next.
     pub fn take_due(&mut self, now: Duration) -> Option<(usize, Fault)> {
         if self.due()? > now {
             return None;
@@ -287,7 +295,7 @@ impl Placer {
         let next = *self.next()?;
         self.pending
             .retain(|p| p.command_index != next.command_index);
-        self.in_flight = Some(InFlight {
+        self.in_flight.push(InFlight {
             pending: next,
             sent: now,
         });
@@ -296,23 +304,23 @@ impl Placer {
 
     /// Whether a fault command is in flight.
     pub fn in_flight(&self) -> bool {
-        self.in_flight.is_some()
+        !self.in_flight.is_empty()
     }
 
-    /// The command index of the fault in flight.
-    pub fn in_flight_command(&self) -> Option<usize> {
-        self.in_flight.map(|f| f.pending.command_index)
-    }
-
-    /// The car confirmed the fault in flight at `now` (`resent`: its reply was lost and the
-    /// car's fault list showed it added). Returns its command index and when the car added it.
+    /// The car confirmed fault command `command_index` at `now` (`resent`: its reply was lost
+    /// and the car's fault list showed it added). Returns when the car added it.
     pub fn confirmed(
         &mut self,
+        command_index: usize,
         now: Duration,
         resent: bool,
         rates: &ProbeRates,
     ) -> Option<(usize, Duration)> {
-        let flight = self.in_flight.take()?;
+        let at = self
+            .in_flight
+            .iter()
+            .position(|f| f.pending.command_index == command_index)?;
+        let flight = self.in_flight.remove(at);
         let sent = flight.sent.as_secs_f64();
         let half_rtt = self.median_round_trip().as_secs_f64() / 2.0;
         let elapsed = now.as_secs_f64() - sent;
@@ -343,9 +351,15 @@ impl Placer {
         Some((p.command_index, added_at))
     }
 
-    /// The fault in flight ended without being added (refused, or the drive stopped).
-    pub fn dropped(&mut self) {
-        self.in_flight = None;
+    /// Fault command `command_index` ended without being added (refused, or the link lost).
+    pub fn dropped(&mut self, command_index: usize) {
+        self.in_flight
+            .retain(|f| f.pending.command_index != command_index);
+    }
+
+    /// Every fault command in flight is given up (the drive stopped).
+    pub fn dropped_all(&mut self) {
+        self.in_flight.clear();
     }
 
     /// The placements so far (sent and confirmed faults), in the order the car added them.
@@ -353,12 +367,19 @@ impl Placer {
         &self.placements
     }
 
-    /// The next fault to send: of those whose segment is appended, the one whose place comes
-    /// first on the route (in plan order among equal places).
+    /// The next fault to send: of those whose segment is appended and whose probe has no
+    /// command in flight, the one whose place comes first on the route (in plan order among
+    /// equal places).
     fn next(&self) -> Option<&Pending> {
         self.pending
             .iter()
             .filter(|p| p.target_s.is_some())
+            .filter(|p| {
+                !self
+                    .in_flight
+                    .iter()
+                    .any(|f| f.pending.fault.probe == p.fault.probe)
+            })
             .min_by(|a, b| {
                 a.target_s
                     .unwrap_or(f64::INFINITY)

@@ -277,19 +277,20 @@ fn faults_without_a_place_go_out_when_four_points_are_left_of_their_segment() {
     assert_eq!(
         h.drive.next_fault(h.now),
         None,
-        "one fault command at a time"
+        "one fault command per probe at a time"
     );
     assert_eq!(h.drive.fault_due(), None);
     h.now += ms(20);
-    let confirmed = Event::FaultReply {
+    let confirmed = |command_index| Event::FaultReply {
+        command_index,
         reply: Reply::Done,
         resent: false,
     };
-    assert!(h.drive.handle(h.now, confirmed.clone()).is_empty());
+    assert!(h.drive.handle(h.now, confirmed(1)).is_empty());
     // The second fault has the same place, which the car has reached: it goes at once.
     assert_eq!(fault_index(&h.drive.next_fault(h.now)), Some((2, 1)));
     h.now += ms(20);
-    assert!(h.drive.handle(h.now, confirmed).is_empty());
+    assert!(h.drive.handle(h.now, confirmed(2)).is_empty());
     h.now = ms(1150);
     h.sample(12.1);
     let outcome = h.drive.finish(h.now);
@@ -305,6 +306,46 @@ fn faults_without_a_place_go_out_when_four_points_are_left_of_their_segment() {
     );
     // Probe calls every 10 ms from when the car added it, 50 of them.
     assert!(close(places[0].acts_from_s, 1.08) && close(places[0].acts_to_s, 1.58));
+}
+
+#[test]
+fn faults_on_different_probes_are_in_flight_together_each_at_its_place() {
+    // Two faults placed 0.01 m apart (10 ms at 1 m/s, less than the 20 ms round trip), on two
+    // probes: neither waits for the other.
+    let commands = vec![
+        segment(12.0),
+        placed_fault(Probe::UwbRange(50), 0, 3.0),
+        placed_fault(Probe::UwbYaw, 0, 3.01),
+    ];
+    let (area, plan) = (area(), plan(commands));
+    let mut h = Harness::new(&area, &plan, FailurePolicy::default());
+    h.sample(7.7);
+    assert_eq!(h.next().as_ref().and_then(append_index), Some(0));
+    assert!(h.reply(Reply::Done).is_empty());
+    // x = 13 is 3 m along the segment; the car is at x = 12 at 90 ms, at 1 m/s: there at
+    // 1.09 s, the command 10 ms before; the second place 10 ms later.
+    h.sample(12.0);
+    assert_eq!(h.drive.fault_due(), Some(ms(1080)));
+    h.now = ms(1080);
+    assert_eq!(fault_index(&h.drive.next_fault(h.now)), Some((1, 0)));
+    assert_eq!(h.drive.next_fault(h.now), None, "the second is not due yet");
+    assert_eq!(h.drive.fault_due(), Some(ms(1090)));
+    h.now = ms(1090);
+    assert_eq!(fault_index(&h.drive.next_fault(h.now)), Some((2, 0)));
+    // Replies in any order.
+    for (command_index, at) in [(2, 1110), (1, 1100)] {
+        h.now = ms(at);
+        let reply = Event::FaultReply {
+            command_index,
+            reply: Reply::Done,
+            resent: false,
+        };
+        assert!(h.drive.handle(h.now, reply).is_empty());
+    }
+    let outcome = h.drive.finish(h.now);
+    let mut confirmed = outcome.faults_confirmed.clone();
+    confirmed.sort();
+    assert_eq!(confirmed, [(1, ms(1090)), (2, ms(1100))]);
 }
 
 #[test]
@@ -325,6 +366,7 @@ fn a_placed_fault_is_sent_half_a_round_trip_before_the_car_reaches_its_place() {
     // The reply is lost; the car's list shows the fault: it was added 10 ms after sending.
     h.now = ms(1600);
     let lost = Event::FaultReply {
+        command_index: 1,
         reply: Reply::Done,
         resent: true,
     };
@@ -363,6 +405,7 @@ fn a_fault_never_delays_a_segment_nor_outlives_a_failure() {
     h.sample(16.5);
     assert_eq!(fault_index(&h.drive.next_fault(h.now)), Some((1, 0)));
     let confirmed = Event::FaultReply {
+        command_index: 1,
         reply: Reply::Done,
         resent: false,
     };

@@ -115,6 +115,8 @@ pub(super) struct Shared {
     /// GET_STATE requests in flight, oldest first.
     pub(super) state_waiters: Mutex<VecDeque<StateWaiter>>,
     pub(super) lanes: Mutex<HashMap<u8, Arc<tokio::sync::Mutex<()>>>>,
+    /// Lanes of terminal commands whose replies can be told apart (a fault command per probe).
+    pub(super) named_lanes: Mutex<HashMap<String, Arc<tokio::sync::Mutex<()>>>>,
     pub(super) printf: broadcast::Sender<String>,
     pub(super) events: broadcast::Sender<LinkEvent>,
     pub(super) health: Mutex<HealthRecorder>,
@@ -163,6 +165,7 @@ impl Shared {
             garbled: Mutex::new(HashMap::new()),
             state_waiters: Mutex::new(VecDeque::new()),
             lanes: Mutex::new(HashMap::new()),
+            named_lanes: Mutex::new(HashMap::new()),
             printf: broadcast::channel(256).0,
             events: broadcast::channel(64).0,
             health: Mutex::new(HealthRecorder::default()),
@@ -539,9 +542,27 @@ impl Shared {
         relevant: impl Fn(&str) -> bool,
         done: impl Fn(&[String]) -> bool,
     ) -> Result<Vec<String>, CarError> {
+        self.terminal_lines_in(None, command, relevant, done).await
+    }
+
+    /// [`Shared::terminal_lines`] one at a time in lane `lane` instead of the terminal's lane: commands in
+    /// different lanes are in flight together, so their replies must be told apart by `relevant` alone.
+    pub(super) async fn terminal_lines_in(
+        &self,
+        lane: Option<&str>,
+        command: &str,
+        relevant: impl Fn(&str) -> bool,
+        done: impl Fn(&[String]) -> bool,
+    ) -> Result<Vec<String>, CarError> {
         let request = Request::TerminalCmd(command.to_string());
         let (payload, _, cmd) = self.encode(&request)?;
-        let lane = self.lane(payload[1]);
+        let lane = match lane {
+            Some(name) => lock(&self.named_lanes)
+                .entry(name.to_owned())
+                .or_default()
+                .clone(),
+            None => self.lane(payload[1]),
+        };
         let _one_at_a_time = lane.lock().await;
         let mut printf = self.printf.subscribe();
         let losses = self.losses.load(Ordering::SeqCst);

@@ -131,7 +131,7 @@ async fn run(
     t0: Instant,
 ) {
     let mut op: Option<InFlight> = None;
-    let mut fault_op: Option<InFlight> = None;
+    let mut fault_ops: Vec<InFlight> = Vec::new();
     let mut ticker = tokio::time::interval(ctx.config.state_period);
     ticker.set_missed_tick_behavior(MissedTickBehavior::Delay);
     telemetry.drain(ctx.journal);
@@ -151,20 +151,15 @@ async fn run(
             }
             op = next.map(|operation| start(ctx, test_index, operation));
         }
-        if fault_op.is_none() {
-            fault_op = machine
-                .next_fault(t0.elapsed())
-                .map(|operation| start(ctx, test_index, operation));
+        while let Some(operation) = machine.next_fault(t0.elapsed()) {
+            fault_ops.push(start(ctx, test_index, operation));
         }
-        let due = machine
-            .fault_due()
-            .filter(|_| fault_op.is_none())
-            .map(|due| t0 + due);
+        let due = machine.fault_due().map(|due| t0 + due);
         let woke = tokio::select! {
             biased;
             () = ctx.cancel.cancelled(), if machine.interruptible() => Woke::Interrupt,
             (recorded, result) = wait_op(&mut op) => Woke::Op(recorded, result),
-            (recorded, result) = wait_op(&mut fault_op) => Woke::Fault(recorded, result),
+            (recorded, result) = wait_any(&mut fault_ops) => Woke::Fault(recorded, result),
             () = sleep_until(due) => Woke::FaultDue,
             sample = telemetry.next(ctx.journal) => Woke::Sample(sample),
             _ = ticker.tick() => Woke::Tick,
@@ -177,10 +172,14 @@ async fn run(
                 Event::Reply(reply(result))
             }
             Woke::Fault(recorded, result) => {
-                fault_op = None;
                 record_answer(ctx, test_index, recorded, &result);
                 let resent = matches!(result, Ok(true));
+                let command_index = match recorded {
+                    Recorded::Fault { command, .. } => command,
+                    Recorded::Points { .. } => continue,
+                };
                 Event::FaultReply {
+                    command_index,
                     reply: reply(result),
                     resent,
                 }
@@ -194,7 +193,7 @@ async fn run(
         let actions = machine.handle(t0.elapsed(), event);
         let in_flight = InFlightOps {
             op: &mut op,
-            fault: &mut fault_op,
+            faults: &mut fault_ops,
         };
         carry_out(ctx, machine, in_flight, actions, test_index, t0).await;
     }
@@ -217,10 +216,10 @@ async fn sleep_until(deadline: Option<Instant>) {
     }
 }
 
-/// The operations in flight: the route's and the fault's.
+/// The operations in flight: the route's and the faults'.
 struct InFlightOps<'o> {
     op: &'o mut Option<InFlight>,
-    fault: &'o mut Option<InFlight>,
+    faults: &'o mut Vec<InFlight>,
 }
 
 /// Carries out `actions` in order (and those of a lost link the brake command finds).
@@ -240,11 +239,11 @@ async fn carry_out(
                     .write(&SafetyRecord::new(Some(test_index), abort));
             }
             Action::Abandon | Action::AbandonFault => {
-                let slot = match action {
-                    Action::Abandon => &mut *in_flight.op,
-                    _ => &mut *in_flight.fault,
+                let abandoned: Vec<InFlight> = match action {
+                    Action::Abandon => in_flight.op.take().into_iter().collect(),
+                    _ => std::mem::take(in_flight.faults),
                 };
-                if let Some((recorded, _)) = slot.take() {
+                for (recorded, _) in abandoned {
                     let abandoned = Err::<bool, _>("abandoned: the drive stopped");
                     record_answer(ctx, test_index, recorded, &abandoned);
                 }
@@ -318,6 +317,24 @@ fn record_answer<E: std::fmt::Display>(
             ctx.journal.write(&answered);
         }
     }
+}
+
+/// Waits for the first of the operations in flight to end and takes it out of `ops`; never
+/// completes without one. Cancel-safe: the futures stay in `ops` until one ends.
+async fn wait_any(ops: &mut Vec<InFlight>) -> (Recorded, OpResult) {
+    if ops.is_empty() {
+        return std::future::pending().await;
+    }
+    std::future::poll_fn(|cx| {
+        for k in 0..ops.len() {
+            if let std::task::Poll::Ready(result) = ops[k].1.as_mut().poll(cx) {
+                let (recorded, _) = ops.remove(k);
+                return std::task::Poll::Ready((recorded, result));
+            }
+        }
+        std::task::Poll::Pending
+    })
+    .await
 }
 
 /// Waits for the operation in flight; never completes without one. Cancel-safe: the
