@@ -1,6 +1,6 @@
 //! The [`Recorder`]: writes a campaign's MCAP file append-only as things happen.
 //!
-//! Messages go into an in-memory chunk (no compression) that is written whole and flushed to the
+//! Messages go into an in-memory chunk (compressed with zstd) that is written whole and flushed to the
 //! operating system when its messages span the chunk interval of log time, at [`Recorder::flush`]
 //! and before each metadata record. The file therefore only ever grows by whole records: a killed
 //! process leaves every chunk written before the kill, and loses the open one.
@@ -95,7 +95,7 @@ impl Recorder {
             source,
         })?;
         let options = WriteOptions::new()
-            .compression(None)
+            .compression(Some(mcap::Compression::Zstd))
             .chunk_size(Some(CHUNK_BYTES))
             .disable_seeking(true)
             .library(format!("drivecheck {} (mcap-rs)", tool_version()));
