@@ -19,6 +19,7 @@
 //! facts are used here), the run directory, the recording and the command line (`orchestrator`).
 
 pub mod case;
+pub mod coverage;
 pub mod drive;
 pub mod explain;
 pub mod model;

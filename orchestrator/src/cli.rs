@@ -304,6 +304,10 @@ pub enum RunsCommand {
         /// The run directory (a path, or a name inside `--dir`).
         #[arg(value_name = "DIR")]
         run: PathBuf,
+        /// Also what the campaign covered: the share of the area driven, the headings and speeds
+        /// driven, the fault types per probe planned, confirmed and acting, segments per test.
+        #[arg(long)]
+        coverage: bool,
     },
 }
 

@@ -213,3 +213,42 @@ fn a_recovery_route_ending_far_from_the_start_route_is_joined_by_a_planned_route
         text(&out)
     );
 }
+
+/// What a campaign covered is in `campaign.json`, in `runs show --coverage` and in the report: the
+/// share of the area driven, headings and speeds, fault types per probe, segments per test.
+#[test]
+fn a_campaign_records_and_shows_what_it_covered() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run(&["--seed", "1", "--tests", "3"], dir.path());
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    let record = campaign::case::CampaignRecord::from_json(
+        &std::fs::read_to_string(dir.path().join("campaign.json")).unwrap(),
+    )
+    .unwrap();
+    let coverage = record.summary.unwrap().coverage.unwrap();
+    assert_eq!(coverage.tests, 3);
+    assert!(
+        coverage.area_share > 0.1 && coverage.area_share <= 1.0,
+        "{coverage:?}"
+    );
+    assert!(coverage.heading_m.iter().sum::<f64>() > 10.0);
+    assert!(!coverage.faults.is_empty());
+    assert!(
+        coverage
+            .faults
+            .iter()
+            .all(|f| f.acted <= f.confirmed && f.confirmed <= f.planned)
+    );
+    assert_eq!(coverage.segments_per_test.iter().sum::<usize>(), 3);
+    let shown = drivecheck(&["runs", "show", path(dir.path()), "--coverage"]);
+    assert_eq!(shown.status.code(), Some(0), "{}", text(&shown));
+    let shown = String::from_utf8_lossy(&shown.stdout);
+    assert!(
+        shown.contains("coverage of 3 tests:") && shown.contains("| uwb_"),
+        "{shown}"
+    );
+    let report = drivecheck(&["report", path(dir.path())]);
+    assert_eq!(report.status.code(), Some(0), "{}", text(&report));
+    let page = std::fs::read_to_string(dir.path().join("report.html")).unwrap();
+    assert!(page.contains("<section id=\"coverage\">"));
+}

@@ -697,6 +697,10 @@ pub struct CampaignSummary {
     /// estimate is dead reckoning only, so a pass says nothing about UWB).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uwb_not_tested: Option<String>,
+    /// What the tests covered: the share of the area driven, headings and speeds, fault kinds
+    /// per probe (`campaign::coverage`); absent in records of older versions.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coverage: Option<crate::coverage::CoverageStats>,
 }
 
 impl CampaignRecord {

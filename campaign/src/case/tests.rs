@@ -102,6 +102,7 @@ fn a_campaign_record_survives_a_round_trip_through_json() {
             worst_deviation_m: Some(1.42),
             failing_cases: vec!["case-003.json".to_owned(), "case-007.json".to_owned()],
             uwb_not_tested: None,
+            coverage: None,
         }),
         replay_of: None,
     };

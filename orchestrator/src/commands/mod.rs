@@ -19,6 +19,8 @@ mod sweep;
 
 use std::process::ExitCode;
 
+pub use runs::coverage_text;
+
 use anyhow::Result;
 
 use crate::cli::{AreaCommand, BenchCommand, Cli, Command, RouteCommand, ScenarioCommand};

@@ -20,13 +20,13 @@ const CAMPAIGN_FILE: &str = "campaign.json";
 pub fn runs(args: &RunsArgs) -> Result<ExitCode> {
     match &args.command {
         None => list(&args.dir),
-        Some(RunsCommand::Show { run }) => {
+        Some(RunsCommand::Show { run, coverage }) => {
             let dir = if run.exists() {
                 run.clone()
             } else {
                 args.dir.join(run)
             };
-            show(&dir)
+            show(&dir, *coverage)
         }
     }
 }
@@ -167,7 +167,7 @@ fn row(entry: &Entry) -> String {
     }
 }
 
-fn show(dir: &Path) -> Result<ExitCode> {
+fn show(dir: &Path, coverage: bool) -> Result<ExitCode> {
     match read_entry(dir) {
         None => bail!(
             "{} is not a run directory (no {CAMPAIGN_FILE} or {REPLAY_FILE})",
@@ -202,13 +202,13 @@ fn show(dir: &Path) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Some(Entry::Campaign(record)) => {
-            show_campaign(dir, *record)?;
+            show_campaign(dir, *record, coverage)?;
             Ok(ExitCode::SUCCESS)
         }
     }
 }
 
-fn show_campaign(dir: &Path, record: CampaignRecord) -> Result<()> {
+fn show_campaign(dir: &Path, record: CampaignRecord, coverage: bool) -> Result<()> {
     println!(
         "campaign: scenario {} (hash {}), seed {}{}, car {} (firmware {}), drivecheck {}",
         record.scenario.name,
@@ -253,6 +253,31 @@ fn show_campaign(dir: &Path, record: CampaignRecord) -> Result<()> {
         tests.push(TestSummary::of(case.test_index.unwrap_or(i), file, &case));
         cases.push(case);
     }
+    let stats = coverage.then(|| {
+        record
+            .summary
+            .as_ref()
+            .and_then(|s| s.coverage.clone())
+            .ok_or_else(|| format!("{CAMPAIGN_FILE} has no coverage (an older version wrote it)"))
+            .or_else(|why| {
+                let scenario = scenarios::bundled::load(&record.scenario.name)
+                    .map_err(|_| {
+                        format!(
+                            "{why}, and scenario {} is not bundled",
+                            record.scenario.name
+                        )
+                    })?
+                    .scenario;
+                let start_end = scenario
+                    .start_route
+                    .points
+                    .last()
+                    .map_or(trajgen::Point::new(0.0, 0.0), |w| w.position);
+                Ok::<_, String>(
+                    campaign::coverage::coverage(&scenario.area, start_end, &cases).stats,
+                )
+            })
+    });
     println!();
     print_report(
         &CampaignReport {
@@ -263,7 +288,86 @@ fn show_campaign(dir: &Path, record: CampaignRecord) -> Result<()> {
         },
         None,
     );
+    match stats {
+        Some(Ok(stats)) => print!("\n{}", coverage_text(&stats)),
+        Some(Err(why)) => println!("\nno coverage: {why}"),
+        None => {}
+    }
     Ok(())
+}
+
+/// The coverage statistics as text.
+pub fn coverage_text(c: &campaign::coverage::CoverageStats) -> String {
+    use std::fmt::Write as _;
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "coverage of {} tests: {:.1} % of the drivable area driven ({} of {} cells of {} m)",
+        c.tests,
+        c.area_share * 100.0,
+        c.driven_cells,
+        c.drivable_cells,
+        c.cell_m
+    );
+    let total: f64 = c.heading_m.iter().sum();
+    let _ = writeln!(
+        out,
+        "metres driven by heading (counter-clockwise from east), {total:.0} m in all:"
+    );
+    let width = 360.0 / c.heading_m.len().max(1) as f64;
+    for (k, m) in c.heading_m.iter().enumerate() {
+        let _ = writeln!(
+            out,
+            "  {:>3.0}°–{:>3.0}° {:>7.1} m {}",
+            k as f64 * width,
+            (k + 1) as f64 * width,
+            m,
+            bar(*m, total)
+        );
+    }
+    let _ = writeln!(out, "metres driven by speed:");
+    let last = c.speed_m.iter().rposition(|&m| m > 0.0).unwrap_or(0);
+    for (k, m) in c.speed_m.iter().enumerate().take(last + 1) {
+        let _ = writeln!(
+            out,
+            "  {:>2.0}–{:>2.0} km/h {:>7.1} m {}",
+            k as f64 * campaign::coverage::SPEED_BIN_KMH,
+            (k + 1) as f64 * campaign::coverage::SPEED_BIN_KMH,
+            m,
+            bar(*m, total)
+        );
+    }
+    if c.faults.is_empty() {
+        out.push_str("faults: none planned\n");
+    } else {
+        out.push_str("| probe | fault type | planned | confirmed | began acting in its test |\n|---|---|---|---|---|\n");
+        for f in &c.faults {
+            let _ = writeln!(
+                out,
+                "| {} | {} | {} | {} | {} |",
+                f.probe, f.kind, f.planned, f.confirmed, f.acted
+            );
+        }
+    }
+    let counts: Vec<String> = c
+        .segments_per_test
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| **n > 0)
+        .map(|(segments, n)| format!("{segments} segments: {n}"))
+        .collect();
+    let _ = writeln!(out, "tests by segments driven: {}", counts.join(", "));
+    out
+}
+
+/// A bar of up to 30 characters for `part` of `total`.
+fn bar(part: f64, total: f64) -> String {
+    let n = if total > 0.0 {
+        (30.0 * part / total).round() as usize
+    } else {
+        0
+    };
+    "#".repeat(n)
 }
 
 /// Says whether the run's recording is complete and, when the process was killed before it was

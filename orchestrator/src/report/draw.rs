@@ -133,6 +133,8 @@ pub(crate) struct MapLayers<'a> {
     pub tracks: Vec<TrackLayer<'a>>,
     /// The faults.
     pub faults: Vec<FaultMark>,
+    /// A heat map of the cells driven (the campaign's coverage), drawn under the routes.
+    pub heat: Option<&'a trajgen::validation::CoverageGrid>,
 }
 
 /// The picture's pixel size and its ranges in metres, with one scale on both axes.
@@ -237,6 +239,18 @@ fn coloured_runs(
     runs
 }
 
+/// A heat-map colour for `visits` of at most `most`: pale yellow for one visit to dark red, on a
+/// logarithmic scale (a few cells are driven far more often than the rest).
+fn heat_colour(visits: u32, most: u32) -> RGBColor {
+    let t = if most > 1 {
+        (f64::from(visits).ln() / f64::from(most).ln()).clamp(0.0, 1.0)
+    } else {
+        1.0
+    };
+    let lerp = |a: f64, b: f64| (a + (b - a) * t).round() as u8;
+    RGBColor(lerp(255.0, 165.0), lerp(237.0, 15.0), lerp(160.0, 21.0))
+}
+
 /// The map (see the module doc); `None` without anything to draw.
 pub(crate) fn map_svg(
     scenario: Option<&Scenario>,
@@ -311,6 +325,22 @@ fn draw_map(
                 .map_err(draw_error)?;
             chart
                 .draw_series([PathElement::new(closed(vertices), BLACK.stroke_width(1))])
+                .map_err(draw_error)?;
+        }
+        if let Some(grid) = layers.heat {
+            let r = &grid.raster;
+            let most = grid.visits.iter().copied().max().unwrap_or(0).max(1);
+            let cells = (0..r.rows).flat_map(|row| (0..r.cols).map(move |col| (col, row)));
+            chart
+                .draw_series(cells.filter_map(|(col, row)| {
+                    let visits = grid.visits[row * r.cols + col];
+                    (visits > 0 && r.drivable[row * r.cols + col]).then(|| {
+                        let low = r.cell_centre(col, row)
+                            - Point::new(r.cell_size / 2.0, r.cell_size / 2.0);
+                        let high = low + Point::new(r.cell_size, r.cell_size);
+                        Rectangle::new([xy(low), xy(high)], heat_colour(visits, most).filled())
+                    })
+                }))
                 .map_err(draw_error)?;
         }
         let start = s.start_route.positions();
@@ -672,6 +702,7 @@ mod tests {
         assert!(plot.starts_with("<svg"), "{plot}");
         assert!(plot.contains("threshold 1.00 m") && plot.contains("uwb_yaw"));
         let layers = MapLayers {
+            heat: None,
             segments: vec![vec![Point::new(0.0, 0.0), Point::new(5.0, 1.0)]],
             tracks: vec![TrackLayer {
                 samples: &samples,

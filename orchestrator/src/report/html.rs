@@ -450,6 +450,7 @@ fn test_section(
         .unwrap_or_default();
     if draw_map {
         let layers = MapLayers {
+            heat: None,
             segments: segments(case),
             driven: driven(case),
             tracks: vec![TrackLayer {
@@ -671,6 +672,7 @@ pub(crate) fn campaign_page(
         );
     }
     out.push_str("</table>\n</section>\n");
+    coverage_section(&mut out, data, scenario)?;
     for t in &data.tests {
         test_section(
             &mut out,
@@ -684,6 +686,48 @@ pub(crate) fn campaign_page(
     }
     foot(&mut out, &data.dir);
     Ok(out)
+}
+
+/// What the campaign covered: a heat map of the cells its tests drove, then the numbers
+/// (`drivecheck runs show --coverage`).
+fn coverage_section(
+    out: &mut String,
+    data: &CampaignData,
+    scenario: Option<&Scenario>,
+) -> Result<(), ReportError> {
+    let Some(scenario) = scenario else {
+        return Ok(());
+    };
+    let cases: Vec<Case> = data.tests.iter().map(|t| t.case.clone()).collect();
+    let start_end = scenario
+        .start_route
+        .points
+        .last()
+        .map_or(trajgen::Point::new(0.0, 0.0), |w| w.position);
+    let coverage = campaign::coverage::coverage(&scenario.area, start_end, &cases);
+    out.push_str("<section id=\"coverage\">\n<h2>Coverage</h2>\n");
+    let layers = MapLayers {
+        heat: Some(&coverage.grid),
+        segments: Vec::new(),
+        driven: 0,
+        tracks: Vec::new(),
+        faults: Vec::new(),
+    };
+    figure(
+        out,
+        map_svg(Some(scenario), &layers)?,
+        "No map of the area.",
+    );
+    out.push_str(
+        "<p class=\"sub\">Cells of 0.5 m the tests' driven segments passed through, pale for \
+         one to dark red for the most (logarithmic).</p>\n",
+    );
+    let _ = writeln!(
+        out,
+        "<pre style=\"white-space:pre-wrap\">{}</pre>\n</section>",
+        escape(&crate::commands::coverage_text(&coverage.stats))
+    );
+    Ok(())
 }
 
 /// A replay's page: the runs on one map, the comparison, a plot per run.
@@ -817,6 +861,7 @@ pub(crate) fn replay_page(
         .collect();
     if let Some((_, first, _)) = decimated.first() {
         let layers = MapLayers {
+            heat: None,
             segments: segments(&first.case),
             driven: decimated
                 .iter()

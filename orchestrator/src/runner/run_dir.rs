@@ -64,6 +64,9 @@ pub(crate) struct RunDirectory {
     cases: Vec<Case>,
     /// The scenario has no anchors: UWB is not tested.
     no_anchors: bool,
+    /// The area and where the start route ends, for the coverage statistics.
+    area: trajgen::Area,
+    start_end: trajgen::Point,
 }
 
 impl RunDirectory {
@@ -99,6 +102,12 @@ impl RunDirectory {
             tests: Vec::new(),
             cases: Vec::new(),
             no_anchors: scenario.anchors.is_empty(),
+            area: scenario.area.clone(),
+            start_end: scenario
+                .start_route
+                .points
+                .last()
+                .map_or(trajgen::Point::new(0.0, 0.0), |w| w.position),
         };
         dir.write_record()?;
         Ok(dir)
@@ -175,6 +184,9 @@ impl RunDirectory {
                  test says anything about UWB positioning"
                     .to_owned()
             }),
+            coverage: Some(
+                campaign::coverage::coverage(&self.area, self.start_end, &self.cases).stats,
+            ),
         }
     }
 

@@ -1,0 +1,240 @@
+//! What a campaign covered — what QuickCheck's `classify` and `cover` report and proptest does
+//! not: the share of the drivable area its tests drove (with the grid for a heat map), the
+//! headings and speeds driven, the fault kinds on each probe injected, confirmed and acting, and
+//! the segments per test.
+//!
+//! Everything comes from the case files: the segments a test drove (those the oracle judged) as
+//! planned, from the end of the start route, and its fault commands with their places and
+//! windows. The safety monitor keeps the car within its cross-track limit of the planned route,
+//! so the planned route is where it drove to within that limit.
+
+use serde::{Deserialize, Serialize};
+use trajgen::validation::CoverageGrid;
+use trajgen::{Area, Point};
+
+use crate::case::{Case, CommandRecord};
+
+/// Side of a coverage cell, metres.
+pub const CELL_M: f64 = 0.5;
+/// Width of a heading bin, degrees.
+pub const HEADING_BIN_DEG: f64 = 30.0;
+/// Width of a speed bin, km/h.
+pub const SPEED_BIN_KMH: f64 = 2.0;
+
+/// A campaign's coverage statistics (what `campaign.json` keeps).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CoverageStats {
+    /// Tests counted.
+    pub tests: usize,
+    /// Side of a cell, metres.
+    pub cell_m: f64,
+    /// Drivable cells of the area.
+    pub drivable_cells: usize,
+    /// Drivable cells a driven segment passed through.
+    pub driven_cells: usize,
+    /// `driven_cells / drivable_cells`.
+    pub area_share: f64,
+    /// Metres driven per heading bin: bin *k* holds headings from `k × 30°` (counter-clockwise
+    /// from east) up to the next.
+    pub heading_m: Vec<f64>,
+    /// Metres driven per speed bin: bin *k* holds speeds from `k × 2 km/h` up to the next.
+    pub speed_m: Vec<f64>,
+    /// Per probe and fault type: how many fault commands the tests held, sent and confirmed by
+    /// the car, and estimated to begin acting before their test ended.
+    pub faults: Vec<FaultCoverage>,
+    /// `segments_per_test[n]`: how many tests drove `n` segments.
+    pub segments_per_test: Vec<usize>,
+}
+
+/// One probe and fault type of [`CoverageStats::faults`].
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FaultCoverage {
+    /// The probe (`uwb_range_50`, `uwb_travel_dist`, `uwb_yaw`).
+    pub probe: String,
+    /// The fault type (`OFFSET`, `AMPLIFICATION`, `SET_TO`, `BITFLIP`).
+    pub kind: String,
+    /// Fault commands of that probe and type in the tests' plans.
+    pub planned: usize,
+    /// Sent and confirmed by the car.
+    pub confirmed: usize,
+    /// Estimated to begin acting before their test's drive ended.
+    pub acted: usize,
+}
+
+/// The coverage statistics with the grid behind them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Coverage {
+    /// The statistics.
+    pub stats: CoverageStats,
+    /// Visits per cell: how many driven segments passed through it.
+    pub grid: CoverageGrid,
+}
+
+/// The coverage of `cases`, tests driven in `area` from a start route ending at `start_end`.
+pub fn coverage(area: &Area, start_end: Point, cases: &[Case]) -> Coverage {
+    let mut grid = CoverageGrid::new(area, CELL_M);
+    let bins = |width: f64, full: f64| (full / width).ceil() as usize;
+    let mut heading_m = vec![0.0; bins(HEADING_BIN_DEG, 360.0)];
+    let mut speed_m = vec![0.0; bins(SPEED_BIN_KMH, 30.0)];
+    let mut faults: Vec<FaultCoverage> = Vec::new();
+    let mut segments_per_test: Vec<usize> = Vec::new();
+    for case in cases {
+        let driven = case.segments.len();
+        let mut from = start_end;
+        let mut segment = 0usize;
+        for command in &case.commands {
+            match command {
+                CommandRecord::RunSegments { points, .. } => {
+                    if segment < driven {
+                        for p in points {
+                            let to = Point::new(p.x, p.y);
+                            let length = from.dist(to);
+                            if length > 0.0 && to.is_finite() {
+                                grid.visit_segment(from, to);
+                                let heading = (to - from).heading().to_degrees().rem_euclid(360.0);
+                                add(&mut heading_m, heading / HEADING_BIN_DEG, length);
+                                add(&mut speed_m, p.speed * 3.6 / SPEED_BIN_KMH, length);
+                            }
+                            from = to;
+                        }
+                    }
+                    segment += 1;
+                }
+                CommandRecord::AddFault { probe, kind, .. } => {
+                    let (probe, kind) = (probe.to_string(), kind.to_string());
+                    let index = match faults
+                        .iter()
+                        .position(|f| f.probe == probe && f.kind == kind)
+                    {
+                        Some(index) => index,
+                        None => {
+                            faults.push(FaultCoverage {
+                                probe,
+                                kind,
+                                planned: 0,
+                                confirmed: 0,
+                                acted: 0,
+                            });
+                            faults.len() - 1
+                        }
+                    };
+                    faults[index].planned += 1;
+                }
+            }
+        }
+        for place in &case.fault_places {
+            if let Some(CommandRecord::AddFault { probe, kind, .. }) =
+                case.commands.get(place.command_index)
+            {
+                let (probe, kind) = (probe.to_string(), kind.to_string());
+                if let Some(f) = faults
+                    .iter_mut()
+                    .find(|f| f.probe == probe && f.kind == kind)
+                {
+                    f.confirmed += 1;
+                    let ended = case.timing.map_or(f64::INFINITY, |t| t.drive_s);
+                    if place.acts_from_s < ended {
+                        f.acted += 1;
+                    }
+                }
+            }
+        }
+        if segments_per_test.len() <= driven {
+            segments_per_test.resize(driven + 1, 0);
+        }
+        segments_per_test[driven] += 1;
+    }
+    faults.sort_by(|a, b| (&a.probe, &a.kind).cmp(&(&b.probe, &b.kind)));
+    let drivable_cells = grid.raster.drivable_cells();
+    let driven_cells = grid.visited_cells();
+    Coverage {
+        stats: CoverageStats {
+            tests: cases.len(),
+            cell_m: CELL_M,
+            drivable_cells,
+            driven_cells,
+            area_share: grid.coverage(),
+            heading_m,
+            speed_m,
+            faults,
+            segments_per_test,
+        },
+        grid,
+    }
+}
+
+/// Adds `metres` to bin `⌊position⌋` (the last bin takes what lies beyond it).
+fn add(bins: &mut [f64], position: f64, metres: f64) {
+    if let Some(last) = bins.len().checked_sub(1) {
+        let k = (position.max(0.0).floor() as usize).min(last);
+        bins[k] += metres;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use trajgen::Polygon;
+
+    fn square() -> Area {
+        let fence = Polygon::new(vec![
+            Point::new(0.0, 0.0),
+            Point::new(10.0, 0.0),
+            Point::new(10.0, 10.0),
+            Point::new(0.0, 10.0),
+        ])
+        .unwrap();
+        Area::new(fence, vec![]).unwrap()
+    }
+
+    /// A case of one segment through `points` (x, y, speed), judged `judged` times (0 or 1).
+    fn case_driving(points: &[(f64, f64, f64)], judged: usize) -> Case {
+        let points: Vec<serde_json::Value> = points
+            .iter()
+            .map(|&(x, y, speed)| serde_json::json!({"x": x, "y": y, "speed": speed}))
+            .collect();
+        let segments: Vec<serde_json::Value> = (0..judged)
+            .map(|k| {
+                serde_json::json!({
+                    "segment_index": k, "command_index": 0, "faults_preceding": [],
+                    "oracle": {"stats": null, "invalid_uwb_samples": 0, "unjudged_samples": 0,
+                               "threshold_m": 1.0, "verdict": "passed"}
+                })
+            })
+            .collect();
+        let json = serde_json::json!({
+            "format": "drivecheck-case", "schema_version": 2,
+            "scenario": {"name": "square"}, "no_faults": false,
+            "commands": [{"command": "run_segments", "points": points}],
+            "return_route": [], "segments": segments
+        });
+        Case::from_json(&json.to_string()).unwrap()
+    }
+
+    #[test]
+    fn a_straight_drive_covers_its_cells_its_heading_and_its_speed() {
+        // From (1, 1.25) east to (9, 1.25) at 1 m/s (3.6 km/h): 16 cells of 0.5 m in one row.
+        let case = case_driving(&[(5.0, 1.25, 1.0), (9.0, 1.25, 1.0)], 1);
+        let c = coverage(&square(), Point::new(1.0, 1.25), &[case]);
+        assert_eq!(c.stats.drivable_cells, 400);
+        assert_eq!(c.stats.driven_cells, 17);
+        assert!(
+            (c.stats.heading_m[0] - 8.0).abs() < 1e-9,
+            "{:?}",
+            c.stats.heading_m
+        );
+        assert!(
+            (c.stats.speed_m[1] - 8.0).abs() < 1e-9,
+            "{:?}",
+            c.stats.speed_m
+        );
+        assert_eq!(c.stats.segments_per_test, [0, 1]);
+        // A segment the test did not drive (no verdict) covers nothing.
+        let undriven = case_driving(&[(5.0, 1.25, 1.0)], 0);
+        let none = coverage(&square(), Point::new(1.0, 1.25), &[undriven]);
+        assert_eq!(none.stats.driven_cells, 0);
+        assert_eq!(none.stats.segments_per_test, [1]);
+    }
+}
