@@ -72,6 +72,16 @@ pub struct Coverage {
     pub grid: CoverageGrid,
 }
 
+/// The coverage of `cases`, tests driven in `scenario` (from the end of its start route).
+pub fn of_scenario(scenario: &scenarios::Scenario, cases: &[Case]) -> Coverage {
+    let start_end = scenario
+        .start_route
+        .points
+        .last()
+        .map_or(Point::new(0.0, 0.0), |w| w.position);
+    coverage(&scenario.area, start_end, cases)
+}
+
 /// The coverage of `cases`, tests driven in `area` from a start route ending at `start_end`.
 pub fn coverage(area: &Area, start_end: Point, cases: &[Case]) -> Coverage {
     let mut grid = CoverageGrid::new(area, CELL_M);

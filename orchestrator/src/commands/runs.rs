@@ -268,14 +268,7 @@ fn show_campaign(dir: &Path, record: CampaignRecord, coverage: bool) -> Result<(
                         )
                     })?
                     .scenario;
-                let start_end = scenario
-                    .start_route
-                    .points
-                    .last()
-                    .map_or(trajgen::Point::new(0.0, 0.0), |w| w.position);
-                Ok::<_, String>(
-                    campaign::coverage::coverage(&scenario.area, start_end, &cases).stats,
-                )
+                Ok::<_, String>(campaign::coverage::of_scenario(&scenario, &cases).stats)
             })
     });
     println!();

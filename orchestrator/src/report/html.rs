@@ -699,12 +699,7 @@ fn coverage_section(
         return Ok(());
     };
     let cases: Vec<Case> = data.tests.iter().map(|t| t.case.clone()).collect();
-    let start_end = scenario
-        .start_route
-        .points
-        .last()
-        .map_or(trajgen::Point::new(0.0, 0.0), |w| w.position);
-    let coverage = campaign::coverage::coverage(&scenario.area, start_end, &cases);
+    let coverage = campaign::coverage::of_scenario(scenario, &cases);
     out.push_str("<section id=\"coverage\">\n<h2>Coverage</h2>\n");
     let layers = MapLayers {
         heat: Some(&coverage.grid),

@@ -64,9 +64,8 @@ pub(crate) struct RunDirectory {
     cases: Vec<Case>,
     /// The scenario has no anchors: UWB is not tested.
     no_anchors: bool,
-    /// The area and where the start route ends, for the coverage statistics.
-    area: trajgen::Area,
-    start_end: trajgen::Point,
+    /// The scenario, for the coverage statistics.
+    scenario: Scenario,
 }
 
 impl RunDirectory {
@@ -102,12 +101,7 @@ impl RunDirectory {
             tests: Vec::new(),
             cases: Vec::new(),
             no_anchors: scenario.anchors.is_empty(),
-            area: scenario.area.clone(),
-            start_end: scenario
-                .start_route
-                .points
-                .last()
-                .map_or(trajgen::Point::new(0.0, 0.0), |w| w.position),
+            scenario: scenario.clone(),
         };
         dir.write_record()?;
         Ok(dir)
@@ -184,9 +178,7 @@ impl RunDirectory {
                  test says anything about UWB positioning"
                     .to_owned()
             }),
-            coverage: Some(
-                campaign::coverage::coverage(&self.area, self.start_end, &self.cases).stats,
-            ),
+            coverage: Some(campaign::coverage::of_scenario(&self.scenario, &self.cases).stats),
         }
     }
 
