@@ -43,6 +43,8 @@ pub const EARLIER_TOOL_POINTS_LEFT: usize = 4;
 const ROUND_TRIPS: usize = 9;
 /// Samples kept to interpolate where the car was.
 const HISTORY: usize = 64;
+/// The window over which the car's progress along its route gives its speed, seconds.
+const RATE_WINDOW_S: f64 = 0.2;
 /// Fault commands in flight at once at most (each for another probe).
 pub const MAX_IN_FLIGHT: usize = 3;
 /// The slowest speed a prediction assumes, m/s (a standing car's place is never predicted).
@@ -232,15 +234,15 @@ impl Placer {
             return;
         };
         let car_time = now.as_secs_f64() - round_trip.as_secs_f64() / 2.0;
-        self.seen = Some(Seen {
-            car_time,
-            s,
-            speed: speed.abs(),
-        });
         self.history.push_back((car_time, s));
         if self.history.len() > HISTORY {
             self.history.pop_front();
         }
+        self.seen = Some(Seen {
+            car_time,
+            s,
+            speed: self.progress_rate().unwrap_or(speed.abs()),
+        });
         self.resolve();
     }
 
@@ -386,6 +388,20 @@ impl Placer {
                     .total_cmp(&b.target_s.unwrap_or(f64::INFINITY))
                     .then(a.command_index.cmp(&b.command_index))
             })
+    }
+
+    /// How fast the car advanced along its route over the last [`RATE_WINDOW_S`], m/s: what a
+    /// place is reached by. It differs from the reported wheel speed where the car cuts a corner
+    /// or drifts off the route, and the actual place of a fault is measured along the route too.
+    /// `None` without two samples that far apart.
+    fn progress_rate(&self) -> Option<f64> {
+        let &(t1, s1) = self.history.back()?;
+        let &(t0, s0) = self
+            .history
+            .iter()
+            .rev()
+            .find(|(t, _)| t1 - t >= RATE_WINDOW_S)?;
+        (t1 > t0).then(|| ((s1 - s0) / (t1 - t0)).max(0.0))
     }
 
     fn distance(&self, progress: Progress) -> Option<f64> {
