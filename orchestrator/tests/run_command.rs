@@ -208,7 +208,8 @@ fn a_recovery_route_ending_far_from_the_start_route_is_joined_by_a_planned_route
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
         stderr.contains("the recovery route ends 3.77 m from start_route[0]")
-            && stderr.contains("the reset plans a route between them"),
+            && stderr.contains("the reset plans a route between them")
+            && stderr.contains("every reset drives a planned join of"),
         "{}",
         text(&out)
     );

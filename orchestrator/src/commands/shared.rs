@@ -252,7 +252,7 @@ async fn ctrl_c() {
 }
 
 /// A campaign's progress on the terminal: a bar of the tests run, the test running, each
-/// verdict printed above the bar (nothing when standard error is not a terminal).
+/// verdict printed above the bar (the bar and the verdicts only on a terminal; notes always).
 #[derive(Debug)]
 pub(super) struct Progress {
     bar: ProgressBar,
@@ -278,7 +278,13 @@ impl Progress {
 
 impl CampaignObserver for Progress {
     fn note(&self, text: &str) {
-        self.bar.println(text);
+        // A hidden bar (standard error is not a terminal: a CI log, a pipe) prints nothing, but
+        // a note (what preflight switched off, a planned join) must reach the log.
+        if self.bar.is_hidden() {
+            eprintln!("{text}");
+        } else {
+            self.bar.println(text);
+        }
     }
 
     fn tests_planned(&self, tests: usize) {
