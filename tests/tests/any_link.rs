@@ -3,17 +3,17 @@
 //! simulated in virtual time), gets the same verdict on every segment, with maximum deviations
 //! within 0.2 m, because each fault is sent at its place on the route, not at a time.
 
+mod common;
+
 use std::path::Path;
 use std::time::Duration;
 
 use campaign::case::{Case, ReplayOf};
 use campaign::model::Campaign;
 use campaign::oracle::Verdict;
-use car_link::{Car, LinkConfig};
 use car_sim::{LinkImpairment, SimConfig};
-use orchestrator::runner::{ReplaySource, RunConfig, Silent, SimulatorView, run_campaign};
+use orchestrator::runner::{ReplaySource, RunConfig};
 use scenarios::Scenario;
-use tokio_util::sync::CancellationToken;
 use trajgen::{Generator, Strategy};
 
 const SEED: u64 = 2;
@@ -32,23 +32,8 @@ async fn run(scenario: &Scenario, config: &RunConfig, link: LinkImpairment) -> V
         link,
         ..SimConfig::from_scenario(scenario)
     };
-    let (stream, sim) = car_sim::spawn_in_process(&sim_config);
-    let link_config = LinkConfig {
-        request_timeout: Duration::from_secs(1),
-        terminal_timeout: Duration::from_secs(2),
-        ..LinkConfig::default()
-    };
-    let car = Car::over_stream(stream, link_config).await.unwrap();
-    let report = run_campaign(
-        &car,
-        scenario,
-        config,
-        &CancellationToken::new(),
-        &Silent,
-        Some(&sim as &dyn SimulatorView),
-    )
-    .await
-    .unwrap();
+    let (car, sim) = common::sim_car(&sim_config).await;
+    let report = common::drive(&car, &sim, scenario, config).await.unwrap();
     report.cases
 }
 

@@ -4,13 +4,15 @@
 //! a lossy slow link ends no test early, and a lost link or an interrupt ends the campaign as an
 //! error with a complete run directory.
 
+mod common;
+
 use std::path::Path;
 use std::time::Duration;
 
 use campaign::case::{CampaignRecord, Case};
 use campaign::model::Campaign;
 use campaign::oracle::{SegmentVerdict, Verdict};
-use car_link::{Car, LinkConfig};
+use car_link::Car;
 use car_sim::{SimConfig, SimHandle};
 use orchestrator::runner::{
     CampaignReport, RunConfig, RunError, Silent, SimulatorView, run_campaign,
@@ -30,14 +32,7 @@ async fn sim_car(scenario: &Scenario, seed: u64) -> (Car, SimHandle) {
         seed,
         ..SimConfig::from_scenario(scenario)
     };
-    let (stream, sim) = car_sim::spawn_in_process(&config);
-    let car_config = LinkConfig {
-        request_timeout: Duration::from_secs(1),
-        terminal_timeout: Duration::from_secs(2),
-        ..LinkConfig::default()
-    };
-    let car = Car::over_stream(stream, car_config).await.unwrap();
-    (car, sim)
+    common::sim_car(&config).await
 }
 
 fn config(seed: u64, tests: usize, no_faults: bool, out: &Path) -> RunConfig {
@@ -185,13 +180,7 @@ async fn a_lossy_slow_link_ends_no_test_early() {
         },
         ..SimConfig::from_scenario(&scenario)
     };
-    let (stream, sim) = car_sim::spawn_in_process(&sim_config);
-    let car_config = LinkConfig {
-        request_timeout: Duration::from_secs(1),
-        terminal_timeout: Duration::from_secs(2),
-        ..LinkConfig::default()
-    };
-    let car = Car::over_stream(stream, car_config).await.unwrap();
+    let (car, sim) = common::sim_car(&sim_config).await;
     let dir = tempfile::tempdir().unwrap();
     let report = run_campaign(
         &car,

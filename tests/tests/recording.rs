@@ -3,13 +3,14 @@
 //! its confirmation, the state samples, the oracle results of the case files and the
 //! simulator's truth; the same seed records the same messages.
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Duration;
 
 use campaign::case::{Case, CommandRecord};
 use campaign::model::Campaign;
-use car_link::LinkConfig;
 use car_sim::SimConfig;
 use orchestrator::recording::{
     AckOutcome, CarCommand, CarStateRecord, CommandAck, CommandSent, FaultRecord, FaultStatus,
@@ -36,15 +37,7 @@ async fn try_campaign(seed: u64, tests: usize, out: &Path) -> Result<(), RunErro
         seed,
         ..SimConfig::from_scenario(&scenario)
     };
-    let (stream, sim) = car_sim::spawn_in_process(&sim_config);
-    let car_config = LinkConfig {
-        request_timeout: Duration::from_secs(1),
-        terminal_timeout: Duration::from_secs(2),
-        ..LinkConfig::default()
-    };
-    let car = car_link::Car::over_stream(stream, car_config)
-        .await
-        .unwrap();
+    let (car, sim) = common::sim_car(&sim_config).await;
     let campaign = Campaign {
         seed,
         tests,

@@ -3,14 +3,15 @@
 //! different probes share a round trip. Never an error that reads like a firmware fault (before,
 //! 500 ms each way died in the first upload: "the car did not store route point 0 as sent").
 
+mod common;
+
 use std::time::Duration;
 
 use campaign::model::Campaign;
 use campaign::oracle::Verdict;
-use car_link::{Car, LinkConfig};
+use car_link::Car;
 use car_sim::{LinkImpairment, SimConfig};
-use orchestrator::runner::{CampaignReport, RunConfig, Silent, SimulatorView, run_campaign};
-use tokio_util::sync::CancellationToken;
+use orchestrator::runner::{CampaignReport, RunConfig};
 
 #[tokio::test(start_paused = true)]
 async fn a_campaign_over_half_a_second_each_way_drives_its_tests() {
@@ -93,14 +94,7 @@ async fn campaign_over(
         link,
         ..SimConfig::from_scenario(&scenario)
     };
-    let (stream, sim) = car_sim::spawn_in_process(&sim_config);
-    let link_config = LinkConfig {
-        request_timeout: Duration::from_secs(1),
-        terminal_timeout: Duration::from_secs(2),
-        tries: 10,
-        ..LinkConfig::default()
-    };
-    let car = Car::over_stream(stream, link_config).await.unwrap();
+    let (car, sim) = common::sim_car(&sim_config).await;
     let dir = tempfile::tempdir().unwrap();
     let campaign = Campaign {
         seed: 5,
@@ -111,16 +105,9 @@ async fn campaign_over(
     if let Some(stale_after) = stale_after {
         config.safety.stale_after = stale_after;
     }
-    let report = run_campaign(
-        &car,
-        &scenario,
-        &config,
-        &CancellationToken::new(),
-        &Silent,
-        Some(&sim as &dyn SimulatorView),
-    )
-    .await
-    .unwrap_or_else(|failure| panic!("seed {seed}: {}", failure.error));
+    let report = common::drive(&car, &sim, &scenario, &config)
+        .await
+        .unwrap_or_else(|failure| panic!("seed {seed}: {}", failure.error));
     (car, report)
 }
 
@@ -140,13 +127,7 @@ async fn fault_commands_for_two_probes_take_one_round_trip() {
         },
         ..SimConfig::from_scenario(&scenario)
     };
-    let (stream, _sim) = car_sim::spawn_in_process(&sim_config);
-    let link_config = LinkConfig {
-        request_timeout: Duration::from_secs(1),
-        terminal_timeout: Duration::from_secs(2),
-        ..LinkConfig::default()
-    };
-    let car = Car::over_stream(stream, link_config).await.unwrap();
+    let (car, _sim) = common::sim_car(&sim_config).await;
     car.set_fi_enabled(true).await.unwrap();
     let started = tokio::time::Instant::now();
     let (range, yaw) = tokio::join!(
