@@ -102,3 +102,45 @@ fn a_run_with_faults_is_explained_by_them_and_cannot_be_calibrated_on() {
     assert_eq!(missing.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&missing.stderr).contains("no-such-dir"));
 }
+
+/// A replay directory is explained run by run (`run-1/`, `run-2/`, …).
+#[test]
+fn a_replay_directory_is_explained_run_by_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = campaign(dir.path(), 1, 6, &["--on-failure", "continue"], 1);
+    let failed = std::fs::read_dir(&run)
+        .unwrap()
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .find(|p| {
+            std::fs::read_to_string(p).is_ok_and(|t| t.contains("\"verdict\": \"failed\""))
+                && p.file_name()
+                    .unwrap()
+                    .to_string_lossy()
+                    .starts_with("case-")
+        })
+        .expect("a failed case");
+    let replay = dir.path().join("replay");
+    let out = drivecheck(&[
+        "replay",
+        path(&failed),
+        "--times",
+        "2",
+        "--out",
+        path(&replay),
+    ]);
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out));
+    let explained = drivecheck(&["explain", path(&replay), "--json"]);
+    assert_eq!(explained.status.code(), Some(0), "{}", text(&explained));
+    let json: serde_json::Value = serde_json::from_slice(&explained.stdout).unwrap();
+    let cases: Vec<&str> = json["cases"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["case"].as_str().unwrap())
+        .collect();
+    assert_eq!(cases.len(), 2, "{json}");
+    assert!(
+        cases[0].contains("run-1") && cases[1].contains("run-2"),
+        "{cases:?}"
+    );
+}

@@ -82,8 +82,18 @@ pub fn explain(args: &ExplainArgs) -> Result<ExitCode> {
         if only.is_some() {
             bail!("--score takes a run directory (every failing segment of the run is scored)");
         }
-        let (explanations, scored) = score_run(&dir, scenario.as_ref(), &options)
-            .with_context(|| format!("cannot score {}", dir.display()))?;
+        let mut explanations = Explanations {
+            cases: Vec::new(),
+            notes: Vec::new(),
+        };
+        let mut scored = Vec::new();
+        for run in run_dirs(&dir) {
+            let (e, s) = score_run(&run, scenario.as_ref(), &options)
+                .with_context(|| format!("cannot score {}", run.display()))?;
+            explanations.cases.extend(e.cases);
+            explanations.notes.extend(e.notes);
+            scored.extend(s);
+        }
         if args.json {
             let out = serde_json::json!({ "cases": explanations.cases, "scored": scored });
             println!("{}", serde_json::to_string_pretty(&out)?);
@@ -92,14 +102,48 @@ pub fn explain(args: &ExplainArgs) -> Result<ExitCode> {
         }
         return Ok(ExitCode::SUCCESS);
     }
-    let explanations = explain_run(&dir, only, scenario.as_ref(), &options)
-        .with_context(|| format!("cannot explain {}", dir.display()))?;
+    let mut explanations = Explanations {
+        cases: Vec::new(),
+        notes: Vec::new(),
+    };
+    for run in run_dirs(&dir) {
+        let e = explain_run(&run, only, scenario.as_ref(), &options)
+            .with_context(|| format!("cannot explain {}", run.display()))?;
+        explanations.cases.extend(e.cases);
+        explanations.notes.extend(e.notes);
+    }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&explanations)?);
     } else {
         print!("{}", text(&explanations));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The run directories of `dir`: a replay directory's runs (`run-1/`, `run-2/`, … beside its
+/// `replay.json`), else `dir` itself.
+fn run_dirs(dir: &Path) -> Vec<std::path::PathBuf> {
+    if !dir.join(campaign::replay::REPLAY_FILE).is_file() {
+        return vec![dir.to_owned()];
+    }
+    let mut runs: Vec<(u32, std::path::PathBuf)> = std::fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter_map(|p| {
+            let n = p
+                .file_name()?
+                .to_str()?
+                .strip_prefix("run-")?
+                .parse()
+                .ok()?;
+            p.join(crate::runner::CAMPAIGN_FILE)
+                .is_file()
+                .then_some((n, p))
+        })
+        .collect();
+    runs.sort();
+    runs.into_iter().map(|(_, p)| p).collect()
 }
 
 /// The explanations as text: per segment, its growth and the causes in order.

@@ -13,8 +13,7 @@ use crate::runner::{CampaignReport, TestSummary};
 use campaign::case::{CampaignRecord, Case};
 use campaign::replay::{Comparison, REPLAY_FILE};
 
-/// The campaign record's file name in a run directory.
-const CAMPAIGN_FILE: &str = "campaign.json";
+use crate::runner::CAMPAIGN_FILE;
 
 /// Lists or shows run directories. Exit status 0, or 2 when the directory cannot be read.
 pub fn runs(args: &RunsArgs) -> Result<ExitCode> {

@@ -17,8 +17,7 @@ use campaign::case::{CampaignRecord, Case};
 use campaign::replay::{Comparison, REPLAY_FILE, ReplayRun};
 use campaign::shrink::{MINIMAL_FILE, SHRINK_FILE, ShrinkReport};
 
-/// The campaign record's file name in a run directory.
-pub(crate) const CAMPAIGN_FILE: &str = "campaign.json";
+pub(crate) use crate::runner::CAMPAIGN_FILE;
 
 /// One state sample of a test, on the test's clock.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -143,9 +142,9 @@ impl Directory {
 }
 
 fn read_text(path: &Path) -> Result<String, ReportError> {
-    std::fs::read_to_string(path).map_err(|source| ReportError::Read {
+    std::fs::read_to_string(path).map_err(|error| ReportError::Read {
         path: path.to_owned(),
-        source,
+        error,
     })
 }
 
@@ -161,9 +160,9 @@ fn invalid(path: &Path, error: impl std::fmt::Display) -> ReportError {
 pub(crate) fn read_campaign(dir: &Path) -> Result<CampaignData, ReportError> {
     let path = dir.join(CAMPAIGN_FILE);
     let record = CampaignRecord::from_json(&read_text(&path)?).map_err(|e| invalid(&path, e))?;
-    let entries = std::fs::read_dir(dir).map_err(|source| ReportError::Read {
+    let entries = std::fs::read_dir(dir).map_err(|error| ReportError::Read {
         path: dir.to_owned(),
-        source,
+        error,
     })?;
     let mut files: Vec<(usize, String)> = entries
         .filter_map(|e| e.ok())

@@ -52,12 +52,12 @@ pub enum ReportError {
         dir: PathBuf,
     },
     /// A file could not be read.
-    #[error("cannot read {path}: {source}")]
+    #[error("cannot read {path}: {error}")]
     Read {
         /// The file.
         path: PathBuf,
-        /// What the system said.
-        source: std::io::Error,
+        /// What the system said (in the message, not a source: it would be said twice).
+        error: std::io::Error,
     },
     /// A file is not what its name says.
     #[error("{path}: {message}")]
@@ -71,12 +71,12 @@ pub enum ReportError {
     #[error("cannot draw a picture: {0}")]
     Draw(String),
     /// The page could not be written.
-    #[error("cannot write {path}: {source}")]
+    #[error("cannot write {path}: {error}")]
     Write {
         /// The file.
         path: PathBuf,
-        /// What the system said.
-        source: std::io::Error,
+        /// What the system said (in the message, not a source: it would be said twice).
+        error: std::io::Error,
     },
 }
 
@@ -151,9 +151,9 @@ pub fn render(
 /// Writes the page of `dir` to `out` (see [`render`]).
 pub fn write(dir: &Path, out: &Path, scenario: Option<&Scenario>) -> Result<Written, ReportError> {
     let (page, kind, items) = render(dir, scenario)?;
-    crate::atomic::write(out, &page).map_err(|source| ReportError::Write {
+    crate::atomic::write(out, &page).map_err(|error| ReportError::Write {
         path: out.to_owned(),
-        source,
+        error,
     })?;
     Ok(Written {
         path: out.to_owned(),

@@ -70,7 +70,7 @@ use campaign::safety::{Abort, AbortReason, SafetyConfig};
 use campaign::streaming::StreamingConfig;
 
 pub use events::{CampaignObserver, Silent, SimulatorView};
-pub use run_dir::{CampaignReport, RECORDING_FILE, TestSummary};
+pub use run_dir::{CAMPAIGN_FILE, CampaignReport, RECORDING_FILE, TestSummary};
 pub(crate) use run_dir::{is_used, rfc3339_now, run_dir_name};
 
 use journal::Journal;

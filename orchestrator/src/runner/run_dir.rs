@@ -18,7 +18,7 @@ use campaign::safety::SafetyConfig;
 use campaign::streaming::StreamingConfig;
 
 /// The file name of the campaign record in a run directory.
-pub(crate) const CAMPAIGN_FILE: &str = "campaign.json";
+pub const CAMPAIGN_FILE: &str = "campaign.json";
 /// The file name of the recording in a run directory.
 pub const RECORDING_FILE: &str = "campaign.mcap";
 
