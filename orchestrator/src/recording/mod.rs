@@ -22,6 +22,7 @@
 //!
 //! Not here: deciding what to record when (the campaign runner), replay.
 
+pub mod foxglove;
 mod reader;
 mod records;
 mod schema;

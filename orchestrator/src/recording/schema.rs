@@ -45,6 +45,11 @@ fn body(topic: Topic) -> Value {
             ])}),
             &["sim_ms", "event"],
         ),
+        Topic::FoxgloveArea
+        | Topic::FoxgloveRoute
+        | Topic::FoxgloveRtk
+        | Topic::FoxgloveUwb
+        | Topic::FoxgloveLog => super::foxglove::schema(topic).unwrap_or_default(),
     }
 }
 

@@ -34,11 +34,21 @@ pub enum Topic {
     SimFaults,
     /// `/sim/events`: the simulated firmware's watchdog and quirk events ([`super::SimEvent`]).
     SimEvents,
+    /// `/foxglove/area`: the area in Foxglove's `SceneUpdate` ([`super::foxglove::AreaScene`]).
+    FoxgloveArea,
+    /// `/foxglove/route`: each test's planned segments in `SceneUpdate`.
+    FoxgloveRoute,
+    /// `/foxglove/rtk`: the RTK pose of every state sample in `PoseInFrame`.
+    FoxgloveRtk,
+    /// `/foxglove/uwb`: the UWB pose of every state sample in `PoseInFrame`.
+    FoxgloveUwb,
+    /// `/foxglove/log`: faults, tests and safety stops in Foxglove's `Log`.
+    FoxgloveLog,
 }
 
 impl Topic {
     /// Every channel, in registration order.
-    pub const ALL: [Topic; 13] = [
+    pub const ALL: [Topic; 18] = [
         Topic::CarState,
         Topic::Commands,
         Topic::Acks,
@@ -52,6 +62,11 @@ impl Topic {
         Topic::SimRanges,
         Topic::SimFaults,
         Topic::SimEvents,
+        Topic::FoxgloveArea,
+        Topic::FoxgloveRoute,
+        Topic::FoxgloveRtk,
+        Topic::FoxgloveUwb,
+        Topic::FoxgloveLog,
     ];
 
     /// The topic name (`/car/state`, …).
@@ -70,10 +85,16 @@ impl Topic {
             Topic::SimRanges => "/sim/ranges",
             Topic::SimFaults => "/sim/faults",
             Topic::SimEvents => "/sim/events",
+            Topic::FoxgloveArea => "/foxglove/area",
+            Topic::FoxgloveRoute => "/foxglove/route",
+            Topic::FoxgloveRtk => "/foxglove/rtk",
+            Topic::FoxgloveUwb => "/foxglove/uwb",
+            Topic::FoxgloveLog => "/foxglove/log",
         }
     }
 
-    /// The channel's schema name (`drivecheck.CarState`, …).
+    /// The channel's schema name (`drivecheck.CarState`, …; Foxglove's well-known names for the
+    /// `/foxglove/*` channels).
     pub fn schema_name(self) -> &'static str {
         match self {
             Topic::CarState => "drivecheck.CarState",
@@ -89,6 +110,9 @@ impl Topic {
             Topic::SimRanges => "drivecheck.SimRange",
             Topic::SimFaults => "drivecheck.SimFault",
             Topic::SimEvents => "drivecheck.SimEvent",
+            Topic::FoxgloveArea | Topic::FoxgloveRoute => "foxglove.SceneUpdate",
+            Topic::FoxgloveRtk | Topic::FoxgloveUwb => "foxglove.PoseInFrame",
+            Topic::FoxgloveLog => "foxglove.Log",
         }
     }
 
@@ -113,7 +137,7 @@ impl fmt::Display for Topic {
 }
 
 /// A message type of a recording: the record one channel carries, as JSON.
-pub trait Record: Serialize + DeserializeOwned {
+pub trait Record: Serialize + DeserializeOwned + 'static {
     /// Its channel.
     const TOPIC: Topic;
 }

@@ -24,7 +24,7 @@ use super::records::{
     nanos_since,
 };
 use super::topic::{Record, Topic};
-use super::{RECORDING_FORMAT, RECORDING_VERSION, RecordingError, schema};
+use super::{RECORDING_FORMAT, RECORDING_VERSION, RecordingError, foxglove, schema};
 use campaign::case::{CampaignRecord, tool_version};
 
 /// The default [`RecordingStart::chunk_interval`]: at most one second of messages is lost when the
@@ -115,6 +115,10 @@ impl Recorder {
         };
         recorder.register_channels(start.simulated)?;
         recorder.write_start_metadata(start)?;
+        recorder.write_at_ns(
+            0,
+            &foxglove::area(start.scenario, foxglove::Time::from_ns(0)),
+        )?;
         recorder.flush()?;
         Ok(recorder)
     }
@@ -215,6 +219,16 @@ impl Recorder {
     /// Records `message` with log time `log_time` (ns since the origin). A message for a channel
     /// that is not registered (`/sim/*` in a run on a real car) is ignored.
     fn write_at_ns<R: Record>(&mut self, log_time: u64, message: &R) -> Result<(), RecordingError> {
+        self.write_one(log_time, message)?;
+        match foxglove::derived(message, foxglove::Time::from_ns(log_time)) {
+            Some(foxglove::Derived::Route(route)) => self.write_one(log_time, &route),
+            Some(foxglove::Derived::Log(log)) => self.write_one(log_time, &log),
+            None => Ok(()),
+        }
+    }
+
+    /// Records `message` alone (nothing derived from it).
+    fn write_one<R: Record>(&mut self, log_time: u64, message: &R) -> Result<(), RecordingError> {
         let Some(&channel_id) = self.channels.get(&R::TOPIC) else {
             return Ok(());
         };
@@ -255,7 +269,11 @@ impl Recorder {
     /// Records a state sample at the time it was received.
     pub fn car_state(&mut self, sample: &StateSample) -> Result<(), RecordingError> {
         let record = CarStateRecord::new(sample, self.origin);
-        self.write_at(sample.received_at, &record)
+        self.write_at(sample.received_at, &record)?;
+        let at = nanos_since(self.origin, sample.received_at);
+        let (rtk, uwb) = foxglove::poses(&record, foxglove::Time::from_ns(at));
+        self.write_one(at, &rtk)?;
+        self.write_one(at, &uwb)
     }
 
     /// Records a command about to be sent during test `test_index` (if any) and returns its id

@@ -1,0 +1,610 @@
+//! Channels in Foxglove's well-known schemas, so that Foxglove shows a recording on a map in its
+//! 3D panel without any set-up: the area (`/foxglove/area`, `foxglove.SceneUpdate`: the fence and
+//! cutouts as line loops, the anchors as spheres with their ids), each test's planned route
+//! (`/foxglove/route`, `foxglove.SceneUpdate`: a line strip per segment, cleared when a test
+//! starts), the RTK and UWB poses of every state sample (`/foxglove/rtk`, `/foxglove/uwb`,
+//! `foxglove.PoseInFrame`) and the events worth reading (`/foxglove/log`, `foxglove.Log`: faults
+//! sent and confirmed, tests started and ended, safety stops).
+//!
+//! They are JSON, with JSON schemas of our own that describe the fields written (Foxglove knows
+//! the message types by their schema names). Everything is in the frame `map`: x east, y north, in
+//! metres, as the area's coordinates. The recorder writes them beside the records they come from
+//! (see `Recorder`); `docs/foxglove-layout.json` is a layout with a 3D panel, a plot of the
+//! deviation and the log.
+
+use scenarios::Scenario;
+use serde::{Deserialize, Serialize};
+use serde_json::{Value, json};
+
+use super::records::{CarStateRecord, FaultRecord, FaultStatus, PlannedSegment, SafetyRecord};
+use super::records::{TestEvent, TestEventKind};
+use super::topic::{Record, Topic};
+
+/// The frame everything is drawn in.
+pub const FRAME: &str = "map";
+
+/// A time: seconds and nanoseconds (here, of the run's clock since the campaign started).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Time {
+    /// Whole seconds.
+    pub sec: u64,
+    /// Nanoseconds.
+    pub nsec: u32,
+}
+
+impl Time {
+    /// The time `ns` nanoseconds after the origin.
+    pub fn from_ns(ns: u64) -> Self {
+        Self {
+            sec: ns / 1_000_000_000,
+            nsec: (ns % 1_000_000_000) as u32,
+        }
+    }
+}
+
+/// A point or a size.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Vector3 {
+    /// East, m.
+    pub x: f64,
+    /// North, m.
+    pub y: f64,
+    /// Up, m.
+    pub z: f64,
+}
+
+/// An orientation.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Quaternion {
+    /// x.
+    pub x: f64,
+    /// y.
+    pub y: f64,
+    /// z.
+    pub z: f64,
+    /// w.
+    pub w: f64,
+}
+
+impl Quaternion {
+    /// A rotation by `yaw` radians about the vertical (counter-clockwise from east).
+    pub fn yaw(yaw: f64) -> Self {
+        Self {
+            x: 0.0,
+            y: 0.0,
+            z: (yaw / 2.0).sin(),
+            w: (yaw / 2.0).cos(),
+        }
+    }
+}
+
+/// A position and an orientation.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Pose {
+    /// Where.
+    pub position: Vector3,
+    /// Which way.
+    pub orientation: Quaternion,
+}
+
+impl Pose {
+    /// At (`x`, `y`) on the ground, heading `yaw` radians.
+    pub fn at(x: f64, y: f64, yaw: f64) -> Self {
+        Self {
+            position: Vector3 { x, y, z: 0.0 },
+            orientation: Quaternion::yaw(yaw),
+        }
+    }
+}
+
+/// A colour, each part 0–1.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Color {
+    /// Red.
+    pub r: f64,
+    /// Green.
+    pub g: f64,
+    /// Blue.
+    pub b: f64,
+    /// Opacity.
+    pub a: f64,
+}
+
+const fn rgb(r: f64, g: f64, b: f64) -> Color {
+    Color { r, g, b, a: 1.0 }
+}
+
+/// A polyline (`type` 0: strip, 1: loop).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LinePrimitive {
+    /// 0 line strip, 1 line loop, 2 line list.
+    #[serde(rename = "type")]
+    pub kind: u8,
+    /// Where its points are relative to.
+    pub pose: Pose,
+    /// Its width.
+    pub thickness: f64,
+    /// Whether `thickness` is in pixels (true) or metres.
+    pub scale_invariant: bool,
+    /// The points.
+    pub points: Vec<Vector3>,
+    /// Its colour.
+    pub color: Color,
+    /// Per-point colours (none).
+    pub colors: Vec<Color>,
+    /// Indices into `points` (none: in order).
+    pub indices: Vec<u32>,
+}
+
+/// A sphere.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SpherePrimitive {
+    /// Its centre.
+    pub pose: Pose,
+    /// Its diameters.
+    pub size: Vector3,
+    /// Its colour.
+    pub color: Color,
+}
+
+/// A text label.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TextPrimitive {
+    /// Where.
+    pub pose: Pose,
+    /// Always facing the camera.
+    pub billboard: bool,
+    /// Its size.
+    pub font_size: f64,
+    /// Whether `font_size` is in pixels.
+    pub scale_invariant: bool,
+    /// Its colour.
+    pub color: Color,
+    /// The text.
+    pub text: String,
+}
+
+/// A thing in the 3D scene, made of primitives (only lines, spheres and texts are written; the
+/// other kinds are empty).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SceneEntity {
+    /// When.
+    pub timestamp: Time,
+    /// Its frame ([`FRAME`]).
+    pub frame_id: String,
+    /// Its id: an entity replaces an earlier one of the same id on its topic.
+    pub id: String,
+    /// How long it shows (zero: until replaced or deleted).
+    pub lifetime: Time,
+    /// Whether it moves with its frame.
+    pub frame_locked: bool,
+    /// Key-value pairs (none).
+    pub metadata: Vec<Value>,
+    /// Arrows (none).
+    pub arrows: Vec<Value>,
+    /// Cubes (none).
+    pub cubes: Vec<Value>,
+    /// Spheres.
+    pub spheres: Vec<SpherePrimitive>,
+    /// Cylinders (none).
+    pub cylinders: Vec<Value>,
+    /// Lines.
+    pub lines: Vec<LinePrimitive>,
+    /// Triangles (none).
+    pub triangles: Vec<Value>,
+    /// Texts.
+    pub texts: Vec<TextPrimitive>,
+    /// Models (none).
+    pub models: Vec<Value>,
+}
+
+impl SceneEntity {
+    fn new(at: Time, id: String) -> Self {
+        Self {
+            timestamp: at,
+            frame_id: FRAME.to_owned(),
+            id,
+            lifetime: Time::from_ns(0),
+            frame_locked: false,
+            metadata: Vec::new(),
+            arrows: Vec::new(),
+            cubes: Vec::new(),
+            spheres: Vec::new(),
+            cylinders: Vec::new(),
+            lines: Vec::new(),
+            triangles: Vec::new(),
+            texts: Vec::new(),
+            models: Vec::new(),
+        }
+    }
+}
+
+/// A deletion of entities (`type` 1: all on the topic).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SceneEntityDeletion {
+    /// Entities older than this go.
+    pub timestamp: Time,
+    /// 0 the one with `id`, 1 all.
+    #[serde(rename = "type")]
+    pub kind: u8,
+    /// The id (for `type` 0).
+    pub id: String,
+}
+
+/// An update of the 3D scene.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SceneUpdate {
+    /// What to remove first.
+    pub deletions: Vec<SceneEntityDeletion>,
+    /// What to add or replace.
+    pub entities: Vec<SceneEntity>,
+}
+
+/// `/foxglove/area`: the area, once at the start.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct AreaScene(pub SceneUpdate);
+
+impl Record for AreaScene {
+    const TOPIC: Topic = Topic::FoxgloveArea;
+}
+
+/// `/foxglove/route`: a test's planned segments.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct RouteScene(pub SceneUpdate);
+
+impl Record for RouteScene {
+    const TOPIC: Topic = Topic::FoxgloveRoute;
+}
+
+/// A pose in a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PoseInFrame {
+    /// When.
+    pub timestamp: Time,
+    /// The frame ([`FRAME`]).
+    #[serde(with = "frame")]
+    pub frame_id: (),
+    /// The pose.
+    pub pose: Pose,
+}
+
+/// `frame_id` is always [`FRAME`].
+mod frame {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(_: &(), s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(super::FRAME)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<(), D::Error> {
+        String::deserialize(d).map(drop)
+    }
+}
+
+/// `/foxglove/rtk`: the RTK (fused) pose of a state sample.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct RtkPose(pub PoseInFrame);
+
+impl Record for RtkPose {
+    const TOPIC: Topic = Topic::FoxgloveRtk;
+}
+
+/// `/foxglove/uwb`: the UWB pose of a state sample.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct UwbPose(pub PoseInFrame);
+
+impl Record for UwbPose {
+    const TOPIC: Topic = Topic::FoxgloveUwb;
+}
+
+/// `/foxglove/log`: an event worth reading.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Log {
+    /// When.
+    pub timestamp: Time,
+    /// 1 debug, 2 info, 3 warning, 4 error, 5 fatal.
+    pub level: u8,
+    /// The text.
+    pub message: String,
+    /// Who says it (`drivecheck`).
+    pub name: String,
+    /// Source file (empty).
+    pub file: String,
+    /// Source line (0).
+    pub line: u32,
+}
+
+impl Record for Log {
+    const TOPIC: Topic = Topic::FoxgloveLog;
+}
+
+impl Log {
+    fn new(at: Time, level: u8, message: String) -> Self {
+        Self {
+            timestamp: at,
+            level,
+            message,
+            name: "drivecheck".to_owned(),
+            file: String::new(),
+            line: 0,
+        }
+    }
+}
+
+const INFO: u8 = 2;
+const WARNING: u8 = 3;
+const ERROR: u8 = 4;
+
+const FENCE: Color = rgb(0.1, 0.1, 0.1);
+const CUTOUT: Color = rgb(0.45, 0.45, 0.45);
+const ANCHOR: Color = rgb(0.1, 0.1, 0.55);
+const ROUTE: Color = rgb(0.29, 0.5, 0.76);
+
+fn ground(p: trajgen::Point) -> Vector3 {
+    Vector3 {
+        x: p.x,
+        y: p.y,
+        z: 0.0,
+    }
+}
+
+fn line(kind: u8, points: Vec<Vector3>, thickness: f64, color: Color) -> LinePrimitive {
+    LinePrimitive {
+        kind,
+        pose: Pose::at(0.0, 0.0, 0.0),
+        thickness,
+        scale_invariant: false,
+        points,
+        color,
+        colors: Vec::new(),
+        indices: Vec::new(),
+    }
+}
+
+/// The area of `scenario`: fence and cutouts as line loops, anchors as spheres with labels.
+pub fn area(scenario: &Scenario, at: Time) -> AreaScene {
+    let mut fence = SceneEntity::new(at, "area".to_owned());
+    let vertices = |p: &trajgen::Polygon| p.vertices().iter().copied().map(ground).collect();
+    fence
+        .lines
+        .push(line(1, vertices(scenario.area.fence()), 0.08, FENCE));
+    for cutout in scenario.area.cutouts() {
+        fence.lines.push(line(1, vertices(cutout), 0.06, CUTOUT));
+    }
+    let mut anchors = SceneEntity::new(at, "anchors".to_owned());
+    for a in &scenario.anchors {
+        let centre = Pose::at(a.x, a.y, 0.0);
+        anchors.spheres.push(SpherePrimitive {
+            pose: Pose {
+                position: Vector3 {
+                    z: a.height,
+                    ..centre.position
+                },
+                ..centre
+            },
+            size: Vector3 {
+                x: 0.4,
+                y: 0.4,
+                z: 0.4,
+            },
+            color: ANCHOR,
+        });
+        anchors.texts.push(TextPrimitive {
+            pose: Pose {
+                position: Vector3 {
+                    z: a.height + 0.5,
+                    ..centre.position
+                },
+                ..centre
+            },
+            billboard: true,
+            font_size: 14.0,
+            scale_invariant: true,
+            color: ANCHOR,
+            text: format!("anchor {}", a.id),
+        });
+    }
+    AreaScene(SceneUpdate {
+        deletions: Vec::new(),
+        entities: vec![fence, anchors],
+    })
+}
+
+/// The derived messages of a record written on one of drivecheck's own channels.
+pub(super) enum Derived {
+    /// On `/foxglove/route`.
+    Route(RouteScene),
+    /// On `/foxglove/log`.
+    Log(Log),
+}
+
+/// What `record` adds to the Foxglove channels, at `at`.
+pub(super) fn derived<R: Record + 'static>(record: &R, at: Time) -> Option<Derived> {
+    let any: &dyn std::any::Any = record;
+    if let Some(segment) = any.downcast_ref::<PlannedSegment>() {
+        let mut entity = SceneEntity::new(
+            at,
+            format!(
+                "test {} segment {}",
+                segment.test_index, segment.segment_index
+            ),
+        );
+        entity.lines.push(line(
+            0,
+            segment
+                .points
+                .iter()
+                .map(|p| Vector3 {
+                    x: p.x,
+                    y: p.y,
+                    z: 0.0,
+                })
+                .collect(),
+            0.05,
+            ROUTE,
+        ));
+        return Some(Derived::Route(RouteScene(SceneUpdate {
+            deletions: Vec::new(),
+            entities: vec![entity],
+        })));
+    }
+    if let Some(event) = any.downcast_ref::<TestEvent>() {
+        let (level, text) = match &event.event {
+            TestEventKind::Started { commands } => {
+                // A new test: the planned route of the one before goes.
+                let clear = RouteScene(SceneUpdate {
+                    deletions: vec![SceneEntityDeletion {
+                        timestamp: at,
+                        kind: 1,
+                        id: String::new(),
+                    }],
+                    entities: Vec::new(),
+                });
+                let _ = commands;
+                return Some(Derived::Route(clear));
+            }
+            TestEventKind::Ended { verdict, reason } => (
+                match verdict {
+                    campaign::oracle::Verdict::Passed => INFO,
+                    campaign::oracle::Verdict::Failed => ERROR,
+                    campaign::oracle::Verdict::Aborted => WARNING,
+                },
+                format!(
+                    "test {} {}{}",
+                    event.test_index,
+                    verdict.as_str(),
+                    reason
+                        .as_deref()
+                        .map_or_else(String::new, |r| format!(": {r}"))
+                ),
+            ),
+        };
+        return Some(Derived::Log(Log::new(at, level, text)));
+    }
+    if let Some(fault) = any.downcast_ref::<FaultRecord>() {
+        let f = &fault.fault;
+        let what = format!(
+            "test {} command {}: {} {} {}",
+            fault.test_index, fault.command_index, f.probe, f.kind, f.param
+        );
+        let (level, text) = match &fault.status {
+            FaultStatus::Sent => (INFO, format!("{what} sent")),
+            FaultStatus::Confirmed => (INFO, format!("{what} confirmed by the car")),
+            FaultStatus::Refused { error } => (WARNING, format!("{what} not added: {error}")),
+            FaultStatus::Placed { placement } => (
+                INFO,
+                format!(
+                    "{what} acted from {:.2} s to {:.2} s (placed {} m off its place)",
+                    placement.acts_from_s,
+                    placement.acts_to_s,
+                    placement
+                        .error_m
+                        .map_or_else(|| "?".to_owned(), |e| format!("{e:+.2}"))
+                ),
+            ),
+        };
+        return Some(Derived::Log(Log::new(at, level, text)));
+    }
+    if let Some(stop) = any.downcast_ref::<SafetyRecord>() {
+        return Some(Derived::Log(Log::new(
+            at,
+            WARNING,
+            format!("safety: {}", stop.message),
+        )));
+    }
+    None
+}
+
+/// The RTK and UWB poses of a state sample.
+pub(super) fn poses(state: &CarStateRecord, at: Time) -> (RtkPose, UwbPose) {
+    let yaw = state.rtk.yaw_deg.to_radians();
+    let pose = |x: f64, y: f64| PoseInFrame {
+        timestamp: at,
+        frame_id: (),
+        pose: Pose::at(x, y, if yaw.is_finite() { yaw } else { 0.0 }),
+    };
+    (
+        RtkPose(pose(state.rtk.x, state.rtk.y)),
+        UwbPose(pose(state.uwb.x, state.uwb.y)),
+    )
+}
+
+// The schemas: the fields written, by Foxglove's schema names.
+
+fn object(properties: Value) -> Value {
+    let required: Vec<String> = properties
+        .as_object()
+        .map(|m| m.keys().cloned().collect())
+        .unwrap_or_default();
+    json!({"type": "object", "properties": properties, "required": required})
+}
+
+fn number() -> Value {
+    json!({"type": ["number", "null"]})
+}
+
+fn array(items: Value) -> Value {
+    json!({"type": "array", "items": items})
+}
+
+fn time() -> Value {
+    object(json!({"sec": {"type": "integer"}, "nsec": {"type": "integer"}}))
+}
+
+fn vector3() -> Value {
+    object(json!({"x": number(), "y": number(), "z": number()}))
+}
+
+fn pose() -> Value {
+    object(json!({
+        "position": vector3(),
+        "orientation": object(json!({"x": number(), "y": number(), "z": number(), "w": number()})),
+    }))
+}
+
+fn color() -> Value {
+    object(json!({"r": number(), "g": number(), "b": number(), "a": number()}))
+}
+
+fn scene_update() -> Value {
+    let line = object(json!({
+        "type": {"type": "integer"}, "pose": pose(), "thickness": number(),
+        "scale_invariant": {"type": "boolean"}, "points": array(vector3()), "color": color(),
+        "colors": array(color()), "indices": array(json!({"type": "integer"})),
+    }));
+    let sphere = object(json!({"pose": pose(), "size": vector3(), "color": color()}));
+    let text = object(json!({
+        "pose": pose(), "billboard": {"type": "boolean"}, "font_size": number(),
+        "scale_invariant": {"type": "boolean"}, "color": color(), "text": {"type": "string"},
+    }));
+    let none = array(json!({"type": "object"}));
+    let entity = object(json!({
+        "timestamp": time(), "frame_id": {"type": "string"}, "id": {"type": "string"},
+        "lifetime": time(), "frame_locked": {"type": "boolean"}, "metadata": none,
+        "arrows": none, "cubes": none, "spheres": array(sphere), "cylinders": none,
+        "lines": array(line), "triangles": none, "texts": array(text), "models": none,
+    }));
+    let deletion = object(json!({
+        "timestamp": time(), "type": {"type": "integer"}, "id": {"type": "string"},
+    }));
+    object(json!({"deletions": array(deletion), "entities": array(entity)}))
+}
+
+/// The JSON schema of a Foxglove channel's messages (`None` for drivecheck's own channels).
+pub(super) fn schema(topic: Topic) -> Option<Value> {
+    Some(match topic {
+        Topic::FoxgloveArea | Topic::FoxgloveRoute => scene_update(),
+        Topic::FoxgloveRtk | Topic::FoxgloveUwb => object(json!({
+            "timestamp": time(), "frame_id": {"type": "string"}, "pose": pose(),
+        })),
+        Topic::FoxgloveLog => object(json!({
+            "timestamp": time(), "level": {"type": "integer"}, "message": {"type": "string"},
+            "name": {"type": "string"}, "file": {"type": "string"}, "line": {"type": "integer"},
+        })),
+        _ => return None,
+    })
+}
