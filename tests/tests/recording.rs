@@ -315,3 +315,68 @@ async fn a_recording_that_cannot_be_written_ends_the_campaign_as_an_error() {
     let record = campaign::case::CampaignRecord::from_json(&text).unwrap();
     assert!(record.ended_at.is_some());
 }
+
+/// A campaign's recording has the `/foxglove/…` channels in Foxglove's well-known schemas, read
+/// with the `mcap` crate (drivecheck's reader) and, where it is installed, with the official
+/// Python `mcap` reader (`.ci/run` installs it into a virtual environment and names its python in
+/// `DRIVECHECK_PYTHON`).
+#[tokio::test(start_paused = true)]
+async fn the_recording_has_foxglove_channels_that_the_official_readers_read() {
+    let dir = tempfile::tempdir().unwrap();
+    campaign(5, 1, dir.path()).await;
+    let path = dir.path().join("campaign.mcap");
+    let recording = read_recording(dir.path());
+    let expected = [
+        ("/foxglove/area", "foxglove.SceneUpdate"),
+        ("/foxglove/route", "foxglove.SceneUpdate"),
+        ("/foxglove/rtk", "foxglove.PoseInFrame"),
+        ("/foxglove/uwb", "foxglove.PoseInFrame"),
+        ("/foxglove/log", "foxglove.Log"),
+    ];
+    for (topic, schema) in expected {
+        let channel = recording
+            .channels()
+            .find(|c| c.topic == topic)
+            .unwrap_or_else(|| panic!("no channel {topic}"));
+        assert_eq!(channel.schema_name, schema);
+        let t = orchestrator::recording::Topic::from_name(topic).unwrap();
+        assert!(recording.count(t) > 0, "no message on {topic}");
+    }
+    assert_eq!(
+        recording.count(orchestrator::recording::Topic::FoxgloveRtk),
+        recording.count(orchestrator::recording::Topic::CarState)
+    );
+    let python = std::env::var("DRIVECHECK_PYTHON").unwrap_or_else(|_| "python3".to_owned());
+    let script = r#"
+import sys, json, collections
+from mcap.reader import make_reader
+counts, schemas = collections.Counter(), {}
+with open(sys.argv[1], "rb") as f:
+    for schema, channel, message in make_reader(f).iter_messages():
+        counts[channel.topic] += 1
+        schemas[channel.topic] = schema.name
+        json.loads(message.data)
+print(json.dumps({"counts": counts, "schemas": schemas}))
+"#;
+    let out = std::process::Command::new(&python)
+        .args(["-c", script])
+        .arg(&path)
+        .output();
+    let Ok(out) = out else {
+        eprintln!("skipped the Python reader: {python} does not run");
+        return;
+    };
+    if !out.status.success() {
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        if stderr.contains("No module named") {
+            eprintln!("skipped the Python reader: the mcap package is not installed ({python})");
+            return;
+        }
+        panic!("the Python mcap reader failed: {stderr}");
+    }
+    let read: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for (topic, schema) in expected {
+        assert_eq!(read["schemas"][topic], schema, "{read}");
+        assert!(read["counts"][topic].as_u64().unwrap_or(0) > 0, "{read}");
+    }
+}
