@@ -339,12 +339,12 @@ async fn the_recording_has_foxglove_channels_that_the_official_readers_read() {
             .find(|c| c.topic == topic)
             .unwrap_or_else(|| panic!("no channel {topic}"));
         assert_eq!(channel.schema_name, schema);
-        let t = orchestrator::recording::Topic::from_name(topic).unwrap();
+        let t = Topic::from_name(topic).unwrap();
         assert!(recording.count(t) > 0, "no message on {topic}");
     }
     assert_eq!(
-        recording.count(orchestrator::recording::Topic::FoxgloveRtk),
-        recording.count(orchestrator::recording::Topic::CarState)
+        recording.count(Topic::FoxgloveRtk),
+        recording.count(Topic::CarState)
     );
     let python = std::env::var("DRIVECHECK_PYTHON").unwrap_or_else(|_| "python3".to_owned());
     let script = r#"
