@@ -106,6 +106,12 @@ pub struct RunArgs {
     /// At the end, also write `report.html` into the run directory (as `drivecheck report`).
     #[arg(long)]
     pub report: bool,
+    /// Serve every channel of the recording live over the Foxglove WebSocket protocol while the
+    /// campaign runs, on loopback port 8765 unless an address is given (`0.0.0.0:8765` for the
+    /// network); open it in Foxglove with *Open connection…* `ws://ADDR`. The embedded simulated
+    /// car then runs against the wall clock.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8765")]
+    pub live: Option<std::net::SocketAddr>,
 }
 
 /// What a campaign does after a failing segment.

@@ -16,6 +16,7 @@ use super::shared::{
 use super::{explain, shrink};
 use crate::cli::{OnFailure, RunArgs};
 use crate::junit;
+use crate::recording::live::LiveView;
 use crate::report::REPORT_FILE;
 use crate::report::explain::{ExplainOptions, explain_run};
 use crate::runner::{CampaignReport, RunConfig, run_campaign, run_dir_name};
@@ -73,7 +74,8 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         OnFailure::Stop => FailurePolicy::StopAtFailingSegment,
         OnFailure::Continue => FailurePolicy::ContinueAndRecord,
     };
-    let virtual_time = address == CarAddress::Sim && !args.realtime;
+    // A live view is for watching: a virtual-time campaign would be over before anyone looks.
+    let virtual_time = address == CarAddress::Sim && !args.realtime && args.live.is_none();
     eprintln!(
         "seed {seed}: {} tests on {} with car {}{}, writing {}",
         campaign.tests,
@@ -84,7 +86,23 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     );
     let runtime = runtime(virtual_time)?;
     let started = Instant::now();
-    let result = runtime.block_on(campaign_on(&address, &scenario, &config));
+    let result = runtime.block_on(async {
+        // The server lives until the campaign ends.
+        let _server = match args.live {
+            Some(addr) => {
+                let (view, server) = LiveView::start(addr).await?;
+                eprintln!(
+                    "live view: ws://{}:{} (Foxglove: Open connection…)",
+                    addr.ip(),
+                    server.port()
+                );
+                config.live = Some(view);
+                Some(server)
+            }
+            None => None,
+        };
+        campaign_on(&address, &scenario, &config).await
+    });
     let wall = started.elapsed();
     let report = result?;
     print_report(&report, Some(wall));

@@ -23,6 +23,7 @@
 //! Not here: deciding what to record when (the campaign runner), replay.
 
 pub mod foxglove;
+pub mod live;
 mod reader;
 mod records;
 mod schema;

@@ -51,6 +51,7 @@ fn create(path: &Path, s: &Scenario, simulated: bool, origin: Instant) -> Record
         origin,
         simulated,
         chunk_interval: DEFAULT_CHUNK_INTERVAL,
+        live: None,
     };
     Recorder::create(path, &start).unwrap()
 }

@@ -19,6 +19,7 @@ use mcap::{WriteOptions, Writer};
 use scenarios::Scenario;
 use tokio::time::Instant;
 
+use super::live::LiveView;
 use super::records::{
     AckOutcome, CarCommand, CarStateRecord, CommandAck, CommandSent, SimRecord, TruthRecord,
     nanos_since,
@@ -49,6 +50,8 @@ pub struct RecordingStart<'a> {
     pub simulated: bool,
     /// The longest span of log time one chunk holds ([`DEFAULT_CHUNK_INTERVAL`]).
     pub chunk_interval: Duration,
+    /// Where every message is also served as it is written (`run --live`).
+    pub live: Option<&'a LiveView>,
 }
 
 /// What [`Recorder::finish`] wrote.
@@ -75,6 +78,8 @@ pub struct Recorder {
     next_command: u64,
     pending_commands: BTreeMap<u64, (u64, &'static str)>,
     sim_offset_ns: Option<i128>,
+    /// The live view's channels (`run --live`), by topic.
+    live: HashMap<Topic, std::sync::Arc<::foxglove::RawChannel>>,
 }
 
 impl std::fmt::Debug for Recorder {
@@ -112,8 +117,9 @@ impl Recorder {
             next_command: 1,
             pending_commands: BTreeMap::new(),
             sim_offset_ns: None,
+            live: HashMap::new(),
         };
-        recorder.register_channels(start.simulated)?;
+        recorder.register_channels(start.simulated, start.live)?;
         recorder.write_start_metadata(start)?;
         recorder.write_at_ns(
             0,
@@ -123,7 +129,11 @@ impl Recorder {
         Ok(recorder)
     }
 
-    fn register_channels(&mut self, simulated: bool) -> Result<(), RecordingError> {
+    fn register_channels(
+        &mut self,
+        simulated: bool,
+        live: Option<&LiveView>,
+    ) -> Result<(), RecordingError> {
         let topics = Topic::ALL
             .into_iter()
             .filter(|t| simulated || !t.is_simulator_only());
@@ -138,6 +148,9 @@ impl Recorder {
                 .add_channel(schema_id, topic.name(), "json", &BTreeMap::new())
                 .map_err(RecordingError::Write)?;
             self.channels.insert(topic, channel);
+            if let Some(channel) = live.and_then(|view| view.channel(topic, &schema)) {
+                self.live.insert(topic, channel);
+            }
         }
         Ok(())
     }
@@ -236,6 +249,9 @@ impl Recorder {
             topic: R::TOPIC.name(),
             source,
         })?;
+        if let Some(channel) = self.live.get(&R::TOPIC) {
+            channel.log(&data);
+        }
         self.close_chunk_if_due(log_time)?;
         let sequence = self.sequences.entry(R::TOPIC).or_insert(0);
         *sequence = sequence.wrapping_add(1);

@@ -105,6 +105,8 @@ pub struct RunConfig {
     pub replay: Option<ReplaySource>,
     /// Write `campaign.mcap` (true by default; a shrink's candidate runs write none).
     pub record: bool,
+    /// Serve every recorded message live as well (`run --live`).
+    pub live: Option<crate::recording::live::LiveView>,
 }
 
 /// A case driven again instead of generated tests: every test of the campaign drives its plan
@@ -131,6 +133,7 @@ impl RunConfig {
             car_label: car_label.into(),
             replay: None,
             record: true,
+            live: None,
         }
     }
 }
@@ -323,6 +326,7 @@ pub async fn run_campaign(
         origin,
         simulated: sim.is_some(),
         chunk_interval: DEFAULT_CHUNK_INTERVAL,
+        live: config.live.as_ref(),
     };
     let journal = if !config.record {
         Journal::without_recording(sim)
