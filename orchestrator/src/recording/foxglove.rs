@@ -454,7 +454,7 @@ pub(super) fn derived<R: Record + 'static>(record: &R, at: Time) -> Option<Deriv
     }
     if let Some(event) = any.downcast_ref::<TestEvent>() {
         let (level, text) = match &event.event {
-            TestEventKind::Started { commands } => {
+            TestEventKind::Started { .. } => {
                 // A new test: the planned route of the one before goes.
                 let clear = RouteScene(SceneUpdate {
                     deletions: vec![SceneEntityDeletion {
@@ -464,7 +464,6 @@ pub(super) fn derived<R: Record + 'static>(record: &R, at: Time) -> Option<Deriv
                     }],
                     entities: Vec::new(),
                 });
-                let _ = commands;
                 return Some(Derived::Route(clear));
             }
             TestEventKind::Ended { verdict, reason } => (
