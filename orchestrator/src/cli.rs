@@ -255,7 +255,8 @@ pub struct ReportArgs {
 /// Options of `drivecheck explain`.
 #[derive(Debug, Args)]
 pub struct ExplainArgs {
-    /// A case file of a run directory (`case-NNN.json`), or the run directory (every test).
+    /// A case file of a run directory (`case-NNN.json`), the run directory (every test), or a
+    /// replay directory (every run).
     #[arg(value_name = "CASE.json|RUN_DIR")]
     pub target: PathBuf,
     /// Print the explanations as JSON (`{"cases": [{"case": …, "segments": [...]}]}`).
