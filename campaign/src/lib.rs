@@ -14,6 +14,7 @@
 //! - [`replay`]: replay planning (the test a recorded case is driven as) and the comparison of a
 //!   replay's runs.
 //! - [`seed`]: the one random number generator of every run.
+//! - [`shard`]: the deterministic partition of a campaign's tests into shards.
 //!
 //! Not here: the wire protocol and the client (`car-link`; only its protocol layer and firmware
 //! facts are used here), the run directory, the recording and the command line (`orchestrator`).
@@ -27,6 +28,7 @@ pub mod oracle;
 pub mod replay;
 pub mod safety;
 pub mod seed;
+pub mod shard;
 pub mod shrink;
 pub mod streaming;
 pub mod sweep;

@@ -112,6 +112,30 @@ pub struct RunArgs {
     /// car then runs against the wall clock.
     #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8765")]
     pub live: Option<std::net::SocketAddr>,
+    /// Tests at once, each on a simulated car of its own (default: the number of cores for the
+    /// embedded simulated car, 1 with --live; a real car runs one test at a time). Every test
+    /// runs on a fresh simulated car whatever N, so the results do not depend on it.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub jobs: Option<u32>,
+    /// Run only shard K of N of the campaign's tests (tests i with i mod N = K − 1), into a run
+    /// directory that says so; `drivecheck runs merge` joins the shards' run directories.
+    #[arg(long, value_name = "K/N")]
+    pub shard: Option<campaign::shard::Shard>,
+    /// What `campaign.mcap` keeps: every test, the tests that did not pass, or no recording
+    /// (case files are always written).
+    #[arg(long, value_enum, value_name = "WHAT", default_value_t = RecordArg::All)]
+    pub record: RecordArg,
+}
+
+/// What the recording keeps (`run --record`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum RecordArg {
+    /// Every test.
+    All,
+    /// The tests that failed or were aborted.
+    Failing,
+    /// Nothing: no `campaign.mcap`.
+    None,
 }
 
 /// What a campaign does after a failing segment.
@@ -316,6 +340,21 @@ pub enum RunsCommand {
         #[arg(long)]
         coverage: bool,
     },
+    /// Join the run directories of a campaign's shards (`run --shard K/N`) into the run
+    /// directory of the whole campaign: every case file, `campaign.json` with the summary over all
+    /// tests, one `campaign.mcap` in test order. Refuses shards of different campaigns and names
+    /// the shards missing.
+    Merge {
+        /// The shards' run directories.
+        #[arg(value_name = "DIR", required = true, num_args = 1..)]
+        shards: Vec<PathBuf>,
+        /// The run directory to write (must not exist or be empty).
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+        /// The scenario the shards ran, when it is not bundled (a .toml or reference .xml file).
+        #[arg(long)]
+        scenario: Option<String>,
+    },
 }
 
 /// Options of `drivecheck sim`.
@@ -324,9 +363,14 @@ pub struct SimArgs {
     /// Scenario: a bundled name, a .toml file or a reference .xml.
     #[arg(long)]
     pub scenario: String,
-    /// Address to listen on (loopback unless told otherwise).
+    /// Address to listen on (loopback unless told otherwise); port 0 takes any free port, so
+    /// that several simulated cars on one machine never collide.
     #[arg(long, default_value = "127.0.0.1:8300")]
     pub listen: std::net::SocketAddr,
+    /// Write the car's address (`tcp://127.0.0.1:41234`, for `run --car`) to FILE once it
+    /// listens: with `--listen 127.0.0.1:0`, how a script learns the port.
+    #[arg(long, value_name = "FILE")]
+    pub address_file: Option<PathBuf>,
     /// Serve UDP instead of TCP (replies go to the sender's address at the port + 1).
     #[arg(long)]
     pub udp: bool,

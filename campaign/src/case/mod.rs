@@ -655,6 +655,10 @@ pub struct CampaignRecord {
     /// For a replay (`drivecheck replay`): the case every test drove again.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub replay_of: Option<ReplayOf>,
+    /// For one shard of a campaign (`drivecheck run --shard K/N`): which one. Its run directory
+    /// holds the shard's tests only; `drivecheck runs merge` joins the shards.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shard: Option<crate::shard::Shard>,
 }
 
 /// The case a replay drove again.

@@ -4,6 +4,7 @@ mod area;
 mod bench;
 mod bench_recovery;
 mod explain;
+mod merge;
 mod replay;
 mod report;
 mod route;

@@ -8,7 +8,7 @@
 //! car is connected once and reset before each run. The comparison (`replay.json`, see
 //! [`campaign::replay`]) is written and printed at the end, also when a run ended the replay early.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::ExitCode;
 use std::time::Instant;
 
@@ -75,9 +75,13 @@ pub fn replay(args: &ReplayArgs) -> Result<ExitCode> {
         .car
         .parse()
         .with_context(|| format!("--car {}", args.car))?;
-    let out = args.out.clone().unwrap_or_else(|| {
-        PathBuf::from("runs").join(run_dir_name(&format!("replay-{}", scenario.name), seed))
-    });
+    let out = match &args.out {
+        Some(out) => out.clone(),
+        None => crate::runner::claim_default_run_dir(&run_dir_name(
+            &format!("replay-{}", scenario.name),
+            seed,
+        ))?,
+    };
     let of = ReplayOf {
         case: path.display().to_string(),
         campaign_seed: case.campaign_seed,

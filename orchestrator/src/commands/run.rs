@@ -1,7 +1,6 @@
 //! `drivecheck run`: a test campaign against the embedded simulated car (in virtual time by
 //! default, or against the wall clock) or a car behind TCP, UDP or a serial port.
 
-use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
@@ -11,15 +10,18 @@ use car_link::firmware::{MAX_STALE_LIMIT, WATCHDOG};
 use scenarios::Scenario;
 
 use super::shared::{
-    CampaignFailed, Interrupt, Progress, cancel_on_ctrl_c, connect, print_report, runtime, sim_view,
+    CampaignFailed, EmbeddedSims, Interrupt, Progress, cancel_on_ctrl_c, connect, print_report,
+    runtime, sim_view,
 };
 use super::{explain, shrink};
-use crate::cli::{OnFailure, RunArgs};
+use crate::cli::{OnFailure, RecordArg, RunArgs};
 use crate::junit;
 use crate::recording::live::LiveView;
 use crate::report::REPORT_FILE;
 use crate::report::explain::{ExplainOptions, explain_run};
-use crate::runner::{CampaignReport, RunConfig, run_campaign, run_dir_name};
+use crate::runner::{
+    CampaignReport, RecordMode, RunConfig, run_campaign, run_campaign_fresh, run_dir_name,
+};
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::choose_seed;
 use campaign::case::Case;
@@ -52,10 +54,16 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         tests: args.tests.unwrap_or(scenario.campaign.tests),
         no_faults: args.no_faults,
     };
-    let out = args
-        .out
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("runs").join(run_dir_name(&scenario.name, seed)));
+    let out = match &args.out {
+        Some(out) => out.clone(),
+        None => {
+            let name = run_dir_name(&scenario.name, seed);
+            crate::runner::claim_default_run_dir(&match args.shard {
+                Some(shard) => format!("{name}-shard{}of{}", shard.index, shard.count),
+                None => name,
+            })?
+        }
+    };
     if crate::runner::is_used(&out) {
         anyhow::bail!(crate::runner::RunError::OutDirUsed { path: out });
     }
@@ -74,35 +82,43 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
         OnFailure::Stop => FailurePolicy::StopAtFailingSegment,
         OnFailure::Continue => FailurePolicy::ContinueAndRecord,
     };
+    config.shard = args.shard;
+    config.record = match args.record {
+        RecordArg::All => RecordMode::All,
+        RecordArg::Failing => RecordMode::Failing,
+        RecordArg::None => RecordMode::None,
+    };
+    let embedded = address == CarAddress::Sim;
+    let jobs = jobs(args, embedded)?;
     // A live view is for watching: a virtual-time campaign would be over before anyone looks.
-    let virtual_time = address == CarAddress::Sim && !args.realtime && args.live.is_none();
+    let virtual_time = embedded && !args.realtime && args.live.is_none();
     eprintln!(
-        "seed {seed}: {} tests on {} with car {}{}, writing {}",
-        campaign.tests,
+        "seed {seed}: {}{} tests on {} with car {}{}{}, writing {}",
+        config.test_indices().len(),
+        args.shard
+            .map(|s| format!(" of {} (shard {s})", campaign.tests))
+            .unwrap_or_default(),
         scenario.name,
         args.car,
         if virtual_time { " (virtual time)" } else { "" },
+        if jobs > 1 {
+            format!(", {jobs} at once")
+        } else {
+            String::new()
+        },
         config.out_dir.display()
     );
-    let runtime = runtime(virtual_time)?;
     let started = Instant::now();
-    let result = runtime.block_on(async {
-        // The server lives until the campaign ends.
-        let _server = match args.live {
-            Some(addr) => {
-                let (view, server) = LiveView::start(addr).await?;
-                eprintln!(
-                    "live view: ws://{}:{} (Foxglove: Open connection…)",
-                    addr.ip(),
-                    server.port()
-                );
-                config.live = Some(view);
-                Some(server)
-            }
-            None => None,
-        };
-        campaign_on(&address, &scenario, &config).await
-    });
+    let result = if embedded {
+        campaign_on_fresh_cars(&scenario, &mut config, jobs, virtual_time, args.live)
+    } else {
+        let runtime = runtime(false)?;
+        runtime.block_on(async {
+            // The server lives until the campaign ends.
+            let _server = start_live(args.live, &mut config).await?;
+            campaign_on(&address, &scenario, &config).await
+        })
+    };
     let wall = started.elapsed();
     let report = result?;
     print_report(&report, Some(wall));
@@ -154,7 +170,7 @@ fn explain_failed(report: &CampaignReport, scenario: &Scenario) {
             .and_then(|text| Ok(Case::from_json(&text)?))
             .and_then(|mut on_disk| {
                 on_disk.explanation = case.segments.clone();
-                crate::atomic::write(&case.case, on_disk.to_json()?)?;
+                crate::atomic::write(&case.case, format!("{}\n", on_disk.to_json()?))?;
                 Ok(())
             });
         if let Err(error) = written {
@@ -282,8 +298,68 @@ fn shrink_failed(report: &CampaignReport, scenario: &Scenario, budget: Duration)
     Ok(())
 }
 
-/// Connects to the car (starting the embedded simulator for `sim`) and runs the campaign,
+/// How many tests run at once: `--jobs`, by default the cores for the embedded simulated car
+/// (one with a live view, which shows one car); a real car drives one test at a time.
+fn jobs(args: &RunArgs, embedded: bool) -> Result<usize> {
+    let cores = std::thread::available_parallelism().map_or(1, usize::from);
+    match (args.jobs, embedded, args.live) {
+        (Some(n), false, _) if n > 1 => anyhow::bail!(
+            "--jobs {n}: a real car (--car {}) drives one test at a time; split a campaign over \
+             several cars with --shard K/N",
+            args.car
+        ),
+        (Some(n), true, Some(_)) if n > 1 => {
+            anyhow::bail!("--jobs {n} with --live: the live view shows one car; use --jobs 1")
+        }
+        (Some(n), _, _) => Ok(n as usize),
+        (None, true, None) => Ok(cores),
+        (None, _, _) => Ok(1),
+    }
+}
+
+/// Serves the live view when asked (`--live`) and sets it in `config`; the server's handle, which
+/// serves until dropped.
+async fn start_live(
+    live: Option<std::net::SocketAddr>,
+    config: &mut RunConfig,
+) -> Result<Option<foxglove::WebSocketServerHandle>> {
+    let Some(addr) = live else {
+        return Ok(None);
+    };
+    let (view, server) = LiveView::start(addr).await?;
+    eprintln!(
+        "live view: ws://{}:{} (Foxglove: Open connection…)",
+        addr.ip(),
+        server.port()
+    );
+    config.live = Some(view);
+    Ok(Some(server))
+}
+
+/// Runs the campaign on the embedded simulator, a fresh simulated car per test, `jobs` at once,
 /// interrupted by Ctrl-C.
+fn campaign_on_fresh_cars(
+    scenario: &Scenario,
+    config: &mut RunConfig,
+    jobs: usize,
+    virtual_time: bool,
+    live: Option<std::net::SocketAddr>,
+) -> Result<CampaignReport> {
+    // The signals and the live view's server run on a runtime of their own; every test runs on
+    // its own runtime on a worker thread.
+    let runtime = runtime(false)?;
+    let _server = runtime.block_on(start_live(live, config))?;
+    let _context = runtime.enter();
+    let interrupt = Interrupt::listen();
+    let cars = EmbeddedSims::new(scenario, config.campaign.seed, virtual_time);
+    let progress = Progress::new(config.test_indices().len());
+    let result = run_campaign_fresh(&cars, scenario, config, jobs, interrupt.token(), &progress);
+    progress.finish();
+    result
+        .map_err(|failure| anyhow::Error::new(CampaignFailed::new(failure.error, &config.out_dir)))
+}
+
+/// Connects to the car and runs the campaign, interrupted by Ctrl-C.
 async fn campaign_on(
     address: &CarAddress,
     scenario: &Scenario,

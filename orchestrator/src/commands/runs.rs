@@ -27,6 +27,11 @@ pub fn runs(args: &RunsArgs) -> Result<ExitCode> {
             };
             show(&dir, *coverage)
         }
+        Some(RunsCommand::Merge {
+            shards,
+            out,
+            scenario,
+        }) => super::merge::merge(shards, out, scenario.as_deref()),
     }
 }
 

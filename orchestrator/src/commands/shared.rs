@@ -14,7 +14,9 @@ use indicatif::{ProgressBar, ProgressStyle};
 use scenarios::Scenario;
 use tokio_util::sync::CancellationToken;
 
-use crate::runner::{CampaignObserver, CampaignReport, RunError, SimulatorView};
+use crate::runner::{
+    CampaignObserver, CampaignReport, Connecting, FreshCars, RunError, SimulatorView, StartPose,
+};
 use crate::scenario_arg::{load_scenario, print_warnings};
 use anyhow::bail;
 use campaign::case::Case;
@@ -80,6 +82,67 @@ pub(super) async fn connect_sim(config: &car_sim::SimConfig) -> Result<(Car, Sim
         .await
         .context("cannot connect to the embedded simulated car")?;
     Ok((car, sim))
+}
+
+/// The simulated cars of a campaign with a fresh car per test (`run` on the embedded simulator):
+/// test *i*'s car is seeded from the campaign's seed and *i*, and stands where the runner says.
+pub(super) struct EmbeddedSims {
+    /// The simulator of the scenario, with the campaign's seed.
+    config: car_sim::SimConfig,
+    /// Virtual time (the default) or the wall clock (`--realtime`, `--live`).
+    virtual_time: bool,
+}
+
+impl EmbeddedSims {
+    /// The cars of a campaign with `seed` in `scenario`.
+    pub(super) fn new(scenario: &Scenario, seed: u64, virtual_time: bool) -> Self {
+        Self {
+            config: car_sim::SimConfig {
+                seed,
+                record_events: true,
+                ..car_sim::SimConfig::from_scenario(scenario)
+            },
+            virtual_time,
+        }
+    }
+}
+
+/// The simulator seed of test `test_index` of a campaign with `seed` (SplitMix64 of both: seeds
+/// of neighbouring tests share no bits of pattern).
+pub(super) fn test_sim_seed(seed: u64, test_index: usize) -> u64 {
+    let mut z = seed
+        ^ (test_index as u64)
+            .wrapping_add(1)
+            .wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+impl FreshCars for EmbeddedSims {
+    fn virtual_time(&self) -> bool {
+        self.virtual_time
+    }
+
+    fn connect(&self, test_index: usize, start: Option<StartPose>) -> Connecting<'_> {
+        let mut config = car_sim::SimConfig {
+            seed: test_sim_seed(self.config.seed, test_index),
+            ..self.config.clone()
+        };
+        if let Some(start) = start {
+            config.placement = Some(car_sim::Placement {
+                x: start.position.x,
+                y: start.position.y,
+                heading: start.heading,
+            });
+        }
+        Box::pin(async move {
+            let (car, sim) = connect_sim(&config).await.map_err(|error| {
+                RunError::Preflight(format!("the simulated car of test {test_index}: {error:#}"))
+            })?;
+            Ok((car, Box::new(sim) as Box<dyn SimulatorView>))
+        })
+    }
 }
 
 /// The embedded simulator's debug view, as the runner records it.

@@ -9,7 +9,7 @@
 //! directory keeps `minimal.json` (the minimal case as its first confirming run wrote it: a case
 //! file every command takes, e.g. `drivecheck replay`) and `shrink.json` (every step).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
@@ -63,9 +63,13 @@ pub fn shrink(args: &ShrinkArgs) -> Result<ExitCode> {
         .seed
         .or(case.campaign_seed)
         .unwrap_or_else(|| choose_seed(None));
-    let out = args.out.clone().unwrap_or_else(|| {
-        PathBuf::from("runs").join(run_dir_name(&format!("shrink-{}", scenario.name), seed))
-    });
+    let out = match &args.out {
+        Some(out) => out.clone(),
+        None => crate::runner::claim_default_run_dir(&run_dir_name(
+            &format!("shrink-{}", scenario.name),
+            seed,
+        ))?,
+    };
     let options = Options {
         runs: args.runs,
         budget: args.budget,

@@ -48,9 +48,20 @@ async fn serve_until_ctrl_c(args: &SimArgs, config: &SimConfig) -> Result<()> {
     } else {
         car_sim::serve_tcp(args.listen, config).await
     }
-    .with_context(|| format!("cannot listen on {}", args.listen))?;
+    .with_context(|| {
+        format!(
+            "cannot listen on {} (another simulated car there? --listen {}:0 takes any free port, \
+             and --address-file tells which)",
+            args.listen,
+            args.listen.ip()
+        )
+    })?;
     let scheme = if args.udp { "udp" } else { "tcp" };
     let address = sim.local_addr().unwrap_or(args.listen);
+    if let Some(file) = &args.address_file {
+        crate::atomic::write(file, format!("{scheme}://{address}\n"))
+            .with_context(|| format!("cannot write {}", file.display()))?;
+    }
     eprintln!(
         "simulated car (firmware {}, seed {}) at {scheme}://{address}; latency {:?} + up to {:?}, loss {:.1} %; Ctrl-C stops it",
         config.firmware,

@@ -152,7 +152,7 @@ impl<'a> SimDriver<'a> {
             of: self.of.clone(),
         });
         config.policy = self.policy;
-        config.record = false;
+        config.record = crate::runner::RecordMode::None;
         let (car, sim) = connect_sim(&settings.config(self.scenario, seed)).await?;
         let sim = Some(sim);
         let result = run_campaign(

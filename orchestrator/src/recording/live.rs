@@ -3,9 +3,10 @@
 //! operator watches the area, the planned route, the car and its UWB estimate in Foxglove (*Open
 //! connection…*, `ws://ADDR`) on a laptop. The messages are the very JSON the recording holds.
 
+use std::collections::HashMap;
 use std::fmt;
 use std::net::SocketAddr;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use foxglove::{
     ChannelBuilder, Context, RawChannel, Schema, WebSocketServer, WebSocketServerHandle,
@@ -17,6 +18,9 @@ use super::topic::Topic;
 #[derive(Clone)]
 pub struct LiveView {
     context: Arc<Context>,
+    /// The channels made so far: every recorder of the campaign (one per test when tests run on
+    /// fresh simulated cars) logs to the same channel of a topic.
+    channels: Arc<Mutex<HashMap<Topic, Arc<RawChannel>>>>,
 }
 
 impl fmt::Debug for LiveView {
@@ -57,12 +61,22 @@ impl LiveView {
                 addr,
                 message: e.to_string(),
             })?;
-        Ok((Self { context }, server))
+        Ok((
+            Self {
+                context,
+                channels: Arc::default(),
+            },
+            server,
+        ))
     }
 
     /// A channel of the view for `topic`, with its schema.
     pub(super) fn channel(&self, topic: Topic, schema: &str) -> Option<Arc<RawChannel>> {
-        ChannelBuilder::new(topic.name())
+        let mut channels = self.channels.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(channel) = channels.get(&topic) {
+            return Some(Arc::clone(channel));
+        }
+        let channel = ChannelBuilder::new(topic.name())
             .message_encoding("json")
             .schema(Schema::new(
                 topic.schema_name(),
@@ -71,6 +85,8 @@ impl LiveView {
             ))
             .context(&self.context)
             .build_raw()
-            .ok()
+            .ok()?;
+        channels.insert(topic, Arc::clone(&channel));
+        Some(channel)
     }
 }

@@ -36,7 +36,7 @@ use std::path::PathBuf;
 
 use thiserror::Error;
 
-pub use reader::{Recording, RecordingChannel, Stamped};
+pub use reader::{Recording, RecordingChannel, Span, Spans, Stamped};
 pub use records::{
     AckOutcome, CarCommand, CarStateRecord, CommandAck, CommandSent, FaultRecord, FaultSpec,
     FaultStatus, OracleRecord, PlannedReturnRoute, PlannedSegment, Pose, Position, RadioPathKind,
@@ -44,7 +44,9 @@ pub use records::{
     TestEvent, TestEventKind, TruthRecord,
 };
 pub use topic::{Record, Topic};
-pub use writer::{DEFAULT_CHUNK_INTERVAL, FinishedRecording, Recorder, RecordingStart};
+pub use writer::{
+    DEFAULT_CHUNK_INTERVAL, FinishedRecording, Held, Recorder, RecordingStart, TEST_SPAN_PREFIX,
+};
 
 /// The `format` in a recording's `drivecheck.recording` metadata record.
 pub const RECORDING_FORMAT: &str = "drivecheck-recording";

@@ -170,6 +170,23 @@ impl Recording {
 
     /// The metadata record `name` (`drivecheck.recording`, `drivecheck.scenario`,
     /// `drivecheck.campaign`, `drivecheck.campaign_end`).
+    /// The names of the metadata records.
+    pub fn metadata_names(&self) -> impl Iterator<Item = &str> {
+        self.metadata.keys().map(String::as_str)
+    }
+
+    /// Every message of a known topic in file order, as written (for `drivecheck runs merge`).
+    pub fn held(&self) -> Vec<super::Held> {
+        self.messages
+            .iter()
+            .filter_map(|m| {
+                let topic = Topic::from_name(&self.channels.get(&m.channel_id)?.topic)?;
+                Some(super::Held::new(topic, m.log_time, m.data.clone()))
+            })
+            .collect()
+    }
+
+    /// A metadata record by name.
     pub fn metadata(&self, name: &str) -> Option<&BTreeMap<String, String>> {
         self.metadata.get(name)
     }
@@ -219,5 +236,122 @@ impl Recording {
         self.messages
             .iter()
             .filter(move |m| ids.contains(&m.channel_id))
+    }
+}
+
+/// The messages of one test in a recording, as [`Spans`] reads them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Span {
+    /// The test (`None`: messages no `drivecheck.test.*` record claims, such as all of a
+    /// recording made on one car for the whole campaign).
+    pub test_index: Option<usize>,
+    /// Log time of the span's start, ns.
+    pub start_ns: u64,
+    /// Log time of its last message, ns.
+    pub end_ns: u64,
+    /// Its messages, in file order.
+    pub messages: Vec<super::Held>,
+}
+
+/// Reads a recording test by test, one test's messages in memory at a time: every
+/// `drivecheck.test.<index>` metadata record closes the span of the messages before it (those
+/// from its start on); messages after the last such record come as one span without a test.
+pub struct Spans<'a> {
+    records: ChunkFlattener<'a>,
+    channels: BTreeMap<u16, Topic>,
+    pending: Vec<super::Held>,
+    done: bool,
+    /// The recording says every test's messages have a span: what no span claims is the
+    /// campaign's own (the area), not a test's.
+    spanned: bool,
+}
+
+impl<'a> Spans<'a> {
+    /// The spans of the recording in `bytes`.
+    pub fn new(bytes: &'a [u8]) -> Result<Self, RecordingError> {
+        Ok(Self {
+            records: ChunkFlattener::new_with_options(bytes, Options::ValidateChunkCrcs.into())
+                .map_err(RecordingError::NotMcap)?,
+            channels: BTreeMap::new(),
+            pending: Vec::new(),
+            done: false,
+            spanned: false,
+        })
+    }
+
+    fn leftover(&mut self) -> Option<Span> {
+        let messages = std::mem::take(&mut self.pending);
+        if self.spanned {
+            return None;
+        }
+        let start_ns = messages.iter().map(super::Held::log_time).min()?;
+        let end_ns = messages.iter().map(super::Held::log_time).max()?;
+        Some(Span {
+            test_index: None,
+            start_ns,
+            end_ns,
+            messages,
+        })
+    }
+}
+
+impl Iterator for Spans<'_> {
+    type Item = Result<Span, RecordingError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.done {
+            return None;
+        }
+        loop {
+            let record = match self.records.next() {
+                None => {
+                    self.done = true;
+                    return self.leftover().map(Ok);
+                }
+                Some(Err(e)) => {
+                    self.done = true;
+                    return Some(Err(RecordingError::NotMcap(e)));
+                }
+                Some(Ok(record)) => record,
+            };
+            match record {
+                McapRecord::Channel(channel) => {
+                    if let Some(topic) = Topic::from_name(&channel.topic) {
+                        self.channels.insert(channel.id, topic);
+                    }
+                }
+                McapRecord::Message { header, data } => {
+                    if let Some(&topic) = self.channels.get(&header.channel_id) {
+                        self.pending.push(super::Held::new(
+                            topic,
+                            header.log_time,
+                            data.into_owned(),
+                        ));
+                    }
+                }
+                McapRecord::Metadata(m) if m.name == "drivecheck.recording" => {
+                    self.spanned = m.metadata.get("test_spans").is_some_and(|v| v == "true");
+                }
+                McapRecord::Metadata(m) if m.name.starts_with(super::TEST_SPAN_PREFIX) => {
+                    let field = |name: &str| m.metadata.get(name).and_then(|v| v.parse().ok());
+                    let (Some(test_index), Some(start_ns), Some(end_ns)) =
+                        (field("test_index"), field("start_ns"), field("end_ns"))
+                    else {
+                        continue;
+                    };
+                    // What came before the span's start is the campaign's, not the test's (the
+                    // area at log time 0).
+                    let mut messages = std::mem::take(&mut self.pending);
+                    messages.retain(|m| m.log_time() >= start_ns);
+                    return Some(Ok(Span {
+                        test_index: Some(test_index as usize),
+                        start_ns,
+                        end_ns,
+                        messages,
+                    }));
+                }
+                _ => {}
+            }
+        }
     }
 }

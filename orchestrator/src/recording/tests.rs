@@ -40,6 +40,7 @@ fn campaign(s: &Scenario) -> CampaignRecord {
         ended_at: None,
         summary: None,
         replay_of: None,
+        shard: None,
     }
 }
 
@@ -52,6 +53,7 @@ fn create(path: &Path, s: &Scenario, simulated: bool, origin: Instant) -> Record
         simulated,
         chunk_interval: DEFAULT_CHUNK_INTERVAL,
         live: None,
+        test_spans: false,
     };
     Recorder::create(path, &start).unwrap()
 }

@@ -32,6 +32,9 @@ use campaign::case::{CampaignRecord, tool_version};
 /// process is killed while messages flow.
 pub const DEFAULT_CHUNK_INTERVAL: Duration = Duration::from_secs(1);
 
+/// The name of a test's span metadata record, before the test's index ([`Recorder::test_span`]).
+pub const TEST_SPAN_PREFIX: &str = "drivecheck.test.";
+
 /// Chunks are also closed when they reach this many bytes.
 const CHUNK_BYTES: u64 = 256 * 1024;
 
@@ -52,6 +55,9 @@ pub struct RecordingStart<'a> {
     pub chunk_interval: Duration,
     /// Where every message is also served as it is written (`run --live`).
     pub live: Option<&'a LiveView>,
+    /// Every test's messages are followed by a `drivecheck.test.<index>` record of their span
+    /// (a campaign on fresh simulated cars; see [`Recorder::test_span`]).
+    pub test_spans: bool,
 }
 
 /// What [`Recorder::finish`] wrote.
@@ -63,14 +69,57 @@ pub struct FinishedRecording {
     pub chunks: u32,
 }
 
-/// A campaign's recording being written (see the module doc).
+/// A message encoded but not written yet: what a test's recording holds until its verdict
+/// decides whether it is kept (`run --record failing`), or what a test run on a fresh simulated
+/// car in a worker thread hands to the campaign's recording (`run --jobs`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Held {
+    topic: Topic,
+    /// Log time, ns since the origin of the recorder that encoded it.
+    log_time: u64,
+    data: Vec<u8>,
+}
+
+impl Held {
+    /// A message on `topic` at `log_time` with its encoded bytes.
+    pub fn new(topic: Topic, log_time: u64, data: Vec<u8>) -> Self {
+        Self {
+            topic,
+            log_time,
+            data,
+        }
+    }
+
+    /// Its log time (ns since the origin of the recorder that encoded it).
+    pub fn log_time(&self) -> u64 {
+        self.log_time
+    }
+
+    /// Its channel's topic.
+    pub fn topic(&self) -> Topic {
+        self.topic
+    }
+
+    /// Its encoded bytes (JSON).
+    pub fn data(&self) -> &[u8] {
+        &self.data
+    }
+}
+
+/// A campaign's recording being written (see the module doc), or a test's recording held in
+/// memory ([`Recorder::in_memory`]).
 ///
 /// Every write is synchronous and small (a JSON encoding into memory; a chunk write to the OS
 /// page cache once per chunk interval). Dropping a recorder without [`Recorder::finish`]
 /// completes the file as well, ignoring errors.
 pub struct Recorder {
-    writer: Writer<Sink>,
+    /// The file; `None` for a recorder in memory.
+    writer: Option<Writer<Sink>>,
     channels: HashMap<Topic, u16>,
+    /// Messages encoded while held ([`Recorder::hold`]), or always for a recorder in memory.
+    held: Option<Vec<Held>>,
+    /// A recording of a simulated car: the `/sim/*` channels are recorded.
+    simulated: bool,
     sequences: HashMap<Topic, u32>,
     origin: Instant,
     chunk_interval: u64,
@@ -108,8 +157,10 @@ impl Recorder {
             .create(NoSeek::new(BufWriter::new(file)))
             .map_err(RecordingError::Write)?;
         let mut recorder = Self {
-            writer,
+            writer: Some(writer),
             channels: HashMap::new(),
+            held: None,
+            simulated: start.simulated,
             sequences: HashMap::new(),
             origin: start.origin,
             chunk_interval: u64::try_from(start.chunk_interval.as_nanos()).unwrap_or(u64::MAX),
@@ -129,6 +180,75 @@ impl Recorder {
         Ok(recorder)
     }
 
+    /// A recorder that keeps every message in memory (see [`Held`]), with log times from
+    /// `origin` and command ids from `first_command`: a test run in a worker thread records
+    /// through it, and the campaign's recorder writes what it kept ([`Recorder::write_held`]).
+    /// `live` serves every message as it is encoded.
+    pub fn in_memory(
+        origin: Instant,
+        simulated: bool,
+        first_command: u64,
+        live: Option<&LiveView>,
+    ) -> Self {
+        let topics = Topic::ALL
+            .into_iter()
+            .filter(|t| simulated || !t.is_simulator_only());
+        let live = topics
+            .filter_map(|topic| {
+                let schema = schema::schema(topic).to_string();
+                let channel = live?.channel(topic, &schema)?;
+                Some((topic, channel))
+            })
+            .collect();
+        Self {
+            writer: None,
+            channels: HashMap::new(),
+            held: Some(Vec::new()),
+            simulated,
+            sequences: HashMap::new(),
+            origin,
+            chunk_interval: u64::MAX,
+            chunk_opened_at: None,
+            next_command: first_command,
+            pending_commands: BTreeMap::new(),
+            sim_offset_ns: None,
+            live,
+        }
+    }
+
+    /// From now on, messages are held in memory instead of written, until [`Recorder::release`].
+    pub fn hold(&mut self) {
+        self.held.get_or_insert_with(Vec::new);
+    }
+
+    /// Ends holding: writes the held messages when `keep` (in order, with their log times),
+    /// drops them otherwise. A recorder in memory keeps holding; nothing is written.
+    pub fn release(&mut self, keep: bool) -> Result<(), RecordingError> {
+        if self.writer.is_none() {
+            return Ok(());
+        }
+        let held = self.held.take().unwrap_or_default();
+        if keep {
+            self.write_held(&held, 0)?;
+        }
+        Ok(())
+    }
+
+    /// Takes the messages held so far.
+    pub fn take_held(&mut self) -> Vec<Held> {
+        self.held.as_mut().map(std::mem::take).unwrap_or_default()
+    }
+
+    /// Writes messages another recorder held, their log times shifted by `offset_ns`; they are
+    /// not served live again. A recorder in memory holds them.
+    pub fn write_held(&mut self, held: &[Held], offset_ns: u64) -> Result<(), RecordingError> {
+        for message in held {
+            let log_time = message.log_time.saturating_add(offset_ns);
+            self.write_data(message.topic, log_time, message.data.clone())?;
+        }
+        Ok(())
+    }
+
     fn register_channels(
         &mut self,
         simulated: bool,
@@ -139,12 +259,13 @@ impl Recorder {
             .filter(|t| simulated || !t.is_simulator_only());
         for topic in topics {
             let schema = schema::schema(topic).to_string();
-            let schema_id = self
-                .writer
+            let Some(writer) = &mut self.writer else {
+                break;
+            };
+            let schema_id = writer
                 .add_schema(topic.schema_name(), "jsonschema", schema.as_bytes())
                 .map_err(RecordingError::Write)?;
-            let channel = self
-                .writer
+            let channel = writer
                 .add_channel(schema_id, topic.name(), "json", &BTreeMap::new())
                 .map_err(RecordingError::Write)?;
             self.channels.insert(topic, channel);
@@ -165,6 +286,7 @@ impl Recorder {
                 "ns of the run's tokio clock since the campaign started".to_owned(),
             ),
             ("simulated", start.simulated.to_string()),
+            ("test_spans", start.test_spans.to_string()),
         ];
         self.metadata("drivecheck.recording", &recording)?;
         let s = start.scenario;
@@ -199,6 +321,23 @@ impl Recorder {
         self.metadata(name, &entries)
     }
 
+    /// Records that test `test_index`'s messages span `start_ns..=end_ns` of log time (a
+    /// `drivecheck.test.<index>` metadata record): how `drivecheck runs merge` finds each test's
+    /// messages in a shard's recording.
+    pub fn test_span(
+        &mut self,
+        test_index: usize,
+        start_ns: u64,
+        end_ns: u64,
+    ) -> Result<(), RecordingError> {
+        let entries = [
+            ("test_index", test_index.to_string()),
+            ("start_ns", start_ns.to_string()),
+            ("end_ns", end_ns.to_string()),
+        ];
+        self.metadata(&format!("{TEST_SPAN_PREFIX}{test_index}"), &entries)
+    }
+
     /// Writes a metadata record (which closes the open chunk) and flushes.
     fn metadata(&mut self, name: &str, entries: &[(&str, String)]) -> Result<(), RecordingError> {
         let metadata = Metadata {
@@ -208,9 +347,11 @@ impl Recorder {
                 .map(|(k, v)| ((*k).to_owned(), v.clone()))
                 .collect(),
         };
-        self.writer
-            .write_metadata(&metadata)
-            .map_err(RecordingError::Write)?;
+        if let Some(writer) = &mut self.writer {
+            writer
+                .write_metadata(&metadata)
+                .map_err(RecordingError::Write)?;
+        }
         self.flush()
     }
 
@@ -242,9 +383,9 @@ impl Recorder {
 
     /// Records `message` alone (nothing derived from it).
     fn write_one<R: Record>(&mut self, log_time: u64, message: &R) -> Result<(), RecordingError> {
-        let Some(&channel_id) = self.channels.get(&R::TOPIC) else {
+        if R::TOPIC.is_simulator_only() && !self.simulated {
             return Ok(());
-        };
+        }
         let data = serde_json::to_vec(message).map_err(|source| RecordingError::Encode {
             topic: R::TOPIC.name(),
             source,
@@ -252,8 +393,29 @@ impl Recorder {
         if let Some(channel) = self.live.get(&R::TOPIC) {
             channel.log(&data);
         }
+        self.write_data(R::TOPIC, log_time, data)
+    }
+
+    /// Writes (or holds) one encoded message.
+    fn write_data(
+        &mut self,
+        topic: Topic,
+        log_time: u64,
+        data: Vec<u8>,
+    ) -> Result<(), RecordingError> {
+        if let Some(held) = &mut self.held {
+            held.push(Held {
+                topic,
+                log_time,
+                data,
+            });
+            return Ok(());
+        }
+        let Some(&channel_id) = self.channels.get(&topic) else {
+            return Ok(());
+        };
         self.close_chunk_if_due(log_time)?;
-        let sequence = self.sequences.entry(R::TOPIC).or_insert(0);
+        let sequence = self.sequences.entry(topic).or_insert(0);
         *sequence = sequence.wrapping_add(1);
         let header = MessageHeader {
             channel_id,
@@ -261,9 +423,11 @@ impl Recorder {
             log_time,
             publish_time: log_time,
         };
-        self.writer
-            .write_to_known_channel(&header, &data)
-            .map_err(RecordingError::Write)?;
+        if let Some(writer) = &mut self.writer {
+            writer
+                .write_to_known_channel(&header, &data)
+                .map_err(RecordingError::Write)?;
+        }
         self.chunk_opened_at.get_or_insert(log_time);
         Ok(())
     }
@@ -279,7 +443,10 @@ impl Recorder {
     /// so far survives a kill from here on. Call it at the end of each test.
     pub fn flush(&mut self) -> Result<(), RecordingError> {
         self.chunk_opened_at = None;
-        self.writer.flush().map_err(RecordingError::Write)
+        match &mut self.writer {
+            Some(writer) => writer.flush().map_err(RecordingError::Write),
+            None => Ok(()),
+        }
     }
 
     /// Records a state sample at the time it was received.
@@ -370,10 +537,16 @@ impl Recorder {
     /// Completes the file (the last chunk, the summary with indexes and statistics, the footer)
     /// and syncs it to disk.
     pub fn finish(mut self) -> Result<FinishedRecording, RecordingError> {
-        let summary = self.writer.finish().map_err(RecordingError::Write)?;
+        self.release(true)?;
+        let Some(mut writer) = self.writer.take() else {
+            return Ok(FinishedRecording {
+                messages: 0,
+                chunks: 0,
+            });
+        };
+        let summary = writer.finish().map_err(RecordingError::Write)?;
         let stats = summary.stats.unwrap_or_default();
-        let file = self
-            .writer
+        let file = writer
             .into_inner()
             .into_inner()
             .into_inner()

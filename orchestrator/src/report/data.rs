@@ -9,7 +9,7 @@ use trajgen::Point;
 
 use super::ReportError;
 use crate::recording::{
-    AckOutcome, CarCommand, CarStateRecord, CommandAck, CommandSent, Recording, TestEvent,
+    AckOutcome, CarCommand, CarStateRecord, CommandAck, CommandSent, Recording, Stamped, TestEvent,
     TestEventKind,
 };
 use crate::runner::RECORDING_FILE;
@@ -335,12 +335,10 @@ fn split_tracks(
             entry.autopilot.get_or_insert(at);
         }
     }
-    let mut states: Vec<CarStateRecord> = recording
-        .messages::<CarStateRecord>()?
-        .into_iter()
-        .map(|s| s.message)
-        .collect();
-    states.sort_by_key(|s| s.received_at_ns);
+    // Log time, not the record's own `received_at_ns`: in a campaign on fresh simulated cars
+    // (`run --jobs`) the record's times count from its test's start, log time from the campaign's.
+    let mut states: Vec<Stamped<CarStateRecord>> = recording.messages::<CarStateRecord>()?;
+    states.sort_by_key(|s| s.log_time_ns);
     let starts: Vec<u64> = times.values().filter_map(|t| t.started).collect();
     let mut tracks = BTreeMap::new();
     for test in tests {
@@ -363,16 +361,22 @@ fn split_tracks(
             Some(at) if at >= started && at <= ended => (at, Origin::Autopilot),
             _ => (started, Origin::StartEvent),
         };
-        let from = states.partition_point(|s| s.received_at_ns < started);
+        let from = states.partition_point(|s| s.log_time_ns < started);
         let samples = states[from..]
             .iter()
-            .take_while(|s| s.received_at_ns <= ended)
-            .map(|s| Sample {
-                t_s: (s.received_at_ns as f64 - zero as f64) / 1e9,
-                rtk: Point::new(s.rtk.x, s.rtk.y),
-                uwb: Point::new(s.uwb.x, s.uwb.y),
-                deviation_m: s.deviation_m.filter(|d| d.is_finite()),
-            })
+            .take_while(|s| s.log_time_ns <= ended)
+            .map(
+                |Stamped {
+                     log_time_ns,
+                     message: s,
+                     ..
+                 }| Sample {
+                    t_s: (*log_time_ns as f64 - zero as f64) / 1e9,
+                    rtk: Point::new(s.rtk.x, s.rtk.y),
+                    uwb: Point::new(s.uwb.x, s.uwb.y),
+                    deviation_m: s.deviation_m.filter(|d| d.is_finite()),
+                },
+            )
             .collect();
         tracks.insert(
             test.index,

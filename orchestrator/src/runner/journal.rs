@@ -12,7 +12,7 @@ use std::sync::{Mutex, MutexGuard};
 
 use super::RunError;
 use super::events::SimulatorView;
-use crate::recording::{CarCommand, Record, Recorder, RecordingError};
+use crate::recording::{CarCommand, Held, Record, Recorder, RecordingError};
 use campaign::case::CampaignRecord;
 use car_link::{CarError, StateSample};
 
@@ -129,6 +129,34 @@ impl<'a> Journal<'a> {
                 r.sim_events(&events)
             });
         }
+    }
+
+    /// From now on, holds what is recorded until [`Journal::release`] (`run --record failing`).
+    pub(crate) fn hold(&self) {
+        self.with(|r| {
+            r.hold();
+            Ok(())
+        });
+    }
+
+    /// Writes what was held when `keep`, drops it otherwise.
+    pub(crate) fn release(&self, keep: bool) {
+        self.with(|r| r.release(keep));
+    }
+
+    /// Takes what a journal in memory holds (see [`Recorder::in_memory`]).
+    pub(crate) fn take_held(&self) -> Vec<Held> {
+        self.with(|r| Ok(r.take_held())).unwrap_or_default()
+    }
+
+    /// Writes messages another journal held, log time shifted by `offset_ns`.
+    pub(crate) fn write_held(&self, held: &[Held], offset_ns: u64) {
+        self.with(|r| r.write_held(held, offset_ns));
+    }
+
+    /// Records the span of log time of test `test_index`'s messages.
+    pub(crate) fn test_span(&self, test_index: usize, start_ns: u64, end_ns: u64) {
+        self.with(|r| r.test_span(test_index, start_ns, end_ns));
     }
 
     /// Writes the open chunk to the file (end of a test).

@@ -41,6 +41,7 @@
 
 mod drive;
 mod events;
+mod fresh;
 mod journal;
 mod preflight;
 mod reset;
@@ -54,7 +55,7 @@ use car_link::{Car, CarError};
 use scenarios::Scenario;
 use thiserror::Error;
 use tokio_util::sync::CancellationToken;
-use trajgen::{GenerationError, Generator, Point, Strategy};
+use trajgen::{GenerationError, Generator, Point, RouteTail, Strategy};
 
 use crate::recording::{
     DEFAULT_CHUNK_INTERVAL, FaultRecord, OracleRecord, PlannedSegment, Recorder, RecordingError,
@@ -67,15 +68,17 @@ use campaign::drive::DriveSettings;
 use campaign::model::{Campaign, Command, ModelError, ProbeRates, TestPlan, TestPlanner};
 use campaign::oracle::{FailurePolicy, Verdict};
 use campaign::safety::{Abort, AbortReason, SafetyConfig};
+use campaign::shard::Shard;
 use campaign::streaming::StreamingConfig;
 
 pub use events::{CampaignObserver, Silent, SimulatorView};
+pub(crate) use fresh::SPAN_GAP_NS;
+pub use fresh::{Connecting, FreshCar, FreshCars, StartPose, run_campaign_fresh};
 pub use run_dir::{CAMPAIGN_FILE, CampaignReport, RECORDING_FILE, TestSummary};
-pub(crate) use run_dir::{is_used, rfc3339_now, run_dir_name};
+pub(crate) use run_dir::{RunDirectory, claim_default_run_dir, is_used, rfc3339_now, run_dir_name};
 
 use journal::Journal;
 use preflight::Preflight;
-use run_dir::RunDirectory;
 use telemetry::Telemetry;
 
 use campaign::drive::{BRAKE_TIMEOUT, SAFE_STOP_SPEED_MPS, STOPPED_SPEED_MPS};
@@ -103,8 +106,10 @@ pub struct RunConfig {
     pub car_label: String,
     /// A recorded case to drive in every test instead of generated tests (`drivecheck replay`).
     pub replay: Option<ReplaySource>,
-    /// Write `campaign.mcap` (true by default; a shrink's candidate runs write none).
-    pub record: bool,
+    /// What `campaign.mcap` keeps (every test by default; a shrink's candidate runs write none).
+    pub record: RecordMode,
+    /// Run only this shard of the campaign's tests (`run --shard K/N`).
+    pub shard: Option<Shard>,
     /// Serve every recorded message live as well (`run --live`).
     pub live: Option<crate::recording::live::LiveView>,
 }
@@ -132,10 +137,33 @@ impl RunConfig {
             out_dir,
             car_label: car_label.into(),
             replay: None,
-            record: true,
+            record: RecordMode::All,
+            shard: None,
             live: None,
         }
     }
+
+    /// The indices of the tests this run drives: all of the campaign's, or its shard's.
+    pub fn test_indices(&self) -> Vec<usize> {
+        let tests = self.campaign.tests;
+        match self.shard {
+            Some(shard) => shard.tests(tests).collect(),
+            None => (0..tests).collect(),
+        }
+    }
+}
+
+/// What the recording (`campaign.mcap`) keeps (`run --record`). Case files are always written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum RecordMode {
+    /// Every test, and everything between tests.
+    #[default]
+    All,
+    /// The tests that did not pass (failed or aborted), and what happens outside tests: a large
+    /// campaign keeps what a user looks at.
+    Failing,
+    /// No recording at all (no `campaign.mcap`).
+    None,
 }
 
 /// Why a campaign could not run (or not to its end).
@@ -327,8 +355,9 @@ pub async fn run_campaign(
         simulated: sim.is_some(),
         chunk_interval: DEFAULT_CHUNK_INTERVAL,
         live: config.live.as_ref(),
+        test_spans: false,
     };
-    let journal = if !config.record {
+    let journal = if config.record == RecordMode::None {
         Journal::without_recording(sim)
     } else {
         match Recorder::create(&dir.path().join(RECORDING_FILE), &start) {
@@ -381,19 +410,72 @@ async fn run_tests(inputs: &Inputs<'_>, dir: &mut RunDirectory) -> Result<(), Ru
         observer,
         journal,
     } = *inputs;
-    let preflight = Preflight::run(car, scenario, config, journal).await?;
+    let start_join = reset::plan_start_join(scenario, config.campaign.seed)?;
+    let (ctx, mut telemetry, preflight) =
+        open_session(car, scenario, config, cancel, journal, start_join).await?;
     if !preflight.switched_off.is_empty() {
-        observer.note(&format!(
-            "preflight: switched off {}",
-            preflight.switched_off.join(", ")
-        ));
+        observer.note(&switched_off_note(&preflight.switched_off));
     }
+    if !ctx.start_join.is_empty() {
+        observer.note(&start_join_note(&ctx.start_join));
+    }
+    dir.set_firmware(car.version().to_string());
+    dir.set_runtime(ctx.safety, config.streaming);
+    let tests = TestSource::new(scenario, config)?;
+    let indices = config.test_indices();
+    observer.tests_planned(indices.len());
+    for test_index in indices {
+        if cancel.is_cancelled() {
+            return Err(RunError::Interrupted { test_index });
+        }
+        observer.test_started(test_index);
+        if config.record == RecordMode::Failing {
+            journal.hold();
+        }
+        let (case, end) =
+            plan_and_run(&ctx, &mut telemetry, &tests, test_index, dir.settings()).await?;
+        dir.write_case(&case)?;
+        record_test_end(journal, test_index, &case);
+        if config.record == RecordMode::Failing {
+            journal.release(case.verdict != Some(Verdict::Passed));
+        }
+        observer.test_finished(test_index, case.verdict);
+        if let TestEnd::Stop(error) = end {
+            return Err(error);
+        }
+        journal.check()?;
+    }
+    Ok(())
+}
+
+/// The note for the configuration fields preflight switched off.
+fn switched_off_note(switched_off: &[String]) -> String {
+    format!("preflight: switched off {}", switched_off.join(", "))
+}
+
+/// The note for a recovery route that needs a planned join to the start route.
+fn start_join_note(start_join: &[Point]) -> String {
+    format!(
+        "the recovery route ends far from start_route[0]: every reset drives a planned join of {} points",
+        start_join.len()
+    )
+}
+
+/// A car ready for tests: preflight passed (which measured the link and prepared the car), the
+/// state samples flowing. Returns the test's context, the telemetry and what preflight found.
+async fn open_session<'a>(
+    car: &'a Car,
+    scenario: &'a Scenario,
+    config: &'a RunConfig,
+    cancel: &'a CancellationToken,
+    journal: &'a Journal<'a>,
+    start_join: Vec<Point>,
+) -> Result<(Context<'a>, Telemetry, Preflight), RunError> {
+    let preflight = Preflight::run(car, scenario, config, journal).await?;
     let safety = SafetyConfig {
         stale_after: preflight.stale_after,
         ..config.safety
     };
-    dir.set_firmware(car.version().to_string());
-    dir.set_runtime(safety, config.streaming);
     let ctx = Context {
         car,
         scenario,
@@ -405,16 +487,8 @@ async fn run_tests(inputs: &Inputs<'_>, dir: &mut RunDirectory) -> Result<(), Ru
         rates: preflight.rates,
         cancel,
         journal,
-        start_join: reset::plan_start_join(scenario, config.campaign.seed)?,
+        start_join,
     };
-    if !ctx.start_join.is_empty() {
-        observer.note(&format!(
-            "the recovery route ends far from start_route[0]: every reset drives a planned join of {} points",
-            ctx.start_join.len()
-        ));
-    }
-    let planner = TestPlanner::new(scenario)?;
-    let start_tail = campaign::model::start_tail(scenario)?;
     let mut telemetry = Telemetry::start(car, config.state_period, ctx.sample_timeout);
     // The first sample comes a round trip after polling starts: wait for it (or for the link's
     // end), so that no safety monitor is armed before samples flow.
@@ -423,38 +497,60 @@ async fn run_tests(inputs: &Inputs<'_>, dir: &mut RunDirectory) -> Result<(), Ru
         telemetry.next(journal),
     )
     .await;
-    observer.tests_planned(config.campaign.tests);
-    for test_index in 0..config.campaign.tests {
-        if cancel.is_cancelled() {
-            return Err(RunError::Interrupted { test_index });
-        }
-        observer.test_started(test_index);
-        let started = tokio::time::Instant::now();
-        let plan = match &config.replay {
+    Ok((ctx, telemetry, preflight))
+}
+
+/// Where a campaign's test plans come from: generated from the seed, or a replayed case.
+struct TestSource<'a> {
+    planner: TestPlanner,
+    start_tail: RouteTail,
+    config: &'a RunConfig,
+}
+
+impl<'a> TestSource<'a> {
+    fn new(scenario: &Scenario, config: &'a RunConfig) -> Result<Self, RunError> {
+        Ok(Self {
+            planner: TestPlanner::new(scenario)?,
+            start_tail: campaign::model::start_tail(scenario)?,
+            config,
+        })
+    }
+
+    /// The plan of test `test_index`.
+    fn plan(&self, test_index: usize) -> Result<TestPlan, RunError> {
+        Ok(match &self.config.replay {
             Some(replay) => TestPlan {
                 test_index,
                 ..replay.plan.clone()
             },
-            None => planner.plan_test(&config.campaign, test_index, start_tail)?,
-        };
-        let per_segment = started.elapsed() / plan.segments().count().max(1) as u32;
-        let mut case = Case::planned(
-            &plan,
-            scenario,
-            config.campaign.seed,
-            config.campaign.no_faults,
-            dir.settings().clone(),
-        );
-        let end = run_test(&ctx, &mut telemetry, &plan, &mut case, per_segment).await;
-        dir.write_case(&case)?;
-        record_test_end(journal, test_index, &case);
-        observer.test_finished(test_index, case.verdict);
-        if let TestEnd::Stop(error) = end {
-            return Err(error);
-        }
-        journal.check()?;
+            None => self
+                .planner
+                .plan_test(&self.config.campaign, test_index, self.start_tail)?,
+        })
     }
-    Ok(())
+}
+
+/// Plans test `test_index` and runs it (reset and drive); its case and how it ended.
+async fn plan_and_run(
+    ctx: &Context<'_>,
+    telemetry: &mut Telemetry,
+    tests: &TestSource<'_>,
+    test_index: usize,
+    settings: &Settings,
+) -> Result<(Case, TestEnd), RunError> {
+    let started = tokio::time::Instant::now();
+    let plan = tests.plan(test_index)?;
+    let per_segment = started.elapsed() / plan.segments().count().max(1) as u32;
+    let config = ctx.config;
+    let mut case = Case::planned(
+        &plan,
+        ctx.scenario,
+        config.campaign.seed,
+        config.campaign.no_faults,
+        settings.clone(),
+    );
+    let end = run_test(ctx, telemetry, &plan, &mut case, per_segment).await;
+    Ok((case, end))
 }
 
 /// Records a test's oracle results and its end, and writes the recording's open chunk.

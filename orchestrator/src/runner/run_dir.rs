@@ -94,10 +94,39 @@ impl RunDirectory {
             ended_at: None,
             summary: None,
             replay_of: config.replay.as_ref().map(|r| r.of.clone()),
+            shard: config.shard,
         };
         let dir = Self {
             path,
             record,
+            tests: Vec::new(),
+            cases: Vec::new(),
+            no_anchors: scenario.anchors.is_empty(),
+            scenario: scenario.clone(),
+        };
+        dir.write_record()?;
+        Ok(dir)
+    }
+
+    /// Creates the run directory `path` that joins a campaign's shards (`drivecheck runs merge`)
+    /// and writes its first `campaign.json`: `record` as the shards agree on it, without shard.
+    pub(crate) fn merged(
+        path: PathBuf,
+        record: CampaignRecord,
+        scenario: &Scenario,
+    ) -> Result<Self, RunError> {
+        std::fs::create_dir_all(&path).map_err(|source| RunError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        let dir = Self {
+            path,
+            record: CampaignRecord {
+                shard: None,
+                ended_at: None,
+                summary: None,
+                ..record
+            },
             tests: Vec::new(),
             cases: Vec::new(),
             no_anchors: scenario.anchors.is_empty(),
@@ -143,8 +172,13 @@ impl RunDirectory {
     }
 
     /// Writes the final `campaign.json` (end time and summary) and returns the report.
-    pub(crate) fn finish(mut self) -> Result<CampaignReport, RunError> {
-        self.record.ended_at = Some(rfc3339_now());
+    pub(crate) fn finish(self) -> Result<CampaignReport, RunError> {
+        self.finish_at(rfc3339_now())
+    }
+
+    /// [`RunDirectory::finish`] with the end time `ended_at` (RFC 3339).
+    pub(crate) fn finish_at(mut self, ended_at: String) -> Result<CampaignReport, RunError> {
+        self.record.ended_at = Some(ended_at);
         self.record.summary = Some(self.summary());
         self.write_record()?;
         Ok(CampaignReport {
@@ -233,6 +267,34 @@ pub(crate) fn run_dir_name(scenario: &str, seed: u64) -> String {
     format!("{compact}T{h:02}{m:02}{s:02}Z-{scenario}-{seed}")
 }
 
+/// Creates the default run directory `root/name`, or `root/name-2`, `root/name-3`, … when
+/// another campaign took it (two campaigns of one scenario and seed started in the same second on
+/// one machine): creating the directory is the claim, so concurrent campaigns never share one.
+pub(crate) fn claim_run_dir(root: &Path, name: &str) -> std::io::Result<PathBuf> {
+    std::fs::create_dir_all(root)?;
+    for attempt in 1u32.. {
+        let path = match attempt {
+            1 => root.join(name),
+            n => root.join(format!("{name}-{n}")),
+        };
+        match std::fs::create_dir(&path) {
+            Ok(()) => return Ok(path),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(e) => return Err(e),
+        }
+    }
+    unreachable!("u32 attempts")
+}
+
+/// Claims the default run directory `runs/<name>` (see [`claim_run_dir`]).
+pub(crate) fn claim_default_run_dir(name: &str) -> Result<PathBuf, RunError> {
+    let root = Path::new("runs");
+    claim_run_dir(root, name).map_err(|source| RunError::Io {
+        path: root.join(name),
+        source,
+    })
+}
+
 /// Today's date (`YYYY-MM-DD`) and the time of day in UTC.
 fn utc_now() -> (String, [u64; 3]) {
     let secs = SystemTime::now()
@@ -272,6 +334,22 @@ pub(crate) fn is_used(path: &Path) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn concurrent_campaigns_claim_different_run_directories() {
+        let root = tempfile::tempdir().unwrap();
+        let claimed: Vec<PathBuf> = std::thread::scope(|scope| {
+            let handles: Vec<_> = (0..8)
+                .map(|_| scope.spawn(|| claim_run_dir(root.path(), "same-name").unwrap()))
+                .collect();
+            handles.into_iter().map(|h| h.join().unwrap()).collect()
+        });
+        let unique: std::collections::BTreeSet<_> = claimed.iter().collect();
+        assert_eq!(unique.len(), 8, "{claimed:?}");
+        assert!(claimed.iter().all(|p| p.is_dir()));
+        assert!(claimed.contains(&root.path().join("same-name")));
+        assert!(claimed.contains(&root.path().join("same-name-8")));
+    }
 
     #[test]
     fn days_convert_to_civil_dates() {

@@ -1,0 +1,383 @@
+//! `drivecheck runs merge DIR… --out DIR`: the run directories of a campaign's shards
+//! (`run --shard K/N`) joined into the run directory of the whole campaign: every case file,
+//! `campaign.json` with the summary over all tests, and one `campaign.mcap` with every test's
+//! messages in test order (as the unsharded run writes it).
+//!
+//! Refused, before anything is written: a directory that is not a shard, shards of different
+//! campaigns (seed, scenario, tool version, settings, car, faults or not, replayed case, shard
+//! count), a shard given twice, missing shards (named), a shard that did not end or lacks a case
+//! file, and shards of which only some have a recording.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, bail};
+
+use crate::recording::{Recorder, RecordingStart, Span, Spans};
+use crate::runner::{CAMPAIGN_FILE, RECORDING_FILE, RunDirectory, SPAN_GAP_NS, is_used};
+use campaign::case::{CampaignRecord, Case, Settings};
+use campaign::shard::Shard;
+
+/// One shard's run directory, read.
+struct ShardDir {
+    dir: PathBuf,
+    record: CampaignRecord,
+    shard: Shard,
+}
+
+/// Merges the shards in `dirs` into `out` (see the module doc) and prints what it wrote.
+pub fn merge(dirs: &[PathBuf], out: &Path, scenario: Option<&str>) -> Result<ExitCode> {
+    if is_used(out) {
+        bail!(crate::runner::RunError::OutDirUsed {
+            path: out.to_owned()
+        });
+    }
+    let shards = read_shards(dirs)?;
+    let first = &shards[0];
+    let tests = first.record.settings.tests;
+    let cases = read_cases(&shards, tests)?;
+    let recorded: Vec<bool> = shards
+        .iter()
+        .map(|s| s.dir.join(RECORDING_FILE).is_file())
+        .collect();
+    if recorded.iter().any(|&r| r) && !recorded.iter().all(|&r| r) {
+        let without: Vec<String> = shards
+            .iter()
+            .zip(&recorded)
+            .filter(|(_, r)| !**r)
+            .map(|(s, _)| format!("{} ({})", s.shard, s.dir.display()))
+            .collect();
+        bail!(
+            "only some shards have a recording ({RECORDING_FILE}); missing in shard {}: run them \
+             with the same --record",
+            without.join(", ")
+        );
+    }
+    let scenario = scenario_of(&first.record, scenario)?;
+    let started_at = shards
+        .iter()
+        .map(|s| s.record.started_at.clone())
+        .min()
+        .unwrap_or_default();
+    let ended_at = shards
+        .iter()
+        .filter_map(|s| s.record.ended_at.clone())
+        .max()
+        .unwrap_or_default();
+    let record = CampaignRecord {
+        started_at,
+        ..first.record.clone()
+    };
+    let mut dir = RunDirectory::merged(out.to_owned(), record, &scenario)?;
+    for case in &cases {
+        dir.write_case(case)?;
+    }
+    let report = dir.finish_at(ended_at)?;
+    if recorded[0] {
+        merge_recordings(
+            &shards,
+            &report.record,
+            &scenario,
+            &out.join(RECORDING_FILE),
+        )?;
+    }
+    let summary = report.record.summary.as_ref();
+    println!(
+        "merged {} shards of campaign seed {} on {}: {} tests, {} passed, {} failed, {} aborted{}",
+        shards.len(),
+        report.record.seed,
+        report.record.scenario.name,
+        cases.len(),
+        summary.map_or(0, |s| s.passed),
+        summary.map_or(0, |s| s.failed),
+        summary.map_or(0, |s| s.aborted),
+        if recorded[0] {
+            format!(", recording {RECORDING_FILE}")
+        } else {
+            String::new()
+        }
+    );
+    println!("run directory: {}", out.display());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Reads every shard's `campaign.json` and checks that they are the shards of one campaign, each
+/// once, none missing.
+fn read_shards(dirs: &[PathBuf]) -> Result<Vec<ShardDir>> {
+    let mut shards = Vec::new();
+    for dir in dirs {
+        let path = dir.join(CAMPAIGN_FILE);
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("cannot read {}", path.display()))?;
+        let record =
+            CampaignRecord::from_json(&text).with_context(|| path.display().to_string())?;
+        let Some(shard) = record.shard else {
+            bail!(
+                "{}: not a shard (its campaign.json names no shard): only run directories of \
+                 `drivecheck run --shard K/N` merge",
+                dir.display()
+            );
+        };
+        if record.summary.is_none() {
+            bail!(
+                "{}: shard {shard} did not end (its campaign.json has no summary): run it again",
+                dir.display()
+            );
+        }
+        shards.push(ShardDir {
+            dir: dir.clone(),
+            record,
+            shard,
+        });
+    }
+    let Some(first) = shards.first() else {
+        bail!("no run directory to merge");
+    };
+    for other in &shards[1..] {
+        if let Some(difference) = difference(&first.record, &other.record) {
+            bail!(
+                "{} and {} are shards of different campaigns: {difference}",
+                first.dir.display(),
+                other.dir.display()
+            );
+        }
+    }
+    let count = first.shard.count;
+    let mut by_index: BTreeMap<usize, &ShardDir> = BTreeMap::new();
+    for shard in &shards {
+        if let Some(before) = by_index.insert(shard.shard.index, shard) {
+            bail!(
+                "shard {} is given twice: {} and {}",
+                shard.shard,
+                before.dir.display(),
+                shard.dir.display()
+            );
+        }
+    }
+    let missing: Vec<String> = Shard::all(count)
+        .filter(|s| !by_index.contains_key(&s.index))
+        .map(|s| s.to_string())
+        .collect();
+    if !missing.is_empty() {
+        bail!(
+            "shards missing: {} (given {} of {count}); run them with `drivecheck run --shard K/{count}` \
+             and the same seed and scenario",
+            missing.join(", "),
+            shards.len()
+        );
+    }
+    shards.sort_by_key(|s| s.shard.index);
+    Ok(shards)
+}
+
+/// What makes `b` a shard of another campaign than `a`, if anything.
+fn difference(a: &CampaignRecord, b: &CampaignRecord) -> Option<String> {
+    let differs =
+        |what: &str, x: String, y: String| (x != y).then(|| format!("{what} {x} and {y}"));
+    let shard_count = |r: &CampaignRecord| r.shard.map_or(0, |s| s.count).to_string();
+    let without_runtime = |s: &Settings| Settings {
+        safety: None,
+        streaming: None,
+        ..s.clone()
+    };
+    differs("seed", a.seed.to_string(), b.seed.to_string())
+        .or_else(|| {
+            differs(
+                "scenario",
+                format!(
+                    "{} ({})",
+                    a.scenario.name,
+                    a.scenario.hash.as_deref().unwrap_or("-")
+                ),
+                format!(
+                    "{} ({})",
+                    b.scenario.name,
+                    b.scenario.hash.as_deref().unwrap_or("-")
+                ),
+            )
+        })
+        .or_else(|| {
+            differs(
+                "tool version",
+                a.tool_version.clone(),
+                b.tool_version.clone(),
+            )
+        })
+        .or_else(|| differs("shard count", shard_count(a), shard_count(b)))
+        .or_else(|| {
+            differs(
+                "--no-faults",
+                a.no_faults.to_string(),
+                b.no_faults.to_string(),
+            )
+        })
+        .or_else(|| differs("car", a.car.clone(), b.car.clone()))
+        .or_else(|| {
+            (without_runtime(&a.settings) != without_runtime(&b.settings)).then(|| {
+                "the campaign settings differ (tests, sizes, speeds, faults or policy)".to_owned()
+            })
+        })
+        .or_else(|| (a.replay_of != b.replay_of).then(|| "they replay different cases".to_owned()))
+}
+
+/// Every test's case, in test order, read from its shard.
+fn read_cases(shards: &[ShardDir], tests: usize) -> Result<Vec<Case>> {
+    let mut cases = Vec::with_capacity(tests);
+    for test_index in 0..tests {
+        let shard = shards
+            .iter()
+            .find(|s| s.shard.contains(test_index))
+            .context("every test is in a shard")?;
+        let path = shard.dir.join(format!("case-{test_index:03}.json"));
+        let text = std::fs::read_to_string(&path).with_context(|| {
+            format!(
+                "cannot read {} (shard {} ended without test {test_index}: run it again)",
+                path.display(),
+                shard.shard
+            )
+        })?;
+        let case = Case::from_json(&text).with_context(|| path.display().to_string())?;
+        if case.test_index != Some(test_index) {
+            bail!(
+                "{}: holds test {:?}, not test {test_index}",
+                path.display(),
+                case.test_index
+            );
+        }
+        cases.push(case);
+    }
+    Ok(cases)
+}
+
+/// The campaign's scenario: `--scenario`, else the bundled one of its name; its hash must be the
+/// campaign's (the coverage in the summary is computed over its area).
+fn scenario_of(record: &CampaignRecord, arg: Option<&str>) -> Result<scenarios::Scenario> {
+    let name = &record.scenario.name;
+    let scenario = match arg {
+        Some(arg) => crate::scenario_arg::load_scenario(arg)?.scenario,
+        None => {
+            scenarios::bundled::load(name)
+                .with_context(|| {
+                    format!("scenario `{name}` is not bundled: give its file with --scenario")
+                })?
+                .scenario
+        }
+    };
+    if let Some(hash) = &record.scenario.hash
+        && scenario.hash() != *hash
+    {
+        bail!(
+            "scenario `{}` hashes to {}, but the shards ran `{name}` with hash {hash}: give \
+             the scenario file they ran with --scenario",
+            scenario.name,
+            scenario.hash()
+        );
+    }
+    Ok(scenario)
+}
+
+/// Writes `out`: every shard's tests' messages in test order, each test's log time shifted to
+/// follow the one before it as in an unsharded run; messages of a recording made without test
+/// spans (one car for the whole shard) follow, a shard at a time. One test per shard is in memory
+/// at a time (besides the shards' compressed files).
+fn merge_recordings(
+    shards: &[ShardDir],
+    record: &CampaignRecord,
+    scenario: &scenarios::Scenario,
+    out: &Path,
+) -> Result<()> {
+    let files: Vec<Vec<u8>> = shards
+        .iter()
+        .map(|s| {
+            let path = s.dir.join(RECORDING_FILE);
+            std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))
+        })
+        .collect::<Result<_>>()?;
+    let simulated = shards.iter().all(|s| s.record.car == "sim");
+    let at_start = CampaignRecord {
+        ended_at: None,
+        summary: None,
+        ..record.clone()
+    };
+    let start = RecordingStart {
+        campaign: &at_start,
+        scenario,
+        origin: tokio::time::Instant::now(),
+        simulated,
+        chunk_interval: crate::recording::DEFAULT_CHUNK_INTERVAL,
+        live: None,
+        // Shards on the embedded simulator ran a fresh car per test: every test has a span.
+        test_spans: simulated,
+    };
+    let mut recorder = Recorder::create(out, &start)?;
+    let mut readers: Vec<(usize, std::iter::Peekable<Spans<'_>>)> = files
+        .iter()
+        .enumerate()
+        .map(|(i, bytes)| Ok((i, Spans::new(bytes)?.peekable())))
+        .collect::<Result<_, crate::recording::RecordingError>>()?;
+    let mut offset_ns = SPAN_GAP_NS;
+    let mut leftovers: Vec<Span> = Vec::new();
+    loop {
+        // The shard whose next span is the lowest test.
+        let mut best: Option<(usize, usize)> = None;
+        for (position, (_, spans)) in readers.iter_mut().enumerate() {
+            match spans.peek() {
+                Some(Ok(Span {
+                    test_index: Some(t),
+                    ..
+                })) if best.is_none_or(|(_, b)| *t < b) => best = Some((position, *t)),
+                Some(Ok(_)) | None => {}
+                Some(Err(_)) => {
+                    if let Some(Err(error)) = spans.next() {
+                        return Err(anyhow::Error::new(error)
+                            .context(format!("{}", shards[readers[position].0].dir.display())));
+                    }
+                }
+            }
+        }
+        let Some((position, _)) = best else {
+            // Only spans without a test are left.
+            for (_, spans) in &mut readers {
+                leftovers.extend(spans.filter_map(Result::ok));
+            }
+            break;
+        };
+        let Some(Ok(span)) = readers[position].1.next() else {
+            continue;
+        };
+        write_span(&mut recorder, &span, &mut offset_ns)?;
+    }
+    for span in &leftovers {
+        write_span(&mut recorder, span, &mut offset_ns)?;
+    }
+    recorder.campaign_ended(record)?;
+    recorder.finish()?;
+    Ok(())
+}
+
+/// Writes `span`'s messages starting at `offset_ns`, with its test's span record, and moves the
+/// offset past it.
+fn write_span(recorder: &mut Recorder, span: &Span, offset_ns: &mut u64) -> Result<()> {
+    let shift = offset_ns.wrapping_sub(span.start_ns);
+    let shifted: Vec<_> = span
+        .messages
+        .iter()
+        .map(|m| {
+            crate::recording::Held::new(
+                m.topic(),
+                m.log_time().wrapping_add(shift),
+                m.data().to_vec(),
+            )
+        })
+        .collect();
+    recorder.write_held(&shifted, 0)?;
+    let length = span.end_ns.saturating_sub(span.start_ns);
+    if let Some(test_index) = span.test_index {
+        recorder.test_span(test_index, *offset_ns, *offset_ns + length)?;
+    } else {
+        recorder.flush()?;
+    }
+    *offset_ns += length + SPAN_GAP_NS;
+    Ok(())
+}

@@ -1,0 +1,469 @@
+//! A campaign on fresh simulated cars: every test runs on a simulated car of its own, seeded from
+//! the campaign's seed and the test's index, standing where the plan of the test before it ends;
+//! up to `jobs` tests at once, each on a thread with its own async runtime (its own virtual
+//! clock). A test therefore depends on (scenario, seed, index) only: the serial run, `--jobs N`
+//! and the shards of a campaign give the same case files.
+//!
+//! Each test is the whole method on its car: preflight (which measures the link, uploads the
+//! anchors, enables fault injection), the reset with its return route from where the car stands,
+//! the drive and its safe stop. Its recording is held in memory ([`Recorder::in_memory`]); the
+//! campaign's thread writes the case files, the recording and the progress in test order, so that
+//! `campaign.mcap` is the same whatever the number of jobs: test *k*'s messages follow test
+//! *k − 1*'s, log time shifted to start 1 ms after the last message before them, and a
+//! `drivecheck.test.<k>` metadata record gives their span (`drivecheck runs merge` reads it).
+//!
+//! Not here: how a simulated car is made (`FreshCars`, implemented by the command line with
+//! `car-sim`).
+
+use std::collections::BTreeMap;
+use std::future::Future;
+use std::pin::Pin;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::mpsc;
+
+use car_link::Car;
+use scenarios::Scenario;
+use tokio_util::sync::CancellationToken;
+use trajgen::Point;
+
+use super::journal::Journal;
+use super::run_dir::RunDirectory;
+use super::{
+    CampaignFailure, CampaignObserver, CampaignReport, RECORDING_FILE, RecordMode, RunConfig,
+    RunError, SimulatorView, TestEnd, TestSource, open_session, plan_and_run, record_test_end,
+    reset, start_join_note, switched_off_note,
+};
+use crate::recording::{DEFAULT_CHUNK_INTERVAL, Held, Recorder, RecordingStart};
+use campaign::case::{Case, Settings};
+use campaign::model::TestPlan;
+use campaign::oracle::Verdict;
+use campaign::safety::SafetyConfig;
+
+/// Where a fresh simulated car stands when its test begins.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StartPose {
+    /// Its position.
+    pub position: Point,
+    /// Its heading, radians counter-clockwise from east.
+    pub heading: f64,
+}
+
+/// A connected car and its simulator's debug view.
+pub type FreshCar = (Car, Box<dyn SimulatorView>);
+
+/// What [`FreshCars::connect`] returns.
+pub type Connecting<'a> = Pin<Box<dyn Future<Output = Result<FreshCar, RunError>> + 'a>>;
+
+/// Makes the simulated car of each test (the command line implements it with `car-sim`).
+pub trait FreshCars: Sync {
+    /// Whether the cars run in virtual time: each test's runtime then has a paused clock.
+    fn virtual_time(&self) -> bool;
+
+    /// A fresh simulated car for test `test_index`, standing at `start` (`None`: at the start
+    /// of the scenario's start route), connected. Called inside the test's runtime.
+    fn connect(&self, test_index: usize, start: Option<StartPose>) -> Connecting<'_>;
+}
+
+/// Where the car stands when test `test_index` begins: where the plan of the test before it ends
+/// (the last point it drives, heading along its last leg), as on a car that drove it; `None` for
+/// the first test.
+fn start_pose(tests: &TestSource<'_>, test_index: usize) -> Result<Option<StartPose>, RunError> {
+    if test_index == 0 {
+        return Ok(None);
+    }
+    Ok(end_pose(&tests.plan(test_index - 1)?))
+}
+
+/// The last point `plan` drives, heading along its last leg.
+fn end_pose(plan: &TestPlan) -> Option<StartPose> {
+    let points: Vec<Point> = plan
+        .segments()
+        .flat_map(|(_, segment)| segment.points.iter().copied())
+        .collect();
+    let [.., before, last] = points[..] else {
+        return None;
+    };
+    Some(StartPose {
+        position: last,
+        heading: (last - before).heading(),
+    })
+}
+
+/// The first command id of test `test_index`'s recording: ids stay unique in the campaign's file.
+fn first_command(test_index: usize) -> u64 {
+    (test_index as u64 + 1) << 32
+}
+
+/// Log time between the last message of a test and the first of the next in the campaign's
+/// recording.
+pub(crate) const SPAN_GAP_NS: u64 = 1_000_000;
+
+/// What one test on a fresh car gave.
+struct Ran {
+    case: Case,
+    end: TestEnd,
+    held: Vec<Held>,
+    firmware: String,
+    safety: SafetyConfig,
+    switched_off: Vec<String>,
+    start_join: usize,
+}
+
+/// What the campaign shares with its workers.
+struct Shared<'a> {
+    cars: &'a dyn FreshCars,
+    scenario: &'a Scenario,
+    config: &'a RunConfig,
+    cancel: &'a CancellationToken,
+    tests: TestSource<'a>,
+    start_join: Vec<Point>,
+    /// The settings of `campaign.json` as created (without the runtime constants).
+    settings: Settings,
+}
+
+/// Runs a campaign with a fresh simulated car per test, up to `jobs` at once (see the module
+/// doc), and writes its run directory as [`super::run_campaign`] does: same files, same
+/// failures. A test that stops the campaign (interrupted, a preflight refused, a reset that
+/// failed) lets the tests already running end; no test starts after it.
+///
+/// Call it outside any async runtime: each test runs on a runtime of its own, on one of `jobs`
+/// threads. Cancellation: `cancel` makes every running test stop safely, recorded as `aborted
+/// (interrupted)`, and the campaign ends with [`RunError::Interrupted`].
+#[allow(
+    clippy::result_large_err,
+    reason = "the failure of run_campaign, returned once per campaign"
+)]
+pub fn run_campaign_fresh(
+    cars: &dyn FreshCars,
+    scenario: &Scenario,
+    config: &RunConfig,
+    jobs: usize,
+    cancel: &CancellationToken,
+    observer: &dyn CampaignObserver,
+) -> Result<CampaignReport, CampaignFailure> {
+    let origin = tokio::time::Instant::now();
+    let settings = Settings::new(scenario, config.campaign.tests, config.policy);
+    let mut dir = RunDirectory::create(config, scenario, settings.clone())
+        .map_err(CampaignFailure::without_report)?;
+    let mut recorder = match config.record {
+        RecordMode::None => None,
+        RecordMode::All | RecordMode::Failing => {
+            let start = RecordingStart {
+                campaign: dir.record(),
+                scenario,
+                origin,
+                simulated: true,
+                chunk_interval: DEFAULT_CHUNK_INTERVAL,
+                live: None,
+                test_spans: true,
+            };
+            match Recorder::create(&dir.path().join(RECORDING_FILE), &start) {
+                Ok(recorder) => Some(recorder),
+                Err(error) => {
+                    let report = dir.finish().map_err(CampaignFailure::without_report)?;
+                    return Err(CampaignFailure {
+                        error: RunError::Recording(error),
+                        report: Some(report),
+                    });
+                }
+            }
+        }
+    };
+    let journal = match recorder.take() {
+        Some(recorder) => Journal::new(recorder, None),
+        None => Journal::without_recording(None),
+    };
+    let result = prepare(scenario, config, cars, cancel, settings)
+        .and_then(|shared| run_tests(&shared, jobs.max(1), observer, &mut dir, &journal));
+    let report = dir.finish().map_err(CampaignFailure::without_report)?;
+    let recorded = journal.finish(&report.record);
+    match result.and(recorded) {
+        Ok(()) => Ok(report),
+        Err(error) => Err(CampaignFailure {
+            error,
+            report: Some(report),
+        }),
+    }
+}
+
+fn prepare<'a>(
+    scenario: &'a Scenario,
+    config: &'a RunConfig,
+    cars: &'a dyn FreshCars,
+    cancel: &'a CancellationToken,
+    settings: Settings,
+) -> Result<Shared<'a>, RunError> {
+    Ok(Shared {
+        cars,
+        scenario,
+        config,
+        cancel,
+        tests: TestSource::new(scenario, config)?,
+        start_join: reset::plan_start_join(scenario, config.campaign.seed)?,
+        settings,
+    })
+}
+
+/// Runs the tests on `jobs` threads and writes what they give in test order.
+fn run_tests(
+    shared: &Shared<'_>,
+    jobs: usize,
+    observer: &dyn CampaignObserver,
+    dir: &mut RunDirectory,
+    journal: &Journal<'_>,
+) -> Result<(), RunError> {
+    let indices = shared.config.test_indices();
+    observer.tests_planned(indices.len());
+    let next = AtomicUsize::new(0);
+    let stop = AtomicBool::new(false);
+    let (tx, rx) = mpsc::channel::<(usize, Result<Ran, RunError>)>();
+    std::thread::scope(|scope| {
+        for _ in 0..jobs.min(indices.len()) {
+            let tx = tx.clone();
+            let (next, stop, indices) = (&next, &stop, &indices);
+            scope.spawn(move || {
+                loop {
+                    if stop.load(Ordering::SeqCst) || shared.cancel.is_cancelled() {
+                        break;
+                    }
+                    let Some(&test_index) = indices.get(next.fetch_add(1, Ordering::SeqCst)) else {
+                        break;
+                    };
+                    let ran = run_one(shared, test_index);
+                    if matches!(
+                        &ran,
+                        Err(_)
+                            | Ok(Ran {
+                                end: TestEnd::Stop(_),
+                                ..
+                            })
+                    ) {
+                        stop.store(true, Ordering::SeqCst);
+                    }
+                    if tx.send((test_index, ran)).is_err() {
+                        break;
+                    }
+                }
+            });
+        }
+        drop(tx);
+        let mut writer = InOrder::new(indices.clone());
+        let mut first_error = None;
+        for (test_index, ran) in rx {
+            for (test_index, ran) in writer.ready(test_index, ran) {
+                let written =
+                    write_test(shared, observer, dir, journal, &mut writer, test_index, ran);
+                if let Err(error) = written {
+                    stop.store(true, Ordering::SeqCst);
+                    first_error.get_or_insert(error);
+                }
+            }
+        }
+        if let (None, Some(&test_index)) = (&first_error, indices.get(writer.next))
+            && shared.cancel.is_cancelled()
+        {
+            first_error = Some(RunError::Interrupted { test_index });
+        }
+        first_error.map_or(Ok(()), Err)
+    })
+}
+
+/// Results in test order: what came early waits for the tests before it.
+struct InOrder {
+    indices: Vec<usize>,
+    /// Position in `indices` of the next test to write.
+    next: usize,
+    waiting: BTreeMap<usize, Result<Ran, RunError>>,
+    /// Where the next test's messages start in the campaign's recording, ns.
+    offset_ns: u64,
+    /// The first test written: its car gives the campaign's firmware and runtime constants.
+    first: bool,
+}
+
+impl InOrder {
+    fn new(indices: Vec<usize>) -> Self {
+        Self {
+            indices,
+            next: 0,
+            waiting: BTreeMap::new(),
+            // After the campaign's own messages at log time 0 (the area).
+            offset_ns: SPAN_GAP_NS,
+            first: true,
+        }
+    }
+
+    /// Takes `ran` of test `test_index` and returns the tests now due, in order.
+    fn ready(
+        &mut self,
+        test_index: usize,
+        ran: Result<Ran, RunError>,
+    ) -> Vec<(usize, Result<Ran, RunError>)> {
+        self.waiting.insert(test_index, ran);
+        let mut due = Vec::new();
+        while let Some(&index) = self.indices.get(self.next) {
+            let Some(ran) = self.waiting.remove(&index) else {
+                break;
+            };
+            due.push((index, ran));
+            self.next += 1;
+        }
+        due
+    }
+}
+
+/// Writes test `test_index`'s case file and recording, and reports it.
+fn write_test(
+    shared: &Shared<'_>,
+    observer: &dyn CampaignObserver,
+    dir: &mut RunDirectory,
+    journal: &Journal<'_>,
+    order: &mut InOrder,
+    test_index: usize,
+    ran: Result<Ran, RunError>,
+) -> Result<(), RunError> {
+    let ran = ran?;
+    if std::mem::take(&mut order.first) {
+        if !ran.switched_off.is_empty() {
+            observer.note(&switched_off_note(&ran.switched_off));
+        }
+        if ran.start_join > 0 {
+            observer.note(&start_join_note(&shared.start_join));
+        }
+        dir.set_firmware(ran.firmware.clone());
+        dir.set_runtime(ran.safety, shared.config.streaming);
+    }
+    observer.test_started(test_index);
+    dir.write_case(&ran.case)?;
+    let keep = match shared.config.record {
+        RecordMode::All => true,
+        RecordMode::Failing => ran.case.verdict != Some(Verdict::Passed),
+        RecordMode::None => false,
+    };
+    if keep && !ran.held.is_empty() {
+        let last = ran.held.iter().map(Held::log_time).max().unwrap_or(0);
+        journal.write_held(&ran.held, order.offset_ns);
+        journal.test_span(test_index, order.offset_ns, order.offset_ns + last);
+        order.offset_ns += last + SPAN_GAP_NS;
+    }
+    observer.test_finished(test_index, ran.case.verdict);
+    if let TestEnd::Stop(error) = ran.end {
+        return Err(error);
+    }
+    journal.check()
+}
+
+/// Runs test `test_index` on a fresh car, on a runtime of its own.
+fn run_one(shared: &Shared<'_>, test_index: usize) -> Result<Ran, RunError> {
+    let runtime = if shared.cars.virtual_time() {
+        tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .start_paused(true)
+            .build()
+    } else {
+        tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+    };
+    let runtime = runtime.map_err(|source| RunError::Io {
+        path: "the async runtime".into(),
+        source,
+    })?;
+    runtime.block_on(fresh_test(shared, test_index))
+}
+
+/// Test `test_index` on a fresh car: the car, preflight, reset and drive.
+async fn fresh_test(shared: &Shared<'_>, test_index: usize) -> Result<Ran, RunError> {
+    let Shared {
+        cars,
+        scenario,
+        config,
+        cancel,
+        ..
+    } = *shared;
+    let origin = tokio::time::Instant::now();
+    let start = start_pose(&shared.tests, test_index)?;
+    let (car, sim) = cars.connect(test_index, start).await?;
+    let journal = match config.record {
+        RecordMode::None => Journal::without_recording(Some(&*sim)),
+        RecordMode::All | RecordMode::Failing => Journal::new(
+            Recorder::in_memory(
+                origin,
+                true,
+                first_command(test_index),
+                config.live.as_ref(),
+            ),
+            Some(&*sim),
+        ),
+    };
+    let (ctx, mut telemetry, preflight) = open_session(
+        &car,
+        scenario,
+        config,
+        cancel,
+        &journal,
+        shared.start_join.clone(),
+    )
+    .await?;
+    let settings = shared
+        .settings
+        .clone()
+        .with_runtime(ctx.safety, config.streaming);
+    let (case, end) =
+        plan_and_run(&ctx, &mut telemetry, &shared.tests, test_index, &settings).await?;
+    record_test_end(&journal, test_index, &case);
+    drop(telemetry);
+    let end = match (end, journal.check()) {
+        (TestEnd::Continue, Err(error)) => TestEnd::Stop(error),
+        (end, _) => end,
+    };
+    Ok(Ran {
+        held: journal.take_held(),
+        end,
+        firmware: car.version().to_string(),
+        safety: ctx.safety,
+        switched_off: preflight.switched_off,
+        start_join: ctx.start_join.len(),
+        case,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use campaign::model::{Command, Segment};
+
+    #[test]
+    fn a_plan_ends_at_its_last_point_heading_along_its_last_leg() {
+        let segment = |points: Vec<Point>| {
+            Command::RunSegments(Segment {
+                intent: None,
+                speeds: vec![1.0; points.len()],
+                points,
+                margin: Vec::new(),
+            })
+        };
+        let mut plan = TestPlan {
+            test_index: 0,
+            start_tail: trajgen::RouteTail::from_points(&[
+                Point::new(-1.0, 0.0),
+                Point::new(0.0, 0.0),
+            ])
+            .unwrap(),
+            commands: vec![
+                segment(vec![Point::new(0.0, 0.0), Point::new(1.0, 0.0)]),
+                segment(vec![Point::new(1.0, 1.0)]),
+            ],
+        };
+        let pose = end_pose(&plan).unwrap();
+        assert_eq!(pose.position, Point::new(1.0, 1.0));
+        assert!((pose.heading - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
+        plan.commands.truncate(0);
+        assert_eq!(end_pose(&plan), None);
+    }
+
+    #[test]
+    fn command_ids_of_different_tests_never_meet() {
+        assert!(first_command(0) + u64::from(u32::MAX) < first_command(1));
+        assert_ne!(first_command(0), 1);
+    }
+}

@@ -1,0 +1,300 @@
+//! Large campaigns end to end (`docs/scaling.md`): a campaign run serially, with `--jobs 2`, and
+//! as shards merged with `runs merge` gives the same case files and summary; the merged recording
+//! holds the same messages as the unsharded one; the Kubernetes and Slurm examples' shard commands
+//! run as plain shell and merge; merge refuses what is not one campaign.
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use common::{drivecheck, path, text};
+use orchestrator::recording::Recording;
+
+/// `drivecheck run --seed SEED --tests TESTS [extra] --out DIR`; its exit status must be 0 or 1.
+fn run(seed: u64, tests: usize, extra: &[&str], out: &Path) {
+    let (seed, tests) = (seed.to_string(), tests.to_string());
+    let mut args = vec!["run", "--seed", &seed, "--tests", &tests];
+    args.extend_from_slice(extra);
+    args.extend_from_slice(&["--out", path(out)]);
+    let output = drivecheck(&args);
+    assert!(
+        matches!(output.status.code(), Some(0 | 1)),
+        "{}",
+        text(&output)
+    );
+}
+
+/// The case files of a run directory, by name.
+fn cases(dir: &Path) -> BTreeMap<String, String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|name| name.starts_with("case-") && name.ends_with(".json"))
+        .map(|name| {
+            let text = std::fs::read_to_string(dir.join(&name)).unwrap();
+            (name, text)
+        })
+        .collect()
+}
+
+/// `campaign.json`'s summary.
+fn summary(dir: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(dir.join("campaign.json")).unwrap();
+    let record: serde_json::Value = serde_json::from_str(&text).unwrap();
+    record["summary"].clone()
+}
+
+/// Every message of a recording: topic, log time and bytes, in file order.
+fn messages(dir: &Path) -> Vec<(String, u64, Vec<u8>)> {
+    let recording = Recording::read(&dir.join("campaign.mcap")).unwrap();
+    assert!(recording.is_complete());
+    recording
+        .held()
+        .into_iter()
+        .map(|m| (m.topic().name().to_owned(), m.log_time(), m.data().to_vec()))
+        .collect()
+}
+
+/// Asserts two recordings hold the same messages, naming the first difference.
+fn assert_same_messages(a: &Path, b: &Path) {
+    let (ma, mb) = (messages(a), messages(b));
+    let first = ma.iter().zip(&mb).position(|(x, y)| x != y);
+    let show = |m: Option<&(String, u64, Vec<u8>)>| {
+        m.map(|(topic, t, data)| format!("{topic} at {t}: {}", String::from_utf8_lossy(data)))
+    };
+    assert!(
+        first.is_none() && ma.len() == mb.len(),
+        "{} has {} messages, {} has {}; first difference at {first:?}: {:?} and {:?}",
+        a.display(),
+        ma.len(),
+        b.display(),
+        mb.len(),
+        show(first.and_then(|i| ma.get(i))),
+        show(first.and_then(|i| mb.get(i)))
+    );
+}
+
+fn assert_same_campaign(a: &Path, b: &Path) {
+    let (ca, cb) = (cases(a), cases(b));
+    assert!(!ca.is_empty());
+    assert_eq!(ca.keys().collect::<Vec<_>>(), cb.keys().collect::<Vec<_>>());
+    for (name, text) in &ca {
+        assert!(
+            cb[name] == *text,
+            "{name} differs between {} and {}",
+            a.display(),
+            b.display()
+        );
+    }
+    assert_eq!(summary(a), summary(b));
+}
+
+#[test]
+fn two_jobs_and_two_merged_shards_give_the_serial_runs_case_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let (serial, jobs, merged) = (
+        dir.path().join("serial"),
+        dir.path().join("jobs"),
+        dir.path().join("merged"),
+    );
+    let none = ["--record", "none"];
+    run(3, 200, &[&["--jobs", "1"], &none[..]].concat(), &serial);
+    run(3, 200, &[&["--jobs", "2"], &none[..]].concat(), &jobs);
+    let shards: Vec<PathBuf> = (1..=2)
+        .map(|k| dir.path().join(format!("shard-{k}")))
+        .collect();
+    for (k, shard) in shards.iter().enumerate() {
+        let arg = format!("{}/2", k + 1);
+        run(3, 200, &[&["--shard", &arg], &none[..]].concat(), shard);
+        assert_eq!(cases(shard).len(), 100);
+    }
+    let out = drivecheck(&[
+        "runs",
+        "merge",
+        path(&shards[1]),
+        path(&shards[0]),
+        "--out",
+        path(&merged),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    assert_eq!(cases(&serial).len(), 200);
+    assert_same_campaign(&serial, &jobs);
+    assert_same_campaign(&serial, &merged);
+    assert!(summary(&serial)["failed"].as_u64().unwrap() > 0);
+}
+
+#[test]
+fn a_merged_recording_holds_the_unsharded_runs_messages_and_failing_keeps_the_failed_tests() {
+    let dir = tempfile::tempdir().unwrap();
+    let whole = dir.path().join("whole");
+    run(5, 12, &["--jobs", "2"], &whole);
+    let shards: Vec<PathBuf> = (1..=3)
+        .map(|k| dir.path().join(format!("shard-{k}")))
+        .collect();
+    for (k, shard) in shards.iter().enumerate() {
+        run(5, 12, &["--shard", &format!("{}/3", k + 1)], shard);
+    }
+    let merged = dir.path().join("merged");
+    let mut args = vec!["runs", "merge"];
+    args.extend(shards.iter().map(|s| path(s)));
+    args.extend(["--out", path(&merged)]);
+    let out = drivecheck(&args);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    assert_same_campaign(&whole, &merged);
+    let a = messages(&whole);
+    assert!(a.len() > 1000, "{}", a.len());
+    assert_same_messages(&whole, &merged);
+    // `explain` reads the merged recording as the whole one.
+    let explained = |dir: &Path| {
+        let out = drivecheck(&["explain", path(dir), "--json"]);
+        String::from_utf8_lossy(&out.stdout).replace(path(dir), "RUN")
+    };
+    assert_eq!(explained(&whole), explained(&merged));
+
+    // --record failing keeps the failing tests' messages only: each test's span is kept whole.
+    let failing = dir.path().join("failing");
+    run(5, 12, &["--record", "failing"], &failing);
+    assert_same_campaign(&whole, &failing);
+    let recording = Recording::read(&failing.join("campaign.mcap")).unwrap();
+    let kept: Vec<usize> = recording
+        .metadata_names()
+        .filter_map(|n| n.strip_prefix("drivecheck.test.")?.parse().ok())
+        .collect();
+    let failed: Vec<usize> = cases(&failing)
+        .values()
+        .map(|text| serde_json::from_str::<serde_json::Value>(text).unwrap())
+        .filter(|case| case["verdict"] != "passed")
+        .map(|case| case["test_index"].as_u64().unwrap() as usize)
+        .collect();
+    let mut kept_sorted = kept.clone();
+    kept_sorted.sort_unstable();
+    let mut failed_sorted = failed.clone();
+    failed_sorted.sort_unstable();
+    assert!(!failed.is_empty() && failed.len() < 12, "{failed:?}");
+    assert_eq!(kept_sorted, failed_sorted);
+    assert!(messages(&failing).len() < a.len());
+}
+
+#[test]
+fn merge_refuses_other_campaigns_and_names_the_missing_shards() {
+    let dir = tempfile::tempdir().unwrap();
+    let shard = |seed: u64, k: usize, n: usize| {
+        let out = dir.path().join(format!("s{seed}-{k}of{n}"));
+        run(
+            seed,
+            4,
+            &["--shard", &format!("{k}/{n}"), "--record", "none"],
+            &out,
+        );
+        out
+    };
+    let merge = |dirs: &[&Path], out: &str| {
+        let out = dir.path().join(out);
+        let mut args = vec!["runs", "merge"];
+        args.extend(dirs.iter().map(|d| path(d)));
+        args.extend(["--out", path(&out)]);
+        drivecheck(&args)
+    };
+    let (a1, a3, b2) = (shard(1, 1, 3), shard(1, 3, 3), shard(2, 2, 3));
+    let missing = merge(&[&a1, &a3], "m1");
+    assert_eq!(missing.status.code(), Some(2), "{}", text(&missing));
+    assert!(
+        String::from_utf8_lossy(&missing.stderr).contains("shards missing: 2/3"),
+        "{}",
+        text(&missing)
+    );
+    let other = merge(&[&a1, &b2, &a3], "m2");
+    assert_eq!(other.status.code(), Some(2), "{}", text(&other));
+    assert!(
+        String::from_utf8_lossy(&other.stderr).contains("seed 1 and 2"),
+        "{}",
+        text(&other)
+    );
+    let twice = merge(&[&a1, &a1, &a3], "m3");
+    assert!(
+        String::from_utf8_lossy(&twice.stderr).contains("given twice"),
+        "{}",
+        text(&twice)
+    );
+    let whole = dir.path().join("whole");
+    run(1, 4, &["--record", "none"], &whole);
+    let not_a_shard = merge(&[&whole], "m4");
+    assert!(
+        String::from_utf8_lossy(&not_a_shard.stderr).contains("not a shard"),
+        "{}",
+        text(&not_a_shard)
+    );
+    assert!(!dir.path().join("m1").exists() && !dir.path().join("m2").exists());
+}
+
+/// The shell block after `<!-- scaling-test: NAME -->` in `docs/scaling.md`.
+fn documented(name: &str) -> String {
+    let doc = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/scaling.md"))
+        .unwrap();
+    let marker = format!("<!-- scaling-test: {name} -->");
+    let after = &doc[doc.find(&marker).unwrap_or_else(|| panic!("{marker}")) + marker.len()..];
+    let block = after.split("```sh\n").nth(1).unwrap();
+    block.split("\n```").next().unwrap().trim().to_owned()
+}
+
+/// Runs `command` with `sh -c` in `dir`, the `drivecheck` under test first on the path.
+fn shell(command: &str, dir: &Path, env: &[(&str, String)]) {
+    let bin = Path::new(env!("CARGO_BIN_EXE_drivecheck"))
+        .parent()
+        .unwrap();
+    let path_var = format!(
+        "{}:{}",
+        bin.display(),
+        std::env::var("PATH").unwrap_or_default()
+    );
+    let output = Command::new("sh")
+        .arg("-c")
+        .arg(command)
+        .current_dir(dir)
+        .env("PATH", path_var)
+        .envs(env.iter().map(|(k, v)| (*k, v.as_str())))
+        .output()
+        .unwrap();
+    assert!(
+        matches!(output.status.code(), Some(0 | 1)),
+        "{command}: {}",
+        text(&output)
+    );
+}
+
+#[test]
+fn the_kubernetes_and_slurm_examples_run_as_shell_and_merge() {
+    let dir = tempfile::tempdir().unwrap();
+    let serial = dir.path().join("serial");
+    run(9, 6, &["--record", "failing"], &serial);
+    let common = |extra: Vec<(&'static str, String)>| {
+        let mut env = vec![
+            ("SEED", "9".to_owned()),
+            ("TESTS", "6".to_owned()),
+            ("SHARDS", "3".to_owned()),
+        ];
+        env.extend(extra);
+        env
+    };
+    for engine in ["kubernetes", "slurm"] {
+        let work = dir.path().join(engine);
+        std::fs::create_dir(&work).unwrap();
+        let command = documented(engine);
+        for index in 0..3 {
+            let env = match engine {
+                "kubernetes" => common(vec![("JOB_COMPLETION_INDEX", index.to_string())]),
+                _ => common(vec![
+                    ("SLURM_ARRAY_TASK_ID", (index + 1).to_string()),
+                    ("SLURM_ARRAY_TASK_COUNT", "3".to_owned()),
+                ]),
+            };
+            shell(&command, &work, &env);
+        }
+        shell(&documented("merge"), &work, &[]);
+        assert_same_campaign(&serial, &work.join("merged"));
+        assert_same_messages(&serial, &work.join("merged"));
+    }
+}
