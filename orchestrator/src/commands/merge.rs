@@ -346,9 +346,9 @@ fn merge_recordings(
         let Some(Ok(span)) = readers[position].1.next() else {
             continue;
         };
-        write_span(&mut recorder, &span, &mut offset_ns)?;
+        write_span(&mut recorder, span, &mut offset_ns)?;
     }
-    for span in &leftovers {
+    for span in leftovers {
         write_span(&mut recorder, span, &mut offset_ns)?;
     }
     recorder.campaign_ended(record)?;
@@ -358,20 +358,9 @@ fn merge_recordings(
 
 /// Writes `span`'s messages starting at `offset_ns`, with its test's span record, and moves the
 /// offset past it.
-fn write_span(recorder: &mut Recorder, span: &Span, offset_ns: &mut u64) -> Result<()> {
+fn write_span(recorder: &mut Recorder, span: Span, offset_ns: &mut u64) -> Result<()> {
     let shift = offset_ns.wrapping_sub(span.start_ns);
-    let shifted: Vec<_> = span
-        .messages
-        .iter()
-        .map(|m| {
-            crate::recording::Held::new(
-                m.topic(),
-                m.log_time().wrapping_add(shift),
-                m.data().to_vec(),
-            )
-        })
-        .collect();
-    recorder.write_held(&shifted, 0)?;
+    recorder.write_held(span.messages, shift)?;
     let length = span.end_ns.saturating_sub(span.start_ns);
     if let Some(test_index) = span.test_index {
         recorder.test_span(test_index, *offset_ns, *offset_ns + length)?;

@@ -137,7 +137,7 @@ impl fmt::Display for Topic {
 }
 
 /// A message type of a recording: the record one channel carries, as JSON.
-pub trait Record: Serialize + DeserializeOwned + 'static {
+pub trait Record: Serialize + DeserializeOwned + Clone + Send + 'static {
     /// Its channel.
     const TOPIC: Topic;
 }

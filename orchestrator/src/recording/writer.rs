@@ -106,6 +106,48 @@ impl Held {
     }
 }
 
+/// A record kept as it is until it is known to be written: encoding is most of what recording
+/// costs, and `run --record failing` drops the messages of every test that passed.
+trait Deferred: Send {
+    fn encode(&self) -> Result<Vec<u8>, RecordingError>;
+}
+
+impl<R: Record> Deferred for R {
+    fn encode(&self) -> Result<Vec<u8>, RecordingError> {
+        serde_json::to_vec(self).map_err(|source| RecordingError::Encode {
+            topic: R::TOPIC.name(),
+            source,
+        })
+    }
+}
+
+/// A message held: encoded already (it was served live), or not yet.
+enum Pending {
+    Encoded(Held),
+    Deferred {
+        topic: Topic,
+        log_time: u64,
+        record: Box<dyn Deferred>,
+    },
+}
+
+impl Pending {
+    fn encoded(self) -> Result<Held, RecordingError> {
+        match self {
+            Pending::Encoded(held) => Ok(held),
+            Pending::Deferred {
+                topic,
+                log_time,
+                record,
+            } => Ok(Held {
+                topic,
+                log_time,
+                data: record.encode()?,
+            }),
+        }
+    }
+}
+
 /// A campaign's recording being written (see the module doc), or a test's recording held in
 /// memory ([`Recorder::in_memory`]).
 ///
@@ -116,8 +158,9 @@ pub struct Recorder {
     /// The file; `None` for a recorder in memory.
     writer: Option<Writer<Sink>>,
     channels: HashMap<Topic, u16>,
-    /// Messages encoded while held ([`Recorder::hold`]), or always for a recorder in memory.
-    held: Option<Vec<Held>>,
+    /// Messages recorded while held ([`Recorder::hold`]), or always for a recorder in memory;
+    /// encoded when written or taken.
+    held: Option<Vec<Pending>>,
     /// A recording of a simulated car: the `/sim/*` channels are recorded.
     simulated: bool,
     sequences: HashMap<Topic, u32>,
@@ -150,6 +193,8 @@ impl Recorder {
         })?;
         let options = WriteOptions::new()
             .compression(Some(mcap::Compression::Zstd))
+            .compression_threads(0)
+            .compression_level(1)
             .chunk_size(Some(CHUNK_BYTES))
             .disable_seeking(true)
             .library(format!("drivecheck {} (mcap-rs)", tool_version()));
@@ -193,13 +238,15 @@ impl Recorder {
         let topics = Topic::ALL
             .into_iter()
             .filter(|t| simulated || !t.is_simulator_only());
-        let live = topics
-            .filter_map(|topic| {
-                let schema = schema::schema(topic).to_string();
-                let channel = live?.channel(topic, &schema)?;
-                Some((topic, channel))
-            })
-            .collect();
+        let live = match live {
+            Some(view) => topics
+                .filter_map(|topic| {
+                    let schema = schema::schema(topic).to_string();
+                    Some((topic, view.channel(topic, &schema)?))
+                })
+                .collect(),
+            None => HashMap::new(),
+        };
         Self {
             writer: None,
             channels: HashMap::new(),
@@ -229,22 +276,37 @@ impl Recorder {
         }
         let held = self.held.take().unwrap_or_default();
         if keep {
-            self.write_held(&held, 0)?;
+            for pending in held {
+                let Held {
+                    topic,
+                    log_time,
+                    data,
+                } = pending.encoded()?;
+                self.write_data(topic, log_time, data)?;
+            }
         }
         Ok(())
     }
 
-    /// Takes the messages held so far.
-    pub fn take_held(&mut self) -> Vec<Held> {
-        self.held.as_mut().map(std::mem::take).unwrap_or_default()
+    /// Takes the messages held so far, encoded.
+    pub fn take_held(&mut self) -> Result<Vec<Held>, RecordingError> {
+        let pending = self.held.as_mut().map(std::mem::take).unwrap_or_default();
+        pending.into_iter().map(Pending::encoded).collect()
+    }
+
+    /// Drops the messages held so far without encoding them.
+    pub fn drop_held(&mut self) {
+        if let Some(held) = &mut self.held {
+            held.clear();
+        }
     }
 
     /// Writes messages another recorder held, their log times shifted by `offset_ns`; they are
     /// not served live again. A recorder in memory holds them.
-    pub fn write_held(&mut self, held: &[Held], offset_ns: u64) -> Result<(), RecordingError> {
+    pub fn write_held(&mut self, held: Vec<Held>, offset_ns: u64) -> Result<(), RecordingError> {
         for message in held {
-            let log_time = message.log_time.saturating_add(offset_ns);
-            self.write_data(message.topic, log_time, message.data.clone())?;
+            let log_time = message.log_time.wrapping_add(offset_ns);
+            self.write_data(message.topic, log_time, message.data)?;
         }
         Ok(())
     }
@@ -386,11 +448,17 @@ impl Recorder {
         if R::TOPIC.is_simulator_only() && !self.simulated {
             return Ok(());
         }
-        let data = serde_json::to_vec(message).map_err(|source| RecordingError::Encode {
-            topic: R::TOPIC.name(),
-            source,
-        })?;
-        if let Some(channel) = self.live.get(&R::TOPIC) {
+        let live = self.live.get(&R::TOPIC);
+        if let (Some(held), None) = (&mut self.held, live) {
+            held.push(Pending::Deferred {
+                topic: R::TOPIC,
+                log_time,
+                record: Box::new(message.clone()),
+            });
+            return Ok(());
+        }
+        let data = message.encode()?;
+        if let Some(channel) = live {
             channel.log(&data);
         }
         self.write_data(R::TOPIC, log_time, data)
@@ -404,11 +472,11 @@ impl Recorder {
         data: Vec<u8>,
     ) -> Result<(), RecordingError> {
         if let Some(held) = &mut self.held {
-            held.push(Held {
+            held.push(Pending::Encoded(Held {
                 topic,
                 log_time,
                 data,
-            });
+            }));
             return Ok(());
         }
         let Some(&channel_id) = self.channels.get(&topic) else {

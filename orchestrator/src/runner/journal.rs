@@ -146,11 +146,20 @@ impl<'a> Journal<'a> {
 
     /// Takes what a journal in memory holds (see [`Recorder::in_memory`]).
     pub(crate) fn take_held(&self) -> Vec<Held> {
-        self.with(|r| Ok(r.take_held())).unwrap_or_default()
+        self.with(Recorder::take_held).unwrap_or_default()
+    }
+
+    /// Drops what a journal in memory holds, unencoded (a test `run --record failing` does not
+    /// keep).
+    pub(crate) fn drop_held(&self) {
+        self.with(|r| {
+            r.drop_held();
+            Ok(())
+        });
     }
 
     /// Writes messages another journal held, log time shifted by `offset_ns`.
-    pub(crate) fn write_held(&self, held: &[Held], offset_ns: u64) {
+    pub(crate) fn write_held(&self, held: Vec<Held>, offset_ns: u64) {
         self.with(|r| r.write_held(held, offset_ns));
     }
 
