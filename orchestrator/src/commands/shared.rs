@@ -319,7 +319,12 @@ async fn ctrl_c() {
 #[derive(Debug)]
 pub(super) struct Progress {
     bar: ProgressBar,
+    /// A large campaign prints a line for the tests that did not pass only.
+    quiet_passes: bool,
 }
+
+/// Above this many tests the progress prints no line for a test that passed.
+const QUIET_PASSES_ABOVE: usize = 100;
 
 impl Progress {
     /// A bar for `tests` tests.
@@ -330,7 +335,10 @@ impl Progress {
         {
             bar.set_style(style.progress_chars("=> "));
         }
-        Self { bar }
+        Self {
+            bar,
+            quiet_passes: tests > QUIET_PASSES_ABOVE,
+        }
     }
 
     /// Removes the bar.
@@ -359,8 +367,10 @@ impl CampaignObserver for Progress {
     }
 
     fn test_finished(&self, test_index: usize, verdict: Option<Verdict>) {
-        let verdict = verdict.map_or("not run", Verdict::as_str);
-        self.bar.println(format!("test {test_index}: {verdict}"));
+        if !(self.quiet_passes && verdict == Some(Verdict::Passed)) {
+            let verdict = verdict.map_or("not run", Verdict::as_str);
+            self.bar.println(format!("test {test_index}: {verdict}"));
+        }
         self.bar.inc(1);
     }
 }

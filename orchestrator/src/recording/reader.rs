@@ -132,6 +132,36 @@ impl Recording {
         }
     }
 
+    /// A recording of `held` messages alone (a test's span, see [`Spans`]): its channels are their
+    /// topics, without schemas; no metadata.
+    pub fn from_held(held: Vec<super::Held>) -> Self {
+        let mut recording = Recording {
+            complete: true,
+            ..Recording::default()
+        };
+        for message in held {
+            let topic = message.topic();
+            let id = topic as u16;
+            recording
+                .channels
+                .entry(id)
+                .or_insert_with(|| RecordingChannel {
+                    topic: topic.name().to_owned(),
+                    message_encoding: "json".to_owned(),
+                    schema_name: String::new(),
+                    schema_encoding: String::new(),
+                    schema: Vec::new(),
+                });
+            recording.messages.push(RawMessage {
+                channel_id: id,
+                sequence: 0,
+                log_time: message.log_time(),
+                data: message.into_data(),
+            });
+        }
+        recording
+    }
+
     /// Checks that the file is a drivecheck recording of the version this build reads (its
     /// `drivecheck.recording` metadata record, written first, so a cut-short file has it too).
     pub fn check_format(&self) -> Result<(), RecordingError> {
@@ -261,9 +291,13 @@ pub struct Spans<'a> {
     channels: BTreeMap<u16, Topic>,
     pending: Vec<super::Held>,
     done: bool,
+    /// Where the file is damaged or cut short: given after what was read before it.
+    error: Option<RecordingError>,
     /// The recording says every test's messages have a span: what no span claims is the
     /// campaign's own (the area), not a test's.
     spanned: bool,
+    /// The metadata records read so far, but the spans'.
+    metadata: BTreeMap<String, BTreeMap<String, String>>,
 }
 
 impl<'a> Spans<'a> {
@@ -275,8 +309,15 @@ impl<'a> Spans<'a> {
             channels: BTreeMap::new(),
             pending: Vec::new(),
             done: false,
+            error: None,
             spanned: false,
+            metadata: BTreeMap::new(),
         })
+    }
+
+    /// A metadata record read so far (not a span's), by name.
+    pub fn metadata(&self, name: &str) -> Option<&BTreeMap<String, String>> {
+        self.metadata.get(name)
     }
 
     fn leftover(&mut self) -> Option<Span> {
@@ -300,7 +341,7 @@ impl Iterator for Spans<'_> {
 
     fn next(&mut self) -> Option<Self::Item> {
         if self.done {
-            return None;
+            return self.error.take().map(Err);
         }
         loop {
             let record = match self.records.next() {
@@ -309,8 +350,13 @@ impl Iterator for Spans<'_> {
                     return self.leftover().map(Ok);
                 }
                 Some(Err(e)) => {
+                    // What was read before the damage first, then the damage.
                     self.done = true;
-                    return Some(Err(RecordingError::NotMcap(e)));
+                    self.error = Some(RecordingError::NotMcap(e));
+                    return match self.leftover() {
+                        Some(span) => Some(Ok(span)),
+                        None => self.error.take().map(Err),
+                    };
                 }
                 Some(Ok(record)) => record,
             };
@@ -329,8 +375,11 @@ impl Iterator for Spans<'_> {
                         ));
                     }
                 }
-                McapRecord::Metadata(m) if m.name == "drivecheck.recording" => {
-                    self.spanned = m.metadata.get("test_spans").is_some_and(|v| v == "true");
+                McapRecord::Metadata(m) if !m.name.starts_with(super::TEST_SPAN_PREFIX) => {
+                    if m.name == "drivecheck.recording" {
+                        self.spanned = m.metadata.get("test_spans").is_some_and(|v| v == "true");
+                    }
+                    self.metadata.insert(m.name, m.metadata);
                 }
                 McapRecord::Metadata(m) if m.name.starts_with(super::TEST_SPAN_PREFIX) => {
                     let field = |name: &str| m.metadata.get(name).and_then(|v| v.parse().ok());

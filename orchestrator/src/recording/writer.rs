@@ -104,6 +104,11 @@ impl Held {
     pub fn data(&self) -> &[u8] {
         &self.data
     }
+
+    /// Its encoded bytes, taken.
+    pub fn into_data(self) -> Vec<u8> {
+        self.data
+    }
 }
 
 /// A record kept as it is until it is known to be written: encoding is most of what recording

@@ -188,32 +188,7 @@ pub(crate) fn read_campaign(dir: &Path) -> Result<CampaignData, ReportError> {
     let mut recorded_scenario = None;
     let recording_path = dir.join(RECORDING_FILE);
     if recording_path.is_file() {
-        match Recording::read(&recording_path) {
-            Ok(recording) => {
-                if let Some(why) = recording.cut_short() {
-                    notes.push(format!(
-                        "{} is cut short ({why}): the tracks end where it does",
-                        recording_path.display()
-                    ));
-                }
-                recorded_scenario = recording
-                    .metadata("drivecheck.scenario")
-                    .and_then(|m| m.get("toml"))
-                    .cloned();
-                match split_tracks(&recording, &tests) {
-                    Ok(mut tracks) => {
-                        for test in &mut tests {
-                            test.track = tracks.remove(&test.index);
-                        }
-                    }
-                    Err(e) => notes.push(format!(
-                        "{}: {e}; no tracks or plots",
-                        recording_path.display()
-                    )),
-                }
-            }
-            Err(e) => notes.push(format!("{e}; no tracks or plots")),
-        }
+        recorded_scenario = read_tracks(&recording_path, &mut tests, &mut notes);
     } else {
         notes.push(format!(
             "{} does not exist: no tracks or plots",
@@ -227,6 +202,66 @@ pub(crate) fn read_campaign(dir: &Path) -> Result<CampaignData, ReportError> {
         recorded_scenario,
         notes,
     })
+}
+
+/// Reads the recording at `path` and gives each test its track; the recording's copy of the
+/// scenario. A test at a time when the recording has test spans (a campaign on fresh simulated
+/// cars, `docs/scaling.md`), so that a large campaign's recording is never in memory decoded
+/// whole; what no span claims (a recording of one car for the whole campaign) is read at once.
+fn read_tracks(path: &Path, tests: &mut [TestData], notes: &mut Vec<String>) -> Option<String> {
+    let bytes = match std::fs::read(path) {
+        Ok(bytes) => bytes,
+        Err(e) => {
+            notes.push(format!(
+                "cannot read {}: {e}; no tracks or plots",
+                path.display()
+            ));
+            return None;
+        }
+    };
+    let mut spans = match crate::recording::Spans::new(&bytes) {
+        Ok(spans) => spans,
+        Err(e) => {
+            notes.push(format!("{}: {e}; no tracks or plots", path.display()));
+            return None;
+        }
+    };
+    let by_index: BTreeMap<usize, usize> = tests
+        .iter()
+        .enumerate()
+        .map(|(i, t)| (t.index, i))
+        .collect();
+    for span in spans.by_ref() {
+        let span = match span {
+            Ok(span) => span,
+            Err(why) => {
+                notes.push(format!(
+                    "{} is cut short ({why}): the tracks end where it does",
+                    path.display()
+                ));
+                break;
+            }
+        };
+        let recording = Recording::from_held(span.messages);
+        let mine = match span.test_index.and_then(|t| by_index.get(&t)) {
+            Some(&i) => std::slice::from_mut(&mut tests[i]),
+            None => &mut tests[..],
+        };
+        match split_tracks(&recording, mine) {
+            Ok(mut tracks) => {
+                for test in mine.iter_mut() {
+                    if let Some(track) = tracks.remove(&test.index) {
+                        test.track = Some(track);
+                    }
+                }
+            }
+            Err(e) => notes.push(format!("{}: {e}; no tracks or plots", path.display())),
+        }
+    }
+    spans
+        .metadata("drivecheck.scenario")
+        .and_then(|m| m.get("toml"))
+        .cloned()
 }
 
 fn read_replay(dir: &Path) -> Result<ReplayData, ReportError> {
