@@ -423,6 +423,27 @@ pub enum BenchCommand {
     /// Both return-route planners side by side on every bundled area, from random poses with
     /// at least 1 m clearance: success, plan time p50/p99, length and ratio to the lower bound.
     Recovery(BenchRecoveryArgs),
+    /// The simulated car's fault effects next to the published real-car experiments: the
+    /// published fault sequence on generated tests of `parking-lot-august` (with and without its
+    /// faults, and rerun with other simulator seeds), and the rock lot without faults.
+    Fidelity(BenchFidelityArgs),
+}
+
+/// Options of `drivecheck bench fidelity`.
+#[derive(Debug, Args)]
+pub struct BenchFidelityArgs {
+    /// Generated tests of the published fault sequence (one per seed).
+    #[arg(long, default_value_t = 40, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    pub tests: u32,
+    /// Runs of each test with its faults, with other simulator seeds (the reruns' spread).
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub reruns: u32,
+    /// Tests of the rock lot's campaign without faults.
+    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    pub rock_tests: u32,
+    /// The first seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
 }
 
 /// Options of `drivecheck bench recovery`.

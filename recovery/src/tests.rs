@@ -1,4 +1,4 @@
-//! Properties of planned return routes on the four real areas.
+//! Properties of planned return routes on the five real areas.
 
 use proptest::prelude::*;
 use rand::{RngExt, SeedableRng};

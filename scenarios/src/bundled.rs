@@ -1,4 +1,4 @@
-//! The four real test areas of the published experiments, embedded in the binary.
+//! The five real test areas of the published experiments, embedded in the binary.
 //!
 //! Converted from the reference route XML by this crate's importer and [`crate::to_toml`]; the
 //! files are in `scenarios/areas/`.
@@ -7,7 +7,7 @@ use crate::error::{Problem, ScenarioError};
 use crate::{Loaded, from_toml_str};
 
 /// Name and TOML text of each bundled scenario.
-const AREAS: [(&str, &str); 4] = [
+const AREAS: [(&str, &str); 5] = [
     ("courtyard", include_str!("../areas/courtyard.toml")),
     ("cutouts-four", include_str!("../areas/cutouts-four.toml")),
     (
@@ -15,12 +15,16 @@ const AREAS: [(&str, &str); 4] = [
         include_str!("../areas/parking-lot-2anchors.toml"),
     ),
     (
+        "parking-lot-august",
+        include_str!("../areas/parking-lot-august.toml"),
+    ),
+    (
         "parking-lot-rock",
         include_str!("../areas/parking-lot-rock.toml"),
     ),
 ];
 
-const NAMES: [&str; 4] = [AREAS[0].0, AREAS[1].0, AREAS[2].0, AREAS[3].0];
+const NAMES: [&str; 5] = [AREAS[0].0, AREAS[1].0, AREAS[2].0, AREAS[3].0, AREAS[4].0];
 
 /// The names of the bundled scenarios.
 pub fn names() -> &'static [&'static str] {

@@ -5,7 +5,7 @@
 //! simulator should model around the area, and the generator's and campaign's settings. This crate
 //! reads scenarios from TOML (the format of `docs/scenario-format.md`) or from the reference
 //! control station's route XML, validates them with errors that name the file, the field and its
-//! index, writes canonical TOML, hashes it, and bundles the four real test areas.
+//! index, writes canonical TOML, hashes it, and bundles the five real test areas.
 //!
 //! ```
 //! let loaded = scenarios::bundled::load("courtyard").unwrap();

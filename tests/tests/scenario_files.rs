@@ -200,7 +200,7 @@ fn every_bundled_scenario_loads_with_exactly_the_expected_warnings() {
     };
     let no_anchors =
         "anchors: no anchors: UWB positioning cannot be tested in this area".to_owned();
-    let expected: [(&str, Vec<String>); 4] = [
+    let expected: [(&str, Vec<String>); 5] = [
         (
             "courtyard",
             vec![
@@ -234,6 +234,7 @@ fn every_bundled_scenario_loads_with_exactly_the_expected_warnings() {
                 join("recovery_route[15]", "0.55"),
             ],
         ),
+        ("parking-lot-august", vec![]),
         ("parking-lot-rock", vec![turn("start_route[0]", "38.9")]),
     ];
     assert_eq!(
@@ -261,7 +262,7 @@ fn bundled_scenarios_are_named_and_sourced() {
     assert_eq!(
         error.to_string(),
         "bundled:moon: no bundled scenario `moon` (known: courtyard, cutouts-four, \
-         parking-lot-2anchors, parking-lot-rock)"
+         parking-lot-2anchors, parking-lot-august, parking-lot-rock)"
     );
 }
 

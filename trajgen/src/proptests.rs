@@ -1,4 +1,4 @@
-//! Property tests of the generator on synthetic areas and the four real areas: every generated
+//! Property tests of the generator on synthetic areas and the five real areas: every generated
 //! segment keeps the constraints (checked with [`check_route`], joint with the tail included), the
 //! margin continuation exists and is valid, the same seed gives the same trajectory, and a
 //! failure is always a typed error.

@@ -1,4 +1,4 @@
-//! The four real test areas of the published experiments (fence, cutouts, start and recovery
+//! The five real test areas of the published experiments (fence, cutouts, start and recovery
 //! routes) as coordinates, for the unit tests of the pure crates, which cannot read scenario files.
 //! Test fixtures only (compiled for tests, or with the `test-areas` feature for other crates'
 //! tests): the product's bundled scenarios live in `scenarios/areas/*.toml`, and a test in the
@@ -216,10 +216,48 @@ pub const PARKING_LOT_ROCK: RealArea = RealArea {
     recovery_route: &[[-12.798, -123.609], [-11.935, -122.274], [-11.503, -120.9]],
 };
 
-/// All four real areas.
-pub const REAL_AREAS: [RealArea; 4] = [
+/// `parking-lot-august.xml` (`routes_3.xml` of the car's firmware repository, 14 August 2018).
+pub const PARKING_LOT_AUGUST: RealArea = RealArea {
+    name: "parking-lot-august",
+    fence: &[
+        [-70.06, -140.168],
+        [-72.476, -138.365],
+        [-72.553, -135.949],
+        [-71.095, -133.724],
+        [-68.295, -131.308],
+        [-64.728, -129.85],
+        [-61.123, -128.009],
+        [-57.939, -126.82],
+        [-54.525, -126.398],
+        [-50.882, -127.549],
+        [-47.698, -129.467],
+        [-45.895, -131.615],
+        [-43.939, -134.185],
+        [-43.747, -136.601],
+        [-44.706, -139.746],
+        [-46.01, -140.628],
+        [-51.073, -141.05],
+        [-54.372, -141.357],
+        [-57.977, -141.357],
+        [-62.082, -141.549],
+        [-64.958, -141.319],
+        [-68.372, -140.705],
+    ],
+    cutouts: &[],
+    start_route: &[[-58.133, -138.259], [-57.001, -137.971], [-55.092, -137.46]],
+    recovery_route: &[
+        [-64.268, -139.094],
+        [-62.617, -138.881],
+        [-60.841, -138.681],
+        [-59.043, -138.437],
+    ],
+};
+
+/// All five real areas.
+pub const REAL_AREAS: [RealArea; 5] = [
     COURTYARD,
     CUTOUTS_FOUR,
     PARKING_LOT_2ANCHORS,
     PARKING_LOT_ROCK,
+    PARKING_LOT_AUGUST,
 ];

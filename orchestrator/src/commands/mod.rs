@@ -2,6 +2,7 @@
 
 mod area;
 mod bench;
+mod bench_fidelity;
 mod bench_recovery;
 mod explain;
 mod merge;
@@ -45,5 +46,6 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Command::Scenario(ScenarioCommand::List) => scenario::list(),
         Command::Bench(BenchCommand::Generator(args)) => bench::generator(&args),
         Command::Bench(BenchCommand::Recovery(args)) => bench_recovery::run(&args),
+        Command::Bench(BenchCommand::Fidelity(args)) => bench_fidelity::run(&args),
     }
 }
