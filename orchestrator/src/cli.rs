@@ -441,6 +441,10 @@ pub struct BenchFidelityArgs {
     /// Tests of the rock lot's campaign without faults.
     #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u32).range(1..=100_000))]
     pub rock_tests: u32,
+    /// Also draw where the rock lot's campaign failed as SVG to FILE: every driven track, the
+    /// samples above 1 m, the rock and the wall.
+    #[arg(long, value_name = "FILE")]
+    pub svg: Option<PathBuf>,
     /// The first seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,

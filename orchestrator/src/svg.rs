@@ -109,6 +109,67 @@ pub fn area_picture(scenario: &Scenario, report: &ValidationReport) -> String {
     svg
 }
 
+/// Where a campaign's UWB estimate was off: the area with its environment, every test's driven
+/// track (RTK positions) in grey, and each state sample whose deviation exceeds `threshold_m` as a
+/// red dot; `caption` under it.
+pub fn deviation_picture(
+    scenario: &Scenario,
+    tracks: &[Vec<(Point, Option<f64>)>],
+    threshold_m: f64,
+    caption: &str,
+) -> String {
+    let frame = Frame::new(picture_bbox(scenario));
+    let mut svg = String::new();
+    let legend_px = 60.0;
+    let _ = writeln!(
+        svg,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w:.0}" height="{h:.0}" viewBox="0 0 {w:.0} {h:.0}" font-family="sans-serif" font-size="13">"#,
+        w = WIDTH_PX,
+        h = frame.height_px() + legend_px
+    );
+    let _ = writeln!(
+        svg,
+        r##"<rect width="100%" height="100%" fill="#ffffff"/>"##
+    );
+    area_outline(&mut svg, &frame, scenario);
+    for track in tracks {
+        let points: Vec<Point> = track.iter().map(|(p, _)| *p).collect();
+        let _ = writeln!(
+            svg,
+            r##"<polyline points="{}" fill="none" stroke="#888" stroke-width="0.6" stroke-opacity="0.6"/>"##,
+            frame.points(&points)
+        );
+    }
+    let (mut samples, mut over) = (0usize, 0usize);
+    for (p, deviation) in tracks.iter().flatten() {
+        samples += 1;
+        if deviation.is_some_and(|d| d > threshold_m) {
+            over += 1;
+            let _ = writeln!(
+                svg,
+                r##"<circle cx="{:.1}" cy="{:.1}" r="2.2" fill="#d7191c" fill-opacity="0.7"/>"##,
+                frame.x(p.x),
+                frame.y(p.y)
+            );
+        }
+    }
+    routes_and_anchors(&mut svg, &frame, scenario);
+    let _ = writeln!(
+        svg,
+        r##"<text x="10" y="{:.0}">{}</text>"##,
+        frame.height_px() + 22.0,
+        xml_escape(caption)
+    );
+    let _ = writeln!(
+        svg,
+        r##"<text x="10" y="{:.0}" fill="#555">grey: {} tests driven (RTK); red: {over} of {samples} state samples with UWB more than {threshold_m:.1} m from RTK; brown: obstacle; purple line: reflecting wall</text>"##,
+        frame.height_px() + 44.0,
+        tracks.len()
+    );
+    svg.push_str("</svg>\n");
+    svg
+}
+
 fn heat_map(svg: &mut String, frame: &Frame, report: &ValidationReport) {
     let (grid, visits) = (&report.grid.raster, &report.grid.visits);
     let max_visits = visits.iter().copied().max().unwrap_or(0).max(1);

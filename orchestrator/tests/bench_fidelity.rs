@@ -7,6 +7,8 @@ use common::{drivecheck, text};
 
 #[test]
 fn the_fidelity_benchmark_prints_the_published_sequence_and_the_rock_lot() {
+    let dir = tempfile::tempdir().unwrap();
+    let svg = dir.path().join("rock.svg");
     let out = drivecheck(&[
         "bench",
         "fidelity",
@@ -16,6 +18,8 @@ fn the_fidelity_benchmark_prints_the_published_sequence_and_the_rock_lot() {
         "2",
         "--rock-tests",
         "4",
+        "--svg",
+        common::path(&svg),
     ]);
     assert_eq!(out.status.code(), Some(0), "{}", text(&out));
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -45,4 +49,16 @@ fn the_fidelity_benchmark_prints_the_published_sequence_and_the_rock_lot() {
         .find(|l| l.starts_with("| tests |"))
         .unwrap_or_else(|| panic!("{stdout}"));
     assert!(tests.contains("/4 |"), "{tests}");
+    // The picture: four driven tracks, the rock and the wall, and a red dot per sample above 1 m
+    // as its legend counts them.
+    let picture = std::fs::read_to_string(&svg).unwrap();
+    assert!(picture.starts_with("<svg") && picture.trim_end().ends_with("</svg>"));
+    assert_eq!(picture.matches("stroke=\"#888\"").count(), 4);
+    assert!(picture.contains("<title>rock</title>") && picture.contains("reflecting wall"));
+    let dots = picture.matches("<circle").count();
+    assert!(
+        picture.contains(&format!("red: {dots} of ")),
+        "{dots} dots, legend: {}",
+        picture.lines().rev().nth(1).unwrap_or_default()
+    );
 }

@@ -1,5 +1,6 @@
 //! `drivecheck explain` end to end: a campaign on the rock lot without faults (a rock hides anchor
-//! 234 for part of the lot and a wall reflects its signal) is explained from its recording, scored
+//! 234 for part of the lot and a wall reflects its signal; the wide shadow of
+//! `fixtures/rock-wide-shadow.toml`, across the cars' paths) is explained from its recording, scored
 //! against the simulator's truth, and calibrated on; a case file alone is explained too.
 
 mod common;
@@ -15,7 +16,10 @@ fn the_rock_lots_failures_are_explained_by_anchor_234s_reflected_range() {
         4,
         &[
             "--scenario",
-            "parking-lot-rock",
+            concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/tests/fixtures/rock-wide-shadow.toml"
+            ),
             "--no-faults",
             "--on-failure",
             "continue",

@@ -361,16 +361,17 @@ fn the_illustrative_rock_hides_anchor_234_from_a_minority_of_the_lot_and_the_wal
             }
         }
     }
-    // About a quarter of the lot (0.25 m grid: 25.5 %) is in the shadow, all of it with a reflection.
+    // A strip of the lot (0.25 m grid: about 3 %) is in the shadow, all of it with a reflection:
+    // "a section of the trajectory", crossed by some tests and not by most.
     let share = hidden as f64 / drivable as f64;
     assert!(
-        share > 0.15,
-        "the rock hides only {:.0} % of the lot",
+        share > 0.02,
+        "the rock hides only {:.1} % of the lot",
         share * 100.0
     );
     assert!(
-        share < 0.35,
-        "the rock hides {:.0} % of the lot",
+        share < 0.10,
+        "the rock hides {:.1} % of the lot",
         share * 100.0
     );
     assert!(hidden_with_reflection as f64 > 0.9 * hidden as f64);

@@ -300,7 +300,11 @@ fn rock_lot(args: &BenchFidelityArgs) -> Result<()> {
         "sim",
     );
     config.policy = campaign::oracle::FailurePolicy::ContinueAndRecord;
-    config.record = RecordMode::None;
+    config.record = if args.svg.is_some() {
+        RecordMode::All
+    } else {
+        RecordMode::None
+    };
     let cars = EmbeddedSims::new(&rock, args.seed, true);
     let jobs = std::thread::available_parallelism().map_or(1, usize::from);
     let report = run_campaign_fresh(
@@ -354,5 +358,30 @@ fn rock_lot(args: &BenchFidelityArgs) -> Result<()> {
     println!(
         "\npublished: the rock hid anchor 234 \"for a section of the trajectory\" (about 2 m there)"
     );
+    if let Some(file) = &args.svg {
+        let data = crate::report::data::read_campaign(&scratch.0.join("rock"))?;
+        let tracks: Vec<Vec<(trajgen::Point, Option<f64>)>> = data
+            .tests
+            .iter()
+            .filter_map(|t| t.track.as_ref())
+            .map(|track| {
+                track
+                    .samples
+                    .iter()
+                    .map(|s| (s.rtk, s.deviation_m))
+                    .collect()
+            })
+            .collect();
+        let caption = format!(
+            "parking-lot-rock without faults, seed {}: {failed} of {} tests fail, {:.0} % of the driven route",
+            args.seed,
+            report.cases.len(),
+            pct(failing_samples, samples)
+        );
+        let svg = crate::svg::deviation_picture(&rock, &tracks, 1.0, &caption);
+        crate::atomic::write(file, svg)
+            .with_context(|| format!("cannot write {}", file.display()))?;
+        eprintln!("picture: {}", file.display());
+    }
     Ok(())
 }

@@ -18,7 +18,7 @@
 //!
 //! Not here: reading the command line (`commands::report`).
 
-mod data;
+pub(crate) mod data;
 mod draw;
 pub mod explain;
 mod html;
