@@ -63,10 +63,9 @@ fn picture_bbox(scenario: &Scenario) -> BBox {
         .fold(scenario.area.bbox(), BBox::including)
 }
 
-/// The validation picture: the area, the coverage heat map, a sample of the trajectory and the
-/// numbered hot spots.
-pub fn area_picture(scenario: &Scenario, report: &ValidationReport) -> String {
-    let frame = Frame::new(picture_bbox(scenario));
+/// The start of a picture of `frame` with room for two lines of legend: the `<svg>` element and
+/// a white background.
+fn open_svg(frame: &Frame) -> String {
     let mut svg = String::new();
     let legend_px = 60.0;
     let _ = writeln!(
@@ -79,6 +78,14 @@ pub fn area_picture(scenario: &Scenario, report: &ValidationReport) -> String {
         svg,
         r##"<rect width="100%" height="100%" fill="#ffffff"/>"##
     );
+    svg
+}
+
+/// The validation picture: the area, the coverage heat map, a sample of the trajectory and the
+/// numbered hot spots.
+pub fn area_picture(scenario: &Scenario, report: &ValidationReport) -> String {
+    let frame = Frame::new(picture_bbox(scenario));
+    let mut svg = open_svg(&frame);
     heat_map(&mut svg, &frame, report);
     area_outline(&mut svg, &frame, scenario);
     let _ = writeln!(
@@ -119,18 +126,7 @@ pub fn deviation_picture(
     caption: &str,
 ) -> String {
     let frame = Frame::new(picture_bbox(scenario));
-    let mut svg = String::new();
-    let legend_px = 60.0;
-    let _ = writeln!(
-        svg,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{w:.0}" height="{h:.0}" viewBox="0 0 {w:.0} {h:.0}" font-family="sans-serif" font-size="13">"#,
-        w = WIDTH_PX,
-        h = frame.height_px() + legend_px
-    );
-    let _ = writeln!(
-        svg,
-        r##"<rect width="100%" height="100%" fill="#ffffff"/>"##
-    );
+    let mut svg = open_svg(&frame);
     area_outline(&mut svg, &frame, scenario);
     for track in tracks {
         let points: Vec<Point> = track.iter().map(|(p, _)| *p).collect();

@@ -30,8 +30,8 @@ use super::journal::Journal;
 use super::run_dir::RunDirectory;
 use super::{
     CampaignFailure, CampaignObserver, CampaignReport, RECORDING_FILE, RecordMode, RunConfig,
-    RunError, SimulatorView, TestEnd, TestSource, open_session, plan_and_run, record_test_end,
-    reset, start_join_note, switched_off_note,
+    RunError, SimulatorView, TestEnd, TestSource, finish_campaign, open_session, plan_and_run,
+    record_test_end, reset, start_join_note, switched_off_note,
 };
 use crate::recording::{DEFAULT_CHUNK_INTERVAL, Held, Recorder, RecordingStart};
 use campaign::case::{Case, Settings};
@@ -175,15 +175,7 @@ pub fn run_campaign_fresh(
     };
     let result = prepare(scenario, config, cars, cancel, settings)
         .and_then(|shared| run_tests(&shared, jobs.max(1), observer, &mut dir, &journal));
-    let report = dir.finish().map_err(CampaignFailure::without_report)?;
-    let recorded = journal.finish(&report.record);
-    match result.and(recorded) {
-        Ok(()) => Ok(report),
-        Err(error) => Err(CampaignFailure {
-            error,
-            report: Some(report),
-        }),
-    }
+    finish_campaign(dir, journal, result)
 }
 
 fn prepare<'a>(

@@ -380,6 +380,20 @@ pub async fn run_campaign(
         journal: &journal,
     };
     let result = run_tests(&inputs, &mut dir).await;
+    finish_campaign(dir, journal, result)
+}
+
+/// Completes the run directory and the recording after the tests ran with `result`: the report,
+/// or the failure with the report.
+#[allow(
+    clippy::result_large_err,
+    reason = "the failure of run_campaign, returned once per campaign"
+)]
+fn finish_campaign(
+    dir: RunDirectory,
+    journal: Journal<'_>,
+    result: Result<(), RunError>,
+) -> Result<CampaignReport, CampaignFailure> {
     let report = dir.finish().map_err(CampaignFailure::without_report)?;
     let recorded = journal.finish(&report.record);
     match result.and(recorded) {

@@ -96,6 +96,11 @@ impl RunDirectory {
             replay_of: config.replay.as_ref().map(|r| r.of.clone()),
             shard: config.shard,
         };
+        Self::start(path, record, scenario)
+    }
+
+    /// The run directory `path` (created) with `record`, its first `campaign.json` written.
+    fn start(path: PathBuf, record: CampaignRecord, scenario: &Scenario) -> Result<Self, RunError> {
         let dir = Self {
             path,
             record,
@@ -119,21 +124,13 @@ impl RunDirectory {
             path: path.clone(),
             source,
         })?;
-        let dir = Self {
-            path,
-            record: CampaignRecord {
-                shard: None,
-                ended_at: None,
-                summary: None,
-                ..record
-            },
-            tests: Vec::new(),
-            cases: Vec::new(),
-            no_anchors: scenario.anchors.is_empty(),
-            scenario: scenario.clone(),
+        let record = CampaignRecord {
+            shard: None,
+            ended_at: None,
+            summary: None,
+            ..record
         };
-        dir.write_record()?;
-        Ok(dir)
+        Self::start(path, record, scenario)
     }
 
     /// The directory.
