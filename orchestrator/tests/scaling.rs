@@ -199,6 +199,12 @@ fn merge_refuses_other_campaigns_and_names_the_missing_shards() {
         drivecheck(&args)
     };
     let (a1, a3, b2) = (shard(1, 1, 3), shard(1, 3, 3), shard(2, 2, 3));
+    let shown = drivecheck(&["runs", "show", path(&a1)]);
+    assert!(
+        String::from_utf8_lossy(&shown.stdout).contains("shard 1/3 of a 4-test campaign"),
+        "{}",
+        text(&shown)
+    );
     let missing = merge(&[&a1, &a3], "m1");
     assert_eq!(missing.status.code(), Some(2), "{}", text(&missing));
     assert!(
@@ -219,6 +225,21 @@ fn merge_refuses_other_campaigns_and_names_the_missing_shards() {
         "{}",
         text(&twice)
     );
+    // More shards than tests: shard 6/6 of 4 tests holds none, ends well, and merges.
+    let empty = dir.path().join("empty");
+    let out = drivecheck(&[
+        "run",
+        "--seed",
+        "1",
+        "--tests",
+        "4",
+        "--shard",
+        "6/6",
+        "--out",
+        path(&empty),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    assert!(cases(&empty).is_empty());
     let whole = dir.path().join("whole");
     run(1, 4, &["--record", "none"], &whole);
     let not_a_shard = merge(&[&whole], "m4");

@@ -117,6 +117,10 @@ fn row(entry: &Entry) -> String {
                 None if r.no_faults => "campaign, no faults".to_owned(),
                 None => "campaign".to_owned(),
             };
+            let kind = match r.shard {
+                Some(shard) => format!("{kind}, shard {shard}"),
+                None => kind,
+            };
             let counts = r.summary.as_ref().map_or_else(
                 || "- | - | - | - | -".to_owned(),
                 |s| {
@@ -229,6 +233,14 @@ fn show_campaign(dir: &Path, record: CampaignRecord, coverage: bool) -> Result<(
     );
     if let Some(of) = &record.replay_of {
         println!("replay of {}", of.case);
+    }
+    if let Some(shard) = record.shard {
+        println!(
+            "shard {shard} of a {}-test campaign: its tests i with i mod {} = {} (`drivecheck runs merge` joins the shards)",
+            record.settings.tests,
+            shard.count,
+            shard.index - 1
+        );
     }
     println!(
         "started {}, ended {}",
