@@ -432,6 +432,10 @@ pub enum BenchCommand {
 /// Options of `drivecheck bench fidelity`.
 #[derive(Debug, Args)]
 pub struct BenchFidelityArgs {
+    /// The lot of the published fault sequence: `parking-lot-august` or a variant of it (a .toml
+    /// file), for example with other speeds.
+    #[arg(long, default_value = "parking-lot-august")]
+    pub scenario: String,
     /// Generated tests of the published fault sequence (one per seed).
     #[arg(long, default_value_t = 40, value_parser = clap::value_parser!(u32).range(1..=10_000))]
     pub tests: u32,

@@ -203,7 +203,7 @@ fn spread(values: &[f64]) -> String {
 
 /// Runs the benchmark and prints its tables.
 pub fn run(args: &BenchFidelityArgs) -> Result<ExitCode> {
-    let august = scenarios::bundled::load("parking-lot-august")?.scenario;
+    let august = crate::scenario_arg::load_scenario(&args.scenario)?.scenario;
     let runtime_guard = runtime(false)?;
     let _context = runtime_guard.enter();
     let mut with: Vec<Vec<f64>> = vec![Vec::new(); SEGMENTS];
@@ -252,9 +252,8 @@ pub fn run(args: &BenchFidelityArgs) -> Result<ExitCode> {
         }
     }
     println!(
-        "## The published fault sequence on parking-lot-august: {tests} generated tests (seeds {}..), \
-         {} runs each\n",
-        args.seed, args.reruns
+        "## The published fault sequence on {}: {tests} generated tests (seeds {}..), {} runs each\n",
+        august.name, args.seed, args.reruns
     );
     println!(
         "| segment | published (3 runs) | simulated with faults p10 / p50 / p90 | in 0.6–0.8 m | above 1 m | with the segment before p10 / p50 / p90 | without faults p10 / p50 / p90 | rerun spread p50 / p90 |"
