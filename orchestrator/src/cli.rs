@@ -354,6 +354,9 @@ pub enum RunsCommand {
         /// The scenario the shards ran, when it is not bundled (a .toml or reference .xml file).
         #[arg(long)]
         scenario: Option<String>,
+        /// Also write the whole campaign's tests as JUnit XML to FILE (one testcase per test).
+        #[arg(long, value_name = "FILE")]
+        junit: Option<PathBuf>,
     },
 }
 

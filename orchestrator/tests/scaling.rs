@@ -111,6 +111,7 @@ fn two_jobs_and_two_merged_shards_give_the_serial_runs_case_files() {
         run(3, 200, &[&["--shard", &arg], &none[..]].concat(), shard);
         assert_eq!(cases(shard).len(), 100);
     }
+    let junit = dir.path().join("merged.xml");
     let out = drivecheck(&[
         "runs",
         "merge",
@@ -118,8 +119,12 @@ fn two_jobs_and_two_merged_shards_give_the_serial_runs_case_files() {
         path(&shards[0]),
         "--out",
         path(&merged),
+        "--junit",
+        path(&junit),
     ]);
     assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let xml = std::fs::read_to_string(&junit).unwrap();
+    assert_eq!(xml.matches("<testcase ").count(), 200, "{xml}");
     assert_eq!(cases(&serial).len(), 200);
     assert_same_campaign(&serial, &jobs);
     assert_same_campaign(&serial, &merged);

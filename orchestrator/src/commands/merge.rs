@@ -1,4 +1,4 @@
-//! `drivecheck runs merge DIR… --out DIR`: the run directories of a campaign's shards
+//! `drivecheck runs merge DIR… --out DIR [--junit FILE]`: the run directories of a campaign's shards
 //! (`run --shard K/N`) joined into the run directory of the whole campaign: every case file,
 //! `campaign.json` with the summary over all tests, and one `campaign.mcap` with every test's
 //! messages in test order (as the unsharded run writes it).
@@ -27,7 +27,12 @@ struct ShardDir {
 }
 
 /// Merges the shards in `dirs` into `out` (see the module doc) and prints what it wrote.
-pub fn merge(dirs: &[PathBuf], out: &Path, scenario: Option<&str>) -> Result<ExitCode> {
+pub fn merge(
+    dirs: &[PathBuf],
+    out: &Path,
+    scenario: Option<&str>,
+    junit: Option<&Path>,
+) -> Result<ExitCode> {
     if is_used(out) {
         bail!(crate::runner::RunError::OutDirUsed {
             path: out.to_owned()
@@ -99,6 +104,9 @@ pub fn merge(dirs: &[PathBuf], out: &Path, scenario: Option<&str>) -> Result<Exi
         }
     );
     println!("run directory: {}", out.display());
+    if let Some(file) = junit {
+        super::run::write_junit(&report, file)?;
+    }
     Ok(ExitCode::SUCCESS)
 }
 

@@ -202,7 +202,7 @@ fn explain_failed(report: &CampaignReport, scenario: &Scenario) {
 }
 
 /// Writes the campaign's tests as JUnit XML to `file`.
-fn write_junit(report: &CampaignReport, file: &std::path::Path) -> Result<()> {
+pub(super) fn write_junit(report: &CampaignReport, file: &std::path::Path) -> Result<()> {
     let record = &report.record;
     let cases: Vec<junit::TestCase<'_>> = report
         .tests

@@ -31,7 +31,8 @@ pub fn runs(args: &RunsArgs) -> Result<ExitCode> {
             shards,
             out,
             scenario,
-        }) => super::merge::merge(shards, out, scenario.as_deref()),
+            junit,
+        }) => super::merge::merge(shards, out, scenario.as_deref(), junit.as_deref()),
     }
 }
 
