@@ -64,15 +64,18 @@ pub(super) async fn connect(
             .with_context(|| format!("cannot connect to the car at {address}"))?;
         return Ok((car, None));
     }
-    // The simulator's debug events (ranges, fault applications, watchdog) are recorded on the
-    // `/sim/…` channels of the campaign's MCAP.
-    let sim_config = car_sim::SimConfig {
+    let (car, sim) = connect_sim(&recorded_sim(scenario, seed)).await?;
+    Ok((car, Some(sim)))
+}
+
+/// The embedded simulator of `scenario` seeded with `seed`, its debug events on: they are recorded
+/// on the `/sim/…` channels of the campaign's MCAP (ranges, fault applications, watchdog).
+fn recorded_sim(scenario: &Scenario, seed: u64) -> car_sim::SimConfig {
+    car_sim::SimConfig {
         seed,
         record_events: true,
         ..car_sim::SimConfig::from_scenario(scenario)
-    };
-    let (car, sim) = connect_sim(&sim_config).await?;
-    Ok((car, Some(sim)))
+    }
 }
 
 /// A fresh embedded simulated car with `config`, with its handle.
@@ -97,11 +100,7 @@ impl EmbeddedSims {
     /// The cars of a campaign with `seed` in `scenario`.
     pub(super) fn new(scenario: &Scenario, seed: u64, virtual_time: bool) -> Self {
         Self {
-            config: car_sim::SimConfig {
-                seed,
-                record_events: true,
-                ..car_sim::SimConfig::from_scenario(scenario)
-            },
+            config: recorded_sim(scenario, seed),
             virtual_time,
         }
     }

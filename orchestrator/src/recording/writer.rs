@@ -69,6 +69,29 @@ pub struct FinishedRecording {
     pub chunks: u32,
 }
 
+/// The topics a recording has: all but the simulator's in a run on a real car.
+fn recorded_topics(simulated: bool) -> impl Iterator<Item = Topic> {
+    Topic::ALL
+        .into_iter()
+        .filter(move |t| simulated || !t.is_simulator_only())
+}
+
+/// The live view's channel of every recorded topic (none without a live view).
+fn live_channels(
+    simulated: bool,
+    live: Option<&LiveView>,
+) -> HashMap<Topic, std::sync::Arc<::foxglove::RawChannel>> {
+    let Some(view) = live else {
+        return HashMap::new();
+    };
+    recorded_topics(simulated)
+        .filter_map(|topic| {
+            let schema = schema::schema(topic).to_string();
+            Some((topic, view.channel(topic, &schema)?))
+        })
+        .collect()
+}
+
 /// A message encoded but not written yet: what a test's recording holds until its verdict
 /// decides whether it is kept (`run --record failing`), or what a test run on a fresh simulated
 /// car in a worker thread hands to the campaign's recording (`run --jobs`).
@@ -218,9 +241,9 @@ impl Recorder {
             next_command: 1,
             pending_commands: BTreeMap::new(),
             sim_offset_ns: None,
-            live: HashMap::new(),
+            live: live_channels(start.simulated, start.live),
         };
-        recorder.register_channels(start.simulated, start.live)?;
+        recorder.register_channels(start.simulated)?;
         recorder.write_start_metadata(start)?;
         recorder.write_at_ns(
             0,
@@ -240,18 +263,6 @@ impl Recorder {
         first_command: u64,
         live: Option<&LiveView>,
     ) -> Self {
-        let topics = Topic::ALL
-            .into_iter()
-            .filter(|t| simulated || !t.is_simulator_only());
-        let live = match live {
-            Some(view) => topics
-                .filter_map(|topic| {
-                    let schema = schema::schema(topic).to_string();
-                    Some((topic, view.channel(topic, &schema)?))
-                })
-                .collect(),
-            None => HashMap::new(),
-        };
         Self {
             writer: None,
             channels: HashMap::new(),
@@ -264,7 +275,7 @@ impl Recorder {
             next_command: first_command,
             pending_commands: BTreeMap::new(),
             sim_offset_ns: None,
-            live,
+            live: live_channels(simulated, live),
         }
     }
 
@@ -316,19 +327,12 @@ impl Recorder {
         Ok(())
     }
 
-    fn register_channels(
-        &mut self,
-        simulated: bool,
-        live: Option<&LiveView>,
-    ) -> Result<(), RecordingError> {
-        let topics = Topic::ALL
-            .into_iter()
-            .filter(|t| simulated || !t.is_simulator_only());
-        for topic in topics {
+    fn register_channels(&mut self, simulated: bool) -> Result<(), RecordingError> {
+        let Some(writer) = &mut self.writer else {
+            return Ok(());
+        };
+        for topic in recorded_topics(simulated) {
             let schema = schema::schema(topic).to_string();
-            let Some(writer) = &mut self.writer else {
-                break;
-            };
             let schema_id = writer
                 .add_schema(topic.schema_name(), "jsonschema", schema.as_bytes())
                 .map_err(RecordingError::Write)?;
@@ -336,9 +340,6 @@ impl Recorder {
                 .add_channel(schema_id, topic.name(), "json", &BTreeMap::new())
                 .map_err(RecordingError::Write)?;
             self.channels.insert(topic, channel);
-            if let Some(channel) = live.and_then(|view| view.channel(topic, &schema)) {
-                self.live.insert(topic, channel);
-            }
         }
         Ok(())
     }
