@@ -12,6 +12,7 @@
 //!
 //! Pure functions over samples: no clock, no I/O.
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use trajgen::Point;
 use trajgen::stats::nearest_rank;
@@ -41,7 +42,7 @@ impl FailurePolicy {
 }
 
 /// Deviation statistics of one segment, metres.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct DeviationStats {
     /// Judged samples (finite UWB and RTK positions).
     pub samples: usize,
@@ -55,7 +56,7 @@ pub struct DeviationStats {
 }
 
 /// The oracle's judgement of one segment.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum SegmentVerdict {
     /// Every deviation at or below the threshold.
@@ -142,9 +143,10 @@ impl SegmentOracle {
 }
 
 /// What the oracle says about one segment.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct SegmentOutcome {
-    /// Statistics of the judged samples (`None` without any).
+    /// Statistics of the judged samples (`None`, and left out of files, without any).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stats: Option<DeviationStats>,
     /// Samples with a reference but no finite UWB position (each fails the segment).
     pub invalid_uwb_samples: usize,
@@ -174,7 +176,7 @@ pub fn judge(
 }
 
 /// A test's verdict.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Verdict {
     /// Every segment driven passed and the test ran to its end.

@@ -21,6 +21,7 @@
 use std::fmt;
 use std::time::Duration;
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use trajgen::geometry::point_segment_distance;
 use trajgen::{Area, Point};
@@ -81,7 +82,7 @@ pub struct CarSample {
 }
 
 /// How to stop the car.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum StopAction {
     /// Append a slow extension of the route with the ahead margin, then brake: the car is under
@@ -92,7 +93,7 @@ pub enum StopAction {
 }
 
 /// Why a test was stopped.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum AbortReason {
     /// The car is outside the fence by more than the margin.
@@ -192,7 +193,7 @@ impl fmt::Display for AbortReason {
 }
 
 /// A stop the monitor demands.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Abort {
     /// Why.
@@ -201,6 +202,7 @@ pub struct Abort {
     pub action: StopAction,
     /// When it was detected (the time passed in), milliseconds in files.
     #[serde(with = "millis")]
+    #[schemars(with = "u64")]
     pub at: Duration,
 }
 

@@ -64,6 +64,22 @@ impl FromStr for Probe {
     }
 }
 
+/// A probe is written as its id: a string of the ids the firmware knows.
+#[cfg(feature = "serde")]
+impl schemars::JsonSchema for Probe {
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        "Probe".into()
+    }
+
+    fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        schemars::json_schema!({
+            "description": "A fault-injection probe id: px, uwb_travel_dist, uwb_yaw or uwb_range_<anchor id>.",
+            "type": "string",
+            "pattern": "^(px|uwb_travel_dist|uwb_yaw|uwb_range_(0|[1-9][0-9]{0,4}))$",
+        })
+    }
+}
+
 impl From<Probe> for String {
     fn from(probe: Probe) -> Self {
         probe.to_string()
@@ -83,7 +99,7 @@ impl TryFrom<String> for Probe {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[cfg_attr(
     feature = "serde",
-    derive(serde::Serialize, serde::Deserialize),
+    derive(serde::Serialize, serde::Deserialize, schemars::JsonSchema),
     serde(rename_all = "snake_case")
 )]
 pub enum FaultKind {

@@ -14,6 +14,7 @@
 //! and [`Case::check_route`] checks the geometry against a scenario (both in `check.rs`).
 
 use scenarios::{CampaignSettings, Interval, Scenario};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 use trajgen::{GenerationError, Point, Waypoint};
@@ -263,7 +264,7 @@ impl Settings {
 }
 
 /// A point of a route with the speed the car drives towards it.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RoutePointRecord {
     /// East, metres (local ENU).
@@ -298,7 +299,7 @@ impl From<RoutePointRecord> for Waypoint {
 }
 
 /// A position without a speed (ahead margin points are never driven).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PointRecord {
     /// East, metres.
@@ -320,7 +321,7 @@ impl From<PointRecord> for Point {
 }
 
 /// What the generator was asked for (absent in hand-written cases).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct IntentRecord {
     /// The generator's seed.
@@ -473,7 +474,7 @@ impl CommandRecord {
 }
 
 /// The oracle's result for one driven segment.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SegmentResult {
     /// The segment's index among the test's segments (from 0).

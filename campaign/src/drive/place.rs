@@ -30,6 +30,7 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use trajgen::Point;
 
@@ -51,7 +52,7 @@ pub const MAX_IN_FLIGHT: usize = 3;
 const MIN_SPEED_MPS: f64 = 0.05;
 
 /// Which rule placed a fault.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum PlaceRule {
     /// The case gave the place.
@@ -61,7 +62,7 @@ pub enum PlaceRule {
 }
 
 /// Where a fault was meant to act and where it did: what a case file and the recording keep.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FaultPlacement {
     /// The fault command's index in the plan.

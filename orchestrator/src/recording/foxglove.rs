@@ -6,15 +6,15 @@
 //! `foxglove.PoseInFrame`) and the events worth reading (`/foxglove/log`, `foxglove.Log`: faults
 //! sent and confirmed, tests started and ended, safety stops).
 //!
-//! They are JSON, with JSON schemas of our own that describe the fields written (Foxglove knows
-//! the message types by their schema names). Everything is in the frame `map`: x east, y north, in
+//! They are JSON, with JSON schemas derived from the types below (Foxglove knows the message
+//! types by their schema names). Everything is in the frame `map`: x east, y north, in
 //! metres, as the area's coordinates. The recorder writes them beside the records they come from
 //! (see `Recorder`); `docs/foxglove-layout.json` is a layout with a 3D panel, a plot of the
 //! deviation and the log.
 
 use scenarios::Scenario;
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
-use serde_json::{Value, json};
 
 use super::records::{CarStateRecord, FaultRecord, FaultStatus, PlannedSegment, SafetyRecord};
 use super::records::{TestEvent, TestEventKind};
@@ -24,7 +24,7 @@ use super::topic::{Record, Topic};
 pub const FRAME: &str = "map";
 
 /// A time: seconds and nanoseconds (here, of the run's clock since the campaign started).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Time {
     /// Whole seconds.
     pub sec: u64,
@@ -43,7 +43,7 @@ impl Time {
 }
 
 /// A point or a size.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Vector3 {
     /// East, m.
     pub x: f64,
@@ -54,7 +54,7 @@ pub struct Vector3 {
 }
 
 /// An orientation.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Quaternion {
     /// x.
     pub x: f64,
@@ -79,7 +79,7 @@ impl Quaternion {
 }
 
 /// A position and an orientation.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Pose {
     /// Where.
     pub position: Vector3,
@@ -98,7 +98,7 @@ impl Pose {
 }
 
 /// A colour, each part 0–1.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Color {
     /// Red.
     pub r: f64,
@@ -115,7 +115,7 @@ const fn rgb(r: f64, g: f64, b: f64) -> Color {
 }
 
 /// A polyline (`type` 0: strip, 1: loop).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct LinePrimitive {
     /// 0 line strip, 1 line loop, 2 line list.
     #[serde(rename = "type")]
@@ -137,7 +137,7 @@ pub struct LinePrimitive {
 }
 
 /// A sphere.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct SpherePrimitive {
     /// Its centre.
     pub pose: Pose,
@@ -148,7 +148,7 @@ pub struct SpherePrimitive {
 }
 
 /// A text label.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct TextPrimitive {
     /// Where.
     pub pose: Pose,
@@ -164,9 +164,10 @@ pub struct TextPrimitive {
     pub text: String,
 }
 
-/// A thing in the 3D scene, made of primitives (only lines, spheres and texts are written; the
-/// other kinds are empty).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// A thing in the 3D scene, made of primitives: lines, spheres and texts (the schema's other
+/// kinds, arrows, cubes, cylinders, triangles and models, and its metadata are left out; Foxglove
+/// reads a missing list as empty).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct SceneEntity {
     /// When.
     pub timestamp: Time,
@@ -178,24 +179,12 @@ pub struct SceneEntity {
     pub lifetime: Time,
     /// Whether it moves with its frame.
     pub frame_locked: bool,
-    /// Key-value pairs (none).
-    pub metadata: Vec<Value>,
-    /// Arrows (none).
-    pub arrows: Vec<Value>,
-    /// Cubes (none).
-    pub cubes: Vec<Value>,
     /// Spheres.
     pub spheres: Vec<SpherePrimitive>,
-    /// Cylinders (none).
-    pub cylinders: Vec<Value>,
     /// Lines.
     pub lines: Vec<LinePrimitive>,
-    /// Triangles (none).
-    pub triangles: Vec<Value>,
     /// Texts.
     pub texts: Vec<TextPrimitive>,
-    /// Models (none).
-    pub models: Vec<Value>,
 }
 
 impl SceneEntity {
@@ -206,21 +195,15 @@ impl SceneEntity {
             id,
             lifetime: Time::from_ns(0),
             frame_locked: false,
-            metadata: Vec::new(),
-            arrows: Vec::new(),
-            cubes: Vec::new(),
             spheres: Vec::new(),
-            cylinders: Vec::new(),
             lines: Vec::new(),
-            triangles: Vec::new(),
             texts: Vec::new(),
-            models: Vec::new(),
         }
     }
 }
 
 /// A deletion of entities (`type` 1: all on the topic).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct SceneEntityDeletion {
     /// Entities older than this go.
     pub timestamp: Time,
@@ -232,7 +215,7 @@ pub struct SceneEntityDeletion {
 }
 
 /// An update of the 3D scene.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct SceneUpdate {
     /// What to remove first.
     pub deletions: Vec<SceneEntityDeletion>,
@@ -241,7 +224,7 @@ pub struct SceneUpdate {
 }
 
 /// `/foxglove/area`: the area, once at the start.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(transparent)]
 pub struct AreaScene(pub SceneUpdate);
 
@@ -250,7 +233,7 @@ impl Record for AreaScene {
 }
 
 /// `/foxglove/route`: a test's planned segments.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(transparent)]
 pub struct RouteScene(pub SceneUpdate);
 
@@ -259,12 +242,13 @@ impl Record for RouteScene {
 }
 
 /// A pose in a frame.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct PoseInFrame {
     /// When.
     pub timestamp: Time,
     /// The frame ([`FRAME`]).
     #[serde(with = "frame")]
+    #[schemars(with = "String")]
     pub frame_id: (),
     /// The pose.
     pub pose: Pose,
@@ -284,7 +268,7 @@ mod frame {
 }
 
 /// `/foxglove/rtk`: the RTK (fused) pose of a state sample.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(transparent)]
 pub struct RtkPose(pub PoseInFrame);
 
@@ -293,7 +277,7 @@ impl Record for RtkPose {
 }
 
 /// `/foxglove/uwb`: the UWB pose of a state sample.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(transparent)]
 pub struct UwbPose(pub PoseInFrame);
 
@@ -302,7 +286,7 @@ impl Record for UwbPose {
 }
 
 /// `/foxglove/log`: an event worth reading.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Log {
     /// When.
     pub timestamp: Time,
@@ -518,92 +502,19 @@ pub(super) fn derived<R: Record + 'static>(record: &R, at: Time) -> Option<Deriv
     None
 }
 
-/// The RTK and UWB poses of a state sample.
-pub(super) fn poses(state: &CarStateRecord, at: Time) -> (RtkPose, UwbPose) {
+/// The RTK and UWB poses of a state sample, each where its position is finite (a pose without
+/// one is not written: JSON has no NaN, and Foxglove would draw it at the origin).
+pub(super) fn poses(state: &CarStateRecord, at: Time) -> (Option<RtkPose>, Option<UwbPose>) {
     let yaw = state.rtk.yaw_deg.to_radians();
-    let pose = |x: f64, y: f64| PoseInFrame {
-        timestamp: at,
-        frame_id: (),
-        pose: Pose::at(x, y, if yaw.is_finite() { yaw } else { 0.0 }),
+    let pose = |x: f64, y: f64| {
+        (x.is_finite() && y.is_finite()).then(|| PoseInFrame {
+            timestamp: at,
+            frame_id: (),
+            pose: Pose::at(x, y, if yaw.is_finite() { yaw } else { 0.0 }),
+        })
     };
     (
-        RtkPose(pose(state.rtk.x, state.rtk.y)),
-        UwbPose(pose(state.uwb.x, state.uwb.y)),
+        pose(state.rtk.x, state.rtk.y).map(RtkPose),
+        pose(state.uwb.x, state.uwb.y).map(UwbPose),
     )
-}
-
-// The schemas: the fields written, by Foxglove's schema names.
-
-fn object(properties: Value) -> Value {
-    let required: Vec<String> = properties
-        .as_object()
-        .map(|m| m.keys().cloned().collect())
-        .unwrap_or_default();
-    json!({"type": "object", "properties": properties, "required": required})
-}
-
-fn number() -> Value {
-    json!({"type": ["number", "null"]})
-}
-
-fn array(items: Value) -> Value {
-    json!({"type": "array", "items": items})
-}
-
-fn time() -> Value {
-    object(json!({"sec": {"type": "integer"}, "nsec": {"type": "integer"}}))
-}
-
-fn vector3() -> Value {
-    object(json!({"x": number(), "y": number(), "z": number()}))
-}
-
-fn pose() -> Value {
-    object(json!({
-        "position": vector3(),
-        "orientation": object(json!({"x": number(), "y": number(), "z": number(), "w": number()})),
-    }))
-}
-
-fn color() -> Value {
-    object(json!({"r": number(), "g": number(), "b": number(), "a": number()}))
-}
-
-fn scene_update() -> Value {
-    let line = object(json!({
-        "type": {"type": "integer"}, "pose": pose(), "thickness": number(),
-        "scale_invariant": {"type": "boolean"}, "points": array(vector3()), "color": color(),
-        "colors": array(color()), "indices": array(json!({"type": "integer"})),
-    }));
-    let sphere = object(json!({"pose": pose(), "size": vector3(), "color": color()}));
-    let text = object(json!({
-        "pose": pose(), "billboard": {"type": "boolean"}, "font_size": number(),
-        "scale_invariant": {"type": "boolean"}, "color": color(), "text": {"type": "string"},
-    }));
-    let none = array(json!({"type": "object"}));
-    let entity = object(json!({
-        "timestamp": time(), "frame_id": {"type": "string"}, "id": {"type": "string"},
-        "lifetime": time(), "frame_locked": {"type": "boolean"}, "metadata": none,
-        "arrows": none, "cubes": none, "spheres": array(sphere), "cylinders": none,
-        "lines": array(line), "triangles": none, "texts": array(text), "models": none,
-    }));
-    let deletion = object(json!({
-        "timestamp": time(), "type": {"type": "integer"}, "id": {"type": "string"},
-    }));
-    object(json!({"deletions": array(deletion), "entities": array(entity)}))
-}
-
-/// The JSON schema of a Foxglove channel's messages (`None` for drivecheck's own channels).
-pub(super) fn schema(topic: Topic) -> Option<Value> {
-    Some(match topic {
-        Topic::FoxgloveArea | Topic::FoxgloveRoute => scene_update(),
-        Topic::FoxgloveRtk | Topic::FoxgloveUwb => object(json!({
-            "timestamp": time(), "frame_id": {"type": "string"}, "pose": pose(),
-        })),
-        Topic::FoxgloveLog => object(json!({
-            "timestamp": time(), "level": {"type": "integer"}, "message": {"type": "string"},
-            "name": {"type": "string"}, "file": {"type": "string"}, "line": {"type": "integer"},
-        })),
-        _ => return None,
-    })
 }

@@ -50,8 +50,13 @@ pub use writer::{
 
 /// The `format` in a recording's `drivecheck.recording` metadata record.
 pub const RECORDING_FORMAT: &str = "drivecheck-recording";
-/// The recording format version this build writes and reads.
-pub const RECORDING_VERSION: u32 = 1;
+/// The recording format version this build writes.
+///
+/// Version 2 leaves a value out where version 1 wrote `null` (a number that was not finite, an
+/// absent option), so that every field has one type in the channels' schemas.
+pub const RECORDING_VERSION: u32 = 2;
+/// The recording format versions this build reads (a version-1 `null` is read as before).
+pub const READABLE_RECORDING_VERSIONS: [u32; 2] = [1, 2];
 
 /// Why a recording could not be written or read.
 #[derive(Debug, Error)]
@@ -98,7 +103,7 @@ pub enum RecordingError {
     /// The file is not a drivecheck recording this build reads (its `drivecheck.recording`
     /// metadata record is absent or names another format or version).
     #[error(
-        "not a drivecheck recording version {RECORDING_VERSION} \
+        "not a drivecheck recording of version 1 or 2 \
          (format {format:?}, schema_version {version:?})"
     )]
     UnsupportedFormat {

@@ -9,7 +9,7 @@ use mcap::read::{ChunkFlattener, Options};
 use mcap::records::Record as McapRecord;
 
 use super::topic::{Record, Topic};
-use super::{RECORDING_FORMAT, RECORDING_VERSION, RecordingError};
+use super::{READABLE_RECORDING_VERSIONS, RECORDING_FORMAT, RecordingError};
 
 /// A channel of a recording, as the file declares it.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -162,16 +162,17 @@ impl Recording {
         recording
     }
 
-    /// Checks that the file is a drivecheck recording of the version this build reads (its
+    /// Checks that the file is a drivecheck recording of a version this build reads (its
     /// `drivecheck.recording` metadata record, written first, so a cut-short file has it too).
     pub fn check_format(&self) -> Result<(), RecordingError> {
         let header = self.metadata("drivecheck.recording");
         let format = header.and_then(|h| h.get("format")).cloned();
         let version = header.and_then(|h| h.get("schema_version")).cloned();
-        let expected_version = RECORDING_VERSION.to_string();
-        if format.as_deref() == Some(RECORDING_FORMAT)
-            && version.as_deref() == Some(expected_version.as_str())
-        {
+        let readable = version
+            .as_deref()
+            .and_then(|v| v.parse::<u32>().ok())
+            .is_some_and(|v| READABLE_RECORDING_VERSIONS.contains(&v));
+        if format.as_deref() == Some(RECORDING_FORMAT) && readable {
             return Ok(());
         }
         Err(RecordingError::UnsupportedFormat { format, version })

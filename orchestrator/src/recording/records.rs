@@ -2,11 +2,14 @@
 //! holds (car-link's [`StateSample`], the model's segments and faults, car-sim's [`Truth`] and
 //! [`DebugEvent`]).
 //!
-//! Numbers that may not be finite (estimates and probe values of a faulted car) are written as
-//! JSON `null` and read back as NaN; positions use metres in the local ENU frame.
+//! Numbers that may not be finite (estimates and probe values of a faulted car) are left out
+//! when they are not (JSON has no NaN; version 1 wrote `null`) and read back as NaN; an absent
+//! optional value is left out too, so no record holds a `null` and every field has one type, as
+//! Foxglove's JSON-schema reader requires. Positions use metres in the local ENU frame.
 
 use car_link::StateSample;
 use car_sim::{DebugEvent, FwPose, RadioPath, RangeResult, Truth};
+use schemars::JsonSchema;
 use serde::{Deserialize, Deserializer, Serialize};
 use tokio::time::Instant;
 
@@ -17,9 +20,20 @@ use campaign::model::{Fault, FaultKind, Probe, Segment};
 use campaign::oracle::{Verdict, deviation};
 use campaign::safety::Abort;
 
-/// Reads `null` (a non-finite number when written) as NaN.
+/// Reads `null` as NaN: recordings of version 1 wrote a number that was not finite as `null`
+/// (version 2 leaves it out, which [`nan`] reads as NaN).
 fn nan_if_null<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
     Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+}
+
+/// NaN: a number absent from a record (it was not finite when written).
+fn nan() -> f64 {
+    f64::NAN
+}
+
+/// Whether `x` is left out of a record: a JSON number must be finite.
+fn not_finite(x: &f64) -> bool {
+    !x.is_finite()
 }
 
 /// `Some(x)` when `x` is finite.
@@ -34,14 +48,22 @@ pub(super) fn nanos_since(origin: Instant, at: Instant) -> u64 {
 }
 
 /// A position, metres.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Position {
-    /// East (`null` when not finite).
-    #[serde(deserialize_with = "nan_if_null")]
+    /// East (absent when not finite).
+    #[serde(
+        default = "nan",
+        deserialize_with = "nan_if_null",
+        skip_serializing_if = "not_finite"
+    )]
     pub x: f64,
-    /// North (`null` when not finite).
-    #[serde(deserialize_with = "nan_if_null")]
+    /// North (absent when not finite).
+    #[serde(
+        default = "nan",
+        deserialize_with = "nan_if_null",
+        skip_serializing_if = "not_finite"
+    )]
     pub y: f64,
 }
 
@@ -56,17 +78,29 @@ impl Position {
 }
 
 /// A pose: a position and a yaw.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Pose {
-    /// East, metres (`null` when not finite).
-    #[serde(deserialize_with = "nan_if_null")]
+    /// East, metres (absent when not finite).
+    #[serde(
+        default = "nan",
+        deserialize_with = "nan_if_null",
+        skip_serializing_if = "not_finite"
+    )]
     pub x: f64,
-    /// North, metres (`null` when not finite).
-    #[serde(deserialize_with = "nan_if_null")]
+    /// North, metres (absent when not finite).
+    #[serde(
+        default = "nan",
+        deserialize_with = "nan_if_null",
+        skip_serializing_if = "not_finite"
+    )]
     pub y: f64,
-    /// Yaw, degrees clockwise from east, as the firmware holds it (`null` when not finite).
-    #[serde(deserialize_with = "nan_if_null")]
+    /// Yaw, degrees clockwise from east, as the firmware holds it (absent when not finite).
+    #[serde(
+        default = "nan",
+        deserialize_with = "nan_if_null",
+        skip_serializing_if = "not_finite"
+    )]
     pub yaw_deg: f64,
 }
 
@@ -81,7 +115,7 @@ impl From<FwPose> for Pose {
 }
 
 /// `/car/state`: one state sample of the car.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CarStateRecord {
     /// The car id that answered.
@@ -99,20 +133,32 @@ pub struct CarStateRecord {
     /// The last GNSS fix.
     pub gnss: Position,
     /// |UWB − RTK|, metres; absent when either position is not finite.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub deviation_m: Option<f64>,
     /// Speed from motor RPM, m/s, signed.
-    #[serde(deserialize_with = "nan_if_null")]
+    #[serde(
+        default = "nan",
+        deserialize_with = "nan_if_null",
+        skip_serializing_if = "not_finite"
+    )]
     pub speed_mps: f64,
     /// Points left on the route (stale while the autopilot is inactive).
     pub route_left: i16,
     /// The pursuit goal.
     pub goal: Position,
     /// Look-ahead radius, metres; −1 when inactive or at the route end.
-    #[serde(deserialize_with = "nan_if_null")]
+    #[serde(
+        default = "nan",
+        deserialize_with = "nan_if_null",
+        skip_serializing_if = "not_finite"
+    )]
     pub look_ahead_radius_m: f64,
     /// Input voltage, V.
-    #[serde(deserialize_with = "nan_if_null")]
+    #[serde(
+        default = "nan",
+        deserialize_with = "nan_if_null",
+        skip_serializing_if = "not_finite"
+    )]
     pub input_voltage_v: f64,
     /// Motor-controller fault code, 0 = none.
     pub mc_fault: u8,
@@ -152,7 +198,7 @@ impl Record for CarStateRecord {
 }
 
 /// A command to the car (fault commands go to `/faults` instead).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(tag = "command", rename_all = "snake_case", deny_unknown_fields)]
 pub enum CarCommand {
     /// AP_ADD_POINTS: append to the route.
@@ -247,13 +293,13 @@ fn route_points(points: &[car_link::RoutePoint]) -> Vec<RoutePointRecord> {
 }
 
 /// `/commands`: a command as it was sent.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CommandSent {
     /// The command's number in the recording (from 1), which its ack repeats.
     pub id: u64,
     /// The test it belongs to; absent between tests (resets, return routes).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub test_index: Option<usize>,
     /// The command.
     pub command: CarCommand,
@@ -264,7 +310,7 @@ impl Record for CommandSent {
 }
 
 /// How the car answered a command.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(tag = "status", rename_all = "snake_case", deny_unknown_fields)]
 pub enum AckOutcome {
     /// Acknowledged (or, for commands without an ack, sent without error).
@@ -289,7 +335,7 @@ impl AckOutcome {
 }
 
 /// `/acks`: the answer to a command.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CommandAck {
     /// The command's `id` on `/commands`.
@@ -299,7 +345,7 @@ pub struct CommandAck {
     /// The answer.
     pub outcome: AckOutcome,
     /// From sending to the answer, ms (absent when the send was not recorded).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub round_trip_ms: Option<f64>,
 }
 
@@ -308,7 +354,7 @@ impl Record for CommandAck {
 }
 
 /// What happened to a test.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(tag = "event", rename_all = "snake_case", deny_unknown_fields)]
 pub enum TestEventKind {
     /// The test starts (after its reset and return route).
@@ -321,13 +367,13 @@ pub enum TestEventKind {
         /// Its verdict.
         verdict: Verdict,
         /// Why it failed or was aborted.
-        #[serde(default)]
+        #[serde(default, skip_serializing_if = "Option::is_none")]
         reason: Option<String>,
     },
 }
 
 /// `/tests`: a test started or ended.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct TestEvent {
     /// The test's index in the campaign.
@@ -341,7 +387,7 @@ impl Record for TestEvent {
 }
 
 /// `/plan/segments`: a segment as planned, before it is streamed.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PlannedSegment {
     /// The test.
@@ -384,7 +430,7 @@ impl Record for PlannedSegment {
 }
 
 /// `/plan/return_route`: the route planned from the car's pose back to the recovery route.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PlannedReturnRoute {
     /// The test it prepares.
@@ -398,7 +444,7 @@ impl Record for PlannedReturnRoute {
 }
 
 /// A fault as commanded: `fi_add_fault probe kind param start duration`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FaultSpec {
     /// The probe id.
@@ -426,7 +472,7 @@ impl From<&Fault> for FaultSpec {
 }
 
 /// Where a fault command stands.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(tag = "status", rename_all = "snake_case", deny_unknown_fields)]
 pub enum FaultStatus {
     /// Sent to the car.
@@ -447,7 +493,7 @@ pub enum FaultStatus {
 }
 
 /// `/faults`: a fault command sent, then its confirmation.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FaultRecord {
     /// The test.
@@ -506,7 +552,7 @@ impl Record for FaultRecord {
 }
 
 /// `/oracle/segments`: the oracle's result for one driven segment.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct OracleRecord {
     /// The test.
@@ -520,11 +566,11 @@ impl Record for OracleRecord {
 }
 
 /// `/safety/events`: a stop the safety monitor (or the runner) demanded.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SafetyRecord {
     /// The test it stopped; absent between tests.
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub test_index: Option<usize>,
     /// The stop, as in the case file's `abort`.
     pub abort: Abort,
@@ -548,7 +594,7 @@ impl Record for SafetyRecord {
 }
 
 /// `/sim/truth`: the simulated car's true state and its estimates.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct TruthRecord {
     /// Simulation time since boot, ms.
@@ -556,23 +602,35 @@ pub struct TruthRecord {
     /// True position (rear axle centre).
     pub position: Position,
     /// True heading, radians counter-clockwise from east.
-    #[serde(deserialize_with = "nan_if_null")]
+    #[serde(
+        default = "nan",
+        deserialize_with = "nan_if_null",
+        skip_serializing_if = "not_finite"
+    )]
     pub heading_rad: f64,
     /// True speed, m/s, signed.
-    #[serde(deserialize_with = "nan_if_null")]
+    #[serde(
+        default = "nan",
+        deserialize_with = "nan_if_null",
+        skip_serializing_if = "not_finite"
+    )]
     pub speed_mps: f64,
     /// True steering angle, rad (positive left).
-    #[serde(deserialize_with = "nan_if_null")]
+    #[serde(
+        default = "nan",
+        deserialize_with = "nan_if_null",
+        skip_serializing_if = "not_finite"
+    )]
     pub steering_rad: f64,
     /// The fused (RTK) estimate.
     pub fused: Pose,
     /// The UWB estimate.
     pub uwb: Pose,
     /// Distance of the fused estimate from the true position, metres (absent if not finite).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fused_error_m: Option<f64>,
     /// Distance of the UWB estimate from the true position, metres (absent if not finite).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uwb_error_m: Option<f64>,
 }
 
@@ -600,7 +658,7 @@ impl Record for TruthRecord {
 }
 
 /// The radio path of a simulated range.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum RadioPathKind {
     /// Line of sight.
@@ -612,19 +670,19 @@ pub enum RadioPathKind {
 }
 
 /// A simulated range's radio path.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RadioPathRecord {
     /// Line of sight, reflected (NLOS) or blocked.
     pub kind: RadioPathKind,
     /// Planar length travelled, metres (absent when blocked).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub length_m: Option<f64>,
     /// The reflecting wall's index in the world (reflected only).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub wall: Option<usize>,
     /// Planar length of the blocked direct path, metres (reflected only).
-    #[serde(default)]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub direct_m: Option<f64>,
 }
 
@@ -647,7 +705,7 @@ impl From<&RadioPath> for RadioPathRecord {
 }
 
 /// What a simulated UWB module returned.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum RangeOutcome {
     /// A range (in `range_m`).
@@ -661,7 +719,7 @@ pub enum RangeOutcome {
 }
 
 /// `/sim/ranges`: a simulated range request, or a range reaching the estimator.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(tag = "event", rename_all = "snake_case", deny_unknown_fields)]
 pub enum SimRange {
     /// A range request and its fate.
@@ -671,15 +729,15 @@ pub enum SimRange {
         /// The address (anchor id low byte).
         anchor: u8,
         /// The radio path, when an anchor answers.
-        #[serde(default)]
+        #[serde(default, skip_serializing_if = "Option::is_none")]
         path: Option<RadioPathRecord>,
         /// The true direct slant range, metres.
-        #[serde(default)]
+        #[serde(default, skip_serializing_if = "Option::is_none")]
         true_range_m: Option<f64>,
         /// What the module returned.
         outcome: RangeOutcome,
         /// The measured range, metres (when measured).
-        #[serde(default)]
+        #[serde(default, skip_serializing_if = "Option::is_none")]
         range_m: Option<f64>,
     },
     /// A range reply reached the estimator (after the `uwb_range_<id>` probe).
@@ -688,8 +746,12 @@ pub enum SimRange {
         sim_ms: u64,
         /// The address.
         anchor: u8,
-        /// The range after the probe, metres (`null` when not finite).
-        #[serde(deserialize_with = "nan_if_null")]
+        /// The range after the probe, metres (absent when not finite).
+        #[serde(
+            default = "nan",
+            deserialize_with = "nan_if_null",
+            skip_serializing_if = "not_finite"
+        )]
         range_m: f64,
         /// Whether the estimate moved.
         moved: bool,
@@ -710,7 +772,7 @@ fn range_outcome(result: &RangeResult) -> (RangeOutcome, Option<f64>) {
 }
 
 /// `/sim/faults`: a fault applied at a probe inside the simulator.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SimFault {
     /// When, simulation ms since boot.
@@ -721,11 +783,19 @@ pub struct SimFault {
     pub slots: u8,
     /// The probe's iteration.
     pub iteration: i32,
-    /// The value before (`null` when not finite).
-    #[serde(deserialize_with = "nan_if_null")]
+    /// The value before (absent when not finite).
+    #[serde(
+        default = "nan",
+        deserialize_with = "nan_if_null",
+        skip_serializing_if = "not_finite"
+    )]
     pub before: f64,
-    /// The value after (`null` when not finite).
-    #[serde(deserialize_with = "nan_if_null")]
+    /// The value after (absent when not finite).
+    #[serde(
+        default = "nan",
+        deserialize_with = "nan_if_null",
+        skip_serializing_if = "not_finite"
+    )]
     pub after: f64,
 }
 
@@ -734,7 +804,7 @@ impl Record for SimFault {
 }
 
 /// A simulated firmware event.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum SimEventKind {
     /// The communication watchdog expired.
@@ -751,7 +821,7 @@ pub enum SimEventKind {
 }
 
 /// `/sim/events`: a watchdog or quirk event inside the simulated firmware.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SimEvent {
     /// When, simulation ms since boot.

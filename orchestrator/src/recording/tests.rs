@@ -351,12 +351,90 @@ async fn every_channel_has_a_json_schema_its_messages_follow() {
         let schema: Value = serde_json::from_slice(&channel.schema).unwrap();
         assert_eq!(schema["type"], "object", "{topic}");
         assert_eq!(schema["title"], topic.schema_name());
-        for (i, message) in raw_messages(&recording, topic).iter().enumerate() {
-            if let Err(e) = follows(&schema, message, "") {
+        assert!(
+            !channel.schema.windows(4).any(|w| w == b"$ref"),
+            "{topic}: the schema is not self-contained"
+        );
+        if let Err(e) = foxglove_reads(&schema, topic.name()) {
+            panic!("Foxglove refuses the schema of {topic}: {e}");
+        }
+        let validator = validator(&schema, topic);
+        let messages = raw_messages(&recording, topic);
+        assert!(!messages.is_empty(), "{topic}: no messages to check");
+        for (i, message) in messages.iter().enumerate() {
+            if let Err(e) = validator.validate(message) {
                 panic!("{topic} message {i} does not follow its schema: {e}\n{message}");
             }
         }
     }
+}
+
+/// A standard validator for `schema`, itself checked against the JSON-schema meta-schema.
+fn validator(schema: &Value, topic: Topic) -> jsonschema::Validator {
+    if let Err(e) = jsonschema::meta::validate(schema) {
+        panic!("{topic}: not a valid JSON schema: {e}");
+    }
+    jsonschema::draft202012::new(schema).unwrap()
+}
+
+/// Whether Foxglove's JSON-schema reader takes `schema`, by the rules of the reader in
+/// Lichtblick, Foxglove Studio's open fork (`packages/mcap-support/src/parseJsonSchema.ts`,
+/// which throws, and so drops the channel, on anything else): an object whose every property
+/// has one known type, an array's items too, and a `oneOf` only of numeric constants.
+fn foxglove_reads(schema: &Value, path: &str) -> Result<(), String> {
+    if schema["type"] != "object" {
+        return Err(format!(
+            "{path}: expected \"type\": \"object\", got {}",
+            schema["type"]
+        ));
+    }
+    let properties = schema.get("properties").and_then(Value::as_object);
+    for (name, field) in properties.into_iter().flatten() {
+        let path = format!("{path}.{name}");
+        if let Some(alternatives) = field.get("oneOf").and_then(Value::as_array) {
+            if alternatives.iter().all(|a| a["const"].is_number()) {
+                continue;
+            }
+            return Err(format!(
+                "{path}: oneOf alternatives must have number values"
+            ));
+        }
+        match field["type"].as_str() {
+            Some("boolean" | "number" | "integer") => {}
+            Some("string") => match field.get("contentEncoding") {
+                None => {}
+                Some(encoding) if encoding == "base64" => {}
+                Some(_) => return Err(format!("{path}: unsupported contentEncoding")),
+            },
+            Some("object") => foxglove_reads(field, &path)?,
+            Some("array") => match field["items"]["type"].as_str() {
+                Some("boolean" | "number" | "integer") => {}
+                Some("string") if field["items"].get("contentEncoding").is_none() => {}
+                Some("object") => foxglove_reads(&field["items"], &path)?,
+                _ => return Err(format!("{path}: unsupported array item {}", field["items"])),
+            },
+            _ => return Err(format!("{path}: unsupported type {}", field["type"])),
+        }
+    }
+    Ok(())
+}
+
+#[test]
+fn the_foxglove_rules_refuse_what_its_reader_throws_on() {
+    let nullable = serde_json::json!({"type": "object", "properties": {
+        "x": {"type": ["number", "null"]}}});
+    assert!(foxglove_reads(&nullable, "").is_err());
+    let union = serde_json::json!({"type": "object", "properties": {
+        "kind": {"oneOf": [{"const": "a"}, {"const": "b"}]}}});
+    assert!(foxglove_reads(&union, "").is_err());
+    let untyped_items = serde_json::json!({"type": "object", "properties": {
+        "arrows": {"type": "array", "items": true}}});
+    assert!(foxglove_reads(&untyped_items, "").is_err());
+    let numbered = serde_json::json!({"type": "object", "properties": {
+        "type": {"oneOf": [{"const": 0}, {"const": 1}]},
+        "points": {"type": "array", "items": {"type": "object", "properties": {
+            "x": {"type": "number"}}}}}});
+    assert_eq!(foxglove_reads(&numbered, ""), Ok(()));
 }
 
 /// `topic`'s messages as JSON values, as written.
@@ -367,89 +445,56 @@ fn raw_messages(recording: &Recording, topic: Topic) -> Vec<Value> {
         .collect()
 }
 
-/// Whether `value` follows `schema`, for the keywords our schemas use (`type`, `const`, `enum`,
-/// `oneOf`, `properties`, `required`, `items`); an unknown property is an error, so a field
-/// added to a record without its schema fails.
-fn follows(schema: &Value, value: &Value, path: &str) -> Result<(), String> {
-    if let Some(types) = schema.get("type") {
-        let types: Vec<&str> = match types {
-            Value::String(t) => vec![t.as_str()],
-            other => other
-                .as_array()
-                .into_iter()
-                .flatten()
-                .filter_map(Value::as_str)
-                .collect(),
-        };
-        if !types.iter().any(|t| has_type(value, t)) {
-            return Err(format!("{path}: {value} is not {types:?}"));
-        }
-    }
-    if schema.get("const").is_some_and(|c| c != value) {
-        return Err(format!("{path}: {value} is not {}", schema["const"]));
-    }
-    if let Some(values) = schema.get("enum").and_then(Value::as_array)
-        && !values.contains(value)
-    {
-        return Err(format!("{path}: {value} is not one of {values:?}"));
-    }
-    if let Some(variants) = schema.get("oneOf").and_then(Value::as_array) {
-        let matching = variants
-            .iter()
-            .filter(|v| follows(v, value, path).is_ok())
-            .count();
-        if matching != 1 {
-            return Err(format!("{path}: {value} matches {matching} variants"));
-        }
-    }
-    follows_members(schema, value, path)
-}
-
-fn follows_members(schema: &Value, value: &Value, path: &str) -> Result<(), String> {
-    if let (Some(object), Some(properties)) = (value.as_object(), schema.get("properties")) {
-        for (key, member) in object {
-            let Some(member_schema) = properties.get(key) else {
-                return Err(format!("{path}.{key}: not in the schema"));
-            };
-            follows(member_schema, member, &format!("{path}.{key}"))?;
-        }
-        let required = schema.get("required").and_then(Value::as_array);
-        for key in required.into_iter().flatten().filter_map(Value::as_str) {
-            if !object.contains_key(key) {
-                return Err(format!("{path}.{key}: required but absent"));
-            }
-        }
-    }
-    if let (Some(items), Some(item_schema)) = (value.as_array(), schema.get("items")) {
-        for (i, item) in items.iter().enumerate() {
-            follows(item_schema, item, &format!("{path}[{i}]"))?;
-        }
-    }
-    Ok(())
-}
-
-fn has_type(value: &Value, t: &str) -> bool {
-    match t {
-        "object" => value.is_object(),
-        "array" => value.is_array(),
-        "string" => value.is_string(),
-        "boolean" => value.is_boolean(),
-        "null" => value.is_null(),
-        "number" => value.is_number(),
-        "integer" => value.is_i64() || value.is_u64(),
-        _ => false,
-    }
+#[test]
+fn a_derived_schema_refuses_what_its_record_type_would_not_read() {
+    let validator = validator(&schema::schema(Topic::SimEvents), Topic::SimEvents);
+    let good = serde_json::json!({"sim_ms": 5, "event": "watchdog_expired"});
+    assert!(validator.is_valid(&good));
+    let extra = serde_json::json!({"sim_ms": 5, "event": "watchdog_expired", "x": 1});
+    assert!(!validator.is_valid(&extra));
+    let wrong = serde_json::json!({"sim_ms": 5, "event": "reboot"});
+    assert!(!validator.is_valid(&wrong));
+    let negative = serde_json::json!({"sim_ms": -5, "event": "watchdog_expired"});
+    assert!(!validator.is_valid(&negative));
 }
 
 #[test]
-fn the_schema_checker_refuses_a_field_the_schema_lacks() {
-    let schema = schema::schema(Topic::SimEvents);
-    let good = serde_json::json!({"sim_ms": 5, "event": "watchdog_expired"});
-    assert_eq!(follows(&schema, &good, ""), Ok(()));
-    let extra = serde_json::json!({"sim_ms": 5, "event": "watchdog_expired", "x": 1});
-    assert!(follows(&schema, &extra, "").is_err());
-    let wrong = serde_json::json!({"sim_ms": 5, "event": "reboot"});
-    assert!(follows(&schema, &wrong, "").is_err());
+fn a_number_that_was_not_finite_is_left_out_and_read_back_as_nan() {
+    let topic = Topic::CarState;
+    let validator = validator(&schema::schema(topic), topic);
+    let mut nan = sample(Instant::now(), 1.0);
+    nan.state.speed = f64::NAN;
+    let state = CarStateRecord::new(&nan, Instant::now());
+    let written = serde_json::to_value(&state).unwrap();
+    assert!(written.get("speed_mps").is_none(), "{written}");
+    assert!(validator.is_valid(&written), "{written}");
+    let back: CarStateRecord = serde_json::from_value(written.clone()).unwrap();
+    assert!(back.speed_mps.is_nan());
+    // Version 1 wrote it as null: still read, as NaN.
+    let mut version1 = written;
+    version1["speed_mps"] = Value::Null;
+    let back: CarStateRecord = serde_json::from_value(version1.clone()).unwrap();
+    assert!(back.speed_mps.is_nan());
+    assert!(!validator.is_valid(&version1));
+}
+
+#[test]
+fn a_probe_is_one_of_the_ids_the_firmware_knows() {
+    let topic = Topic::Faults;
+    let validator = validator(&schema::schema(topic), topic);
+    let fault = Fault {
+        probe: Probe::UwbRange(234),
+        kind: FaultKind::Offset,
+        param: 1.0,
+        start: 0,
+        duration: 5,
+        at: None,
+    };
+    let mut written = serde_json::to_value(FaultRecord::sent(0, 1, &fault)).unwrap();
+    assert_eq!(written["fault"]["probe"], "uwb_range_234");
+    assert!(validator.is_valid(&written));
+    written["fault"]["probe"] = "uwb_range_x".into();
+    assert!(!validator.is_valid(&written));
 }
 
 #[tokio::test(start_paused = true)]
@@ -575,6 +620,63 @@ fn another_mcap_file_is_not_a_drivecheck_recording() {
             error,
             RecordingError::UnsupportedFormat { format: None, .. }
         ),
+        "{error}"
+    );
+}
+
+/// An MCAP file with the `drivecheck.recording` header of `version` and one `/car/state` message,
+/// `state` as written.
+fn recording_of_version(version: &str, state: &Value) -> Vec<u8> {
+    let mut bytes = Vec::new();
+    let mut writer = mcap::Writer::new(std::io::Cursor::new(&mut bytes)).unwrap();
+    let header = [("format", RECORDING_FORMAT), ("schema_version", version)]
+        .map(|(k, v)| (k.to_owned(), v.to_owned()));
+    let metadata = mcap::records::Metadata {
+        name: "drivecheck.recording".to_owned(),
+        metadata: header.into_iter().collect(),
+    };
+    writer.write_metadata(&metadata).unwrap();
+    let topic = Topic::CarState;
+    let schema = writer
+        .add_schema(topic.schema_name(), "jsonschema", b"{}")
+        .unwrap();
+    let channel = writer
+        .add_channel(schema, topic.name(), "json", &Default::default())
+        .unwrap();
+    let header = mcap::records::MessageHeader {
+        channel_id: channel,
+        sequence: 1,
+        log_time: 12_000_000,
+        publish_time: 12_000_000,
+    };
+    let payload = serde_json::to_vec(state).unwrap();
+    writer.write_to_known_channel(&header, &payload).unwrap();
+    writer.finish().unwrap();
+    drop(writer);
+    bytes
+}
+
+#[test]
+fn a_version_1_recording_is_read_with_its_nulls_as_nan() {
+    let mut nan = sample(Instant::now(), 1.0);
+    nan.state.speed = f64::NAN;
+    nan.state.px_uwb = f64::NAN;
+    let mut state = serde_json::to_value(CarStateRecord::new(&nan, Instant::now())).unwrap();
+    // What version 1 wrote for them.
+    state["speed_mps"] = Value::Null;
+    state["uwb"]["x"] = Value::Null;
+    state["deviation_m"] = Value::Null;
+    let recording = Recording::from_bytes(&recording_of_version("1", &state)).unwrap();
+    recording.check_format().unwrap();
+    let read = recording.messages::<CarStateRecord>().unwrap();
+    assert_eq!(read.len(), 1);
+    let read = &read[0].message;
+    assert!(read.speed_mps.is_nan() && read.uwb.x.is_nan());
+    assert_eq!(read.deviation_m, None);
+    let future = Recording::from_bytes(&recording_of_version("3", &state)).unwrap();
+    let error = future.check_format().unwrap_err();
+    assert!(
+        matches!(error, RecordingError::UnsupportedFormat { .. }),
         "{error}"
     );
 }

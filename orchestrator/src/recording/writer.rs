@@ -529,8 +529,13 @@ impl Recorder {
         self.write_at(sample.received_at, &record)?;
         let at = nanos_since(self.origin, sample.received_at);
         let (rtk, uwb) = foxglove::poses(&record, foxglove::Time::from_ns(at));
-        self.write_one(at, &rtk)?;
-        self.write_one(at, &uwb)
+        if let Some(rtk) = rtk {
+            self.write_one(at, &rtk)?;
+        }
+        match uwb {
+            Some(uwb) => self.write_one(at, &uwb),
+            None => Ok(()),
+        }
     }
 
     /// Records a command about to be sent during test `test_index` (if any) and returns its id
