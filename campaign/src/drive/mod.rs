@@ -552,6 +552,7 @@ impl<'a> TestDrive<'a> {
         self.cursor.decision = Some(decision);
         self.placer.observe(
             now,
+            sample.rtk,
             self.streamer.progress(),
             sample.speed,
             sample.round_trip,
