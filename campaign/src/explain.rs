@@ -19,11 +19,16 @@
 //! threshold during which the error grew from its last nominal level (at most
 //! [`ExplainConfig::lookback_s`]). Each step between two samples in which the error grows
 //! (`Δe · e/|e| > 0`) gives its growth to the direction its `Δe` is most aligned with, when that
-//! alignment (|cos|) reaches [`ExplainConfig::min_alignment`]; otherwise to `unexplained`. A
-//! direction's growth goes to an injected fault when the fault's window (widened by
-//! [`ExplainConfig::window_slack_s`]) covers the step and the fault acts in that direction (a
-//! range fault on *A* along `u_A`, a `uwb_travel_dist` fault along `h`, a `uwb_yaw` fault along
-//! `n`); else to the anchor's range, the odometry or the heading. A cause's share is its growth
+//! alignment (|cos|) reaches [`ExplainConfig::min_alignment`]; otherwise to `unexplained`. The
+//! injected faults come first: a step goes to a fault whose window (widened by
+//! [`ExplainConfig::window_slack_s`]) covers it when the step is aligned, at least that well,
+//! with the direction the fault moves the estimate in (a range fault on *A* along `u_A`, a
+//! `uwb_travel_dist` fault along `h`, a `uwb_yaw` fault across it: a yaw offset of α degrees
+//! turns the dead-reckoned track by α, which moves `e` along `n` turned by −α/2, the firmware's
+//! yaw being clockwise), the best aligned of them if several; the schedule says the fault is
+//! acting, which an unfaulted direction, even better aligned by a few degrees, cannot claim.
+//! Otherwise the step goes to the best-aligned of the anchors' ranges, the odometry and the
+//! heading. A cause's share is its growth
 //! over the whole growth; causes below [`ExplainConfig::min_growth_m`] are left to
 //! `unexplained` (the threshold a fault-free calibration sets: see `docs/explain.md`).
 //!
@@ -35,7 +40,7 @@
 use serde::{Deserialize, Serialize};
 use trajgen::Point;
 
-use car_link::Probe;
+use car_link::{FaultKind, Probe};
 
 /// One state sample on the test's clock.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -64,6 +69,10 @@ pub struct ExplainFault {
     pub command_index: usize,
     /// The probe it acts on.
     pub probe: Probe,
+    /// What it does (a yaw offset turns the direction it moves the estimate in).
+    pub kind: FaultKind,
+    /// Its parameter (degrees for a yaw offset).
+    pub param: f64,
     /// When it is estimated to begin acting, seconds since the test began.
     pub acts_from_s: f64,
     /// When it is estimated to stop.
@@ -295,22 +304,16 @@ pub fn explain_segment(
             .map(|&(d, u)| (d, (de.dot(u) / length).abs()))
             .collect();
         ranked.sort_by(|x, y| y.1.total_cmp(&x.1));
-        let (best, alignment) = ranked[0];
-        if alignment < config.min_alignment {
-            unexplained += growth;
-            unexplained_steps += 1;
-            continue;
-        }
+        let (best, best_alignment) = ranked[0];
         // Of the faults acting in this direction whose widened window covers the step, the
         // one whose estimated window is nearest (inside it: distance 0).
+        let window_distance =
+            |f: &ExplainFault| (f.acts_from_s - mid_t).max(mid_t - f.acts_to_s).max(0.0);
         let source_of = |d: Direction| {
             faults
                 .iter()
                 .filter(|f| d.moved_by(f.probe))
-                .map(|f| {
-                    let distance = (f.acts_from_s - mid_t).max(mid_t - f.acts_to_s).max(0.0);
-                    (f, distance)
-                })
+                .map(|f| (f, window_distance(f)))
                 .filter(|(_, distance)| *distance <= config.window_slack_s)
                 .min_by(|a, b| a.1.total_cmp(&b.1))
                 .map(|(f, _)| f)
@@ -325,11 +328,43 @@ pub fn explain_segment(
                     },
                 )
         };
-        let source = source_of(best);
+        // An acting fault the step is aligned with comes first: the best aligned; among equals
+        // (faults on one probe) the nearest window, then the strongest.
+        let acting = faults
+            .iter()
+            .filter(|f| window_distance(f) <= config.window_slack_s)
+            .filter_map(|f| {
+                let (direction, u) = fault_direction(f, &directions)?;
+                let cos = (de.dot(u) / length).abs();
+                (cos >= config.min_alignment).then_some((f, direction, cos))
+            })
+            .max_by(|a, b| {
+                a.2.total_cmp(&b.2)
+                    .then(window_distance(b.0).total_cmp(&window_distance(a.0)))
+                    .then(strength(a.0).total_cmp(&strength(b.0)))
+            });
+        let (source, direction, alignment) = match acting {
+            Some((f, direction, cos)) => (
+                Source::Fault {
+                    command_index: f.command_index,
+                },
+                direction,
+                cos,
+            ),
+            None if best_alignment >= config.min_alignment => {
+                (source_of(best), best, best_alignment)
+            }
+            None => {
+                unexplained += growth;
+                unexplained_steps += 1;
+                continue;
+            }
+        };
         // The runner-up is as well aligned: this step cannot tell the two apart.
         let ambiguous = ranked
-            .get(1)
-            .filter(|(_, cos)| *cos >= config.ambiguity_cos && alignment - cos < AMBIGUITY_GAP)
+            .iter()
+            .filter(|(d, _)| *d != direction)
+            .find(|(_, cos)| *cos >= config.ambiguity_cos && alignment - cos < AMBIGUITY_GAP)
             .map(|&(d, _)| source_of(d))
             .filter(|s| *s != source);
         let index = match credit.iter().position(|c| c.source == source) {
@@ -340,7 +375,7 @@ pub fn explain_segment(
                     growth: 0.0,
                     steps: 0,
                     ambiguous: Vec::new(),
-                    kind: best.kind(),
+                    kind: direction.kind(),
                 });
                 credit.len() - 1
             }
@@ -418,6 +453,36 @@ fn share(part: f64, total: f64) -> f64 {
     if total > 0.0 { part / total } else { 0.0 }
 }
 
+/// How strongly `fault` changes its probe's value, to compare faults of one probe acting
+/// together: how far an amplification's factor is from 1, an offset from 0; other kinds count 1.
+fn strength(fault: &ExplainFault) -> f64 {
+    let strength = match fault.kind {
+        FaultKind::Amplification => (fault.param - 1.0).abs(),
+        FaultKind::Offset => fault.param.abs(),
+        FaultKind::SetTo | FaultKind::Bitflip => 1.0,
+        FaultKind::None => 0.0,
+    };
+    if strength.is_finite() { strength } else { 0.0 }
+}
+
+/// The direction `fault` moves the estimate in, among a step's `directions` (the anchors' lines,
+/// the heading, across it): its probe's, a yaw offset's turned by −α/2 (see the module doc).
+/// `None` for a range fault on an anchor the area does not have.
+fn fault_direction(
+    fault: &ExplainFault,
+    directions: &[(Direction, Point)],
+) -> Option<(Direction, Point)> {
+    let &(direction, u) = directions.iter().find(|(d, _)| d.moved_by(fault.probe))?;
+    if direction != Direction::Yaw || fault.kind != FaultKind::Offset || !fault.param.is_finite() {
+        return Some((direction, u));
+    }
+    let (sin, cos) = (-fault.param.to_radians() / 2.0).sin_cos();
+    Some((
+        direction,
+        Point::new(u.x * cos - u.y * sin, u.x * sin + u.y * cos),
+    ))
+}
+
 /// The unit heading of the RTK track around sample `j`: from the sample before to the one after
 /// (`None` while the car stands).
 fn heading_at(samples: &[&ExplainSample], j: usize) -> Option<Point> {
@@ -481,6 +546,8 @@ mod tests {
         let slip = ExplainFault {
             command_index: 3,
             probe: Probe::UwbTravelDist,
+            kind: FaultKind::Amplification,
+            param: 2.5,
             acts_from_s: 2.0,
             acts_to_s: 4.0,
         };
@@ -508,6 +575,86 @@ mod tests {
         .unwrap();
         assert_eq!(unfaulted.top().map(|c| c.source), Some(Source::Odometry));
         assert!(unfaulted.top().unwrap().share > 0.9, "{unfaulted:?}");
+    }
+
+    #[test]
+    fn a_yaw_offset_turns_the_direction_its_fault_is_recognised_in() {
+        // A yaw offset of 80° (clockwise, as the firmware's yaw) turns the dead-reckoned track
+        // 80° to the right of the true one, east at 1 m/s: e grows along (cos 80° − 1, −sin 80°),
+        // the line at 50°, which no anchor, the heading nor the normal to it (90°) is within
+        // |cos| 0.8 of.
+        let alpha = 80f64.to_radians();
+        let drift = Point::new(alpha.cos() - 1.0, -alpha.sin());
+        let unit = drift * (1.0 / drift.norm());
+        let samples = drive(6.0, |t| unit * 0.3 + drift * (t - 2.0).clamp(0.0, 2.0));
+        let yaw = |param: f64| ExplainFault {
+            command_index: 4,
+            probe: Probe::UwbYaw,
+            kind: FaultKind::Offset,
+            param,
+            acts_from_s: 2.0,
+            acts_to_s: 4.0,
+        };
+        let explain = |faults: &[ExplainFault]| {
+            explain_segment(
+                &segment(6.0),
+                &samples,
+                &anchors(),
+                faults,
+                &ExplainConfig::default(),
+            )
+            .unwrap()
+        };
+        let explained = explain(&[yaw(80.0)]);
+        assert_eq!(
+            explained.top().map(|c| c.source),
+            Some(Source::Fault { command_index: 4 }),
+            "{explained:?}"
+        );
+        assert!(explained.top().unwrap().share > 0.9, "{explained:?}");
+        // The same offset the other way turns the other way: it did not do this.
+        let first = |e: SegmentExplanation| e.causes.first().map(|c| c.source);
+        assert_eq!(first(explain(&[yaw(-80.0)])), Some(Source::Unexplained));
+        assert_eq!(first(explain(&[])), Some(Source::Unexplained));
+    }
+
+    #[test]
+    fn an_acting_fault_aligned_with_the_step_comes_before_a_better_aligned_anchor() {
+        // The error grows along the line 20° off the heading (|cos| 0.94 with it); anchor 50's
+        // line is 15° off the heading, so the step is better aligned with the anchor (0.996).
+        let line = 20f64.to_radians();
+        let drift = Point::new(line.cos(), line.sin()) * 0.5;
+        let samples = drive(6.0, |t| drift * 0.6 + drift * (t - 2.0).clamp(0.0, 2.0));
+        let anchors = [ExplainAnchor {
+            id: 50,
+            // Seen from the track's middle, along the line at 15°: better aligned than the
+            // heading.
+            position: Point::new(
+                3.0 + 100.0 * 15f64.to_radians().cos(),
+                100.0 * 15f64.to_radians().sin(),
+            ),
+        }];
+        let slip = ExplainFault {
+            command_index: 2,
+            probe: Probe::UwbTravelDist,
+            kind: FaultKind::Amplification,
+            param: 2.0,
+            acts_from_s: 2.0,
+            acts_to_s: 4.0,
+        };
+        let config = ExplainConfig::default();
+        let with = explain_segment(&segment(6.0), &samples, &anchors, &[slip], &config).unwrap();
+        assert_eq!(
+            with.top().map(|c| c.source),
+            Some(Source::Fault { command_index: 2 }),
+            "{with:?}"
+        );
+        let without = explain_segment(&segment(6.0), &samples, &anchors, &[], &config).unwrap();
+        assert_eq!(
+            without.top().map(|c| c.source),
+            Some(Source::Anchor { anchor_id: 50 }),
+            "{without:?}"
+        );
     }
 
     #[test]

@@ -169,9 +169,13 @@ pub(crate) fn faults_of(case: &Case) -> Vec<ExplainFault> {
     case.fault_places
         .iter()
         .filter_map(|place| match case.commands.get(place.command_index) {
-            Some(CommandRecord::AddFault { probe, .. }) => Some(ExplainFault {
+            Some(CommandRecord::AddFault {
+                probe, kind, param, ..
+            }) => Some(ExplainFault {
                 command_index: place.command_index,
                 probe: *probe,
+                kind: *kind,
+                param: *param,
                 acts_from_s: place.acts_from_s,
                 acts_to_s: place.acts_to_s,
             }),
