@@ -92,6 +92,9 @@ pub struct Sample {
     pub speed: f64,
     /// The sample's request-to-reply time (a measured link round trip).
     pub round_trip: Duration,
+    /// The autopilot's look-ahead radius the car reports, metres (−1 while it is inactive;
+    /// NaN when the car does not report one).
+    pub look_ahead_radius_m: f64,
 }
 
 /// How the operation in flight ended.
@@ -361,7 +364,7 @@ impl<'a> TestDrive<'a> {
         let mut safety = SafetyMonitor::new(settings.area.clone(), settings.safety, Duration::ZERO);
         let positions: Vec<Point> = start.iter().map(|w| w.position).collect();
         safety.set_route(&positions);
-        let placer = Placer::new(plan, &positions);
+        let placer = Placer::new(plan, start);
         Self {
             settings,
             plan,
@@ -550,13 +553,7 @@ impl<'a> TestDrive<'a> {
         }
         let decision = self.streamer.observe(now, sample.rtk);
         self.cursor.decision = Some(decision);
-        self.placer.observe(
-            now,
-            sample.rtk,
-            self.streamer.progress(),
-            sample.speed,
-            sample.round_trip,
-        );
+        self.placer.observe(now, &sample, self.streamer.progress());
         self.track(now, sample.uwb, sample.rtk);
         self.advance_stop(now, decision, sample.speed);
     }
@@ -691,7 +688,7 @@ impl<'a> TestDrive<'a> {
             oracle: SegmentOracle::new(),
             result: None,
         });
-        self.placer.extend(&segment.points);
+        self.placer.extend(&segment.waypoints().collect::<Vec<_>>());
         self.placer
             .segment_appended(self.segments.len() - 1, self.route.len, points.len());
         self.route.len += points.len();
@@ -741,7 +738,7 @@ impl<'a> TestDrive<'a> {
         });
         let append = self.streamer.appended(now, &decision, &points);
         self.safety.extend_route(&extension.points);
-        self.placer.extend(&extension.points);
+        self.placer.extend(&points);
         self.route.stop_first = Some(self.route.len);
         self.route.len += points.len();
         self.phase = Phase::Extending;

@@ -15,9 +15,11 @@
 //! - **When to send.** The car's distance along its route is known at each state sample, as it
 //!   was when the car answered (measured so that it is continuous where the car cuts a corner:
 //!   see [`Placer::along`]) (about half a round trip before the sample arrived). From the
-//!   last sample, the car's speed and the median round trip, the placer predicts when the car
-//!   will be at the place and sends the command half a round trip before: the car then adds the
-//!   fault as it passes the place. The caller wakes the drive at [`Placer::due`].
+//!   last sample and the median round trip, the placer predicts when the car will be at the
+//!   place and sends the command half a round trip before: the car then adds the fault as it
+//!   passes the place. The prediction follows the speeds the route asks for (see
+//!   [`Placer::travel_s`]), so a car speeding up or slowing down into the next segment arrives
+//!   when predicted. The caller wakes the drive at [`Placer::due`].
 //! - **Where it acted.** The car added the fault at about the middle of the command's round trip
 //!   (after a lost reply resolved by listing the car's faults: half a round trip after sending).
 //!   The car's distance at that time is interpolated between the samples around it; the
@@ -36,7 +38,7 @@ use serde::{Deserialize, Serialize};
 use trajgen::Point;
 
 use crate::model::{Command, Fault, FaultPlace, FaultWindow, ProbeRates, TestPlan};
-use crate::streaming::Progress;
+use crate::streaming::{Progress, Waypoint, look_ahead_radius_m};
 
 /// How the earlier tool placed a fault: once its segment's car had this many route points left.
 pub const EARLIER_TOOL_POINTS_LEFT: usize = 4;
@@ -118,15 +120,20 @@ struct Seen {
     car_time: f64,
     /// Its distance along the route, metres.
     s: f64,
-    /// Its speed, m/s.
+    /// Its speed, m/s (its progress along the route, else its wheel speed), ...
     speed: f64,
+    /// ... around this distance along the route.
+    speed_at: f64,
+    /// Its autopilot's look-ahead radius, metres.
+    radius: f64,
 }
 
 /// The faults of a test, sent at their places (see the module doc).
 #[derive(Debug, Clone)]
 pub struct Placer {
-    /// The car's route: its points, and the distance along it at each, metres.
-    route: Vec<Point>,
+    /// The car's route: its points with their speeds, and the distance along it at each,
+    /// metres.
+    route: Vec<Waypoint>,
     route_s: Vec<f64>,
     /// The route's last point (the next appended point continues from it).
     route_end: Option<Point>,
@@ -145,7 +152,7 @@ pub struct Placer {
 impl Placer {
     /// The faults of `plan`, for a car whose route starts with `start` (the start route's
     /// points).
-    pub fn new(plan: &TestPlan, start: &[Point]) -> Self {
+    pub fn new(plan: &TestPlan, start: &[Waypoint]) -> Self {
         let mut segments = 0usize;
         let mut pending = Vec::new();
         for (command_index, command) in plan.commands.iter().enumerate() {
@@ -188,13 +195,14 @@ impl Placer {
     }
 
     /// The car's route grows by `points` (a segment or the safe stop's extension).
-    pub fn extend(&mut self, points: &[Point]) {
-        for &p in points {
+    pub fn extend(&mut self, points: &[Waypoint]) {
+        for &w in points {
+            let p = w.position;
             let s = match (self.route_end, self.route_s.last()) {
                 (Some(end), Some(&s)) => s + end.dist(p),
                 _ => 0.0,
             };
-            self.route.push(p);
+            self.route.push(w);
             self.route_s.push(s);
             self.route_end = Some(p);
         }
@@ -228,16 +236,10 @@ impl Placer {
         }
     }
 
-    /// A state sample arrived at `now`: the car was at `position`, located by the streamer at
-    /// `progress` on its route, at `speed`, about half of `round_trip` ago.
-    pub fn observe(
-        &mut self,
-        now: Duration,
-        position: Point,
-        progress: Progress,
-        speed: f64,
-        round_trip: Duration,
-    ) {
+    /// A state sample arrived at `now`: the car was at `sample.rtk`, located by the streamer
+    /// at `progress` on its route, about half of the sample's round trip ago.
+    pub fn observe(&mut self, now: Duration, sample: &super::Sample, progress: Progress) {
+        let (position, speed, round_trip) = (sample.rtk, sample.speed, sample.round_trip);
         self.round_trips.push_back(round_trip);
         if self.round_trips.len() > ROUND_TRIPS {
             self.round_trips.pop_front();
@@ -250,10 +252,21 @@ impl Placer {
         if self.history.len() > HISTORY {
             self.history.pop_front();
         }
+        // The radius the car reports (it is −1 when its autopilot is inactive); else the larger
+        // of the two firmware generations' at its speed.
+        let reported = sample.look_ahead_radius_m;
+        let radius = if reported.is_finite() && reported > 0.0 {
+            reported
+        } else {
+            look_ahead_radius_m(speed)
+        };
+        let (speed, speed_at) = self.progress_rate().unwrap_or((speed.abs(), s));
         self.seen = Some(Seen {
             car_time,
             s,
-            speed: self.progress_rate().unwrap_or(speed.abs()),
+            speed,
+            speed_at,
+            radius,
         });
         self.resolve();
     }
@@ -272,10 +285,8 @@ impl Placer {
             return None;
         }
         let seen = self.seen?;
-        let speed = seen.speed.max(MIN_SPEED_MPS);
         let round_trip = self.median_round_trip().as_secs_f64();
-        let ideal =
-            |target: f64| seen.car_time + (target - seen.s).max(0.0) / speed - round_trip / 2.0;
+        let ideal = |target: f64| seen.car_time + self.travel_s(&seen, target) - round_trip / 2.0;
         let next = self.next()?;
         let mut targets: Vec<f64> = self
             .pending
@@ -405,15 +416,16 @@ impl Placer {
     /// How fast the car advanced along its route over the last [`RATE_WINDOW_S`], m/s: what a
     /// place is reached by. It differs from the reported wheel speed where the car cuts a corner
     /// or drifts off the route, and the actual place of a fault is measured along the route too.
-    /// `None` without two samples that far apart.
-    fn progress_rate(&self) -> Option<f64> {
+    /// `None` without two samples that far apart. With it, where it applies: the middle of the
+    /// way it was measured over.
+    fn progress_rate(&self) -> Option<(f64, f64)> {
         let &(t1, s1) = self.history.back()?;
         let &(t0, s0) = self
             .history
             .iter()
             .rev()
             .find(|(t, _)| t1 - t >= RATE_WINDOW_S)?;
-        (t1 > t0).then(|| ((s1 - s0) / (t1 - t0)).max(0.0))
+        (t1 > t0).then(|| (((s1 - s0) / (t1 - t0)).max(0.0), (s0 + s1) / 2.0))
     }
 
     /// The car's distance along its route at `position`, near the stretch `hint` (where the
@@ -445,7 +457,7 @@ impl Placer {
     /// On stretch `i` (points `i`, `i + 1`), the distance along the route of `p` and `p`'s
     /// distance from the route there, when `p` is between the stretch's miters.
     fn mitered(&self, i: usize, p: Point) -> Option<(f64, f64)> {
-        let (a, b) = (*self.route.get(i)?, *self.route.get(i + 1)?);
+        let (a, b) = (self.route.get(i)?.position, self.route.get(i + 1)?.position);
         let d = b - a;
         let length = d.norm();
         if length < 1e-9 {
@@ -482,7 +494,7 @@ impl Placer {
     /// stretch's own direction at the route's ends and at a U-turn).
     fn miter(&self, i: usize) -> Option<Point> {
         let unit = |from: usize, to: usize| {
-            let d = *self.route.get(to)? - *self.route.get(from)?;
+            let d = self.route.get(to)?.position - self.route.get(from)?.position;
             let n = d.norm();
             (n > 1e-9).then(|| d * (1.0 / n))
         };
@@ -496,6 +508,63 @@ impl Placer {
             }
             (one, other) => one.or(other),
         }
+    }
+
+    /// Seconds the car seen at `seen` needs to reach `target` (a distance along its route).
+    ///
+    /// In speed mode the firmware's autopilot drives at the route's speed interpolated at its
+    /// goal, the point a look-ahead radius ahead (`docs/firmware.md`, autopilot), and its motor
+    /// reaches a new speed within a tenth of a second (RPM mode, 13.6 m/s²): a car at `s` drives
+    /// at about the route's speed at `s + radius`. So the time is the integral of 1/speed over
+    /// the way, the speeds taken where the goal will be, with the car's radius as it reported
+    /// it; scaled by how the car's measured speed compares with the route's where it was
+    /// measured (1 for a car that keeps its route's speeds; a car that does not, or a link that
+    /// shifts the samples' times, keeps its own ratio). Where the route gives no speed, the
+    /// measured speed.
+    fn travel_s(&self, seen: &Seen, target: f64) -> f64 {
+        const STEP_M: f64 = 0.02;
+        let way = (target - seen.s).max(0.0);
+        let steps = (way / STEP_M).ceil() as usize;
+        if steps == 0 {
+            return 0.0;
+        }
+        let ratio = self
+            .route_speed(seen.speed_at + seen.radius)
+            .map(|asked| seen.speed / asked)
+            .filter(|r| r.is_finite() && *r > 0.0);
+        let ds = way / steps as f64;
+        (0..steps)
+            .map(|k| {
+                let at = seen.s + (k as f64 + 0.5) * ds;
+                let speed = match (ratio, self.route_speed(at + seen.radius)) {
+                    (Some(ratio), Some(asked)) => ratio * asked,
+                    _ => seen.speed,
+                };
+                ds / speed.max(MIN_SPEED_MPS)
+            })
+            .sum()
+    }
+
+    /// The speed the autopilot sets with its goal at `s` along the route: the speeds of the
+    /// stretch's two points interpolated by the goal's distance from them (the last point's
+    /// beyond the end). `None` where the route gives no positive speed.
+    fn route_speed(&self, s: f64) -> Option<f64> {
+        let last = self.route.len().checked_sub(1)?;
+        let i = self.route_s.partition_point(|&x| x <= s);
+        let speed = if i == 0 {
+            self.route[0].speed
+        } else if i > last {
+            self.route[last].speed
+        } else {
+            let (s0, s1) = (self.route_s[i - 1], self.route_s[i]);
+            let (v0, v1) = (self.route[i - 1].speed, self.route[i].speed);
+            if s1 > s0 {
+                v0 + (v1 - v0) * (s - s0) / (s1 - s0)
+            } else {
+                v1
+            }
+        };
+        (speed.is_finite() && speed > 0.0).then_some(speed)
     }
 
     fn distance(&self, progress: Progress) -> Option<f64> {
@@ -552,7 +621,6 @@ impl Placer {
 mod tests {
     use super::*;
     use crate::streaming::locate;
-    use trajgen::Waypoint;
 
     /// A placer on the route (0,0) → (4,0) → (4,4) → (8,4): a left-hand and a right-hand 90°
     /// corner.
@@ -563,12 +631,13 @@ mod tests {
             Point::new(4.0, 4.0),
             Point::new(8.0, 4.0),
         ];
+        let waypoints: Vec<Waypoint> = points.iter().map(|&p| Waypoint::new(p, 1.0)).collect();
         let plan = TestPlan {
             test_index: 0,
             start_tail: trajgen::RouteTail::from_points(&points[..2]).unwrap(),
             commands: Vec::new(),
         };
-        (Placer::new(&plan, &points), points)
+        (Placer::new(&plan, &waypoints), points)
     }
 
     fn hint(route: &[Point], p: Point, from: usize) -> Progress {
@@ -624,6 +693,52 @@ mod tests {
             "closest point's largest step {largest_closest}"
         );
         assert!((previous.unwrap() - 5.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_car_is_predicted_to_speed_up_where_its_goal_reaches_a_faster_stretch() {
+        // 1 m/s to x = 10, then towards x = 20 at 3 m/s: on that stretch the autopilot's speed
+        // rises from 1 to 3 m/s as its goal, 1 m ahead, moves along it.
+        let route: Vec<Waypoint> = [(0.0, 1.0), (10.0, 1.0), (20.0, 3.0)]
+            .iter()
+            .map(|&(x, v)| Waypoint::new(Point::new(x, 0.0), v))
+            .collect();
+        let plan = TestPlan {
+            test_index: 0,
+            start_tail: trajgen::RouteTail::from_points(&[
+                Point::new(0.0, 0.0),
+                Point::new(1.0, 0.0),
+            ])
+            .unwrap(),
+            commands: Vec::new(),
+        };
+        let mut placer = Placer::new(&plan, &route);
+        for k in 0..=6 {
+            let sample = super::super::Sample {
+                rtk: Point::new(7.4 + 0.1 * k as f64, 0.0),
+                uwb: Point::new(7.4 + 0.1 * k as f64, 0.0),
+                speed: 1.0,
+                round_trip: Duration::ZERO,
+                look_ahead_radius_m: 1.0,
+            };
+            let progress = Progress {
+                segment: 0,
+                fraction: sample.rtk.x / 10.0,
+            };
+            placer.observe(Duration::from_millis(100 * k), &sample, progress);
+        }
+        let seen = placer.seen.unwrap();
+        assert!((seen.s - 8.0).abs() < 1e-9 && (seen.speed - 1.0).abs() < 1e-9);
+        // To x = 11: 1 s to x = 9 (goal at 10), then ∫₀² du / (1 + 0.2 u) = 5 ln 1.4 s.
+        let expected = 1.0 + 5.0 * 1.4f64.ln();
+        let predicted = placer.travel_s(&seen, 11.0);
+        assert!(
+            (predicted - expected).abs() < 0.01,
+            "{predicted} instead of {expected}"
+        );
+        // A car driving at twice its route's speeds keeps doing so.
+        let fast = Seen { speed: 2.0, ..seen };
+        assert!((placer.travel_s(&fast, 11.0) - expected / 2.0).abs() < 0.01);
     }
 
     #[test]

@@ -118,6 +118,7 @@ impl<'a> Harness<'a> {
             uwb: Point::new(at.x, at.y + self.uwb_offset),
             speed,
             round_trip: ms(20),
+            look_ahead_radius_m: f64::NAN,
         };
         self.drive.handle(self.now, Event::Sample(sample))
     }
