@@ -32,9 +32,13 @@
 //! over the whole growth; causes below [`ExplainConfig::min_growth_m`] are left to
 //! `unexplained` (the threshold a fault-free calibration sets: see `docs/explain.md`).
 //!
-//! **What it cannot tell apart.** Two directions closer than the alignment's resolution (an
-//! anchor straight ahead or behind looks like odometry; one abeam looks like the heading): such
-//! a step is credited to the best-aligned and the cause records the runner-up in `ambiguous_with`.
+//! **Directions that coincide.** An anchor straight ahead or behind moves the estimate along the
+//! heading, as odometry does; one abeam across it, as the heading does. When a step cannot tell
+//! such an anchor from the drift by direction, it tells them by time: a range corrects the
+//! estimate in one jump at its anchor's ranging instant, dead reckoning a little at every tick, so
+//! the step is the anchor's when it holds more growth in its direction than the two steps each
+//! side of it together (less than one ranging period), the drift's otherwise. The cause still
+//! records the other in `ambiguous_with`.
 //! Growth that happened before the growth interval (a standing offset) is not explained.
 
 use serde::{Deserialize, Serialize};
@@ -304,7 +308,20 @@ pub fn explain_segment(
             .map(|&(d, u)| (d, (de.dot(u) / length).abs()))
             .collect();
         ranked.sort_by(|x, y| y.1.total_cmp(&x.1));
-        let (best, best_alignment) = ranked[0];
+        let (mut best, mut best_alignment) = ranked[0];
+        // An anchor's line and the heading (or its normal) that the step cannot tell apart by
+        // direction: a range corrects the estimate in one jump at its anchor's ranging instant,
+        // dead reckoning drifts it a little at every odometry tick. The step is the anchor's when
+        // it holds more of the growth in its direction than the steps around it together, the
+        // drift's otherwise.
+        if let Some(&(other, cos)) = ranked.get(1)
+            && cos >= config.ambiguity_cos
+            && best_alignment - cos < AMBIGUITY_GAP
+            && matches!(best, Direction::Anchor(_)) != matches!(other, Direction::Anchor(_))
+            && is_jump(&usable, j, de) != matches!(best, Direction::Anchor(_))
+        {
+            (best, best_alignment) = (other, cos);
+        }
         // Of the faults acting in this direction whose widened window covers the step, the
         // one whose estimated window is nearest (inside it: distance 0).
         let window_distance =
@@ -451,6 +468,32 @@ struct Credit {
 
 fn share(part: f64, total: f64) -> f64 {
     if total > 0.0 { part / total } else { 0.0 }
+}
+
+/// How many steps each side [`is_jump`] compares a step with: two, 100 ms at 20 samples a
+/// second, less than an anchor's ranging period (100 ms per anchor in range, so 200 ms with
+/// two): the steps around a range's correction hold no other correction from that anchor.
+const JUMP_NEIGHBOURS: usize = 2;
+
+/// Whether step `j` (from sample `j` to `j + 1`, its error change `de`) holds more growth along
+/// `de` than the [`JUMP_NEIGHBOURS`] steps each side of it together: a jump (a range's
+/// correction), not a drift (dead reckoning's, which grows the error at every step alike).
+fn is_jump(samples: &[&ExplainSample], j: usize, de: Point) -> bool {
+    let length = de.norm();
+    if length <= 0.0 || samples.len() < 2 {
+        return false;
+    }
+    let u = de * (1.0 / length);
+    let along = |i: usize| {
+        let (a, b) = (samples[i], samples[i + 1]);
+        ((b.uwb - b.rtk) - (a.uwb - a.rtk)).dot(u).max(0.0)
+    };
+    let last = samples.len() - 2;
+    let around: f64 = (j.saturating_sub(JUMP_NEIGHBOURS)..=(j + JUMP_NEIGHBOURS).min(last))
+        .filter(|&i| i != j)
+        .map(along)
+        .sum();
+    length > around
 }
 
 /// How strongly `fault` changes its probe's value, to compare faults of one probe acting
@@ -655,6 +698,35 @@ mod tests {
             Some(Source::Anchor { anchor_id: 50 }),
             "{without:?}"
         );
+    }
+
+    #[test]
+    fn an_anchor_on_the_heading_line_is_told_from_odometry_by_jumps() {
+        // Anchor 7 far behind the track, on its line: its range moves the estimate along the
+        // heading, as odometry does.
+        let behind = [ExplainAnchor {
+            id: 7,
+            position: Point::new(-100.0, 0.0),
+        }];
+        let explain = |samples: &[ExplainSample]| {
+            let explained = explain_segment(
+                &segment(4.0),
+                samples,
+                &behind,
+                &[],
+                &ExplainConfig::default(),
+            )
+            .unwrap();
+            explained.top().map(|c| c.source)
+        };
+        // A too-long range corrected once per ranging period (0.2 s): 0.1 m jumps.
+        let jumps = drive(4.0, |t| {
+            Point::new(0.2 + 0.1 * (t / 0.2).floor().min(12.0), 0.0)
+        });
+        assert_eq!(explain(&jumps), Some(Source::Anchor { anchor_id: 7 }));
+        // The odometry over-reading: the same growth at every step.
+        let drift = drive(4.0, |t| Point::new(0.2 + 0.5 * t.min(2.4), 0.0));
+        assert_eq!(explain(&drift), Some(Source::Odometry));
     }
 
     #[test]
