@@ -25,8 +25,10 @@
 //! with the direction the fault moves the estimate in (a range fault on *A* along `u_A`, a
 //! `uwb_travel_dist` fault along `h`, a `uwb_yaw` fault across it: a yaw offset of α degrees
 //! turns the dead-reckoned track by α, which moves `e` along `n` turned by −α/2, the firmware's
-//! yaw being clockwise), the best aligned of them if several; the schedule says the fault is
-//! acting, which an unfaulted direction, even better aligned by a few degrees, cannot claim.
+//! yaw being clockwise), the best aligned of them if several, shared equally with the faults on
+//! its probe whose windows cover the step as well (they act together); the schedule says the
+//! fault is acting, which an unfaulted direction, even better aligned by a few degrees, cannot
+//! claim.
 //! Otherwise the step goes to the best-aligned of the anchors' ranges, the odometry and the
 //! heading. A cause's share is its growth
 //! over the whole growth; causes below [`ExplainConfig::min_growth_m`] are left to
@@ -346,7 +348,7 @@ pub fn explain_segment(
                 )
         };
         // An acting fault the step is aligned with comes first: the best aligned; among equals
-        // (faults on one probe) the nearest window, then the strongest.
+        // the nearest window.
         let acting = faults
             .iter()
             .filter(|f| window_distance(f) <= config.window_slack_s)
@@ -358,7 +360,6 @@ pub fn explain_segment(
             .max_by(|a, b| {
                 a.2.total_cmp(&b.2)
                     .then(window_distance(b.0).total_cmp(&window_distance(a.0)))
-                    .then(strength(a.0).total_cmp(&strength(b.0)))
             });
         let (source, direction, alignment) = match acting {
             Some((f, direction, cos)) => (
@@ -384,26 +385,42 @@ pub fn explain_segment(
             .find(|(_, cos)| *cos >= config.ambiguity_cos && alignment - cos < AMBIGUITY_GAP)
             .map(|&(d, _)| source_of(d))
             .filter(|s| *s != source);
-        let index = match credit.iter().position(|c| c.source == source) {
-            Some(index) => index,
-            None => {
-                credit.push(Credit {
-                    source,
-                    growth: 0.0,
-                    steps: 0,
-                    ambiguous: Vec::new(),
-                    kind: direction.kind(),
-                });
-                credit.len() - 1
-            }
+        // Faults on the chosen fault's probe acting as surely (their windows as near) act
+        // together: the step is theirs in equal parts (which of them changed the probe's value
+        // more is not in what a car reports).
+        let together: Vec<Source> = match acting {
+            Some((f, _, _)) => faults
+                .iter()
+                .filter(|g| g.probe == f.probe && window_distance(g) <= window_distance(f))
+                .map(|g| Source::Fault {
+                    command_index: g.command_index,
+                })
+                .collect(),
+            None => vec![source],
         };
-        let c = &mut credit[index];
-        c.growth += growth;
-        c.steps += 1;
-        if let Some(other) = ambiguous {
-            match c.ambiguous.iter_mut().find(|a| a.0 == other) {
-                Some(a) => a.1 += 1,
-                None => c.ambiguous.push((other, 1)),
+        let each = growth / together.len() as f64;
+        for source in together {
+            let index = match credit.iter().position(|c| c.source == source) {
+                Some(index) => index,
+                None => {
+                    credit.push(Credit {
+                        source,
+                        growth: 0.0,
+                        steps: 0,
+                        ambiguous: Vec::new(),
+                        kind: direction.kind(),
+                    });
+                    credit.len() - 1
+                }
+            };
+            let c = &mut credit[index];
+            c.growth += each;
+            c.steps += 1;
+            if let Some(other) = ambiguous {
+                match c.ambiguous.iter_mut().find(|a| a.0 == other) {
+                    Some(a) => a.1 += 1,
+                    None => c.ambiguous.push((other, 1)),
+                }
             }
         }
     }
@@ -494,18 +511,6 @@ fn is_jump(samples: &[&ExplainSample], j: usize, de: Point) -> bool {
         .map(along)
         .sum();
     length > around
-}
-
-/// How strongly `fault` changes its probe's value, to compare faults of one probe acting
-/// together: how far an amplification's factor is from 1, an offset from 0; other kinds count 1.
-fn strength(fault: &ExplainFault) -> f64 {
-    let strength = match fault.kind {
-        FaultKind::Amplification => (fault.param - 1.0).abs(),
-        FaultKind::Offset => fault.param.abs(),
-        FaultKind::SetTo | FaultKind::Bitflip => 1.0,
-        FaultKind::None => 0.0,
-    };
-    if strength.is_finite() { strength } else { 0.0 }
 }
 
 /// The direction `fault` moves the estimate in, among a step's `directions` (the anchors' lines,
@@ -698,6 +703,41 @@ mod tests {
             Some(Source::Anchor { anchor_id: 50 }),
             "{without:?}"
         );
+    }
+
+    #[test]
+    fn faults_on_one_probe_acting_together_share_the_growth() {
+        // Drift ahead at 0.2 m/s from 2 s to 5 s (the error passes the nominal level at 2.95 s).
+        let samples = drive(6.0, |t| {
+            Point::new(0.3 + 0.2 * (t - 2.0).clamp(0.0, 3.0), 0.0)
+        });
+        let slip = |command_index, param, acts_to_s| ExplainFault {
+            command_index,
+            probe: Probe::UwbTravelDist,
+            kind: FaultKind::Amplification,
+            param,
+            acts_from_s: 2.0,
+            acts_to_s,
+        };
+        let config = ExplainConfig {
+            window_slack_s: 0.0,
+            ..ExplainConfig::default()
+        };
+        let explain = |faults: &[ExplainFault]| {
+            let explained = explain_segment(&segment(6.0), &samples, &[], faults, &config).unwrap();
+            let shares: Vec<(Source, f64)> = explained
+                .causes
+                .iter()
+                .map(|c| (c.source, c.share))
+                .collect();
+            shares
+        };
+        let fault = |command_index| Source::Fault { command_index };
+        // Alike, one over 2–4 s and one over 2–5 s: together for about 1 s, then the second
+        // alone for 1 s, so it acted over more of the growth.
+        let shares = explain(&[slip(3, 2.0, 4.0), slip(5, 2.0, 5.0)]);
+        assert_eq!(shares[0].0, fault(5), "{shares:?}");
+        assert!((shares[0].1 - 0.75).abs() < 0.05, "{shares:?}");
     }
 
     #[test]
