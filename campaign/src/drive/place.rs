@@ -13,8 +13,8 @@
 //!   segment's fourth point from the end). Either way the place becomes a distance along the
 //!   car's route once its segment is appended.
 //! - **When to send.** The car's distance along its route is known at each state sample, as it
-//!   was when the car answered (measured so that it is continuous where the car cuts a corner:
-//!   see [`Placer::along`]) (about half a round trip before the sample arrived). From the
+//!   was when the car answered, about half a round trip before the sample arrived (measured so
+//!   that it is continuous where the car cuts a corner: see [`Placer::along`]). From the
 //!   last sample and the median round trip, the placer predicts when the car will be at the
 //!   place and sends the command half a round trip before: the car then adds the fault as it
 //!   passes the place. The prediction follows the speeds the route asks for (see
@@ -135,8 +135,6 @@ pub struct Placer {
     /// metres.
     route: Vec<Waypoint>,
     route_s: Vec<f64>,
-    /// The route's last point (the next appended point continues from it).
-    route_end: Option<Point>,
     /// The car's route index of each appended segment's first point.
     segment_first: Vec<usize>,
     pending: Vec<Pending>,
@@ -180,7 +178,6 @@ impl Placer {
         let mut placer = Self {
             route: Vec::new(),
             route_s: Vec::new(),
-            route_end: None,
             segment_first: Vec::new(),
             pending,
             in_flight: Vec::new(),
@@ -197,14 +194,12 @@ impl Placer {
     /// The car's route grows by `points` (a segment or the safe stop's extension).
     pub fn extend(&mut self, points: &[Waypoint]) {
         for &w in points {
-            let p = w.position;
-            let s = match (self.route_end, self.route_s.last()) {
-                (Some(end), Some(&s)) => s + end.dist(p),
+            let s = match (self.route.last(), self.route_s.last()) {
+                (Some(end), Some(&s)) => s + end.position.dist(w.position),
                 _ => 0.0,
             };
             self.route.push(w);
             self.route_s.push(s);
-            self.route_end = Some(p);
         }
     }
 
