@@ -980,12 +980,12 @@ impl Car {
         }
         let command = fault::add_fault_command(probe, kind, param, start, duration);
         let success = format!("successfully added to probe {probe}.");
-        // One fault command per probe at a time; those for different probes may be in flight together
-        // (their success lines name their probes).
+        // Fault commands are in flight together, those of one probe in an ordered lane: their success lines
+        // name their probes, and the car answers one probe's commands in the order they arrive.
         let lines = self
             .shared()
-            .terminal_lines_in(
-                Some(&format!("fi_add_fault {id}")),
+            .terminal_lines_ordered(
+                &format!("fi_add_fault {id}"),
                 &command,
                 |line| fault::is_add_fault_reply(line, probe),
                 |lines| lines.iter().any(|l| l.contains(&success)),

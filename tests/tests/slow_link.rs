@@ -141,3 +141,50 @@ async fn fault_commands_for_two_probes_take_one_round_trip() {
     let listed = car.list_faults().await.unwrap();
     assert_eq!(listed.len(), 2, "{listed:?}");
 }
+
+/// Fault commands for one probe are in flight together too, and each gets its own reply: the car
+/// answers them in the order they arrive. Six on one probe over 150 ms each way take one round
+/// trip; the car refuses the sixth (five faults per probe), and that refusal is the sixth's.
+#[tokio::test(start_paused = true)]
+async fn fault_commands_for_one_probe_take_one_round_trip_and_their_own_replies() {
+    use car_link::fault::{FaultError, FaultRejection};
+    use car_link::{CarError, FaultKind, Probe};
+    let scenario = scenarios::bundled::load("parking-lot-2anchors")
+        .unwrap()
+        .scenario;
+    let sim_config = SimConfig {
+        link: LinkImpairment {
+            latency: Duration::from_millis(150),
+            ..LinkImpairment::default()
+        },
+        ..SimConfig::from_scenario(&scenario)
+    };
+    let (car, _sim) = common::sim_car(&sim_config).await;
+    car.set_fi_enabled(true).await.unwrap();
+    let probe = Probe::UwbRange(50);
+    let started = tokio::time::Instant::now();
+    let add = |k: u64| {
+        let (car, probe) = (&car, &probe);
+        async move {
+            // Each later command is sent 10 ms after the one before, all before the first reply.
+            tokio::time::sleep(Duration::from_millis(10 * k)).await;
+            car.add_fault(probe, FaultKind::Offset, k as f32, 1000, 1)
+                .await
+        }
+    };
+    let (r1, r2, r3, r4, r5, r6) = tokio::join!(add(1), add(2), add(3), add(4), add(5), add(6));
+    let results = [r1, r2, r3, r4, r5, r6];
+    let took = started.elapsed();
+    for (k, result) in results.iter().enumerate().take(5) {
+        assert!(result.is_ok(), "command {}: {result:?}", k + 1);
+    }
+    assert!(
+        matches!(&results[5], Err(CarError::Fault(FaultError::Rejected(r))) if r == &[FaultRejection::TooManyFaults]),
+        "{:?}",
+        results[5]
+    );
+    assert!(took < Duration::from_millis(500), "{took:?}");
+    let listed = car.list_faults().await.unwrap();
+    let params: Vec<f32> = listed.iter().map(|f| f.param).collect();
+    assert_eq!(params, [1.0, 2.0, 3.0, 4.0, 5.0]);
+}

@@ -168,9 +168,9 @@ pub enum Operation {
         command_index: usize,
         /// The fault.
         fault: Fault,
-        /// Faults on the same probe that the car confirmed in this test: one more on the
-        /// probe when the car lists its faults means a command whose reply was lost took
-        /// effect.
+        /// Faults on the same probe that the car confirmed in this test, and those sent before
+        /// this one and still in flight: one more on the probe when the car lists its faults
+        /// means a command whose reply was lost took effect.
         on_probe: usize,
     },
 }
@@ -438,16 +438,19 @@ impl<'a> TestDrive<'a> {
             return None;
         }
         let (command_index, fault) = self.placer.take_due(now)?;
-        // Faults on this probe the car confirmed in this test (the reset cleared the others).
-        let on_probe = self
-            .faults
-            .iter()
-            .filter(|(i, _)| {
-                self.plan.commands[*i]
-                    .fault()
-                    .is_some_and(|f| f.probe == fault.probe)
-            })
-            .count();
+        // Faults on this probe the car confirmed in this test (the reset cleared the others), and
+        // those sent before this one and still in flight: the car adds in the order it receives.
+        let earlier_in_flight = self.placer.in_flight_on(&fault.probe).saturating_sub(1);
+        let on_probe = earlier_in_flight
+            + self
+                .faults
+                .iter()
+                .filter(|(i, _)| {
+                    self.plan.commands[*i]
+                        .fault()
+                        .is_some_and(|f| f.probe == fault.probe)
+                })
+                .count();
         Some(Operation::AddFault {
             command_index,
             fault,

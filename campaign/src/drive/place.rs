@@ -25,10 +25,10 @@
 //!   The car's distance at that time is interpolated between the samples around it; the
 //!   difference from the place is the placement's error.
 //!
-//! Fault commands for different probes are in flight together; one probe's wait for each other
-//! (a run of them placed closer together than the car drives in a round trip is sent a round trip
-//! apart, centred on their places: see [`Placer::due`]). Segments are streamed by the time-based
-//! rule independently: a fault never delays a segment.
+//! Fault commands are in flight together, also those of one probe (the car answers a probe's
+//! commands in the order they arrive: see `car_link::Car::add_fault`), so faults placed closer
+//! together than the car drives in a round trip are each sent at its own time. Segments are
+//! streamed by the time-based rule independently: a fault never delays a segment.
 
 use std::collections::VecDeque;
 use std::time::Duration;
@@ -49,8 +49,8 @@ const ROUND_TRIPS: usize = 9;
 const HISTORY: usize = 64;
 /// The window over which the car's progress along its route gives its speed, seconds.
 const RATE_WINDOW_S: f64 = 0.2;
-/// Fault commands in flight at once at most (each for another probe).
-pub const MAX_IN_FLIGHT: usize = 3;
+/// Fault commands in flight at once at most (as many as the car takes on one probe).
+pub const MAX_IN_FLIGHT: usize = 5;
 /// The slowest speed a prediction assumes, m/s (a standing car's place is never predicted).
 const MIN_SPEED_MPS: f64 = 0.05;
 
@@ -267,43 +267,16 @@ impl Placer {
     }
 
     /// When the next fault should be sent (seconds since the test began), if one's place is
-    /// known: half a round trip before the car is predicted to reach it.
-    ///
-    /// Fault commands for different probes are in flight together (up to [`MAX_IN_FLIGHT`]),
-    /// one per probe. A fault whose probe has a command in flight waits for it, a round trip.
-    /// When the next faults on one probe are placed so close that the car reaches their places
-    /// sooner than that (their ideal sending times less than a round trip apart), the later ones
-    /// can only go late: the run of them is sent a round trip apart, centred on their ideal
-    /// times, so the first goes as early as the last goes late.
+    /// known: half a round trip before the car is predicted to reach it. Up to
+    /// [`MAX_IN_FLIGHT`] fault commands are in flight together, whatever their probes.
     pub fn due(&self) -> Option<Duration> {
         if self.in_flight.len() >= MAX_IN_FLIGHT {
             return None;
         }
         let seen = self.seen?;
         let round_trip = self.median_round_trip().as_secs_f64();
-        let ideal = |target: f64| seen.car_time + self.travel_s(&seen, target) - round_trip / 2.0;
-        let next = self.next()?;
-        let mut targets: Vec<f64> = self
-            .pending
-            .iter()
-            .filter(|p| p.fault.probe == next.fault.probe)
-            .filter_map(|p| p.target_s)
-            .collect();
-        targets.sort_by(f64::total_cmp);
-        let first = ideal(next.target_s?);
-        // The run of faults on the probe after the first whose ideal times are less than a round
-        // trip apart, each shifted back by its place in the run: the schedule a round trip apart
-        // that starts at `c` is late by `c - shifted` for each; minimax is the middle.
-        let (mut lowest, mut previous) = (first, first);
-        for (k, &target) in targets.iter().enumerate().skip(1) {
-            let at = ideal(target);
-            if at - previous >= round_trip {
-                break;
-            }
-            lowest = lowest.min(at - k as f64 * round_trip);
-            previous = at;
-        }
-        let at = first.min((lowest + first) / 2.0);
+        let target = self.next()?.target_s?;
+        let at = seen.car_time + self.travel_s(&seen, target) - round_trip / 2.0;
         Some(Duration::from_secs_f64(at.max(0.0)))
     }
 
@@ -320,6 +293,14 @@ impl Placer {
             sent: now,
         });
         Some((next.command_index, next.fault))
+    }
+
+    /// Fault commands on `probe` in flight.
+    pub fn in_flight_on(&self, probe: &crate::model::Probe) -> usize {
+        self.in_flight
+            .iter()
+            .filter(|f| &f.pending.fault.probe == probe)
+            .count()
     }
 
     /// Whether a fault command is in flight.
@@ -387,19 +368,12 @@ impl Placer {
         &self.placements
     }
 
-    /// The next fault to send: of those whose segment is appended and whose probe has no
-    /// command in flight, the one whose place comes first on the route (in plan order among
-    /// equal places).
+    /// The next fault to send: of those whose segment is appended, the one whose place comes
+    /// first on the route (in plan order among equal places).
     fn next(&self) -> Option<&Pending> {
         self.pending
             .iter()
             .filter(|p| p.target_s.is_some())
-            .filter(|p| {
-                !self
-                    .in_flight
-                    .iter()
-                    .any(|f| f.pending.fault.probe == p.fault.probe)
-            })
             .min_by(|a, b| {
                 a.target_s
                     .unwrap_or(f64::INFINITY)

@@ -115,9 +115,13 @@ pub(super) struct Shared {
     /// GET_STATE requests in flight, oldest first.
     pub(super) state_waiters: Mutex<VecDeque<StateWaiter>>,
     pub(super) lanes: Mutex<HashMap<u8, Arc<tokio::sync::Mutex<()>>>>,
-    /// Lanes of terminal commands whose replies can be told apart (a fault command per probe).
-    pub(super) named_lanes: Mutex<HashMap<String, Arc<tokio::sync::Mutex<()>>>>,
+    /// Ordered lanes of terminal commands (the fault commands of one probe), by name: see
+    /// [`Shared::terminal_lines_ordered`].
+    pub(super) ordered_lanes: Mutex<HashMap<String, Arc<OrderedLane>>>,
     pub(super) printf: broadcast::Sender<String>,
+    /// PRINTF lines sent on [`Shared::printf`] so far: the number of each line, for
+    /// [`Shared::subscribe_printf`].
+    pub(super) printf_sent: Mutex<u64>,
     pub(super) events: broadcast::Sender<LinkEvent>,
     pub(super) health: Mutex<HealthRecorder>,
     pub(super) last_feed: Mutex<Option<Instant>>,
@@ -152,6 +156,96 @@ impl Drop for WaiterGuard<'_> {
     }
 }
 
+/// A lane of terminal commands in flight together, their replies taken in order (see
+/// [`Shared::terminal_lines_ordered`]).
+#[derive(Debug, Default)]
+pub(super) struct OrderedLane {
+    /// Held while a command is sent: what the last command sent will have taken (the number of the last
+    /// PRINTF line of its reply), for the command after it.
+    tail: tokio::sync::Mutex<Option<oneshot::Receiver<u64>>>,
+}
+
+/// A terminal command's reply being collected: the relevant lines by number, those after `after` taken.
+struct TerminalReply {
+    /// The number of the last line received.
+    seen: u64,
+    /// Relevant lines, by number.
+    lines: Vec<(u64, String)>,
+    /// Lines up to this number belong to earlier commands; `None` until known.
+    after: Option<u64>,
+    deadline: Instant,
+    last_deadline: Instant,
+    quiet: Duration,
+}
+
+impl TerminalReply {
+    /// Collecting from now; `seen`: the line number at subscription in an ordered lane (else every relevant
+    /// line is taken).
+    fn new(config: &LinkConfig, seen: Option<u64>) -> Self {
+        let deadline = Instant::now() + config.terminal_timeout;
+        TerminalReply {
+            seen: seen.unwrap_or(0),
+            lines: Vec::new(),
+            after: if seen.is_some() { None } else { Some(0) },
+            deadline,
+            // However often the car keeps printing, the reply ends here.
+            last_deadline: deadline + config.terminal_timeout,
+            quiet: config.terminal_quiet,
+        }
+    }
+
+    fn line(&mut self, text: String, relevant: impl Fn(&str) -> bool) {
+        self.seen += 1;
+        if relevant(&text) {
+            self.lines.push((self.seen, text));
+            self.quieten();
+        }
+    }
+
+    fn lagged(&mut self, skipped: u64) {
+        self.seen += skipped;
+    }
+
+    /// The earlier commands' replies end at line `after`.
+    fn after(&mut self, after: u64) {
+        self.after = Some(after);
+        self.quieten();
+    }
+
+    /// Once a line is taken, the reply ends when no further one comes within the quiet time.
+    fn quieten(&mut self) {
+        if self.after.is_some() && self.lines.iter().any(|(n, _)| Some(*n) > self.after) {
+            self.deadline = (Instant::now() + self.quiet).min(self.last_deadline);
+        }
+    }
+
+    /// The lines taken (those after the earlier commands' replies).
+    fn taken(&self) -> Vec<String> {
+        let after = self.after.unwrap_or(u64::MAX);
+        self.lines
+            .iter()
+            .filter(|(n, _)| *n > after)
+            .map(|(_, text)| text.clone())
+            .collect()
+    }
+
+    fn complete(&self, done: impl Fn(&[String]) -> bool) -> bool {
+        self.after.is_some() && done(&self.taken())
+    }
+
+    /// The number of the last line taken, else where the earlier commands' replies end: where the next
+    /// command's reply starts.
+    fn last_taken(&self) -> u64 {
+        let after = self.after.unwrap_or(0);
+        self.lines
+            .iter()
+            .map(|(n, _)| *n)
+            .filter(|&n| n > after)
+            .max()
+            .unwrap_or(after)
+    }
+}
+
 impl Shared {
     pub(super) fn new(config: LinkConfig) -> Shared {
         Shared {
@@ -165,8 +259,9 @@ impl Shared {
             garbled: Mutex::new(HashMap::new()),
             state_waiters: Mutex::new(VecDeque::new()),
             lanes: Mutex::new(HashMap::new()),
-            named_lanes: Mutex::new(HashMap::new()),
+            ordered_lanes: Mutex::new(HashMap::new()),
             printf: broadcast::channel(256).0,
+            printf_sent: Mutex::new(0),
             events: broadcast::channel(64).0,
             health: Mutex::new(HealthRecorder::default()),
             last_feed: Mutex::new(None),
@@ -239,7 +334,9 @@ impl Shared {
         let ours = identity.car_id == ID_ALL || car == identity.car_id;
         if let Reply::Printf(text) = reply {
             if ours {
+                let mut sent = lock(&self.printf_sent);
                 let _ = self.printf.send(text);
+                *sent += 1;
             }
             return;
         }
@@ -535,57 +632,98 @@ impl Shared {
 
     /// Sends a terminal command and collects the PRINTF lines that `relevant` accepts, until `done` says the
     /// reply is complete, or the first line does not come within `terminal_timeout`, or no further line comes
-    /// within `terminal_quiet`.
+    /// within `terminal_quiet`. One command per command code at a time.
     pub(super) async fn terminal_lines(
         &self,
         command: &str,
         relevant: impl Fn(&str) -> bool,
         done: impl Fn(&[String]) -> bool,
     ) -> Result<Vec<String>, CarError> {
-        self.terminal_lines_in(None, command, relevant, done).await
-    }
-
-    /// [`Shared::terminal_lines`] one at a time in lane `lane` instead of the terminal's lane: commands in
-    /// different lanes are in flight together, so their replies must be told apart by `relevant` alone.
-    pub(super) async fn terminal_lines_in(
-        &self,
-        lane: Option<&str>,
-        command: &str,
-        relevant: impl Fn(&str) -> bool,
-        done: impl Fn(&[String]) -> bool,
-    ) -> Result<Vec<String>, CarError> {
         let request = Request::TerminalCmd(command.to_string());
         let (payload, _, cmd) = self.encode(&request)?;
-        let lane = match lane {
-            Some(name) => lock(&self.named_lanes)
-                .entry(name.to_owned())
-                .or_default()
-                .clone(),
-            None => self.lane(payload[1]),
-        };
+        let lane = self.lane(payload[1]);
         let _one_at_a_time = lane.lock().await;
-        let mut printf = self.printf.subscribe();
+        let (mut printf, _) = self.subscribe_printf();
         let losses = self.losses.load(Ordering::SeqCst);
         self.send(payload, cmd).await?;
-        let first_deadline = Instant::now() + self.config.terminal_timeout;
-        // However often the car keeps printing, the reply ends here.
-        let last_deadline = first_deadline + self.config.terminal_timeout;
-        let mut lines: Vec<String> = Vec::new();
-        let mut deadline = first_deadline;
-        while !done(&lines) {
-            match tokio::time::timeout_at(deadline, printf.recv()).await {
-                Ok(Ok(text)) if relevant(&text) => {
-                    lines.push(text);
-                    deadline = (Instant::now() + self.config.terminal_quiet).min(last_deadline);
-                }
-                Ok(Ok(_)) | Ok(Err(broadcast::error::RecvError::Lagged(_))) => {}
+        let mut reply = TerminalReply::new(&self.config, None);
+        while !reply.complete(&done) {
+            match tokio::time::timeout_at(reply.deadline, printf.recv()).await {
+                Ok(Ok(text)) => reply.line(text, &relevant),
+                Ok(Err(broadcast::error::RecvError::Lagged(n))) => reply.lagged(n),
                 Ok(Err(broadcast::error::RecvError::Closed)) | Err(_) => break,
             }
         }
         if self.losses.load(Ordering::SeqCst) != losses {
             return Err(CarError::LinkLost);
         }
-        Ok(lines)
+        Ok(reply.taken())
+    }
+
+    /// [`Shared::terminal_lines`] in the ordered lane `lane`: a command is sent without waiting for the
+    /// replies of the lane's earlier commands, and its reply is the lines `relevant` accepts after those its
+    /// predecessor in the lane took. The car answers terminal commands in the order they arrive, so on a
+    /// link that keeps order the replies of one lane come in the order of its commands. `relevant` must
+    /// accept no line of other lanes' replies (fault commands name their probe).
+    pub(super) async fn terminal_lines_ordered(
+        &self,
+        lane: &str,
+        command: &str,
+        relevant: impl Fn(&str) -> bool,
+        done: impl Fn(&[String]) -> bool,
+    ) -> Result<Vec<String>, CarError> {
+        let request = Request::TerminalCmd(command.to_string());
+        let (payload, _, cmd) = self.encode(&request)?;
+        let lane = lock(&self.ordered_lanes)
+            .entry(lane.to_owned())
+            .or_default()
+            .clone();
+        let mut tail = lane.tail.lock().await;
+        let (mut printf, seen) = self.subscribe_printf();
+        let losses = self.losses.load(Ordering::SeqCst);
+        self.send(payload, cmd).await?;
+        // The next command of the lane waits for what this one takes.
+        let (took, next) = oneshot::channel();
+        let mut predecessor = tail.replace(next);
+        drop(tail);
+        let mut reply = TerminalReply::new(&self.config, Some(seen));
+        if predecessor.is_none() {
+            reply.after(0);
+        }
+        while !reply.complete(&done) {
+            tokio::select! {
+                after = async { predecessor.as_mut().expect("polled only while waiting").await },
+                    if predecessor.is_some() =>
+                {
+                    // A predecessor that was cancelled took nothing it says.
+                    reply.after(after.unwrap_or(0));
+                    predecessor = None;
+                }
+                line = tokio::time::timeout_at(reply.deadline, printf.recv()) => match line {
+                    Ok(Ok(text)) => reply.line(text, &relevant),
+                    Ok(Err(broadcast::error::RecvError::Lagged(n))) => reply.lagged(n),
+                    Ok(Err(broadcast::error::RecvError::Closed)) | Err(_) => {
+                        // The predecessor was sent first: its own deadline ends the wait.
+                        if let Some(earlier) = predecessor.take() {
+                            reply.after(earlier.await.unwrap_or(0));
+                        }
+                        break;
+                    }
+                },
+            }
+        }
+        let _ = took.send(reply.last_taken());
+        if self.losses.load(Ordering::SeqCst) != losses {
+            return Err(CarError::LinkLost);
+        }
+        Ok(reply.taken())
+    }
+
+    /// A receiver of the PRINTF lines from now on, and the number of lines sent before it: its k-th line is
+    /// line number `seen + k` (from 1).
+    fn subscribe_printf(&self) -> (broadcast::Receiver<String>, u64) {
+        let sent = lock(&self.printf_sent);
+        (self.printf.subscribe(), *sent)
     }
 
     /// Checks the duplicate-first-point rule for every packet of an upload before anything is sent: no packet
