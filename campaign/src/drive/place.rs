@@ -47,10 +47,17 @@ pub const EARLIER_TOOL_POINTS_LEFT: usize = 4;
 const ROUND_TRIPS: usize = 9;
 /// Samples kept to interpolate where the car was.
 const HISTORY: usize = 64;
-/// The window over which the car's progress along its route gives its speed, seconds.
-const RATE_WINDOW_S: f64 = 0.2;
+/// The window over which the car's progress along its route is compared with its wheels'
+/// travel, seconds.
+const PROGRESS_WINDOW_S: f64 = 1.0;
+/// The bounds of that ratio: a car advances along its route at its wheel speed but for cutting
+/// corners and drifting, a few percent; beyond these the measurement says more about a jump in
+/// where the car is located on its route (a new route, a reset) than about the car.
+const PROGRESS_RATIO: (f64, f64) = (0.8, 1.25);
 /// Fault commands in flight at once at most (as many as the car takes on one probe).
 pub const MAX_IN_FLIGHT: usize = 5;
+/// Wheel travel below which the progress ratio is not measured, metres.
+const MIN_WHEEL_TRAVEL_M: f64 = 0.2;
 /// The slowest speed a prediction assumes, m/s (a standing car's place is never predicted).
 const MIN_SPEED_MPS: f64 = 0.05;
 
@@ -113,6 +120,17 @@ struct InFlight {
     sent: Duration,
 }
 
+/// Where the car was at a sample.
+#[derive(Debug, Clone, Copy)]
+struct Fix {
+    /// When (the sample's arrival less half its round trip), seconds since the test began.
+    t: f64,
+    /// Its distance along the route, metres.
+    s: f64,
+    /// Its wheel speed, m/s.
+    wheel: f64,
+}
+
 /// Where the car was seen last.
 #[derive(Debug, Clone, Copy)]
 struct Seen {
@@ -120,10 +138,8 @@ struct Seen {
     car_time: f64,
     /// Its distance along the route, metres.
     s: f64,
-    /// Its speed, m/s (its progress along the route, else its wheel speed), ...
+    /// Its speed along the route, m/s (its wheel speed times [`Placer::progress_ratio`]).
     speed: f64,
-    /// ... around this distance along the route.
-    speed_at: f64,
     /// Its autopilot's look-ahead radius, metres.
     radius: f64,
 }
@@ -142,7 +158,7 @@ pub struct Placer {
     placements: Vec<FaultPlacement>,
     /// Placements whose actual place waits for a sample after the car added the fault.
     unresolved: Vec<usize>,
-    history: VecDeque<(f64, f64)>,
+    history: VecDeque<Fix>,
     round_trips: VecDeque<Duration>,
     seen: Option<Seen>,
 }
@@ -243,7 +259,11 @@ impl Placer {
             return;
         };
         let car_time = now.as_secs_f64() - round_trip.as_secs_f64() / 2.0;
-        self.history.push_back((car_time, s));
+        self.history.push_back(Fix {
+            t: car_time,
+            s,
+            wheel: speed.abs(),
+        });
         if self.history.len() > HISTORY {
             self.history.pop_front();
         }
@@ -255,12 +275,11 @@ impl Placer {
         } else {
             look_ahead_radius_m(speed)
         };
-        let (speed, speed_at) = self.progress_rate().unwrap_or((speed.abs(), s));
+        let speed = speed.abs() * self.progress_ratio();
         self.seen = Some(Seen {
             car_time,
             s,
             speed,
-            speed_at,
             radius,
         });
         self.resolve();
@@ -382,19 +401,36 @@ impl Placer {
             })
     }
 
-    /// How fast the car advanced along its route over the last [`RATE_WINDOW_S`], m/s: what a
-    /// place is reached by. It differs from the reported wheel speed where the car cuts a corner
-    /// or drifts off the route, and the actual place of a fault is measured along the route too.
-    /// `None` without two samples that far apart. With it, where it applies: the middle of the
-    /// way it was measured over.
-    fn progress_rate(&self) -> Option<(f64, f64)> {
-        let &(t1, s1) = self.history.back()?;
-        let &(t0, s0) = self
+    /// How far the car advanced along its route per metre its wheels turned, over the last
+    /// [`PROGRESS_WINDOW_S`] (1 until then, within [`PROGRESS_RATIO`]): its speed along the route
+    /// is its wheel speed at the last sample times this. A place is reached along the route,
+    /// which a car cutting a corner or drifting advances along a little faster or slower than
+    /// its wheels. The wheel speed is read by the car at the sample; the progress between two
+    /// samples is not as sure over a jittery link (each sample's time is uncertain by half its
+    /// round trip's jitter, ±20 ms here, ±20 % of the progress over 0.2 s), so it is measured
+    /// over a second.
+    fn progress_ratio(&self) -> f64 {
+        let Some(last) = self.history.back() else {
+            return 1.0;
+        };
+        let Some(from) = self
             .history
             .iter()
-            .rev()
-            .find(|(t, _)| t1 - t >= RATE_WINDOW_S)?;
-        (t1 > t0).then(|| (((s1 - s0) / (t1 - t0)).max(0.0), (s0 + s1) / 2.0))
+            .rposition(|f| last.t - f.t >= PROGRESS_WINDOW_S)
+        else {
+            return 1.0;
+        };
+        let fixes = self.history.range(from..);
+        let wheels: f64 = fixes
+            .clone()
+            .zip(fixes.skip(1))
+            .map(|(a, b)| (a.wheel + b.wheel) / 2.0 * (b.t - a.t))
+            .sum();
+        let progress = last.s - self.history[from].s;
+        if wheels < MIN_WHEEL_TRAVEL_M {
+            return 1.0;
+        }
+        (progress / wheels).clamp(PROGRESS_RATIO.0, PROGRESS_RATIO.1)
     }
 
     /// The car's distance along its route at `position`, near the stretch `hint` (where the
@@ -498,7 +534,7 @@ impl Placer {
             return 0.0;
         }
         let ratio = self
-            .route_speed(seen.speed_at + seen.radius)
+            .route_speed(seen.s + seen.radius)
             .map(|asked| seen.speed / asked)
             .filter(|r| r.is_finite() && *r > 0.0);
         let ds = way / steps as f64;
@@ -558,19 +594,13 @@ impl Placer {
         self.unresolved.retain(|&i| {
             let placement = &mut placements[i];
             let t = placement.added_s;
-            let Some(after) = history.iter().position(|&(time, _)| time >= t) else {
+            let Some(after) = history.iter().position(|f| f.t >= t) else {
                 return true;
             };
+            let b = history[after];
             let s = match after.checked_sub(1).map(|before| history[before]) {
-                Some((t0, s0)) => {
-                    let (t1, s1) = history[after];
-                    if t1 > t0 {
-                        s0 + (s1 - s0) * (t - t0) / (t1 - t0)
-                    } else {
-                        s1
-                    }
-                }
-                None => history[after].1,
+                Some(a) if b.t > a.t => a.s + (b.s - a.s) * (t - a.t) / (b.t - a.t),
+                _ => b.s,
             };
             let start = segment_first
                 .get(placement.segment_index)
@@ -708,6 +738,72 @@ mod tests {
         // A car driving at twice its route's speeds keeps doing so.
         let fast = Seen { speed: 2.0, ..seen };
         assert!((placer.travel_s(&fast, 11.0) - expected / 2.0).abs() < 0.01);
+    }
+
+    /// A placer on a straight 1 m/s route along x, fed samples of a car at `x(t)` with wheel
+    /// speed `wheel`, every 50 ms for 2 s, each arriving after a round trip of 340 ms ± 40 ms
+    /// (one in three late, the others early).
+    fn seen_after(x: impl Fn(f64) -> f64, wheel: f64) -> Seen {
+        let route: Vec<Waypoint> = [(0.0, 1.0), (100.0, 1.0)]
+            .iter()
+            .map(|&(x, v)| Waypoint::new(Point::new(x, 0.0), v))
+            .collect();
+        let plan = TestPlan {
+            test_index: 0,
+            start_tail: trajgen::RouteTail::from_points(&[
+                Point::new(0.0, 0.0),
+                Point::new(1.0, 0.0),
+            ])
+            .unwrap(),
+            commands: Vec::new(),
+        };
+        let mut placer = Placer::new(&plan, &route);
+        for k in 0..=40 {
+            let t = 0.05 * k as f64;
+            let jitter = if k % 3 == 1 { 0.04 } else { -0.04 };
+            // The car answered at t; the reply came half a round trip plus the jitter later.
+            let round_trip = 0.34 + jitter;
+            let arrival = t + 0.17 + jitter;
+            let position = Point::new(x(t), 0.0);
+            let sample = super::super::Sample {
+                rtk: position,
+                uwb: position,
+                speed: wheel,
+                round_trip: Duration::from_secs_f64(round_trip),
+                look_ahead_radius_m: 1.0,
+            };
+            let progress = Progress {
+                segment: 0,
+                fraction: position.x / 100.0,
+            };
+            placer.observe(Duration::from_secs_f64(arrival), &sample, progress);
+        }
+        placer.seen.unwrap()
+    }
+
+    #[test]
+    fn the_speed_along_the_route_is_not_thrown_by_the_links_jitter() {
+        // At 2 m/s, a sample's time is 20 ms off either way: the progress between the last
+        // sample (late) and one 0.2 s before it (early) reads 17 % slow. The wheel speed does
+        // not, and the progress per wheel travel over a second is 4 % off at most.
+        let seen = seen_after(|t| 10.0 + 2.0 * t, 2.0);
+        assert!((seen.speed - 2.0).abs() < 0.1, "{}", seen.speed);
+        // A car advancing along its route faster than its wheels turn (cutting corners) keeps
+        // its ratio, measured over a second.
+        let cutting = seen_after(|t| 10.0 + 2.4 * t, 2.0);
+        assert!((cutting.speed - 2.4).abs() < 0.12, "{}", cutting.speed);
+        // A jump in where the car is located says nothing of its speed beyond the bounds.
+        let jumped = seen_after(
+            |t| {
+                if t < 1.5 {
+                    10.0 + 2.0 * t
+                } else {
+                    20.0 + 2.0 * t
+                }
+            },
+            2.0,
+        );
+        assert!((jumped.speed - 2.5).abs() < 1e-9, "{}", jumped.speed);
     }
 
     #[test]
