@@ -111,12 +111,8 @@ async fn campaign_over(
     (car, report)
 }
 
-/// Fault commands for two probes are in flight together: on a link of 150 ms each way both are
-/// added within one round trip, not two (before, the second waited for the first's reply, and a
-/// fault placed 0.7 m after another on a 2.5 m/s segment was added 0.44 m late).
-#[tokio::test(start_paused = true)]
-async fn fault_commands_for_two_probes_take_one_round_trip() {
-    use car_link::{FaultKind, Probe};
+/// A simulated car of the two-anchor lot, 150 ms away each way, with fault injection on.
+async fn car_150ms_away() -> (Car, car_sim::SimHandle) {
     let scenario = scenarios::bundled::load("parking-lot-2anchors")
         .unwrap()
         .scenario;
@@ -127,8 +123,18 @@ async fn fault_commands_for_two_probes_take_one_round_trip() {
         },
         ..SimConfig::from_scenario(&scenario)
     };
-    let (car, _sim) = common::sim_car(&sim_config).await;
+    let (car, sim) = common::sim_car(&sim_config).await;
     car.set_fi_enabled(true).await.unwrap();
+    (car, sim)
+}
+
+/// Fault commands for two probes are in flight together: on a link of 150 ms each way both are
+/// added within one round trip, not two (before, the second waited for the first's reply, and a
+/// fault placed 0.7 m after another on a 2.5 m/s segment was added 0.44 m late).
+#[tokio::test(start_paused = true)]
+async fn fault_commands_for_two_probes_take_one_round_trip() {
+    use car_link::{FaultKind, Probe};
+    let (car, _sim) = car_150ms_away().await;
     let started = tokio::time::Instant::now();
     let (range, yaw) = tokio::join!(
         car.add_fault(&Probe::UwbRange(50), FaultKind::Offset, 1.0, 1000, 1),
@@ -149,18 +155,7 @@ async fn fault_commands_for_two_probes_take_one_round_trip() {
 async fn fault_commands_for_one_probe_take_one_round_trip_and_their_own_replies() {
     use car_link::fault::{FaultError, FaultRejection};
     use car_link::{CarError, FaultKind, Probe};
-    let scenario = scenarios::bundled::load("parking-lot-2anchors")
-        .unwrap()
-        .scenario;
-    let sim_config = SimConfig {
-        link: LinkImpairment {
-            latency: Duration::from_millis(150),
-            ..LinkImpairment::default()
-        },
-        ..SimConfig::from_scenario(&scenario)
-    };
-    let (car, _sim) = common::sim_car(&sim_config).await;
-    car.set_fi_enabled(true).await.unwrap();
+    let (car, _sim) = car_150ms_away().await;
     let probe = Probe::UwbRange(50);
     let started = tokio::time::Instant::now();
     let add = |k: u64| {

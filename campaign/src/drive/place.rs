@@ -694,11 +694,9 @@ mod tests {
         assert!((previous.unwrap() - 5.0).abs() < 1e-9);
     }
 
-    #[test]
-    fn a_car_is_predicted_to_speed_up_where_its_goal_reaches_a_faster_stretch() {
-        // 1 m/s to x = 10, then towards x = 20 at 3 m/s: on that stretch the autopilot's speed
-        // rises from 1 to 3 m/s as its goal, 1 m ahead, moves along it.
-        let route: Vec<Waypoint> = [(0.0, 1.0), (10.0, 1.0), (20.0, 3.0)]
+    /// A placer on a route along the x axis through the points `(x, speed)`.
+    fn placer_along_x(points: &[(f64, f64)]) -> Placer {
+        let route: Vec<Waypoint> = points
             .iter()
             .map(|&(x, v)| Waypoint::new(Point::new(x, 0.0), v))
             .collect();
@@ -711,7 +709,14 @@ mod tests {
             .unwrap(),
             commands: Vec::new(),
         };
-        let mut placer = Placer::new(&plan, &route);
+        Placer::new(&plan, &route)
+    }
+
+    #[test]
+    fn a_car_is_predicted_to_speed_up_where_its_goal_reaches_a_faster_stretch() {
+        // 1 m/s to x = 10, then towards x = 20 at 3 m/s: on that stretch the autopilot's speed
+        // rises from 1 to 3 m/s as its goal, 1 m ahead, moves along it.
+        let mut placer = placer_along_x(&[(0.0, 1.0), (10.0, 1.0), (20.0, 3.0)]);
         for k in 0..=6 {
             let sample = super::super::Sample {
                 rtk: Point::new(7.4 + 0.1 * k as f64, 0.0),
@@ -744,20 +749,7 @@ mod tests {
     /// speed `wheel`, every 50 ms for 2 s, each arriving after a round trip of 340 ms ± 40 ms
     /// (one in three late, the others early).
     fn seen_after(x: impl Fn(f64) -> f64, wheel: f64) -> Seen {
-        let route: Vec<Waypoint> = [(0.0, 1.0), (100.0, 1.0)]
-            .iter()
-            .map(|&(x, v)| Waypoint::new(Point::new(x, 0.0), v))
-            .collect();
-        let plan = TestPlan {
-            test_index: 0,
-            start_tail: trajgen::RouteTail::from_points(&[
-                Point::new(0.0, 0.0),
-                Point::new(1.0, 0.0),
-            ])
-            .unwrap(),
-            commands: Vec::new(),
-        };
-        let mut placer = Placer::new(&plan, &route);
+        let mut placer = placer_along_x(&[(0.0, 1.0), (100.0, 1.0)]);
         for k in 0..=40 {
             let t = 0.05 * k as f64;
             let jitter = if k % 3 == 1 { 0.04 } else { -0.04 };
