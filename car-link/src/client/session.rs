@@ -179,14 +179,13 @@ struct TerminalReply {
 }
 
 impl TerminalReply {
-    /// Collecting from now; `seen`: the line number at subscription in an ordered lane (else every relevant
-    /// line is taken).
-    fn new(config: &LinkConfig, seen: Option<u64>) -> Self {
+    /// Collecting from now, subscribed after line `seen`.
+    fn new(config: &LinkConfig, seen: u64) -> Self {
         let deadline = Instant::now() + config.terminal_timeout;
         TerminalReply {
-            seen: seen.unwrap_or(0),
+            seen,
             lines: Vec::new(),
-            after: if seen.is_some() { None } else { Some(0) },
+            after: None,
             deadline,
             // However often the car keeps printing, the reply ends here.
             last_deadline: deadline + config.terminal_timeout,
@@ -236,7 +235,7 @@ impl TerminalReply {
     /// The number of the last line taken, else where the earlier commands' replies end: where the next
     /// command's reply starts.
     fn last_taken(&self) -> u64 {
-        let after = self.after.unwrap_or(0);
+        let after = self.after.unwrap_or(self.seen);
         self.lines
             .iter()
             .map(|(n, _)| *n)
@@ -643,21 +642,11 @@ impl Shared {
         let (payload, _, cmd) = self.encode(&request)?;
         let lane = self.lane(payload[1]);
         let _one_at_a_time = lane.lock().await;
-        let (mut printf, _) = self.subscribe_printf();
+        let (printf, seen) = self.subscribe_printf();
         let losses = self.losses.load(Ordering::SeqCst);
         self.send(payload, cmd).await?;
-        let mut reply = TerminalReply::new(&self.config, None);
-        while !reply.complete(&done) {
-            match tokio::time::timeout_at(reply.deadline, printf.recv()).await {
-                Ok(Ok(text)) => reply.line(text, &relevant),
-                Ok(Err(broadcast::error::RecvError::Lagged(n))) => reply.lagged(n),
-                Ok(Err(broadcast::error::RecvError::Closed)) | Err(_) => break,
-            }
-        }
-        if self.losses.load(Ordering::SeqCst) != losses {
-            return Err(CarError::LinkLost);
-        }
-        Ok(reply.taken())
+        let reply = self.collect(printf, seen, None, relevant, done).await;
+        self.reply_lines(&reply, losses)
     }
 
     /// [`Shared::terminal_lines`] in the ordered lane `lane`: a command is sent without waiting for the
@@ -679,16 +668,34 @@ impl Shared {
             .or_default()
             .clone();
         let mut tail = lane.tail.lock().await;
-        let (mut printf, seen) = self.subscribe_printf();
+        let (printf, seen) = self.subscribe_printf();
         let losses = self.losses.load(Ordering::SeqCst);
         self.send(payload, cmd).await?;
         // The next command of the lane waits for what this one takes.
         let (took, next) = oneshot::channel();
-        let mut predecessor = tail.replace(next);
+        let predecessor = tail.replace(next);
         drop(tail);
-        let mut reply = TerminalReply::new(&self.config, Some(seen));
+        let reply = self
+            .collect(printf, seen, predecessor, relevant, done)
+            .await;
+        let _ = took.send(reply.last_taken());
+        self.reply_lines(&reply, losses)
+    }
+
+    /// Collects a terminal command's reply from `printf` (subscribed after line `seen`): the lines `relevant`
+    /// accepts after those the command's `predecessor` in its lane took (with none, every such line), until
+    /// `done` says it is complete or its deadline passes.
+    async fn collect(
+        &self,
+        mut printf: broadcast::Receiver<String>,
+        seen: u64,
+        mut predecessor: Option<oneshot::Receiver<u64>>,
+        relevant: impl Fn(&str) -> bool,
+        done: impl Fn(&[String]) -> bool,
+    ) -> TerminalReply {
+        let mut reply = TerminalReply::new(&self.config, seen);
         if predecessor.is_none() {
-            reply.after(0);
+            reply.after(seen);
         }
         while !reply.complete(&done) {
             tokio::select! {
@@ -696,7 +703,7 @@ impl Shared {
                     if predecessor.is_some() =>
                 {
                     // A predecessor that was cancelled took nothing it says.
-                    reply.after(after.unwrap_or(0));
+                    reply.after(after.unwrap_or(seen));
                     predecessor = None;
                 }
                 line = tokio::time::timeout_at(reply.deadline, printf.recv()) => match line {
@@ -705,14 +712,18 @@ impl Shared {
                     Ok(Err(broadcast::error::RecvError::Closed)) | Err(_) => {
                         // The predecessor was sent first: its own deadline ends the wait.
                         if let Some(earlier) = predecessor.take() {
-                            reply.after(earlier.await.unwrap_or(0));
+                            reply.after(earlier.await.unwrap_or(seen));
                         }
                         break;
                     }
                 },
             }
         }
-        let _ = took.send(reply.last_taken());
+        reply
+    }
+
+    /// The lines of `reply`, unless the link was lost since `losses` was read.
+    fn reply_lines(&self, reply: &TerminalReply, losses: u64) -> Result<Vec<String>, CarError> {
         if self.losses.load(Ordering::SeqCst) != losses {
             return Err(CarError::LinkLost);
         }
