@@ -25,12 +25,13 @@
 //! with the direction the fault moves the estimate in (a range fault on *A* along `u_A`, a
 //! `uwb_travel_dist` fault along `h`, a `uwb_yaw` fault across it: a yaw offset of α degrees
 //! turns the dead-reckoned track by α, which moves `e` along `n` turned by −α/2, the firmware's
-//! yaw being clockwise), the best aligned of them if several, shared equally with the faults on
-//! its probe whose windows cover the step as well (they act together); the schedule says the
-//! fault is acting, which an unfaulted direction, even better aligned by a few degrees, cannot
-//! claim.
+//! yaw being clockwise), the best aligned of them if several; the schedule says the fault is
+//! acting, which an unfaulted direction, even better aligned by a few degrees, cannot claim.
 //! Otherwise the step goes to the best-aligned of the anchors' ranges, the odometry and the
-//! heading. A cause's share is its growth
+//! heading, and to a fault on that direction's probe whose window covers it. Either way, the
+//! faults on that probe whose windows cover the step as well act together: the step is shared
+//! among them by how much each changes the probe's value (|offset|, |factor − 1|; equally when
+//! their kinds differ). A cause's share is its growth
 //! over the whole growth; causes below [`ExplainConfig::min_growth_m`] are left to
 //! `unexplained` (the threshold a fault-free calibration sets: see `docs/explain.md`).
 //!
@@ -328,7 +329,7 @@ pub fn explain_segment(
         // one whose estimated window is nearest (inside it: distance 0).
         let window_distance =
             |f: &ExplainFault| (f.acts_from_s - mid_t).max(mid_t - f.acts_to_s).max(0.0);
-        let source_of = |d: Direction| {
+        let fault_of = |d: Direction| {
             faults
                 .iter()
                 .filter(|f| d.moved_by(f.probe))
@@ -336,16 +337,18 @@ pub fn explain_segment(
                 .filter(|(_, distance)| *distance <= config.window_slack_s)
                 .min_by(|a, b| a.1.total_cmp(&b.1))
                 .map(|(f, _)| f)
-                .map_or(
-                    match d {
-                        Direction::Anchor(id) => Source::Anchor { anchor_id: id },
-                        Direction::Travel => Source::Odometry,
-                        Direction::Yaw => Source::Heading,
-                    },
-                    |f| Source::Fault {
-                        command_index: f.command_index,
-                    },
-                )
+        };
+        let source_of = |d: Direction| {
+            fault_of(d).map_or(
+                match d {
+                    Direction::Anchor(id) => Source::Anchor { anchor_id: id },
+                    Direction::Travel => Source::Odometry,
+                    Direction::Yaw => Source::Heading,
+                },
+                |f| Source::Fault {
+                    command_index: f.command_index,
+                },
+            )
         };
         // An acting fault the step is aligned with comes first: the best aligned; among equals
         // the nearest window.
@@ -361,16 +364,10 @@ pub fn explain_segment(
                 a.2.total_cmp(&b.2)
                     .then(window_distance(b.0).total_cmp(&window_distance(a.0)))
             });
-        let (source, direction, alignment) = match acting {
-            Some((f, direction, cos)) => (
-                Source::Fault {
-                    command_index: f.command_index,
-                },
-                direction,
-                cos,
-            ),
+        let (fault, direction, alignment) = match acting {
+            Some((f, direction, cos)) => (Some(f), direction, cos),
             None if best_alignment >= config.min_alignment => {
-                (source_of(best), best, best_alignment)
+                (fault_of(best), best, best_alignment)
             }
             None => {
                 unexplained += growth;
@@ -378,6 +375,12 @@ pub fn explain_segment(
                 continue;
             }
         };
+        let source = fault.map_or_else(
+            || source_of(direction),
+            |f| Source::Fault {
+                command_index: f.command_index,
+            },
+        );
         // The runner-up is as well aligned: this step cannot tell the two apart.
         let ambiguous = ranked
             .iter()
@@ -386,20 +389,17 @@ pub fn explain_segment(
             .map(|&(d, _)| source_of(d))
             .filter(|s| *s != source);
         // Faults on the chosen fault's probe acting as surely (their windows as near) act
-        // together: the step is theirs in equal parts (which of them changed the probe's value
-        // more is not in what a car reports).
-        let together: Vec<Source> = match acting {
-            Some((f, _, _)) => faults
-                .iter()
-                .filter(|g| g.probe == f.probe && window_distance(g) <= window_distance(f))
-                .map(|g| Source::Fault {
-                    command_index: g.command_index,
-                })
-                .collect(),
-            None => vec![source],
+        // together: the step is theirs in proportion to how much each changes the probe's value
+        // (see [`together_weights`]).
+        let together: Vec<(Source, f64)> = match fault {
+            Some(f) => together_weights(
+                faults
+                    .iter()
+                    .filter(|g| g.probe == f.probe && window_distance(g) <= window_distance(f)),
+            ),
+            None => vec![(source, 1.0)],
         };
-        let each = growth / together.len() as f64;
-        for source in together {
+        for (source, weight) in together {
             let index = match credit.iter().position(|c| c.source == source) {
                 Some(index) => index,
                 None => {
@@ -414,7 +414,7 @@ pub fn explain_segment(
                 }
             };
             let c = &mut credit[index];
-            c.growth += each;
+            c.growth += growth * weight;
             c.steps += 1;
             if let Some(other) = ambiguous {
                 match c.ambiguous.iter_mut().find(|a| a.0 == other) {
@@ -468,6 +468,39 @@ pub fn explain_segment(
         error_to_m: error(usable[end]),
         causes,
     })
+}
+
+/// The shares of a step among faults acting together on one probe: in proportion to how much
+/// each changes the probe's value, where their kinds make that comparable without the value
+/// itself (all offsets: |offset|; all amplifications: |factor − 1|, times the same value); in
+/// equal parts otherwise (mixed kinds, set_to, bitflip).
+fn together_weights<'a>(faults: impl Iterator<Item = &'a ExplainFault>) -> Vec<(Source, f64)> {
+    let faults: Vec<&ExplainFault> = faults.collect();
+    let size = |f: &ExplainFault| match f.kind {
+        FaultKind::Offset => f.param.abs(),
+        FaultKind::Amplification => (f.param - 1.0).abs(),
+        _ => f64::NAN,
+    };
+    let comparable = faults.windows(2).all(|w| w[0].kind == w[1].kind);
+    let sizes: Vec<f64> = faults.iter().map(|f| size(f)).collect();
+    let total: f64 = sizes.iter().sum();
+    let weights: Vec<f64> = if comparable && total.is_finite() && total > 0.0 {
+        sizes.iter().map(|s| s / total).collect()
+    } else {
+        vec![1.0 / faults.len().max(1) as f64; faults.len()]
+    };
+    faults
+        .iter()
+        .zip(weights)
+        .map(|(f, w)| {
+            (
+                Source::Fault {
+                    command_index: f.command_index,
+                },
+                w,
+            )
+        })
+        .collect()
 }
 
 /// How much less aligned than the best a direction may be to be named as ambiguous with it.
@@ -738,6 +771,57 @@ mod tests {
         let shares = explain(&[slip(3, 2.0, 4.0), slip(5, 2.0, 5.0)]);
         assert_eq!(shares[0].0, fault(5), "{shares:?}");
         assert!((shares[0].1 - 0.75).abs() < 0.05, "{shares:?}");
+        // Over the same window, by how much each changes the travelled distance: ×1.5 adds a
+        // half, ×3 twice as much again (a fifth and four fifths).
+        let shares = explain(&[slip(3, 1.5, 5.0), slip(5, 3.0, 5.0)]);
+        assert_eq!(shares[0].0, fault(5), "{shares:?}");
+        assert!((shares[0].1 - 0.8).abs() < 0.02, "{shares:?}");
+        assert!((shares[1].1 - 0.2).abs() < 0.02, "{shares:?}");
+        // Kinds that cannot be compared without the value itself share equally.
+        let mut set_to = slip(5, 0.4, 5.0);
+        set_to.kind = FaultKind::SetTo;
+        let shares = explain(&[slip(3, 3.0, 5.0), set_to]);
+        assert!((shares[0].1 - 0.5).abs() < 0.02, "{shares:?}");
+        assert!((shares[1].1 - 0.5).abs() < 0.02, "{shares:?}");
+    }
+
+    #[test]
+    fn yaw_faults_acting_together_share_a_step_across_the_heading_by_their_offsets() {
+        // The error grows straight across the heading (north while driving east): the plain
+        // heading direction, which neither offset's turned direction (−40° and +50°) is within
+        // |cos| 0.8 of. Both faults act over the whole growth; the step is theirs by offset,
+        // not the first listed's alone.
+        let samples = drive(6.0, |t| {
+            Point::new(0.0, 0.3 + 0.3 * (t - 2.0).clamp(0.0, 3.0))
+        });
+        let yaw = |command_index, param| ExplainFault {
+            command_index,
+            probe: Probe::UwbYaw,
+            kind: FaultKind::Offset,
+            param,
+            acts_from_s: 2.0,
+            acts_to_s: 5.0,
+        };
+        let explained = explain_segment(
+            &segment(6.0),
+            &samples,
+            &[],
+            &[yaw(1, 80.0), yaw(2, -100.0)],
+            &ExplainConfig::default(),
+        )
+        .unwrap();
+        let shares: Vec<(Source, f64)> = explained
+            .causes
+            .iter()
+            .map(|c| (c.source, c.share))
+            .collect();
+        assert_eq!(
+            shares[0].0,
+            Source::Fault { command_index: 2 },
+            "{shares:?}"
+        );
+        assert!((shares[0].1 - 100.0 / 180.0).abs() < 0.02, "{shares:?}");
+        assert!((shares[1].1 - 80.0 / 180.0).abs() < 0.02, "{shares:?}");
     }
 
     #[test]

@@ -265,15 +265,10 @@ pub fn score_run(
                     "uwb_yaw" => delta.to_radians() * YAW_LEVER_M,
                     _ => delta.min(MAX_CORRECTION_M),
                 };
-                for slot in 0..8 {
-                    if f.slots & (1 << slot) == 0 {
-                        continue;
-                    }
-                    if let Some(command) = command_of_slot(&test.case, &f.probe, slot) {
-                        match moved.iter_mut().find(|m| m.0 == command) {
-                            Some(m) => m.1 += metres,
-                            None => moved.push((command, metres)),
-                        }
+                for (command, part) in slot_shares(&test.case, f) {
+                    match moved.iter_mut().find(|m| m.0 == command) {
+                        Some(m) => m.1 += metres * part,
+                        None => moved.push((command, metres * part)),
                     }
                 }
             }
@@ -362,6 +357,44 @@ fn command_of_slot(case: &Case, probe: &str, slot: usize) -> Option<usize> {
         })
         .nth(slot)
         .map(|place| place.command_index)
+}
+
+/// The faults that applied in one probe call (`applied`), each with its share of the call's
+/// change of the probe's value: the simulator applies them in slot order, so each slot's own
+/// change is replayed from the value before. Equal shares when the changes cannot be told (the
+/// value before is not finite, or no slot changed it).
+fn slot_shares(case: &Case, applied: &crate::recording::SimFault) -> Vec<(usize, f64)> {
+    use car_sim::fault::FaultEffect;
+    let mut value = applied.before as f32;
+    let mut changes: Vec<(usize, f64)> = Vec::new();
+    for slot in (0..8).filter(|slot| applied.slots & (1 << slot) != 0) {
+        let Some(command) = command_of_slot(case, &applied.probe, slot) else {
+            continue;
+        };
+        let change = match case.commands.get(command) {
+            Some(CommandRecord::AddFault { kind, param, .. }) => {
+                let next = kind.apply(value, *param as f32);
+                let change = f64::from((next - value).abs());
+                value = next;
+                change
+            }
+            _ => f64::NAN,
+        };
+        changes.push((command, change));
+    }
+    let total: f64 = changes.iter().map(|c| c.1).sum();
+    let equal = 1.0 / changes.len().max(1) as f64;
+    changes
+        .into_iter()
+        .map(|(command, change)| {
+            let part = if total.is_finite() && total > 0.0 {
+                change / total
+            } else {
+                equal
+            };
+            (command, part)
+        })
+        .collect()
 }
 
 /// The class of a truth, for the confusion matrix.
@@ -477,4 +510,62 @@ pub fn calibrate(
 fn quantile(values: &[f64], q: f64) -> f64 {
     let rank = ((q * values.len() as f64).ceil() as usize).clamp(1, values.len());
     values[rank - 1]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::recording::SimFault;
+
+    /// A case with two wheel-slip faults, ×1.5 (slot 0) and ×3 (slot 1).
+    fn two_slips() -> Case {
+        let place = |command_index: usize| {
+            serde_json::json!({
+                "command_index": command_index, "rule": "planned", "segment_index": 0,
+                "planned_along_m": 1.0, "sent_s": 1.0, "added_s": 1.0,
+                "acts_from_s": 1.0, "acts_to_s": 2.0
+            })
+        };
+        let fault = |param: f64| {
+            serde_json::json!({
+                "command": "add_fault", "probe": "uwb_travel_dist", "kind": "amplification",
+                "param": param, "start": 0, "duration": 100
+            })
+        };
+        let json = serde_json::json!({
+            "format": "drivecheck-case", "schema_version": 2, "scenario": {"name": "s"},
+            "commands": [fault(1.5), fault(3.0)],
+            "fault_places": [place(0), place(1)]
+        });
+        Case::from_json(&json.to_string()).unwrap()
+    }
+
+    fn applied(slots: u8, before: f64) -> SimFault {
+        SimFault {
+            sim_ms: 0,
+            probe: "uwb_travel_dist".to_owned(),
+            slots,
+            iteration: 0,
+            before,
+            after: f64::NAN,
+        }
+    }
+
+    #[test]
+    fn a_probe_call_is_shared_among_its_faults_by_each_ones_own_change() {
+        let case = two_slips();
+        // 10 mm: ×1.5 adds 5 mm, then ×3 adds 30 mm.
+        let shares = slot_shares(&case, &applied(0b11, 0.01));
+        assert_eq!(shares.len(), 2);
+        assert_eq!(shares[0].0, 0);
+        assert!((shares[0].1 - 1.0 / 7.0).abs() < 1e-6, "{shares:?}");
+        assert!((shares[1].1 - 6.0 / 7.0).abs() < 1e-6, "{shares:?}");
+        // One slot alone takes the whole call.
+        assert_eq!(slot_shares(&case, &applied(0b10, 0.01)), vec![(1, 1.0)]);
+        // Without the value before, the changes cannot be told: equal shares.
+        assert_eq!(
+            slot_shares(&case, &applied(0b11, f64::NAN)),
+            vec![(0, 0.5), (1, 0.5)]
+        );
+    }
 }
