@@ -16,8 +16,9 @@
 //! - a wrong yaw (a yaw fault, a heading error) moves it across the heading, along `n`.
 //!
 //! For a failing segment the growth interval is the stretch before the first sample above the
-//! threshold during which the error grew from its last nominal level (at most
-//! [`ExplainConfig::lookback_s`]). Each step between two samples in which the error grows
+//! threshold during which the error grew from its last nominal level, however long before (a
+//! segment whose error never came back from an earlier failure fails for what made it grow
+//! then). Each step between two samples in which the error grows
 //! (`Δe · e/|e| > 0`) gives its growth to the direction its `Δe` is most aligned with, when that
 //! alignment (|cos|) reaches [`ExplainConfig::min_alignment`]; otherwise to `unexplained`. The
 //! injected faults come first: a step goes to a fault whose window (widened by
@@ -109,8 +110,6 @@ pub struct ExplainConfig {
     /// --calibrate`, 1 % budget) on 100 fault-free tests of the bundled two-anchor lot (seed 1:
     /// 0.486 m; seed 2: 0.483 m).
     pub nominal_m: f64,
-    /// The growth interval's longest extent, seconds.
-    pub lookback_s: f64,
     /// The least |cos| between a step's `Δe` and a direction for the step to count for it.
     pub min_alignment: f64,
     /// How much wider than its estimated window a fault is taken to act, seconds each side (the
@@ -128,7 +127,6 @@ impl Default for ExplainConfig {
         Self {
             threshold_m: 1.0,
             nominal_m: 0.49,
-            lookback_s: 6.0,
             min_alignment: 0.8,
             window_slack_s: 1.0,
             min_growth_m: 0.08,
@@ -267,10 +265,11 @@ pub fn explain_segment(
                 .max_by(|&a, &b| error(usable[a]).total_cmp(&error(usable[b])))
                 .unwrap_or(last)
         });
-    let earliest = usable[end].t_s - config.lookback_s;
+    // The start: where the error last was nominal, however long before. A segment whose error
+    // never came back from an earlier failure (the estimate lost and not recovered) fails for
+    // what made it grow then.
     let mut start = end;
-    while start > 0 && usable[start - 1].t_s >= earliest && error(usable[start]) > config.nominal_m
-    {
+    while start > 0 && error(usable[start]) > config.nominal_m {
         start -= 1;
     }
     let mut credit: Vec<Credit> = Vec::new();
@@ -656,6 +655,47 @@ mod tests {
         .unwrap();
         assert_eq!(unfaulted.top().map(|c| c.source), Some(Source::Odometry));
         assert!(unfaulted.top().unwrap().share > 0.9, "{unfaulted:?}");
+    }
+
+    #[test]
+    fn a_segment_that_never_recovered_from_an_earlier_failure_is_explained_by_its_cause() {
+        // A slip from 2 s to 4 s pushes the error ahead past 1 m; it never comes back, and creeps
+        // across at 2 cm/s after. The segment from 15 s fails from its first sample: for the slip,
+        // 11 s before, not for the creep.
+        let samples = drive(20.0, |t| {
+            Point::new(
+                0.5 * (t - 2.0).clamp(0.0, 2.0),
+                0.3 + 0.02 * (t - 4.0).max(0.0),
+            )
+        });
+        let slip = ExplainFault {
+            command_index: 3,
+            probe: Probe::UwbTravelDist,
+            kind: FaultKind::Amplification,
+            param: 2.5,
+            acts_from_s: 2.0,
+            acts_to_s: 4.0,
+        };
+        let late = ExplainSegment {
+            segment_index: 6,
+            from_s: 15.0,
+            to_s: 20.0,
+            failed: true,
+        };
+        let explained = explain_segment(
+            &late,
+            &samples,
+            &anchors(),
+            &[slip],
+            &ExplainConfig::default(),
+        )
+        .unwrap();
+        assert!(explained.from_s < 4.0, "{explained:?}");
+        assert_eq!(
+            explained.top().map(|c| c.source),
+            Some(Source::Fault { command_index: 3 }),
+            "{explained:?}"
+        );
     }
 
     #[test]

@@ -240,6 +240,18 @@ pub fn with_fault_values(case: &Case, axes: &[Axis], point: &[f64]) -> Case {
     out
 }
 
+/// `case` without the effect of fault command `command_index`: it becomes a `NONE` fault, sent at
+/// the same place and taking the same slot, so the other faults act as they did (a
+/// counterfactual: what the test does without that fault). `case` itself when that command is
+/// not a fault.
+pub fn with_fault_silenced(case: &Case, command_index: usize) -> Case {
+    let mut out = case.clone();
+    if let Some(CommandRecord::AddFault { kind, .. }) = out.commands.get_mut(command_index) {
+        *kind = car_link::FaultKind::None;
+    }
+    out
+}
+
 /// One segment over a point's runs.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -439,5 +451,36 @@ mod tests {
             CommandRecord::AddFault { start: 5, .. }
         ));
         assert_eq!(grid(&[]), vec![Vec::<f64>::new()]);
+    }
+
+    #[test]
+    fn a_silenced_fault_keeps_its_place_and_does_nothing() {
+        let case = case();
+        let first = fault_commands(&case)[0];
+        let silenced = with_fault_silenced(&case, first);
+        let CommandRecord::AddFault {
+            kind,
+            probe,
+            start,
+            at,
+            ..
+        } = &silenced.commands[first]
+        else {
+            panic!("still a fault command");
+        };
+        assert_eq!(*kind, car_link::FaultKind::None);
+        let CommandRecord::AddFault {
+            probe: p0,
+            start: s0,
+            at: a0,
+            ..
+        } = &case.commands[first]
+        else {
+            panic!("a fault command");
+        };
+        assert_eq!((probe, start, at), (p0, s0, a0));
+        assert_eq!(silenced.commands.len(), case.commands.len());
+        // Not a fault: the case as it was.
+        assert_eq!(with_fault_silenced(&case, 0).commands, case.commands);
     }
 }

@@ -294,6 +294,12 @@ pub struct ExplainArgs {
     /// recorded against the embedded simulated car.
     #[arg(long)]
     pub score: bool,
+    /// With `--score`: where two or more faults moved the estimate in a failing segment, drive
+    /// its case again this many times (seeds from the campaign's) as it was and without each of
+    /// them, on the embedded simulated car in virtual time; the truth is the fault whose absence
+    /// lowers the segment's largest deviation most. 0: rank them by how far each pushed its probe.
+    #[arg(long, default_value_t = 3, value_name = "RUNS")]
+    pub counterfactual_runs: u32,
     /// Scenario of the run (default: the one stored in the recording, else the bundled one the
     /// run names).
     #[arg(long)]

@@ -99,6 +99,40 @@ fn a_run_with_faults_is_explained_by_them_and_cannot_be_calibrated_on() {
         "{right} of {} right",
         scored.len()
     );
+    // Where two faults moved a failing segment's estimate, the case was driven again without
+    // each, and the truth is the one whose absence lowered its deviation most.
+    let settled: Vec<&serde_json::Value> = scored
+        .iter()
+        .filter(|s| s["moved"].as_array().is_some_and(|m| m.len() >= 2))
+        .collect();
+    assert!(!settled.is_empty(), "{json}");
+    for s in &settled {
+        let drops = s["counterfactual"].as_array().expect("a counterfactual");
+        assert_eq!(drops.len(), s["moved"].as_array().unwrap().len(), "{s}");
+        if drops[0]["metres"].as_f64().unwrap() >= 0.05 {
+            assert_eq!(
+                s["truth"]["command_index"], drops[0]["command_index"],
+                "{s}"
+            );
+        }
+    }
+    let unsettled = drivecheck(&[
+        "explain",
+        path(&run),
+        "--score",
+        "--json",
+        "--counterfactual-runs",
+        "0",
+    ]);
+    assert_eq!(unsettled.status.code(), Some(0), "{}", text(&unsettled));
+    let unsettled: serde_json::Value = serde_json::from_slice(&unsettled.stdout).unwrap();
+    assert!(
+        unsettled["scored"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|s| s.get("counterfactual").is_none())
+    );
     let calibrated = drivecheck(&["explain", path(&run), "--calibrate"]);
     assert_eq!(calibrated.status.code(), Some(2), "{}", text(&calibrated));
     assert!(String::from_utf8_lossy(&calibrated.stderr).contains("fault-free"));

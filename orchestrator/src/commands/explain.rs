@@ -2,20 +2,24 @@
 //! the method in `campaign::explain`); with `--score`, how right that is against the simulated
 //! car's hidden truth.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
 use std::path::Path;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 
+use super::shared::{cancel_on_ctrl_c, read_case as read_case_file, runtime};
+use super::simdrive::{SimDriver, SimSettings};
 use crate::cli::ExplainArgs;
 use crate::report::explain::{
-    CaseExplanation, ExplainOptions, Explanations, Scored, calibrate, explain_run, score_run,
+    CaseExplanation, ExplainOptions, Explanations, FaultEffect, Scored, calibrate, explain_run,
+    run_scenario, score_run, settle_by_counterfactual,
 };
 use crate::scenario_arg::optional_scenario;
 use campaign::case::{Case, CommandRecord};
 use campaign::explain::{Cause, Source};
+use campaign::sweep::with_fault_silenced;
 
 /// Explains the target's failing segments (see the module doc). Exit status 0, or 2 on an error.
 pub fn explain(args: &ExplainArgs) -> Result<ExitCode> {
@@ -88,8 +92,14 @@ pub fn explain(args: &ExplainArgs) -> Result<ExitCode> {
         };
         let mut scored = Vec::new();
         for run in run_dirs(&dir) {
-            let (e, s) = score_run(&run, scenario.as_ref(), &options)
+            let (e, mut s) = score_run(&run, scenario.as_ref(), &options)
                 .with_context(|| format!("cannot score {}", run.display()))?;
+            if args.counterfactual_runs > 0 {
+                counterfactual(&run, scenario.as_ref(), &mut s, args.counterfactual_runs)
+                    .with_context(|| {
+                        format!("cannot drive the cases of {} again", run.display())
+                    })?;
+            }
             explanations.cases.extend(e.cases);
             explanations.notes.extend(e.notes);
             scored.extend(s);
@@ -118,6 +128,104 @@ pub fn explain(args: &ExplainArgs) -> Result<ExitCode> {
         print!("{}", text(&explanations));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Settles the truth of every scored segment in which several faults moved the estimate by a
+/// counterfactual ([`settle_by_counterfactual`]): its case driven `runs` times as it was and as
+/// often without each of those faults (a `NONE` fault in its place and slot), on fresh embedded
+/// simulated cars in virtual time, seeds from the case's campaign seed; each fault's effect is
+/// the median over the runs of how much lower the segment's largest deviation came out without
+/// it, run by run (the same seed).
+fn counterfactual(
+    run: &Path,
+    given: Option<&scenarios::Scenario>,
+    scored: &mut [Scored],
+    runs: u32,
+) -> Result<()> {
+    let pending: BTreeSet<std::path::PathBuf> = scored
+        .iter()
+        .filter(|s| s.needs_counterfactual())
+        .map(|s| s.case.clone())
+        .collect();
+    if pending.is_empty() {
+        return Ok(());
+    }
+    let (scenario, _) = run_scenario(run, given)?;
+    let scenario = scenario.context("the run's scenario is unknown (give --scenario)")?;
+    eprintln!(
+        "driving {} case(s) again without each fault that moved a failing segment's estimate ({runs} runs each)",
+        pending.len()
+    );
+    let scratch =
+        std::env::temp_dir().join(format!("drivecheck-counterfactual-{}", std::process::id()));
+    let result = runtime(true)?.block_on(async {
+        let cancel = cancel_on_ctrl_c();
+        for path in &pending {
+            let case = read_case_file(path)?;
+            let seed = case.campaign_seed.unwrap_or_default();
+            let driver = SimDriver::new(
+                &scenario,
+                path,
+                &case,
+                scratch.clone(),
+                (runs, seed),
+                &cancel,
+            );
+            let settings = SimSettings::default();
+            let (_, base) = driver.drive_all(&case, None, &settings).await?;
+            let faults: BTreeSet<usize> = scored
+                .iter()
+                .filter(|s| &s.case == path && s.needs_counterfactual())
+                .flat_map(|s| s.moved.iter().map(|m| m.command_index))
+                .collect();
+            let mut without = BTreeMap::new();
+            for &k in &faults {
+                let (_, driven) = driver
+                    .drive_all(&with_fault_silenced(&case, k), None, &settings)
+                    .await?;
+                without.insert(k, driven);
+            }
+            for s in scored
+                .iter_mut()
+                .filter(|s| &s.case == path && s.needs_counterfactual())
+            {
+                let drops = s
+                    .moved
+                    .iter()
+                    .filter_map(|m| {
+                        let driven = without.get(&m.command_index)?;
+                        Some(FaultEffect {
+                            command_index: m.command_index,
+                            metres: median_drop(&base, driven, s.segment_index)?,
+                        })
+                    })
+                    .collect();
+                settle_by_counterfactual(s, &case, drops);
+            }
+        }
+        anyhow::Ok(())
+    });
+    let _ = std::fs::remove_dir_all(&scratch);
+    result
+}
+
+/// The median over the runs of how much lower segment `segment`'s largest deviation is in
+/// `without` than in `base`, run by run (`None` when no run judged it in both).
+fn median_drop(base: &[(u64, Case)], without: &[(u64, Case)], segment: usize) -> Option<f64> {
+    let max = |case: &Case| {
+        case.segments
+            .iter()
+            .find(|s| s.segment_index == segment)
+            .and_then(|s| s.oracle.stats.as_ref())
+            .map(|stats| stats.max_m)
+    };
+    let mut drops: Vec<f64> = base
+        .iter()
+        .zip(without)
+        .filter_map(|((_, a), (_, b))| Some(max(a)? - max(b)?))
+        .collect();
+    drops.sort_by(f64::total_cmp);
+    drops.get(drops.len() / 2).copied()
 }
 
 /// The run directories of `dir`: a replay directory's runs (`run-1/`, `run-2/`, … beside its

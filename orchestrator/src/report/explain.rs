@@ -218,6 +218,105 @@ pub struct Scored {
     /// Whether the first cause named is the truth (a fault: that very command; a reflection:
     /// that anchor's range; nominal: no fault and no anchor).
     pub right: bool,
+    /// The faults that moved the estimate by at least [`FAULT_MOVED_M`] during the growth
+    /// interval and the [`TRUTH_SLACK_S`] before it, most first (metres: how far each pushed
+    /// its probe's quantity, see [`score_run`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub moved: Vec<FaultEffect>,
+    /// When several did and the case was driven again without each of them
+    /// ([`settle_by_counterfactual`]): how much lower the segment's largest deviation came out
+    /// without each (the median over the runs), most first.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub counterfactual: Vec<FaultEffect>,
+    /// Other faults whose absence lowered the deviation as much as the truth's, within
+    /// [`COUNTERFACTUAL_TIE_M`]: each was needed as much (naming one of them is right).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub tied_with: Vec<usize>,
+}
+
+/// A fault command and a length in metres (what it moved, or what its absence lowered).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct FaultEffect {
+    /// The fault's command index in the case.
+    pub command_index: usize,
+    /// Metres.
+    pub metres: f64,
+}
+
+impl Scored {
+    /// The faults a counterfactual should tell apart: two or more moved the estimate.
+    pub fn needs_counterfactual(&self) -> bool {
+        matches!(self.truth, TrueCause::Fault { .. }) && self.moved.len() >= 2
+    }
+}
+
+/// Settles which of several faults that moved the estimate is the truth by what the segment's
+/// largest deviation came to without each (`drops`: how much lower it was, per fault): the one
+/// whose absence lowered it most. The push each fault gave its probe (what [`score_run`] ranks
+/// by) is not how much of the error it caused: a push while the error pointed across the track,
+/// or while the ranges pulled it back, grows the error little.
+///
+/// Faults whose absence lowered it as much, within [`COUNTERFACTUAL_TIE_M`], are each as much the
+/// cause (often each alone was needed: without either the segment comes out the same), and naming
+/// any of them is right. When no fault's absence lowered it by [`FAULT_MOVED_M`], none of them
+/// alone made it fail and the truth stays the push's.
+pub fn settle_by_counterfactual(scored: &mut Scored, case: &Case, mut drops: Vec<FaultEffect>) {
+    drops.retain(|d| d.metres.is_finite());
+    drops.sort_by(|a, b| b.metres.total_cmp(&a.metres));
+    if let Some(first) = drops.first().filter(|d| d.metres >= FAULT_MOVED_M) {
+        scored.truth = TrueCause::Fault {
+            command_index: first.command_index,
+        };
+        scored.tied_with = drops[1..]
+            .iter()
+            .filter(|d| first.metres - d.metres <= COUNTERFACTUAL_TIE_M)
+            .map(|d| d.command_index)
+            .collect();
+        scored.truth_class = truth_class(case, scored.truth);
+        scored.right = is_right(scored.truth, scored.named)
+            || scored.named.is_some_and(|named| {
+                scored.tied_with.iter().any(|&command_index| {
+                    named == campaign::explain::Source::Fault { command_index }
+                })
+            });
+    }
+    scored.counterfactual = drops;
+}
+
+/// Two faults whose absence lowers a segment's largest deviation by amounts this close are
+/// equally its cause, metres: 2 % of the method's 1 m threshold, far below what decides a verdict.
+pub const COUNTERFACTUAL_TIE_M: f64 = 0.02;
+
+/// Whether `named` is `truth` (see [`Scored::right`]).
+fn is_right(truth: TrueCause, named: Option<campaign::explain::Source>) -> bool {
+    use campaign::explain::Source;
+    match (truth, named) {
+        (TrueCause::Fault { command_index }, Some(Source::Fault { command_index: n })) => {
+            command_index == n
+        }
+        (TrueCause::Reflection { anchor_id }, Some(Source::Anchor { anchor_id: n })) => {
+            anchor_id == n
+        }
+        (TrueCause::Nominal, named) => {
+            !matches!(named, Some(Source::Fault { .. } | Source::Anchor { .. }))
+        }
+        _ => false,
+    }
+}
+
+/// The scenario a run was recorded in (its recording's copy, else the bundled one, else
+/// `given`), with notes on what did not match.
+pub fn run_scenario(
+    dir: &Path,
+    given: Option<&Scenario>,
+) -> Result<(Option<Scenario>, Vec<String>), ReportError> {
+    let data = read_campaign(dir)?;
+    Ok(scenario_for(
+        &data.record.scenario.name,
+        data.record.scenario.hash.as_deref(),
+        given,
+        data.recorded_scenario.as_deref(),
+    ))
 }
 
 /// The truth of each failing segment of a simulated run, next to its explanation.
@@ -306,20 +405,8 @@ pub fn score_run(
                     }
                 }
             };
-            use campaign::explain::Source;
             let named = segment.top().map(|c| c.source);
-            let right = match (truth, named) {
-                (TrueCause::Fault { command_index }, Some(Source::Fault { command_index: n })) => {
-                    command_index == n
-                }
-                (TrueCause::Reflection { anchor_id }, Some(Source::Anchor { anchor_id: n })) => {
-                    anchor_id == n
-                }
-                (TrueCause::Nominal, named) => {
-                    !matches!(named, Some(Source::Fault { .. } | Source::Anchor { .. }))
-                }
-                _ => false,
-            };
+            let right = is_right(truth, named);
             scored.push(Scored {
                 case: case.case.clone(),
                 segment_index: segment.segment_index,
@@ -327,6 +414,16 @@ pub fn score_run(
                 truth,
                 truth_class: truth_class(&test.case, truth),
                 right,
+                moved: moved
+                    .iter()
+                    .filter(|m| m.1 >= FAULT_MOVED_M)
+                    .map(|&(command_index, metres)| FaultEffect {
+                        command_index,
+                        metres,
+                    })
+                    .collect(),
+                counterfactual: Vec::new(),
+                tied_with: Vec::new(),
             });
         }
     }
@@ -567,5 +664,67 @@ mod tests {
             slot_shares(&case, &applied(0b11, f64::NAN)),
             vec![(0, 0.5), (1, 0.5)]
         );
+    }
+
+    fn scored(named: usize, truth: usize) -> Scored {
+        Scored {
+            case: PathBuf::from("case-000.json"),
+            segment_index: 1,
+            named: Some(campaign::explain::Source::Fault {
+                command_index: named,
+            }),
+            truth: TrueCause::Fault {
+                command_index: truth,
+            },
+            truth_class: "wheel slip".to_owned(),
+            right: named == truth,
+            moved: vec![
+                FaultEffect {
+                    command_index: truth,
+                    metres: 1.7,
+                },
+                FaultEffect {
+                    command_index: named,
+                    metres: 0.4,
+                },
+            ],
+            counterfactual: Vec::new(),
+            tied_with: Vec::new(),
+        }
+    }
+
+    fn drops(pairs: &[(usize, f64)]) -> Vec<FaultEffect> {
+        pairs
+            .iter()
+            .map(|&(command_index, metres)| FaultEffect {
+                command_index,
+                metres,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_fault_whose_absence_lowers_the_deviation_most_is_the_truth() {
+        let case = two_slips();
+        assert!(scored(1, 0).needs_counterfactual());
+        // Fault 0 pushed more, but without fault 1 the segment came out 1.4 m lower.
+        let mut s = scored(1, 0);
+        settle_by_counterfactual(&mut s, &case, drops(&[(0, 0.9), (1, 1.4)]));
+        assert_eq!(s.truth, TrueCause::Fault { command_index: 1 });
+        assert!(s.right);
+        assert_eq!(s.counterfactual[0].command_index, 1);
+        assert!(s.tied_with.is_empty());
+        // Without either it comes out the same: each was needed, naming either is right.
+        let mut s = scored(1, 0);
+        settle_by_counterfactual(&mut s, &case, drops(&[(0, 0.65), (1, 0.64)]));
+        assert_eq!(s.truth, TrueCause::Fault { command_index: 0 });
+        assert_eq!(s.tied_with, [1]);
+        assert!(s.right);
+        // Neither's absence changes it: not settled, the push's truth stays.
+        let mut s = scored(1, 0);
+        settle_by_counterfactual(&mut s, &case, drops(&[(0, 0.0), (1, 0.01)]));
+        assert_eq!(s.truth, TrueCause::Fault { command_index: 0 });
+        assert!(!s.right);
+        assert_eq!(s.counterfactual.len(), 2);
     }
 }
