@@ -617,20 +617,25 @@ mod tests {
         ]
     }
 
-    #[test]
-    fn an_error_growing_along_the_heading_in_a_slip_faults_window_names_the_fault() {
-        // 0.3 m of standing error across, then from 2 s to 4 s 0.5 m/s of drift ahead.
-        let samples = drive(6.0, |t| {
-            Point::new(0.0, 0.3) + Point::new(0.5 * (t - 2.0).clamp(0.0, 2.0), 0.0)
-        });
-        let slip = ExplainFault {
+    /// Command 3: a ×2.5 wheel slip acting from 2 s to 4 s.
+    fn slip_2_to_4_s() -> ExplainFault {
+        ExplainFault {
             command_index: 3,
             probe: Probe::UwbTravelDist,
             kind: FaultKind::Amplification,
             param: 2.5,
             acts_from_s: 2.0,
             acts_to_s: 4.0,
-        };
+        }
+    }
+
+    #[test]
+    fn an_error_growing_along_the_heading_in_a_slip_faults_window_names_the_fault() {
+        // 0.3 m of standing error across, then from 2 s to 4 s 0.5 m/s of drift ahead.
+        let samples = drive(6.0, |t| {
+            Point::new(0.0, 0.3) + Point::new(0.5 * (t - 2.0).clamp(0.0, 2.0), 0.0)
+        });
+        let slip = slip_2_to_4_s();
         let explained = explain_segment(
             &segment(6.0),
             &samples,
@@ -668,14 +673,7 @@ mod tests {
                 0.3 + 0.02 * (t - 4.0).max(0.0),
             )
         });
-        let slip = ExplainFault {
-            command_index: 3,
-            probe: Probe::UwbTravelDist,
-            kind: FaultKind::Amplification,
-            param: 2.5,
-            acts_from_s: 2.0,
-            acts_to_s: 4.0,
-        };
+        let slip = slip_2_to_4_s();
         let late = ExplainSegment {
             segment_index: 6,
             from_s: 15.0,

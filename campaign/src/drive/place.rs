@@ -287,7 +287,7 @@ impl Placer {
 
     /// When the next fault should be sent (seconds since the test began), if one's place is
     /// known: half a round trip before the car is predicted to reach it. Up to
-    /// [`MAX_IN_FLIGHT`] fault commands are in flight together, whatever their probes.
+    /// `MAX_IN_FLIGHT` (5) fault commands are in flight together, whatever their probes.
     pub fn due(&self) -> Option<Duration> {
         if self.in_flight.len() >= MAX_IN_FLIGHT {
             return None;

@@ -77,8 +77,8 @@ pub struct Segment {
 impl Segment {
     /// The segment the generator produced for `intent` from `tail`: every point at the intent's
     /// speed, except where the route turns so tightly that this speed would ask more than
-    /// [`MAX_LATERAL_ACCEL_MPS2`] of the car: there the points are slowed to `√(a·R)`, `R` the
-    /// radius of the turn (see [`capped_speeds`]).
+    /// `MAX_LATERAL_ACCEL_MPS2` (4 m/s²) of the car: there the points are slowed to `√(a·R)`,
+    /// `R` the radius of the turn (see `capped_speeds`).
     pub fn generated_from(
         tail: &RouteTail,
         intent: SegmentIntent,
@@ -120,7 +120,7 @@ impl Segment {
 /// look-ahead circle; driven at up to 12 km/h the car runs wide of them by up to a metre, which
 /// can take it out of the area. Below this limit (√(4 · 1.16) = 2.15 m/s there) it follows them;
 /// turns wider than 2.8 m keep the drawn speed up to 12 km/h.
-pub const MAX_LATERAL_ACCEL_MPS2: f64 = 4.0;
+const MAX_LATERAL_ACCEL_MPS2: f64 = 4.0;
 
 /// The speed towards each of `points` (continuing `tail`, followed by `next` when known): `speed`
 /// capped at `√(MAX_LATERAL_ACCEL_MPS2 · R)` for the turns at both ends of the leg towards the

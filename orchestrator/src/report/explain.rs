@@ -432,13 +432,13 @@ pub fn score_run(
 
 /// The truth looks this far before the growth interval (a fault's last applications before
 /// the error crossed the nominal level still count), seconds.
-const TRUTH_SLACK_S: f64 = 0.5;
+pub const TRUTH_SLACK_S: f64 = 0.5;
 /// The firmware's largest correction per range, metres.
 const MAX_CORRECTION_M: f64 = 0.2;
 /// What a yaw error of one radian moves the estimate per odometry tick at about 2 m/s, metres.
 const YAW_LEVER_M: f64 = 0.02;
 /// A fault that moved the estimate less than this is not the truth, metres.
-const FAULT_MOVED_M: f64 = 0.05;
+pub const FAULT_MOVED_M: f64 = 0.05;
 /// Reflected ranges longer than the direct path by less than this in all are not the truth,
 /// metres.
 const REFLECTED_EXCESS_M: f64 = 0.3;
