@@ -193,6 +193,10 @@ pub struct SegmentExplanation {
     pub error_from_m: f64,
     /// |e| at its end.
     pub error_to_m: f64,
+    /// The error was above the nominal level when the car entered the segment: it carried over
+    /// from before, and the growth interval begins before the segment.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub carried_over: bool,
     /// The causes, most growth first; `unexplained` last.
     pub causes: Vec<Cause>,
 }
@@ -465,6 +469,7 @@ pub fn explain_segment(
         to_s: usable[end].t_s,
         error_from_m: error(usable[start]),
         error_to_m: error(usable[end]),
+        carried_over: inside.first().is_some_and(|&first| start < first),
         causes,
     })
 }
@@ -649,6 +654,7 @@ mod tests {
             Some(Source::Fault { command_index: 3 }),
             "{explained:?}"
         );
+        assert!(!explained.carried_over);
         // Without the fault, the same growth is the odometry's.
         let unfaulted = explain_segment(
             &segment(6.0),
@@ -689,6 +695,7 @@ mod tests {
         )
         .unwrap();
         assert!(explained.from_s < 4.0, "{explained:?}");
+        assert!(explained.carried_over);
         assert_eq!(
             explained.top().map(|c| c.source),
             Some(Source::Fault { command_index: 3 }),

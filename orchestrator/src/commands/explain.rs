@@ -262,14 +262,19 @@ fn text(explanations: &Explanations) -> String {
         for segment in &case.segments {
             let _ = writeln!(
                 out,
-                "{} segment {} ({}): |UWB − RTK| {:.2} → {:.2} m from {:.1} s to {:.1} s",
+                "{} segment {} ({}): |UWB − RTK| {:.2} → {:.2} m from {:.1} s to {:.1} s{}",
                 case.case.display(),
                 segment.segment_index,
                 segment.verdict,
                 segment.error_from_m,
                 segment.error_to_m,
                 segment.from_s,
-                segment.to_s
+                segment.to_s,
+                if segment.carried_over {
+                    " (carried over from before the segment)"
+                } else {
+                    ""
+                }
             );
             for (k, cause) in segment.causes.iter().enumerate() {
                 let _ = writeln!(

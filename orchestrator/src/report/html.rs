@@ -352,12 +352,17 @@ fn causes_table(out: &mut String, case: &Case, explained: &[SegmentExplanation])
             let first = if k == 0 {
                 format!(
                     "<td rowspan=\"{rows}\">s{}</td><td rowspan=\"{rows}\">{:.2} → {:.2} m, \
-                     {:.1}–{:.1} s</td>",
+                     {:.1}–{:.1} s{}</td>",
                     segment.segment_index,
                     segment.error_from_m,
                     segment.error_to_m,
                     segment.from_s,
-                    segment.to_s
+                    segment.to_s,
+                    if segment.carried_over {
+                        " (carried over from before the segment)"
+                    } else {
+                        ""
+                    }
                 )
             } else {
                 String::new()
