@@ -14,7 +14,7 @@ use super::simdrive::{SimDriver, SimSettings};
 use crate::cli::ExplainArgs;
 use crate::report::explain::{
     CaseExplanation, ExplainOptions, Explanations, FaultEffect, Scored, calibrate, explain_run,
-    run_scenario, score_run, settle_by_counterfactual,
+    score_run, settle_by_counterfactual,
 };
 use crate::scenario_arg::optional_scenario;
 use campaign::case::{Case, CommandRecord};
@@ -92,10 +92,10 @@ pub fn explain(args: &ExplainArgs) -> Result<ExitCode> {
         };
         let mut scored = Vec::new();
         for run in run_dirs(&dir) {
-            let (e, mut s) = score_run(&run, scenario.as_ref(), &options)
+            let (e, mut s, recorded_in) = score_run(&run, scenario.as_ref(), &options)
                 .with_context(|| format!("cannot score {}", run.display()))?;
             if args.counterfactual_runs > 0 {
-                counterfactual(&run, scenario.as_ref(), &mut s, args.counterfactual_runs)
+                counterfactual(recorded_in.as_ref(), &mut s, args.counterfactual_runs)
                     .with_context(|| {
                         format!("cannot drive the cases of {} again", run.display())
                     })?;
@@ -133,12 +133,11 @@ pub fn explain(args: &ExplainArgs) -> Result<ExitCode> {
 /// Settles the truth of every scored segment in which several faults moved the estimate by a
 /// counterfactual ([`settle_by_counterfactual`]): its case driven `runs` times as it was and as
 /// often without each of those faults (a `NONE` fault in its place and slot), on fresh embedded
-/// simulated cars in virtual time, seeds from the case's campaign seed; each fault's effect is
-/// the median over the runs of how much lower the segment's largest deviation came out without
-/// it, run by run (the same seed).
+/// simulated cars in `scenario` (the run's own) in virtual time, seeds from the case's campaign
+/// seed; each fault's effect is the median over the runs of how much lower the segment's largest
+/// deviation came out without it, run by run (the same seed).
 fn counterfactual(
-    run: &Path,
-    given: Option<&scenarios::Scenario>,
+    scenario: Option<&scenarios::Scenario>,
     scored: &mut [Scored],
     runs: u32,
 ) -> Result<()> {
@@ -150,7 +149,6 @@ fn counterfactual(
     if pending.is_empty() {
         return Ok(());
     }
-    let (scenario, _) = run_scenario(run, given)?;
     let scenario = scenario.context("the run's scenario is unknown (give --scenario)")?;
     eprintln!(
         "driving {} case(s) again without each fault that moved a failing segment's estimate ({runs} runs each)",
@@ -164,7 +162,7 @@ fn counterfactual(
             let case = read_case_file(path)?;
             let seed = case.campaign_seed.unwrap_or_default();
             let driver = SimDriver::new(
-                &scenario,
+                scenario,
                 path,
                 &case,
                 scratch.clone(),

@@ -304,27 +304,14 @@ fn is_right(truth: TrueCause, named: Option<campaign::explain::Source>) -> bool 
     }
 }
 
-/// The scenario a run was recorded in (its recording's copy, else the bundled one, else
-/// `given`), with notes on what did not match.
-pub fn run_scenario(
-    dir: &Path,
-    given: Option<&Scenario>,
-) -> Result<(Option<Scenario>, Vec<String>), ReportError> {
-    let data = read_campaign(dir)?;
-    Ok(scenario_for(
-        &data.record.scenario.name,
-        data.record.scenario.hash.as_deref(),
-        given,
-        data.recorded_scenario.as_deref(),
-    ))
-}
-
-/// The truth of each failing segment of a simulated run, next to its explanation.
+/// The truth of each failing segment of a simulated run, next to its explanation; and the
+/// scenario the run was recorded in (its recording's copy, else the bundled one, else
+/// `scenario`), in which its cases can be driven again.
 pub fn score_run(
     dir: &Path,
     scenario: Option<&Scenario>,
     options: &ExplainOptions,
-) -> Result<(Explanations, Vec<Scored>), ReportError> {
+) -> Result<(Explanations, Vec<Scored>, Option<Scenario>), ReportError> {
     use crate::recording::{Recording, SimFault, SimRange, TruthRecord};
     let explanations = explain_run(dir, None, scenario, options)?;
     let data = read_campaign(dir)?;
@@ -427,7 +414,13 @@ pub fn score_run(
             });
         }
     }
-    Ok((explanations, scored))
+    let (scenario, _) = scenario_for(
+        &data.record.scenario.name,
+        data.record.scenario.hash.as_deref(),
+        scenario,
+        data.recorded_scenario.as_deref(),
+    );
+    Ok((explanations, scored, scenario))
 }
 
 /// The truth looks this far before the growth interval (a fault's last applications before
