@@ -83,10 +83,10 @@ pub struct Progress {
 /// 12.x `max(0.8 s · v, 0.8 m)` and 10.x `1.2 m · (1 + 0.05 v)²`. The car stops at the route end
 /// once it is within this distance of the last point.
 pub fn look_ahead_radius_m(speed: f64) -> f64 {
-    let v = speed.abs();
-    let era_12 = (0.8 * v).max(0.8);
-    let era_10 = 1.2 * (1.0 + 0.05 * v).powi(2);
-    era_12.max(era_10)
+    use car_link::version::FirmwareVersion;
+    FirmwareVersion::V12_3
+        .look_ahead_radius_m(speed)
+        .max(FirmwareVersion::V10_1.look_ahead_radius_m(speed))
 }
 
 /// Locates `position` on `route`: the closest segment among the `ROUTE_WINDOW` segments from

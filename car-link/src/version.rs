@@ -65,6 +65,18 @@ impl FirmwareVersion {
     pub fn swaps_uwb_position(self) -> bool {
         self >= FirmwareVersion::V11_0
     }
+
+    /// The autopilot's look-ahead radius at `speed` m/s with the default settings
+    /// (`docs/firmware.md#control-cycle`), metres: `1.2 m · (1 + 0.05·|v|)²` before 12.0,
+    /// `max(0.8 s · |v|, 0.8 m)` from 12.0 (the version that brought `ap_rad_time_ahead`).
+    pub fn look_ahead_radius_m(self, speed: f64) -> f64 {
+        let v = speed.abs();
+        if self.major >= 12 {
+            (0.8 * v).max(0.8)
+        } else {
+            1.2 * (1.0 + 0.05 * v).powi(2)
+        }
+    }
 }
 
 impl Default for FirmwareVersion {

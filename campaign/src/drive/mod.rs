@@ -78,6 +78,8 @@ pub struct DriveSettings<'a> {
     pub rates: ProbeRates,
     /// The campaign's seed: the safe stop extension's RNG derives from it and the test index.
     pub campaign_seed: u64,
+    /// How the car steers (the scenario's vehicle), to predict when it reaches a fault's place.
+    pub steering: Option<Steering>,
 }
 
 /// One state sample, as the drive uses it.
@@ -92,6 +94,11 @@ pub struct Sample {
     pub speed: f64,
     /// The sample's request-to-reply time (a measured link round trip).
     pub round_trip: Duration,
+    /// The car's heading, degrees clockwise from east, as GET_STATE reports its yaw (NaN when
+    /// unknown).
+    pub yaw_deg: f64,
+    /// The car's firmware version, as GET_STATE reports it (its autopilot's look-ahead law).
+    pub version: car_link::version::FirmwareVersion,
     /// The autopilot's look-ahead radius the car reports, metres (−1 while it is inactive;
     /// NaN when the car does not report one).
     pub look_ahead_radius_m: f64,
@@ -364,7 +371,7 @@ impl<'a> TestDrive<'a> {
         let mut safety = SafetyMonitor::new(settings.area.clone(), settings.safety, Duration::ZERO);
         let positions: Vec<Point> = start.iter().map(|w| w.position).collect();
         safety.set_route(&positions);
-        let placer = Placer::new(plan, start);
+        let placer = Placer::new(plan, start, settings.steering);
         Self {
             settings,
             plan,
@@ -925,4 +932,4 @@ mod place;
 #[cfg(test)]
 mod tests;
 
-pub use place::{EARLIER_TOOL_POINTS_LEFT, FaultPlacement, PlaceRule, Placer};
+pub use place::{EARLIER_TOOL_POINTS_LEFT, FaultPlacement, PlaceRule, Placer, Steering};

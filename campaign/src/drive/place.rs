@@ -17,9 +17,12 @@
 //!   that it is continuous where the car cuts a corner: see [`Placer::along`]). From the
 //!   last sample and the median round trip, the placer predicts when the car will be at the
 //!   place and sends the command half a round trip before: the car then adds the fault as it
-//!   passes the place. The prediction follows the speeds the route asks for (see
-//!   [`Placer::travel_s`]), so a car speeding up or slowing down into the next segment arrives
-//!   when predicted. The caller wakes the drive at [`Placer::due`].
+//!   passes the place. Within a few metres of the place the prediction runs the car's autopilot
+//!   forward from the sample (its position, heading, speed and look-ahead radius: see
+//!   `pursuit`), so a car cutting a bend, which advances along its route up to a quarter faster
+//!   than its wheels turn and slower on the way out, arrives when predicted; farther away, and
+//!   for a car that reports no heading, it follows the speeds the route asks for (see
+//!   [`Placer::travel_s`]). The caller wakes the drive at [`Placer::due`].
 //! - **Where it acted.** The car added the fault at about the middle of the command's round trip
 //!   (after a lost reply resolved by listing the car's faults: half a round trip after sending).
 //!   The car's distance at that time is interpolated between the samples around it; the
@@ -39,6 +42,9 @@ use trajgen::Point;
 
 use crate::model::{Command, Fault, FaultPlace, FaultWindow, ProbeRates, TestPlan};
 use crate::streaming::{Progress, Waypoint, look_ahead_radius_m};
+
+mod pursuit;
+pub use pursuit::Steering;
 
 /// How the earlier tool placed a fault: once its segment's car had this many route points left.
 pub const EARLIER_TOOL_POINTS_LEFT: usize = 4;
@@ -136,6 +142,16 @@ struct Fix {
 struct Seen {
     /// When the car was there (the sample's arrival less half its round trip).
     car_time: f64,
+    /// Where it was.
+    position: Point,
+    /// Its heading, radians counter-clockwise from east, when the car reported one.
+    heading: Option<f64>,
+    /// The route's stretch the streamer located it on.
+    stretch: usize,
+    /// Its wheel speed, m/s.
+    wheel: f64,
+    /// Its firmware, whose look-ahead radius grows with the speed as its version says.
+    version: car_link::version::FirmwareVersion,
     /// Its distance along the route, metres.
     s: f64,
     /// Its speed along the route, m/s (its wheel speed times [`Placer::progress_ratio`]).
@@ -161,12 +177,15 @@ pub struct Placer {
     history: VecDeque<Fix>,
     round_trips: VecDeque<Duration>,
     seen: Option<Seen>,
+    /// How the car steers, to run its autopilot forward (see [`Steering`]); without it the
+    /// prediction follows the route's speeds only.
+    steering: Option<Steering>,
 }
 
 impl Placer {
     /// The faults of `plan`, for a car whose route starts with `start` (the start route's
-    /// points).
-    pub fn new(plan: &TestPlan, start: &[Waypoint]) -> Self {
+    /// points) and that steers as `steering` says.
+    pub fn new(plan: &TestPlan, start: &[Waypoint], steering: Option<Steering>) -> Self {
         let mut segments = 0usize;
         let mut pending = Vec::new();
         for (command_index, command) in plan.commands.iter().enumerate() {
@@ -202,6 +221,7 @@ impl Placer {
             history: VecDeque::new(),
             round_trips: VecDeque::new(),
             seen: None,
+            steering,
         };
         placer.extend(start);
         placer
@@ -275,9 +295,16 @@ impl Placer {
         } else {
             look_ahead_radius_m(speed)
         };
-        let speed = speed.abs() * self.progress_ratio();
+        let wheel = speed.abs();
+        let speed = wheel * self.progress_ratio();
+        let heading = (-sample.yaw_deg.to_radians()).rem_euclid(std::f64::consts::TAU);
         self.seen = Some(Seen {
             car_time,
+            position,
+            heading: heading.is_finite().then_some(heading),
+            stretch: progress.segment,
+            wheel,
+            version: sample.version,
             s,
             speed,
             radius,
@@ -295,7 +322,7 @@ impl Placer {
         let seen = self.seen?;
         let round_trip = self.median_round_trip().as_secs_f64();
         let target = self.next()?.target_s?;
-        let at = seen.car_time + self.travel_s(&seen, target) - round_trip / 2.0;
+        let at = seen.car_time + self.predict_s(&seen, target) - round_trip / 2.0;
         Some(Duration::from_secs_f64(at.max(0.0)))
     }
 
@@ -515,7 +542,19 @@ impl Placer {
         }
     }
 
-    /// Seconds the car seen at `seen` needs to reach `target` (a distance along its route).
+    /// Seconds the car seen at `seen` needs to reach `target` (a distance along its route): its
+    /// autopilot run forward when the target is near ([`Self::pursue`]), else [`Self::travel_s`].
+    fn predict_s(&self, seen: &Seen, target: f64) -> f64 {
+        if target - seen.s <= pursuit::HORIZON_M
+            && let Some(t) = self.pursue(seen, target)
+        {
+            return t;
+        }
+        self.travel_s(seen, target)
+    }
+
+    /// Seconds the car seen at `seen` needs to reach `target` (a distance along its route),
+    /// from the route's speeds.
     ///
     /// In speed mode the firmware's autopilot drives at the route's speed interpolated at its
     /// goal, the point a look-ahead radius ahead (`docs/firmware.md`, autopilot), and its motor
@@ -636,7 +675,7 @@ mod tests {
             start_tail: trajgen::RouteTail::from_points(&points[..2]).unwrap(),
             commands: Vec::new(),
         };
-        (Placer::new(&plan, &waypoints), points)
+        (Placer::new(&plan, &waypoints, None), points)
     }
 
     fn hint(route: &[Point], p: Point, from: usize) -> Progress {
@@ -709,7 +748,7 @@ mod tests {
             .unwrap(),
             commands: Vec::new(),
         };
-        Placer::new(&plan, &route)
+        Placer::new(&plan, &route, None)
     }
 
     #[test]
@@ -723,6 +762,8 @@ mod tests {
                 uwb: Point::new(7.4 + 0.1 * k as f64, 0.0),
                 speed: 1.0,
                 round_trip: Duration::ZERO,
+                yaw_deg: 0.0,
+                version: car_link::version::FirmwareVersion::V10_1,
                 look_ahead_radius_m: 1.0,
             };
             let progress = Progress {
@@ -762,6 +803,8 @@ mod tests {
                 uwb: position,
                 speed: wheel,
                 round_trip: Duration::from_secs_f64(round_trip),
+                yaw_deg: 0.0,
+                version: car_link::version::FirmwareVersion::V10_1,
                 look_ahead_radius_m: 1.0,
             };
             let progress = Progress {

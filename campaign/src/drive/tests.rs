@@ -82,6 +82,7 @@ fn settings(area: &Area, policy: FailurePolicy) -> DriveSettings<'_> {
         stop_points: 4,
         rates: ProbeRates::firmware_10(2),
         campaign_seed: 7,
+        steering: Some(Steering::of(&scenarios::Vehicle::default())),
     }
 }
 
@@ -118,6 +119,8 @@ impl<'a> Harness<'a> {
             uwb: Point::new(at.x, at.y + self.uwb_offset),
             speed,
             round_trip: ms(20),
+            yaw_deg: 0.0,
+            version: car_link::version::FirmwareVersion::V10_1,
             look_ahead_radius_m: f64::NAN,
         };
         self.drive.handle(self.now, Event::Sample(sample))
@@ -349,25 +352,26 @@ fn a_placed_fault_is_sent_half_a_round_trip_before_the_car_reaches_its_place() {
     assert!(h.reply(Reply::Done).is_empty());
     // From the last sample (x = 7.7 at 40 ms, 1 m/s) the car reaches x = 13 at 5.34 s.
     assert_eq!(h.drive.fault_due(), Some(ms(5330)));
-    // 3 m along the segment (from x = 10) is x = 13; the car is at x = 12 at 90 ms, at 2 m/s.
-    h.sample_at(Point::new(12.0, 10.0), 2.0);
-    assert_eq!(h.drive.fault_due(), Some(ms(580)));
-    h.now = ms(580);
+    // 3 m along the segment (from x = 10) is x = 13; the car is at x = 12 at 90 ms, at its
+    // route's 1 m/s: there at 1.09 s, the command 10 ms before.
+    h.sample_at(Point::new(12.0, 10.0), 1.0);
+    assert_eq!(h.drive.fault_due(), Some(ms(1080)));
+    h.now = ms(1080);
     assert_eq!(fault_index(&h.drive.next_fault(h.now)), Some((1, 0)));
     // The reply is lost; the car's list shows the fault: it was added 10 ms after sending.
-    h.now = ms(1600);
+    h.now = ms(2100);
     let lost = Event::FaultReply {
         command_index: 1,
         reply: Reply::Done,
         resent: true,
     };
     assert!(h.drive.handle(h.now, lost).is_empty());
-    h.sample_at(Point::new(15.1, 10.0), 2.0);
+    h.sample_at(Point::new(14.05, 10.0), 1.0);
     let outcome = h.drive.finish(h.now);
     let place = outcome.fault_places[0];
     assert_eq!(place.rule, PlaceRule::Planned);
-    assert!(close(place.added_s, 0.59), "{place:?}");
-    // Between x = 12 at 90 ms and x = 15.1 at 1.64 s: x ≈ 13.0 at 590 ms.
+    assert!(close(place.added_s, 1.09), "{place:?}");
+    // Between x = 12 at 90 ms and x = 14.05 at 2.14 s: x = 13.0 at 1.09 s.
     assert!(place.error_m.unwrap().abs() < 0.01, "{place:?}");
 }
 

@@ -271,6 +271,8 @@ fn drive_sample(sample: &StateSample) -> campaign::drive::Sample {
         uwb: Point::new(s.px_uwb, s.py_uwb),
         speed: s.speed,
         round_trip: sample.rtt(),
+        yaw_deg: s.yaw,
+        version: s.version,
         look_ahead_radius_m: s.ap_rad,
     }
 }

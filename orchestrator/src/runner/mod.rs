@@ -314,6 +314,7 @@ impl Context<'_> {
             stop_points: self.scenario.campaign.points_per_segment.min,
             rates: self.rates,
             campaign_seed: self.config.campaign.seed,
+            steering: Some(campaign::drive::Steering::of(&self.scenario.vehicle)),
         }
     }
 }
