@@ -436,6 +436,39 @@ pub enum BenchCommand {
     /// published fault sequence on generated tests of `parking-lot-august` (with and without its
     /// faults, and rerun with other simulator seeds), and the rock lot without faults.
     Fidelity(BenchFidelityArgs),
+    /// How close to its place on the route each fault is added over a slow, jittery link:
+    /// campaigns in virtual time on simulated cars behind the simulator's impaired link, per
+    /// firmware generation, the distribution of the placement errors.
+    Placement(BenchPlacementArgs),
+}
+
+/// Options of `drivecheck bench placement`.
+#[derive(Debug, Args)]
+pub struct BenchPlacementArgs {
+    /// Scenario: a bundled name, a .toml file or a reference .xml.
+    #[arg(long, default_value = "parking-lot-2anchors")]
+    pub scenario: String,
+    /// Campaign seeds (from `--seed` on).
+    #[arg(long, default_value_t = 12, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    pub seeds: u32,
+    /// Link seeds per campaign seed (other jitter draws, other sensor noise).
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub link_seeds: u32,
+    /// Tests per campaign.
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    pub tests: u32,
+    /// The link's added one-way latency.
+    #[arg(long, default_value = "150ms", value_parser = humantime::parse_duration)]
+    pub link_latency: std::time::Duration,
+    /// Extra one-way delay drawn uniformly from 0 to this.
+    #[arg(long, default_value = "40ms", value_parser = humantime::parse_duration)]
+    pub link_jitter: std::time::Duration,
+    /// Firmware generation: 10.1, 12.3 or both.
+    #[arg(long, default_value = "both")]
+    pub firmware: String,
+    /// The first campaign seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
 }
 
 /// Options of `drivecheck bench fidelity`.

@@ -25,7 +25,7 @@ use car_link::fault::{FaultKind, Probe};
 use scenarios::Scenario;
 use tokio_util::sync::CancellationToken;
 
-use super::shared::{EmbeddedSims, runtime};
+use super::shared::{EmbeddedSims, Scratch, runtime};
 use crate::cli::BenchFidelityArgs;
 use crate::runner::{RecordMode, ReplaySource, RunConfig, Silent, run_campaign_fresh};
 use campaign::case::{Case, ReplayOf};
@@ -120,7 +120,7 @@ fn plan_for(scenario: &Scenario, seed: u64) -> Result<Option<TestPlan>> {
 /// Drives `plan` once on a fresh simulated car seeded `seed` (its faults left out with
 /// `no_faults`); the case.
 fn drive(scenario: &Scenario, plan: &TestPlan, seed: u64, no_faults: bool) -> Result<Case> {
-    let scratch = Scratch::new("published")?;
+    let scratch = Scratch::new("fidelity", "published")?;
     let mut plan = plan.clone();
     if no_faults {
         plan.commands
@@ -162,27 +162,6 @@ fn drive(scenario: &Scenario, plan: &TestPlan, seed: u64, no_faults: bool) -> Re
         .into_iter()
         .next()
         .context("the run wrote no case")
-}
-
-/// A scratch directory of this process, removed when dropped (the runs' case files are read
-/// from the report, not from disk).
-struct Scratch(std::path::PathBuf);
-
-impl Scratch {
-    fn new(name: &str) -> Result<Self> {
-        let path =
-            std::env::temp_dir().join(format!("drivecheck-fidelity-{}-{name}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&path);
-        std::fs::create_dir_all(&path)
-            .with_context(|| format!("cannot create {}", path.display()))?;
-        Ok(Self(path))
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
 }
 
 /// The largest deviation of each judged segment of `case`, in order.
@@ -288,7 +267,7 @@ pub fn run(args: &BenchFidelityArgs) -> Result<ExitCode> {
 /// The rock lot without faults: the share of tests and of the route above 1 m.
 fn rock_lot(args: &BenchFidelityArgs) -> Result<()> {
     let rock = scenarios::bundled::load("parking-lot-rock")?.scenario;
-    let scratch = Scratch::new("rock")?;
+    let scratch = Scratch::new("fidelity", "rock")?;
     let mut config = RunConfig::new(
         Campaign {
             seed: args.seed,

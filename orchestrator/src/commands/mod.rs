@@ -3,6 +3,7 @@
 mod area;
 mod bench;
 mod bench_fidelity;
+mod bench_placement;
 mod bench_recovery;
 mod explain;
 mod merge;
@@ -47,5 +48,6 @@ pub fn run(cli: Cli) -> Result<ExitCode> {
         Command::Bench(BenchCommand::Generator(args)) => bench::generator(&args),
         Command::Bench(BenchCommand::Recovery(args)) => bench_recovery::run(&args),
         Command::Bench(BenchCommand::Fidelity(args)) => bench_fidelity::run(&args),
+        Command::Bench(BenchCommand::Placement(args)) => bench_placement::run(&args),
     }
 }

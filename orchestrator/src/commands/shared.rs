@@ -99,8 +99,13 @@ pub(super) struct EmbeddedSims {
 impl EmbeddedSims {
     /// The cars of a campaign with `seed` in `scenario`.
     pub(super) fn new(scenario: &Scenario, seed: u64, virtual_time: bool) -> Self {
+        Self::with_config(recorded_sim(scenario, seed), virtual_time)
+    }
+
+    /// The cars of a campaign on simulators configured as `config` (its seed the campaign's).
+    pub(super) fn with_config(config: car_sim::SimConfig, virtual_time: bool) -> Self {
         Self {
-            config: recorded_sim(scenario, seed),
+            config,
             virtual_time,
         }
     }
@@ -494,6 +499,28 @@ pub(super) fn check_hash(case: &Case, scenario: &Scenario, ignore: bool) -> Resu
 
 fn short(hash: &str) -> &str {
     hash.get(..12).unwrap_or(hash)
+}
+
+/// A scratch directory of this process (`drivecheck-<kind>-<pid>-<name>` in the system's
+/// temporary directory), removed when dropped: for runs whose case files are read from the
+/// report, not from disk.
+pub(super) struct Scratch(pub PathBuf);
+
+impl Scratch {
+    pub(super) fn new(kind: &str, name: &str) -> Result<Self> {
+        let path =
+            std::env::temp_dir().join(format!("drivecheck-{kind}-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&path);
+        std::fs::create_dir_all(&path)
+            .with_context(|| format!("cannot create {}", path.display()))?;
+        Ok(Self(path))
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }
 
 #[cfg(test)]
