@@ -33,6 +33,7 @@
 //! together than the car drives in a round trip are each sent at its own time. Segments are
 //! streamed by the time-based rule independently: a fault never delays a segment.
 
+use std::cell::Cell;
 use std::collections::VecDeque;
 use std::time::Duration;
 
@@ -64,6 +65,10 @@ const PROGRESS_RATIO: (f64, f64) = (0.8, 1.25);
 pub const MAX_IN_FLIGHT: usize = 5;
 /// Wheel travel below which the progress ratio is not measured, metres.
 const MIN_WHEEL_TRAVEL_M: f64 = 0.2;
+/// How soon a command must be due, after the sample that predicts it arrived, for the car's
+/// autopilot to be run forward (see [`Placer::pursue`]), seconds: the last samples before it is
+/// sent.
+const PURSUIT_WINDOW_S: f64 = 0.5;
 /// The slowest speed a prediction assumes, m/s (a standing car's place is never predicted).
 const MIN_SPEED_MPS: f64 = 0.05;
 
@@ -180,6 +185,9 @@ pub struct Placer {
     /// How the car steers, to run its autopilot forward (see [`Steering`]); without it the
     /// prediction follows the route's speeds only.
     steering: Option<Steering>,
+    /// The last prediction: the sample's time and the target it was made for, and the seconds
+    /// (the drive asks for [`Self::due`] after every event; the pursuit runs once per sample).
+    predicted: Cell<Option<(f64, f64, f64)>>,
 }
 
 impl Placer {
@@ -222,6 +230,7 @@ impl Placer {
             round_trips: VecDeque::new(),
             seen: None,
             steering,
+            predicted: Cell::new(None),
         };
         placer.extend(start);
         placer
@@ -322,7 +331,7 @@ impl Placer {
         let seen = self.seen?;
         let round_trip = self.median_round_trip().as_secs_f64();
         let target = self.next()?.target_s?;
-        let at = seen.car_time + self.predict_s(&seen, target) - round_trip / 2.0;
+        let at = seen.car_time + self.predict_s(&seen, target, round_trip) - round_trip / 2.0;
         Some(Duration::from_secs_f64(at.max(0.0)))
     }
 
@@ -543,14 +552,26 @@ impl Placer {
     }
 
     /// Seconds the car seen at `seen` needs to reach `target` (a distance along its route): its
-    /// autopilot run forward when the target is near ([`Self::pursue`]), else [`Self::travel_s`].
-    fn predict_s(&self, seen: &Seen, target: f64) -> f64 {
-        if target - seen.s <= pursuit::HORIZON_M
+    /// autopilot run forward ([`Self::pursue`]) when the route's speeds ([`Self::travel_s`]) say
+    /// the command is due within [`PURSUIT_WINDOW_S`] of the sample's arrival (`round_trip` after
+    /// the car's time), else the route's speeds (the drive asks again at every sample).
+    fn predict_s(&self, seen: &Seen, target: f64, round_trip: f64) -> f64 {
+        if let Some((car_time, cached, seconds)) = self.predicted.get()
+            && car_time == seen.car_time
+            && cached == target
+        {
+            return seconds;
+        }
+        let by_speeds = self.travel_s(seen, target);
+        let seconds = if by_speeds - round_trip <= PURSUIT_WINDOW_S
             && let Some(t) = self.pursue(seen, target)
         {
-            return t;
-        }
-        self.travel_s(seen, target)
+            t
+        } else {
+            by_speeds
+        };
+        self.predicted.set(Some((seen.car_time, target, seconds)));
+        seconds
     }
 
     /// Seconds the car seen at `seen` needs to reach `target` (a distance along its route),

@@ -21,9 +21,6 @@ const TICK_S: f64 = 0.01;
 const LOOK_AHEAD_STRETCHES: usize = 8;
 /// The motor's acceleration in RPM mode, m/s² (25 000 ERPM/s).
 const MOTOR_ACCEL_MPS2: f64 = 13.6;
-/// The way beyond which the pursuit is not run (the prediction is refined on every sample as the
-/// car comes closer; far away the route's speeds are enough), metres.
-pub(super) const HORIZON_M: f64 = 6.0;
 /// The longest pursuit, ticks (8 s).
 const MAX_TICKS: usize = 800;
 
