@@ -17,8 +17,8 @@
 //!   that it is continuous where the car cuts a corner: see [`Placer::along`]). From the
 //!   last sample and the median round trip, the placer predicts when the car will be at the
 //!   place and sends the command half a round trip before: the car then adds the fault as it
-//!   passes the place. Within a few metres of the place the prediction runs the car's autopilot
-//!   forward from the sample (its position, heading, speed and look-ahead radius: see
+//!   passes the place. For the last samples before the command is due the prediction runs the
+//!   car's autopilot forward from the sample (its position, heading, speed and look-ahead radius: see
 //!   `pursuit`), so a car cutting a bend, which advances along its route up to a quarter faster
 //!   than its wheels turn and slower on the way out, arrives when predicted; farther away, and
 //!   for a car that reports no heading, it follows the speeds the route asks for (see
