@@ -238,6 +238,8 @@ impl Placer {
 
     /// The car's route grows by `points` (a segment or the safe stop's extension).
     pub fn extend(&mut self, points: &[Waypoint]) {
+        // A goal near the old end may lie on the new points: predict again.
+        self.predicted.set(None);
         for &w in points {
             let s = match (self.route.last(), self.route_s.last()) {
                 (Some(end), Some(&s)) => s + end.position.dist(w.position),
