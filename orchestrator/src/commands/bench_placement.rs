@@ -92,14 +92,13 @@ pub fn run(args: &BenchPlacementArgs) -> Result<ExitCode> {
                 );
                 config.policy = FailurePolicy::ContinueAndRecord;
                 config.record = RecordMode::None;
-                let mut sim = car_sim::SimConfig {
+                let sim = car_sim::SimConfig {
                     firmware,
                     link,
                     // The link's draws differ per link seed, the car's per test (as `run`).
                     seed: seed.wrapping_mul(1_000_003).wrapping_add(link_seed),
                     ..car_sim::SimConfig::from_scenario(&scenario)
                 };
-                sim.record_events = false;
                 let cars = EmbeddedSims::with_config(sim, true);
                 let report = run_campaign_fresh(
                     &cars,

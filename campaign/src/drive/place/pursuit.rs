@@ -76,9 +76,6 @@ impl Placer {
     pub(super) fn pursue(&self, seen: &Seen, target: f64) -> Option<f64> {
         let steering = self.steering?;
         let mut heading = seen.heading?;
-        if !heading.is_finite() {
-            return None;
-        }
         if target <= seen.s {
             return Some(0.0);
         }
@@ -89,7 +86,9 @@ impl Placer {
         for tick in 0..MAX_TICKS {
             stretch = self.closest_stretch(position, stretch);
             let goal = self.goal(position, seen.radius_at(speed), stretch)?;
-            let wanted = self.route_speed_at_goal(goal).unwrap_or(speed);
+            // The speed at the goal: its stretch's two speeds interpolated at it.
+            let at = self.route_s[goal.1] + goal.0.dist(self.route[goal.1].position);
+            let wanted = self.route_speed(at).unwrap_or(speed);
             speed += (wanted - speed).clamp(-MOTOR_ACCEL_MPS2 * TICK_S, MOTOR_ACCEL_MPS2 * TICK_S);
             let angle = steering.angle(position, heading, goal.0, speed);
             let step = speed.max(super::MIN_SPEED_MPS) * TICK_S;
@@ -157,19 +156,6 @@ impl Placer {
                 d(i).total_cmp(&d(j))
             })
             .unwrap_or(from)
-    }
-
-    /// The speed the autopilot sets with its goal at `goal`: its stretch's two speeds
-    /// interpolated at it.
-    fn route_speed_at_goal(&self, (goal, i): (Point, usize)) -> Option<f64> {
-        let (a, b) = (self.route.get(i)?, self.route.get(i + 1)?);
-        let (da, db) = (goal.dist(a.position), goal.dist(b.position));
-        let speed = if da + db > 0.0 {
-            a.speed + da / (da + db) * (b.speed - a.speed)
-        } else {
-            a.speed
-        };
-        (speed.is_finite() && speed > 0.0).then_some(speed)
     }
 }
 
