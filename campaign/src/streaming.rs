@@ -79,14 +79,12 @@ pub struct Progress {
     pub fraction: f64,
 }
 
-/// The autopilot's look-ahead radius at `speed` m/s, the larger of both firmware generations:
-/// 12.x `max(0.8 s · v, 0.8 m)` and 10.x `1.2 m · (1 + 0.05 v)²`. The car stops at the route end
-/// once it is within this distance of the last point.
+/// The autopilot's look-ahead radius at `speed` m/s, the larger of every firmware generation's
+/// (`car_link::firmware::steering::largest_look_ahead_radius_m`): 12.x `max(0.8 s · v, 0.8 m)`
+/// and 10.x `1.2 m · (1 + 0.05 v)²`. The car stops at the route end once it is within this
+/// distance of the last point.
 pub fn look_ahead_radius_m(speed: f64) -> f64 {
-    use car_link::version::FirmwareVersion;
-    FirmwareVersion::V12_3
-        .look_ahead_radius_m(speed)
-        .max(FirmwareVersion::V10_1.look_ahead_radius_m(speed))
+    car_link::firmware::steering::largest_look_ahead_radius_m(speed)
 }
 
 /// Locates `position` on `route`: the closest segment among the `ROUTE_WINDOW` segments from

@@ -4,9 +4,9 @@
 use std::hint::black_box;
 use std::time::Duration;
 
+use car_link::firmware::FirmwareVersion;
 use car_link::frame::{FrameDecoder, FrameEncoder};
 use car_link::message::{Dialect, Reply, Request, RoutePoint};
-use car_link::version::FirmwareVersion;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 
 #[path = "../tests/support/mod.rs"]

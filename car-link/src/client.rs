@@ -28,13 +28,14 @@ use tokio_util::sync::CancellationToken;
 use crate::address::CarAddress;
 use crate::config::{ConfigError, ConfigField, MainConfig};
 use crate::fault::{self, FaultError, FaultKind, MAX_PROBE_ID, Probe};
+use crate::firmware::FirmwareVersion;
 use crate::health::LinkHealth;
 use crate::message::{
     Anchor, CarState, DecodeError, EncodeError, EnuRef, ID_ALL, ID_CAR_CLIENT, MAX_ROUTE_PART,
     POINTS_PER_PACKET, Pose, RcControl, RcMode, Reply, Request, RoutePart, RoutePoint, SyncPoint,
 };
 use crate::transport::{Link, PC_BYTE_TIMEOUT};
-use crate::version::{CommandId, FirmwareVersion};
+use crate::version::CommandId;
 use session::{RouteMemory, Shared, StateOutcome, StateTicket, keep_alive, lock, supervise};
 
 /// How closely a point read back from the car must match the point sent, metres: far above the
@@ -669,7 +670,7 @@ impl Car {
         let held = usize::try_from(route_len).unwrap_or(0);
         let expected = lock(&self.shared().route)
             .sent_since_empty
-            .filter(|&sent| sent <= self.version().route_capacity());
+            .filter(|&sent| sent <= self.version().profile().route_capacity);
         if let Some(sent) = expected
             && held != sent
         {

@@ -7,7 +7,7 @@ use std::fmt;
 use thiserror::Error;
 
 use crate::encoding::{f32auto_decode, f32auto_encode};
-use crate::version::FirmwareVersion;
+use crate::firmware::FirmwareVersion;
 
 /// The longest log name the firmware stores (without its NUL).
 pub const MAX_LOG_NAME: usize = 20;
@@ -221,14 +221,15 @@ pub const MULTIROTOR_BLOCK_LEN: usize = 35 * 4 + 7 + 2 * 2;
 /// version and car id.
 fn factory_default(field: ConfigField, version: FirmwareVersion, car_id: u8) -> ConfigValue {
     use ConfigField::*;
-    let modern = version.major >= 12;
+    let profile = version.profile();
     let f = ConfigValue::F32;
     let u = ConfigValue::U8;
     match field {
         MagComp | GpsComp | GpsReqRtk | GpsUseRtcmBaseAsEnuRef | GpsSendNmea | GpsUseUbxInfo => {
             u(1)
         }
-        ApRepeatRoutes | ClampImuYawStationary => u(1),
+        ApRepeatRoutes => u(1),
+        ClampImuYawStationary => u(u8::from(profile.default_clamp_imu_yaw_stationary)),
         MagUse | ApModeTime | LogEn | LogModeExt | YawUseOdometry | DisableMotor
         | SimulateMotor | UseUwbPos => u(0),
         YawMagGain => f(1.2),
@@ -240,8 +241,8 @@ fn factory_default(field: ConfigField, version: FirmwareVersion, car_id: u8) -> 
         GpsCorrGainStat | GpsCorrGainDyn => f(0.05),
         GpsUbxMaxAcc => f(0.12),
         UwbMaxCorr => f(0.1),
-        ApBaseRad => f(if modern { 0.8 } else { 1.2 }),
-        ApRadTimeAhead => f(0.8),
+        ApBaseRad => f(profile.default_base_radius_m as f32),
+        ApRadTimeAhead => f(profile.default_radius_time_ahead_s as f32),
         ApMaxSpeed => f(30.0 / 3.6),
         ApTimeAddRepeatMs => ConfigValue::I32(60_000),
         LogRateHz => ConfigValue::I16(50),
@@ -252,9 +253,13 @@ fn factory_default(field: ConfigField, version: FirmwareVersion, car_id: u8) -> 
         WheelDiam => f(0.11),
         MotorPoles => f(4.0),
         SteeringMaxAngleRad => f(0.42041),
-        SteeringCenter => f(if car_id == 1 && !modern { 0.53 } else { 0.5 }),
+        SteeringCenter => f(if car_id == 1 {
+            profile.car_1_steering_center as f32
+        } else {
+            0.5
+        }),
         SteeringRange => f(0.58),
-        SteeringRampTime => f(if modern { 0.0 } else { 0.6 }),
+        SteeringRampTime => f(profile.default_steering_ramp_time_s as f32),
         AxisDistance => f(0.475),
     }
 }

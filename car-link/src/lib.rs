@@ -49,5 +49,6 @@ pub use address::CarAddress;
 #[cfg(feature = "client")]
 pub use client::{Car, CarError, LinkConfig, LinkEvent, StatePolling, StateSample};
 pub use fault::{FaultKind, Probe};
+pub use firmware::FirmwareVersion;
 pub use message::{CarState, Reply, Request, RoutePoint};
-pub use version::{CommandId, FirmwareVersion};
+pub use version::CommandId;

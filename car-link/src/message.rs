@@ -10,7 +10,8 @@
 //!
 //! ```
 //! use car_link::message::{Dialect, Reply, Request, RoutePoint};
-//! use car_link::version::{CommandId, FirmwareVersion};
+//! use car_link::firmware::FirmwareVersion;
+//! use car_link::version::CommandId;
 //!
 //! let version = FirmwareVersion::V10_1;
 //! let payload = [
@@ -31,8 +32,9 @@ use crate::encoding::{
     NumberError, Rounding, SCALE_FINE, SCALE_HEIGHT, SCALE_LAT_LON, SCALE_POSITION, f32auto_decode,
     f32auto_encode, scaled_i32, scaled_i64, unscale_i32, unscale_i64,
 };
+use crate::firmware::FirmwareVersion;
 use crate::frame::FIRMWARE_MAX_PAYLOAD;
-use crate::version::{CommandId, FirmwareVersion};
+use crate::version::CommandId;
 
 /// Broadcast id (`ID_ALL`): every car processes it and replies with its own id.
 pub const ID_ALL: u8 = 255;

@@ -1,96 +1,8 @@
-//! Firmware generations (`docs/protocol.md#versions`) and the command-id table (`docs/protocol.md#command-ids`).
-//!
-//! Everything version-dependent on the wire is decided here: the route-point size, the numbering of ids 76–89,
-//! the length of `AP_SET_ACTIVE` and the longest PRINTF.
+//! The command-id table (`docs/protocol.md#command-ids`): each command's wire id in each firmware
+//! version ([`FirmwareVersion::new_command_ids`] says which numbering a version uses; every
+//! version-dependent fact is in `crate::firmware`).
 
-use std::fmt;
-
-/// A firmware version as reported by GET_STATE (`fw_major`, `fw_minor`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub struct FirmwareVersion {
-    /// `fw_major`: 10, 11 or 12.
-    pub major: u8,
-    /// `fw_minor`.
-    pub minor: u8,
-}
-
-impl FirmwareVersion {
-    /// 10.1, the firmware of the published UWB experiments.
-    pub const V10_1: FirmwareVersion = FirmwareVersion::new(10, 1);
-    /// 11.0, the transitional version.
-    pub const V11_0: FirmwareVersion = FirmwareVersion::new(11, 0);
-    /// 12.0, the first with 24-byte route points.
-    pub const V12_0: FirmwareVersion = FirmwareVersion::new(12, 0);
-    /// 12.1, the first with the new numbering of ids 76–89.
-    pub const V12_1: FirmwareVersion = FirmwareVersion::new(12, 1);
-    /// 12.3, the latest.
-    pub const V12_3: FirmwareVersion = FirmwareVersion::new(12, 3);
-
-    /// The version `major.minor`.
-    pub const fn new(major: u8, minor: u8) -> Self {
-        FirmwareVersion { major, minor }
-    }
-
-    /// Bytes per route point in AP_ADD_POINTS and AP_REPLACE_ROUTE: 24 from 12.0, 16 before.
-    pub fn route_point_size(self) -> usize {
-        if self.major >= 12 { 24 } else { 16 }
-    }
-
-    /// Points in the car's route ring (`docs/firmware.md#route-ring-and-points-left`): 1000 from 12.0, 500 before.
-    /// Writing past it overwrites points not yet driven.
-    pub fn route_capacity(self) -> usize {
-        if self.major >= 12 { 1000 } else { 500 }
-    }
-
-    /// Whether ids 76–89 use the new numbering (12.1 and later).
-    pub fn new_command_ids(self) -> bool {
-        self >= FirmwareVersion::V12_1
-    }
-
-    /// Whether AP_SET_ACTIVE carries the second byte `reset_state` (12.3 and later).
-    pub fn set_active_has_reset(self) -> bool {
-        self >= FirmwareVersion::V12_3
-    }
-
-    /// The longest PRINTF text the firmware sends: 252 characters up to 12.1, 508 from 12.2.
-    pub fn max_printf_len(self) -> usize {
-        if self >= FirmwareVersion::new(12, 2) {
-            508
-        } else {
-            252
-        }
-    }
-
-    /// Whether GET_STATE swaps the fused and UWB positions when `use_uwb_pos` is set (11.0 and later).
-    pub fn swaps_uwb_position(self) -> bool {
-        self >= FirmwareVersion::V11_0
-    }
-
-    /// The autopilot's look-ahead radius at `speed` m/s with the default settings
-    /// (`docs/firmware.md#control-cycle`), metres: `1.2 m · (1 + 0.05·|v|)²` before 12.0,
-    /// `max(0.8 s · |v|, 0.8 m)` from 12.0 (the version that brought `ap_rad_time_ahead`).
-    pub fn look_ahead_radius_m(self, speed: f64) -> f64 {
-        let v = speed.abs();
-        if self.major >= 12 {
-            (0.8 * v).max(0.8)
-        } else {
-            1.2 * (1.0 + 0.05 * v).powi(2)
-        }
-    }
-}
-
-impl Default for FirmwareVersion {
-    /// The latest version, 12.3.
-    fn default() -> Self {
-        FirmwareVersion::V12_3
-    }
-}
-
-impl fmt::Display for FirmwareVersion {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}.{}", self.major, self.minor)
-    }
-}
+use crate::firmware::FirmwareVersion;
 
 macro_rules! commands {
     ($( $(#[$doc:meta])* $name:ident = $new:expr, $old:expr, $resets:expr; )*) => {
@@ -290,15 +202,5 @@ mod tests {
                 assert!(n <= 1, "id {code} is used {n} times in {version}");
             }
         }
-    }
-
-    #[test]
-    fn layouts_follow_the_version() {
-        assert_eq!(FirmwareVersion::V11_0.route_point_size(), 16);
-        assert_eq!(FirmwareVersion::V12_0.route_point_size(), 24);
-        assert!(!FirmwareVersion::new(12, 2).set_active_has_reset());
-        assert!(FirmwareVersion::V12_3.set_active_has_reset());
-        assert_eq!(FirmwareVersion::V12_1.max_printf_len(), 252);
-        assert_eq!(FirmwareVersion::new(12, 2).max_printf_len(), 508);
     }
 }

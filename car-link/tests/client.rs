@@ -7,9 +7,10 @@ use std::time::Duration;
 
 use car_link::client::{Car, CarError, LinkConfig, LinkEvent};
 use car_link::fault::{FaultError, FaultKind, FaultRejection, Probe};
+use car_link::firmware::FirmwareVersion;
 use car_link::message::{Anchor, DecodeError, EnuRef, Request, RoutePoint};
 use car_link::transport::sim_pipe;
-use car_link::version::{CommandId, FirmwareVersion};
+use car_link::version::CommandId;
 use futures::StreamExt;
 use support::{Behaviour, Log, sample_state, serve};
 

@@ -2,12 +2,13 @@
 //! recover a valid frame that follows arbitrary garbage.
 
 use car_link::config::{ConfigValue, MAX_LOG_NAME, MULTIROTOR_BLOCK_LEN, MainConfig};
+use car_link::firmware::FirmwareVersion;
 use car_link::frame::{FIRMWARE_MAX_PAYLOAD, FrameDecoder, FrameEncoder};
 use car_link::message::{
     Anchor, CarState, Dialect, EnuRef, Pose, RcControl, RcMode, Reply, Request, RoutePart,
     RoutePoint, SyncPoint,
 };
-use car_link::version::{CommandId, FirmwareVersion};
+use car_link::version::CommandId;
 use proptest::prelude::*;
 
 const VERSIONS: [FirmwareVersion; 6] = [

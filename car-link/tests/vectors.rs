@@ -1,9 +1,10 @@
 //! Every test vector of the protocol (`docs/protocol.md#test-vectors`), encoded and decoded with the crate's own types.
 
 use car_link::crc::checksum;
+use car_link::firmware::FirmwareVersion;
 use car_link::frame::{FrameDecoder, FrameEncoder};
 use car_link::message::{Anchor, CarState, Dialect, RcControl, RcMode, Reply, Request, RoutePoint};
-use car_link::version::{CommandId, FirmwareVersion};
+use car_link::version::CommandId;
 
 mod support;
 

@@ -9,8 +9,8 @@ use scenarios::geometry::{Area, Point, Polygon, point_segment_distance};
 
 use crate::noise::Noise;
 use crate::{
-    CarOptions, Firmware, Placement, RadioPath, RcMode, RoutePoint, SimCar, StateReport, World,
-    WorldAnchor,
+    CarOptions, FirmwareVersion, Placement, RadioPath, RcMode, RoutePoint, SimCar, StateReport,
+    World, WorldAnchor,
 };
 
 /// The fence of `parking-lot-2anchors.xml` (route id 2).
@@ -130,7 +130,7 @@ struct Driver {
 impl Driver {
     fn new(mut car: SimCar, route: &[RoutePoint]) -> Self {
         car.terminal("pos_uwb_reset_pos");
-        if car.firmware().is_12x() {
+        if car.firmware().profile().uwb_reset == car_link::firmware::UwbReset::PositionOnly {
             // 12.x's reset copies the position only, and the UWB heading of a car that stood
             // still since boot is frozen at 0°: set the whole pose, as an orchestrator must.
             let s = car.get_state();
@@ -182,7 +182,7 @@ impl Driver {
     }
 }
 
-fn placed_car(firmware: Firmware, seed: u64, route: &[Point]) -> SimCar {
+fn placed_car(firmware: FirmwareVersion, seed: u64, route: &[Point]) -> SimCar {
     let heading = (route[1] - route[0]).heading();
     let mut car = SimCar::new(CarOptions {
         firmware,
@@ -249,7 +249,7 @@ struct CrossTrack {
 /// cross-track error of the true position (start route and last segments excluded).
 fn drive_and_measure(
     scenario: &scenarios::Scenario,
-    firmware: Firmware,
+    firmware: FirmwareVersion,
     seed: u64,
     length_m: f64,
     steering: Steering,
@@ -335,7 +335,10 @@ fn drives_the_start_route_and_200_m_at_3_m_s_on_every_bundled_area_inside_the_fe
         let scenario = scenarios::bundled::load(name)
             .expect("a bundled area")
             .scenario;
-        for (firmware, bound) in [(Firmware::V10_1, 0.25), (Firmware::V12_3, 0.6)] {
+        for (firmware, bound) in [
+            (FirmwareVersion::V10_1, 0.25),
+            (FirmwareVersion::V12_3, 0.6),
+        ] {
             let m = drive_and_measure(
                 &scenario,
                 firmware,
@@ -373,7 +376,7 @@ fn cross_track_at_3_m_s_per_firmware_area_seed_and_steering_law() {
         Steering::DocumentedIdealSensors,
     ];
     println!("firmware area seed law: p50 / p95 / max cross-track, m (samples)");
-    for firmware in [Firmware::V10_1, Firmware::V12_3] {
+    for firmware in [FirmwareVersion::V10_1, FirmwareVersion::V12_3] {
         for law in laws {
             let mut all_p95 = Vec::new();
             for name in scenarios::bundled::names() {
@@ -413,14 +416,14 @@ fn cross_track_at_3_m_s_with_the_documented_look_ahead_settings() {
     // (firmware, distance compensation, ap_base_rad, ap_rad_time_ahead): the look-ahead radius at
     // 3 m/s is 1.3225 · ap_base_rad (10.1) or max(3 · ap_rad_time_ahead, ap_base_rad) (12.3).
     let settings = [
-        (Firmware::V10_1, true, 1.2, 0.0),
-        (Firmware::V10_1, false, 1.2, 0.0),
-        (Firmware::V10_1, true, 1.0, 0.0),
-        (Firmware::V10_1, false, 1.0, 0.0),
-        (Firmware::V12_3, true, 0.8, 0.8),
-        (Firmware::V12_3, true, 0.8, 0.5),
-        (Firmware::V12_3, false, 0.8, 0.5),
-        (Firmware::V12_3, false, 0.8, 0.4),
+        (FirmwareVersion::V10_1, true, 1.2, 0.0),
+        (FirmwareVersion::V10_1, false, 1.2, 0.0),
+        (FirmwareVersion::V10_1, true, 1.0, 0.0),
+        (FirmwareVersion::V10_1, false, 1.0, 0.0),
+        (FirmwareVersion::V12_3, true, 0.8, 0.8),
+        (FirmwareVersion::V12_3, true, 0.8, 0.5),
+        (FirmwareVersion::V12_3, false, 0.8, 0.5),
+        (FirmwareVersion::V12_3, false, 0.8, 0.4),
     ];
     for (firmware, compensation, base_rad, time_ahead) in settings {
         let mut p95 = Vec::new();
@@ -461,7 +464,7 @@ fn cross_track_at_3_m_s_with_the_documented_look_ahead_settings() {
 
 /// A random drive on the lot: one random speed (3–12 km/h) per run of 5 points, like the
 /// method's RunSegments.
-fn lot_drive(firmware: Firmware, seed: u64, length_m: f64) -> (Driver, Vec<Point>) {
+fn lot_drive(firmware: FirmwareVersion, seed: u64, length_m: f64) -> (Driver, Vec<Point>) {
     let area = lot_area();
     let mut route = start_points();
     let mut noise = Noise::stream(seed, 98);
@@ -480,7 +483,7 @@ fn deviation(s: &StateReport) -> f64 {
 
 #[test]
 fn uwb_deviation_over_a_ten_minute_drive_is_in_the_published_range() {
-    for (firmware, seed) in [(Firmware::V10_1, 11), (Firmware::V12_3, 12)] {
+    for (firmware, seed) in [(FirmwareVersion::V10_1, 11), (FirmwareVersion::V12_3, 12)] {
         let (mut driver, _) = lot_drive(firmware, seed, 1500.0);
         let mut devs = Vec::new();
         driver.run(600_000, |car, s| {
@@ -498,7 +501,7 @@ fn uwb_deviation_over_a_ten_minute_drive_is_in_the_published_range() {
 
 #[test]
 fn an_offset_4_fault_on_one_anchor_for_8_iterations_raises_the_deviation_clearly() {
-    let (mut driver, _) = lot_drive(Firmware::V10_1, 21, 300.0);
+    let (mut driver, _) = lot_drive(FirmwareVersion::V10_1, 21, 300.0);
     let mut before = Vec::new();
     driver.run(30_000, |car, s| {
         if car.now_ms() > 5_000 {
@@ -534,7 +537,7 @@ fn an_offset_4_fault_on_one_anchor_for_8_iterations_raises_the_deviation_clearly
 #[test]
 fn the_same_seed_gives_identical_telemetry_and_another_seed_does_not() {
     let telemetry = |seed: u64| {
-        let (mut driver, _) = lot_drive(Firmware::V10_1, seed, 150.0);
+        let (mut driver, _) = lot_drive(FirmwareVersion::V10_1, seed, 150.0);
         driver.car.terminal("fi_set_enabled 1");
         driver
             .car
@@ -550,7 +553,7 @@ fn the_same_seed_gives_identical_telemetry_and_another_seed_does_not() {
 
 #[test]
 fn a_silent_link_for_two_seconds_brakes_and_stops_the_autopilot() {
-    for firmware in [Firmware::V10_1, Firmware::V12_3] {
+    for firmware in [FirmwareVersion::V10_1, FirmwareVersion::V12_3] {
         let (mut driver, _) = lot_drive(firmware, 31, 100.0);
         driver.run(10_000, |_, _| {});
         assert!(driver.car.autopilot().is_active());
@@ -573,7 +576,7 @@ fn a_silent_link_for_two_seconds_brakes_and_stops_the_autopilot() {
         assert!(driver.car.truth().speed.abs() < 0.05, "{firmware}: stopped");
         // 10.x keeps braking at standstill; 12.3 only above 2 km/h (then the motor's own 10 A).
         let stopped_mode = driver.car.motor().mode();
-        if firmware.is_12x() {
+        if firmware.profile().watchdog_brake != car_link::firmware::WatchdogBrake::Always {
             driver.car.run_for(3_000);
             assert_eq!(
                 driver.car.motor().mode(),
@@ -604,7 +607,7 @@ fn the_watchdog_is_expired_from_two_seconds_after_boot_and_heartbeats_do_not_cou
 
 #[test]
 fn set_active_0_and_clear_do_not_brake_the_motor_holds_its_rpm_for_two_seconds() {
-    let (mut driver, _) = lot_drive(Firmware::V10_1, 41, 100.0);
+    let (mut driver, _) = lot_drive(FirmwareVersion::V10_1, 41, 100.0);
     driver.run(8_000, |_, _| {});
     driver.car.set_active(false, false);
     driver.car.step();
@@ -628,7 +631,7 @@ fn set_active_0_and_clear_do_not_brake_the_motor_holds_its_rpm_for_two_seconds()
 
 #[test]
 fn the_px_fault_changes_only_the_reported_value() {
-    let (mut driver, _) = lot_drive(Firmware::V10_1, 51, 100.0);
+    let (mut driver, _) = lot_drive(FirmwareVersion::V10_1, 51, 100.0);
     driver.run(3_000, |_, _| {});
     driver.car.terminal("fi_set_enabled 1");
     driver.car.terminal("fi_add_fault px OFFSET 10 0 0");
@@ -644,7 +647,7 @@ fn the_px_fault_changes_only_the_reported_value() {
 
 #[test]
 fn rc_control_deactivates_and_brakes_to_a_stop() {
-    let (mut driver, _) = lot_drive(Firmware::V10_1, 61, 100.0);
+    let (mut driver, _) = lot_drive(FirmwareVersion::V10_1, 61, 100.0);
     driver.run(8_000, |_, _| {});
     driver.car.rc_control(RcMode::Brake, 50.0, 0.0);
     assert!(!driver.car.autopilot().is_active());
@@ -988,7 +991,7 @@ fn the_12_3_uwb_heading_after_set_pos_starts_exact_and_stays_within_ten_degrees(
     let mut noise = Noise::stream(3, 94);
     random_route(&area, &mut route, 150.0, 0.5, &mut noise);
     let points = route_points(&route, |_| 3.0);
-    let mut car = placed_car(Firmware::V12_3, 3, &route);
+    let mut car = placed_car(FirmwareVersion::V12_3, 3, &route);
     for _ in 0..300 {
         car.step();
         if car.now_ms().is_multiple_of(50) {

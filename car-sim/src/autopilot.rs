@@ -1,17 +1,16 @@
 //! The pure-pursuit autopilot (`docs/firmware.md#autopilot`): route ring, window scan, steering
 //! law, speed, end of route, and the replace/clear/activate semantics of both firmware generations.
 
-use crate::config::{ApTimeMode, FirmwareConfig, VehicleParams};
-use crate::firmware::Firmware;
+use crate::config::{ApTimeMode, FirmwareConfig};
 use crate::motor::MotorCommand;
 use crate::terminal::scan_i32;
+use car_link::firmware::steering::{self, Compensation, LOOK_AHEAD_STRETCHES, PursuitPose};
+use car_link::firmware::{FirmwareProfile, FirmwareVersion, RouteEnd};
 
 /// Milliseconds per day.
 const MS_PER_DAY: i32 = 86_400_000;
 /// Brake current at the route end, A.
 const ROUTE_END_BRAKE_A: f32 = 10.0;
-/// Default look-ahead window, points.
-const DEFAULT_LOOK_AHEAD: usize = 8;
 
 /// One stored route point (the 16-byte 10.x layout has no `pz` and no `attributes`; they are 0).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -107,7 +106,7 @@ pub struct RoutePart {
 /// The autopilot state.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Autopilot {
-    firmware: Firmware,
+    firmware: FirmwareProfile,
     route: Vec<RoutePoint>,
     active: bool,
     point_last: usize,
@@ -143,10 +142,10 @@ struct Scan {
 
 impl Autopilot {
     /// A freshly booted autopilot: empty route, inactive.
-    pub fn new(firmware: Firmware) -> Self {
+    pub fn new(firmware: FirmwareVersion) -> Self {
         Self {
-            firmware,
-            route: vec![RoutePoint::default(); firmware.route_ring_size()],
+            firmware: firmware.profile(),
+            route: vec![RoutePoint::default(); firmware.profile().route_capacity],
             active: false,
             point_last: 0,
             point_now: 0,
@@ -159,7 +158,7 @@ impl Autopilot {
             started: false,
             route_end: false,
             sync_received: false,
-            look_ahead: DEFAULT_LOOK_AHEAD,
+            look_ahead: LOOK_AHEAD_STRETCHES,
             dynamic_rad: true,
             ang_dist_comp: true,
         }
@@ -238,8 +237,9 @@ impl Autopilot {
             self.clear(ms_today);
             return self.add_points(points, cfg);
         }
-        let time_mode =
-            self.firmware.is_12x() && cfg.ap_mode_time != ApTimeMode::Speed && first.time > 0;
+        let time_mode = self.firmware.time_mode_replace
+            && cfg.ap_mode_time != ApTimeMode::Speed
+            && first.time > 0;
         if time_mode {
             self.replace_in_time_mode(points, cfg, &mut outcome);
             return outcome;
@@ -358,7 +358,7 @@ impl Autopilot {
             self.route_end = false;
         }
         self.active = active;
-        if reset_state && self.firmware.is_12x() {
+        if reset_state && self.firmware.set_active_has_reset {
             self.reset_state(ms_today);
         }
     }
@@ -463,15 +463,14 @@ impl Autopilot {
         self.route_left = left;
         let car = self.pose_source(cfg, input);
         if len < 2 {
-            return if self.firmware.is_12x() {
-                ApOutput::default()
-            } else {
-                self.route_end_actions(cfg, input.ms_today)
+            return match self.firmware.route_end {
+                RouteEnd::DeactivatesAndResets => ApOutput::default(),
+                RouteEnd::StaysActiveBraking => self.route_end_actions(cfg, input.ms_today),
             };
         }
         let radius = self.radius(cfg, input.speed);
         self.rad_now = radius;
-        if self.firmware.is_12x() && !self.started {
+        if self.firmware.drives_to_start && !self.started {
             if self.route[0].dist_to(car.x, car.y) < 1.5 * radius {
                 self.started = true;
             } else {
@@ -500,19 +499,16 @@ impl Autopilot {
     }
 
     fn pose_source(&self, cfg: &FirmwareConfig, input: &ApInputs) -> FwPose {
-        let use_uwb = match self.firmware {
-            Firmware::V10_1 => false,
-            Firmware::V12_3 => {
-                let attr = if self.started {
-                    self.route[self.point_now].attributes & 0b111
-                } else {
-                    0
-                };
-                match attr {
-                    1 => false,
-                    2 => true,
-                    _ => cfg.vehicle.use_uwb_pos,
-                }
+        let use_uwb = self.firmware.selects_position_source && {
+            let attr = if self.started {
+                self.route[self.point_now].attributes & 0b111
+            } else {
+                0
+            };
+            match attr {
+                1 => false,
+                2 => true,
+                _ => cfg.vehicle.use_uwb_pos,
             }
         };
         if use_uwb { input.uwb } else { input.fused }
@@ -522,10 +518,12 @@ impl Autopilot {
         if !self.dynamic_rad {
             return cfg.ap_base_rad;
         }
-        match self.firmware {
-            Firmware::V10_1 => cfg.ap_base_rad / VehicleParams::steering_scale(speed),
-            Firmware::V12_3 => (cfg.ap_rad_time_ahead * speed.abs()).max(cfg.ap_base_rad),
-        }
+        steering::look_ahead_radius(
+            self.firmware.look_ahead,
+            cfg.ap_base_rad,
+            cfg.ap_rad_time_ahead,
+            speed,
+        )
     }
 
     fn drive_to_start(&mut self, cfg: &FirmwareConfig, input: &ApInputs, car: FwPose) -> ApOutput {
@@ -549,7 +547,11 @@ impl Autopilot {
     }
 
     fn window(&self, len: usize) -> impl Iterator<Item = Segment> + '_ {
-        let cap = if self.firmware.is_12x() { len - 1 } else { len };
+        let cap = if self.firmware.scan_stops_before_last_point {
+            len - 1
+        } else {
+            len
+        };
         let k = self.look_ahead.min(cap);
         let start = self.point_now;
         (start..start + k).map(|i| Segment {
@@ -660,14 +662,25 @@ impl Autopilot {
 
     fn drive(&self, cfg: &FirmwareConfig, odo_speed: f32, car: FwPose, speed: f32) -> ApOutput {
         let v = &cfg.vehicle;
-        let mut angle = steering_angle(
-            car,
+        let compensation = match self.ang_dist_comp {
+            false => Compensation::Off,
+            #[cfg(test)]
+            true if experiment::multiply_angle() => Compensation::MultiplyAngle2016,
+            true => Compensation::DivideRadius,
+        };
+        let pose = PursuitPose {
+            x: car.x,
+            y: car.y,
+            heading: -car.yaw.to_radians(),
+        };
+        let mut angle = steering::pursuit_angle(
+            pose,
             self.goal.px,
             self.goal.py,
             v.axis_distance,
-            self.ang_dist_comp,
+            compensation,
         );
-        let max = v.steering_max_angle_rad * VehicleParams::steering_scale(odo_speed);
+        let max = steering::max_steering_angle(v.steering_max_angle_rad, odo_speed);
         angle = angle.clamp(-max, max);
         let speed = speed.clamp(-cfg.ap_max_speed, cfg.ap_max_speed);
         let motor =
@@ -687,7 +700,7 @@ impl Autopilot {
                 .then_some(MotorCommand::CurrentBrake(ROUTE_END_BRAKE_A)),
             zero_length_segment: false,
         };
-        if self.firmware.is_12x() {
+        if self.firmware.route_end == RouteEnd::DeactivatesAndResets {
             self.active = false;
             self.route_end = true;
             self.reset_state(ms_today);
@@ -743,7 +756,7 @@ impl Autopilot {
             self.start_time,
             self.route_left
         );
-        if self.firmware.is_12x() {
+        if self.firmware.route_end == RouteEnd::DeactivatesAndResets {
             s.push_str(&format!("m_route_end: {}\n", i32::from(self.route_end)));
         }
         s
@@ -842,41 +855,6 @@ fn closest_point_on_segment(p1: &RoutePoint, p2: &RoutePoint, car: FwPose) -> Ro
     }
 }
 
-/// The steering law (`docs/firmware.md#steering-law`): pure pursuit with optional distance
-/// compensation.
-///
-/// The distance compensation divides the pursuit radius, `R_pp ← R_pp / min(1 + 0.2·D, 5)`, before
-/// `δ = atan(L / R_pp)`: that is the documented law of both generations (the firmware that has the
-/// `ap_ang_dist_comp` switch). The 2016 code before that switch multiplied the angle instead,
-/// `δ = atan(L / R_pp) · min(1 + 0.2·D, 5)`; it is not reproduced (the acceptance tests measure it
-/// for comparison only).
-pub fn steering_angle(
-    car: FwPose,
-    goal_x: f32,
-    goal_y: f32,
-    wheelbase: f32,
-    compensate: bool,
-) -> f32 {
-    let theta = -car.yaw.to_radians();
-    let d = (goal_x - car.x).hypot(goal_y - car.y);
-    let gamma = theta - (goal_y - car.y).atan2(goal_x - car.x);
-    let dx = d * gamma.cos();
-    let dy = d * gamma.sin();
-    if dy.abs() <= 1e-6 {
-        return 0.0;
-    }
-    let mut r = -(dx * dx + dy * dy) / (2.0 * dy);
-    if compensate {
-        let correction = (1.0 + 0.2 * d).min(5.0);
-        #[cfg(test)]
-        if experiment::multiply_angle() {
-            return (wheelbase / r).atan() * correction;
-        }
-        r /= correction;
-    }
-    (wheelbase / r).atan()
-}
-
 /// Test-only experiments on the steering law, per thread (each test runs on its own thread).
 #[cfg(test)]
 pub(crate) mod experiment {
@@ -902,7 +880,7 @@ pub(crate) mod experiment {
 mod tests {
     use super::*;
 
-    fn cfg(fw: Firmware, repeat: bool) -> FirmwareConfig {
+    fn cfg(fw: FirmwareVersion, repeat: bool) -> FirmwareConfig {
         let mut c = FirmwareConfig::defaults(fw);
         c.ap_repeat_routes = repeat;
         c
@@ -926,8 +904,8 @@ mod tests {
 
     #[test]
     fn route_left_counts_from_the_current_segment_start_to_the_end() {
-        let c = cfg(Firmware::V10_1, false);
-        let mut ap = Autopilot::new(Firmware::V10_1);
+        let c = cfg(FirmwareVersion::V10_1, false);
+        let mut ap = Autopilot::new(FirmwareVersion::V10_1);
         ap.add_points(&straight(10, 1.0), &c);
         ap.set_active(true, false, 0);
         ap.cycle(&c, &inputs(0.2, 0.0, 0.0, 0.0));
@@ -941,10 +919,10 @@ mod tests {
 
     #[test]
     fn radius_rule_per_era() {
-        let ap10 = Autopilot::new(Firmware::V10_1);
-        let ap12 = Autopilot::new(Firmware::V12_3);
-        let c10 = FirmwareConfig::defaults(Firmware::V10_1);
-        let c12 = FirmwareConfig::defaults(Firmware::V12_3);
+        let ap10 = Autopilot::new(FirmwareVersion::V10_1);
+        let ap12 = Autopilot::new(FirmwareVersion::V12_3);
+        let c10 = FirmwareConfig::defaults(FirmwareVersion::V10_1);
+        let c12 = FirmwareConfig::defaults(FirmwareVersion::V12_3);
         assert!((ap10.radius(&c10, 1.0) - 1.323).abs() < 1e-3);
         assert!((ap10.radius(&c10, 2.0) - 1.452).abs() < 1e-3);
         assert!((ap12.radius(&c12, 1.0) - 0.8).abs() < 1e-6);
@@ -952,30 +930,9 @@ mod tests {
     }
 
     #[test]
-    fn steering_law_turns_left_towards_a_goal_on_the_left() {
-        let car = FwPose {
-            x: 0.0,
-            y: 0.0,
-            yaw: 0.0,
-        };
-        let left = steering_angle(car, 1.0, 1.0, 0.475, true);
-        let right = steering_angle(car, 1.0, -1.0, 0.475, true);
-        assert!(left > 0.0 && right < 0.0);
-        assert_eq!(steering_angle(car, 2.0, 0.0, 0.475, true), 0.0);
-        // R_pp = 1 m for a goal at (1, 1); with compensation R = 1 / (1 + 0.2·√2) (the documented
-        // law divides the radius), not the 2016 law that multiplied the angle.
-        let correction = 1.0 + 0.2 * 2f32.sqrt();
-        let expected = (0.475f32 / (1.0 / correction)).atan();
-        assert!((left - expected).abs() < 1e-5);
-        let multiplied = 0.475f32.atan() * correction;
-        assert!((left - multiplied).abs() > 0.01);
-        assert!((steering_angle(car, 1.0, 1.0, 0.475, false) - 0.475f32.atan()).abs() < 1e-6);
-    }
-
-    #[test]
     fn goal_is_the_last_circle_hit_and_speed_is_interpolated_at_the_goal() {
-        let c = cfg(Firmware::V10_1, false);
-        let mut ap = Autopilot::new(Firmware::V10_1);
+        let c = cfg(FirmwareVersion::V10_1, false);
+        let mut ap = Autopilot::new(FirmwareVersion::V10_1);
         let mut pts = straight(10, 1.0);
         pts[2].speed = 3.0;
         ap.add_points(&pts, &c);
@@ -994,8 +951,8 @@ mod tests {
 
     #[test]
     fn end_of_route_10x_stays_active_and_brakes_every_cycle() {
-        let c = cfg(Firmware::V10_1, false);
-        let mut ap = Autopilot::new(Firmware::V10_1);
+        let c = cfg(FirmwareVersion::V10_1, false);
+        let mut ap = Autopilot::new(FirmwareVersion::V10_1);
         ap.add_points(&straight(5, 1.0), &c);
         ap.set_active(true, false, 0);
         // The first cycle moves point_now to 3; route_left is then 2 < 3.
@@ -1022,8 +979,8 @@ mod tests {
 
     #[test]
     fn end_of_route_12_3_deactivates_resets_and_redrives_from_route_0() {
-        let c = cfg(Firmware::V12_3, false);
-        let mut ap = Autopilot::new(Firmware::V12_3);
+        let c = cfg(FirmwareVersion::V12_3, false);
+        let mut ap = Autopilot::new(FirmwareVersion::V12_3);
         ap.add_points(&straight(5, 1.0), &c);
         ap.set_active(true, false, 0);
         ap.cycle(&c, &inputs(0.0, 0.0, 0.0, 0.0));
@@ -1043,7 +1000,10 @@ mod tests {
 
     #[test]
     fn short_route_10x_brakes_12x_does_nothing() {
-        for (fw, expect_brake) in [(Firmware::V10_1, true), (Firmware::V12_3, false)] {
+        for (fw, expect_brake) in [
+            (FirmwareVersion::V10_1, true),
+            (FirmwareVersion::V12_3, false),
+        ] {
             let c = cfg(fw, false);
             let mut ap = Autopilot::new(fw);
             ap.add_points(&straight(1, 1.0), &c);
@@ -1055,8 +1015,8 @@ mod tests {
 
     #[test]
     fn duplicate_first_point_drops_the_packet_and_clear_forgets() {
-        let c = cfg(Firmware::V10_1, false);
-        let mut ap = Autopilot::new(Firmware::V10_1);
+        let c = cfg(FirmwareVersion::V10_1, false);
+        let mut ap = Autopilot::new(FirmwareVersion::V10_1);
         let pkt = straight(5, 1.0);
         assert!(!ap.add_points(&pkt, &c).dropped_as_duplicate);
         assert!(ap.add_points(&pkt, &c).dropped_as_duplicate);
@@ -1068,8 +1028,8 @@ mod tests {
 
     #[test]
     fn clear_keeps_route_left_and_zeroes_the_goal() {
-        let c = cfg(Firmware::V10_1, false);
-        let mut ap = Autopilot::new(Firmware::V10_1);
+        let c = cfg(FirmwareVersion::V10_1, false);
+        let mut ap = Autopilot::new(FirmwareVersion::V10_1);
         ap.add_points(&straight(10, 1.0), &c);
         ap.set_active(true, false, 0);
         ap.cycle(&c, &inputs(0.5, 0.0, 0.0, 0.0));
@@ -1083,8 +1043,8 @@ mod tests {
 
     #[test]
     fn replace_while_active_cuts_back_to_the_current_segment() {
-        let c = cfg(Firmware::V10_1, false);
-        let mut ap = Autopilot::new(Firmware::V10_1);
+        let c = cfg(FirmwareVersion::V10_1, false);
+        let mut ap = Autopilot::new(FirmwareVersion::V10_1);
         ap.add_points(&straight(10, 1.0), &c);
         ap.set_active(true, false, 0);
         ap.cycle(&c, &inputs(3.5, 0.0, 0.0, 0.0));
@@ -1100,8 +1060,8 @@ mod tests {
 
     #[test]
     fn route_part_refuses_more_than_20_and_zeroes_missing_points() {
-        let c = cfg(Firmware::V10_1, false);
-        let mut ap = Autopilot::new(Firmware::V10_1);
+        let c = cfg(FirmwareVersion::V10_1, false);
+        let mut ap = Autopilot::new(FirmwareVersion::V10_1);
         ap.add_points(&straight(3, 1.0), &c);
         assert!(ap.route_part(0, 21).is_none());
         let part = ap.route_part(1, 4).unwrap();
@@ -1116,8 +1076,8 @@ mod tests {
 
     #[test]
     fn ring_overflow_overwrites_and_is_flagged() {
-        let c = cfg(Firmware::V10_1, false);
-        let mut ap = Autopilot::new(Firmware::V10_1);
+        let c = cfg(FirmwareVersion::V10_1, false);
+        let mut ap = Autopilot::new(FirmwareVersion::V10_1);
         let mut overflow = false;
         for k in 0..101 {
             let pts: Vec<RoutePoint> = (0..5)
@@ -1132,8 +1092,8 @@ mod tests {
 
     #[test]
     fn zero_length_segments_are_guarded_and_flagged() {
-        let c = cfg(Firmware::V10_1, false);
-        let mut ap = Autopilot::new(Firmware::V10_1);
+        let c = cfg(FirmwareVersion::V10_1, false);
+        let mut ap = Autopilot::new(FirmwareVersion::V10_1);
         let pts = [
             RoutePoint::at(0.0, 0.0, 1.0),
             RoutePoint::at(0.0, 0.0, 1.0),
@@ -1153,8 +1113,8 @@ mod tests {
         // The scan wraps past the route end (`docs/firmware.md#control-cycle`): an L-shaped route;
         // the car stands beyond the route-end circle, next to the wrapped segment from the last
         // point back to route[0].
-        let c = cfg(Firmware::V10_1, false);
-        let mut ap = Autopilot::new(Firmware::V10_1);
+        let c = cfg(FirmwareVersion::V10_1, false);
+        let mut ap = Autopilot::new(FirmwareVersion::V10_1);
         let mut pts: Vec<RoutePoint> = (0..6).map(|i| RoutePoint::at(i as f32, 0.0, 1.0)).collect();
         pts.extend((1..5).map(|j| RoutePoint::at(5.0, j as f32, 1.0)));
         ap.add_points(&pts, &c);
@@ -1173,7 +1133,7 @@ mod tests {
 
     #[test]
     fn terminal_texts() {
-        let mut ap = Autopilot::new(Firmware::V12_3);
+        let mut ap = Autopilot::new(FirmwareVersion::V12_3);
         assert_eq!(
             ap.terminal(&["ap_set_look_ahead", "4"]).unwrap(),
             ["Now looking 4 points ahead along the route"]

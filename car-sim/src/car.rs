@@ -10,7 +10,6 @@ use crate::autopilot::{ApInputs, Autopilot, FwPose, RoutePart, RoutePoint, Store
 use crate::config::{FirmwareConfig, VehicleParams};
 use crate::debug::{DebugEvent, Truth};
 use crate::fault::FaultInjection;
-use crate::firmware::Firmware;
 use crate::motor::{HIL_TEMP_MOS, HIL_V_IN, Motor, MotorCommand};
 use crate::noise::Noise;
 use crate::positioning::{FusedPosition, GnssFix, OdometryInput, wrap180};
@@ -21,6 +20,9 @@ use crate::uwb::{
     UwbEstimator, measure_range,
 };
 use crate::world::World;
+use car_link::firmware::{
+    FirmwareProfile, FirmwareVersion, UwbEstimator as Estimator, WatchdogBrake,
+};
 
 /// The base tick of the simulation, ms.
 pub const TICK_MS: u64 = car_link::firmware::TICK.as_millis() as u64;
@@ -28,8 +30,6 @@ pub const TICK_MS: u64 = car_link::firmware::TICK.as_millis() as u64;
 pub const WATCHDOG_MS: u64 = car_link::firmware::WATCHDOG.as_millis() as u64;
 /// Watchdog brake current, A.
 const WATCHDOG_BRAKE_A: f32 = 40.0;
-/// 12.2+ watchdog brakes only above this speed (2 km/h), m/s.
-const WATCHDOG_BRAKE_MIN_SPEED: f32 = 2.0 / 3.6;
 /// UWB scheduling period, ms.
 const UWB_PERIOD_MS: u64 = car_link::firmware::RANGING_SLOT.as_millis() as u64;
 /// Delay between a range request and its reply, ms (the exchanges take a few ms).
@@ -99,7 +99,7 @@ impl Placement {
 #[derive(Debug, Clone, PartialEq)]
 pub struct CarOptions {
     /// The firmware generation.
-    pub firmware: Firmware,
+    pub firmware: FirmwareVersion,
     /// The seed of every random draw.
     pub seed: u64,
     /// The car id (10.x: from DIP switches; 12.x default 0).
@@ -132,7 +132,7 @@ pub struct CarOptions {
 impl Default for CarOptions {
     fn default() -> Self {
         Self {
-            firmware: Firmware::default(),
+            firmware: FirmwareVersion::default(),
             seed: 0,
             car_id: 1,
             world: World::default(),
@@ -236,6 +236,8 @@ pub struct StateReport {
 #[derive(Debug, Clone)]
 pub struct SimCar {
     options: CarOptions,
+    /// What the firmware version of `options` is like.
+    profile: FirmwareProfile,
     config: FirmwareConfig,
     car_id: u8,
     now_ms: u64,
@@ -306,6 +308,7 @@ impl SimCar {
             enu_ref: (0.0, 0.0, 0.0),
             events: Vec::new(),
             options,
+            profile: fw.profile(),
         };
         car.place(p);
         if let Some(clamp) = car.options.uwb_step_clamp_m {
@@ -353,7 +356,7 @@ impl SimCar {
         self.motor.step();
         self.move_truth();
         self.servo.step(self.config.vehicle.steering_ramp_time);
-        if (self.now_ms / TICK_MS).is_multiple_of(self.options.firmware.odometry_divider()) {
+        if (self.now_ms / TICK_MS).is_multiple_of(self.odometry_divider()) {
             self.odometry_tick();
         }
         self.gnss_tick();
@@ -406,8 +409,7 @@ impl SimCar {
     }
 
     fn odometry_tick(&mut self) {
-        let fw = self.options.firmware;
-        let divider = fw.odometry_divider();
+        let divider = self.odometry_divider();
         let steering = self.config.vehicle.angle_for_servo(self.servo.position());
         let imu_yaw = self.imu_yaw();
         let step = self.fused.odometry_tick(
@@ -422,10 +424,9 @@ impl SimCar {
             },
         );
         let distance = self.probe("uwb_travel_dist", step.distance);
-        let yaw_in = if fw.is_12x() {
-            imu_yaw
-        } else {
-            self.fused.pose().yaw
+        let yaw_in = match self.profile.uwb_estimator {
+            Estimator::TrackedYaw => imu_yaw,
+            Estimator::CopiedYaw => self.fused.pose().yaw,
         };
         let yaw = self.probe("uwb_yaw", yaw_in);
         let dt = (TICK_MS * divider) as f32 / 1000.0;
@@ -562,8 +563,10 @@ impl SimCar {
             self.record(DebugEvent::WatchdogExpired { at_ms: self.now_ms });
         }
         self.autopilot.deactivate();
-        let brake =
-            !self.options.firmware.is_12x() || self.fused.speed().abs() > WATCHDOG_BRAKE_MIN_SPEED;
+        let brake = match self.profile.watchdog_brake {
+            WatchdogBrake::Always => true,
+            WatchdogBrake::AboveSpeed { mps } => self.fused.speed().abs() > mps,
+        };
         if brake && !self.config.vehicle.disable_motor {
             self.motor
                 .command(MotorCommand::CurrentBrake(WATCHDOG_BRAKE_A));
@@ -612,9 +615,14 @@ impl SimCar {
 
     // ----- observation -----
 
-    /// The firmware generation.
-    pub fn firmware(&self) -> Firmware {
+    /// The firmware version.
+    pub fn firmware(&self) -> FirmwareVersion {
         self.options.firmware
+    }
+
+    /// Odometry runs on every n-th 10 ms tick ([`FirmwareProfile::odometry_tick`]).
+    fn odometry_divider(&self) -> u64 {
+        (self.profile.odometry_tick.as_millis() as u64 / TICK_MS).max(1)
     }
 
     /// The car id the firmware answers to (besides 255 and 254).
@@ -684,7 +692,7 @@ impl SimCar {
         self.kick_watchdog();
         let fused = self.fused.pose();
         let uwb = self.uwb.pose();
-        let swap = self.options.firmware.is_12x() && self.config.vehicle.use_uwb_pos;
+        let swap = self.profile.swaps_uwb_position && self.config.vehicle.use_uwb_pos;
         let (main, other) = if swap { (uwb, fused) } else { (fused, uwb) };
         let (mut px, mut px_uwb) = (main.x, other.x);
         if swap {
@@ -692,7 +700,10 @@ impl SimCar {
         } else {
             px = self.probe("px", px);
         }
-        let (fw_major, fw_minor) = self.options.firmware.version();
+        let FirmwareVersion {
+            major: fw_major,
+            minor: fw_minor,
+        } = self.options.firmware;
         let (gx, gy) = self.fused.gps();
         let (goal_x, goal_y) = self.autopilot.goal();
         StateReport {
@@ -751,7 +762,7 @@ impl SimCar {
     pub fn terminal(&mut self, text: &str) -> Vec<String> {
         self.kick_watchdog();
         let args = tokenize(text);
-        let max = self.options.firmware.printf_max_chars();
+        let max = self.profile.max_printf_len;
         let lines = match args.first() {
             None => vec![NO_COMMAND.to_string()],
             Some(&cmd) => self.run_terminal(cmd, &args),
@@ -777,7 +788,7 @@ impl SimCar {
                 vec!["UWB Position Reset\n".to_string()]
             }
             "pos_uwb_anchors" => self.anchor_report(),
-            "set_id" | "set_id_quiet" if self.options.firmware.is_12x() => {
+            "set_id" | "set_id_quiet" if self.profile.terminal_set_id => {
                 self.cmd_set_id(args, cmd == "set_id")
             }
             "help" => vec![HELP.to_string()],
@@ -996,7 +1007,7 @@ ap_set_look_ahead\nap_dynamic_rad\nap_ang_dist_comp\nap_state\n";
 mod tests {
     use super::*;
 
-    fn car(firmware: Firmware) -> SimCar {
+    fn car(firmware: FirmwareVersion) -> SimCar {
         SimCar::new(CarOptions {
             firmware,
             ..CarOptions::default()
@@ -1006,7 +1017,7 @@ mod tests {
     #[test]
     fn rc_control_plus_one_turns_right_and_minus_one_left() {
         for (steering, turns_right) in [(1.0, true), (-1.0, false)] {
-            let mut c = car(Firmware::V12_3);
+            let mut c = car(FirmwareVersion::V12_3);
             c.rc_control(RcMode::Speed, 1.0, steering);
             c.run_for(1_000);
             assert_eq!(c.truth().heading < 0.0, turns_right, "steering {steering}");
@@ -1027,7 +1038,7 @@ mod tests {
         c.set_ms_today(45_296_789);
         c.run_for(1_000);
         assert_eq!(c.get_state().ms_today, 45_297_789);
-        let mut g = car(Firmware::V10_1);
+        let mut g = car(FirmwareVersion::V10_1);
         assert_eq!(g.get_state().ms_today, -1);
         g.run_for(400);
         assert!(g.get_state().ms_today >= 12 * 3_600_000);
@@ -1036,7 +1047,7 @@ mod tests {
 
     #[test]
     fn terminal_commands_and_their_texts() {
-        let mut old = car(Firmware::V10_1);
+        let mut old = car(FirmwareVersion::V10_1);
         assert_eq!(old.terminal("ping"), ["pong\n"]);
         assert_eq!(old.terminal(""), ["No command received\n"]);
         assert_eq!(
@@ -1056,7 +1067,7 @@ mod tests {
                 "ID       : 50\nPX       : 1.00\nPY       : 2.00\nHeight   : 1.50 m\n"
             )
         );
-        let mut new = car(Firmware::V12_3);
+        let mut new = car(FirmwareVersion::V12_3);
         assert_eq!(new.terminal("set_id 3"), ["ID is now 3\n"]);
         assert_eq!(new.car_id(), 3);
         assert!(new.terminal("set_id_quiet 4").is_empty());
@@ -1066,15 +1077,15 @@ mod tests {
     #[test]
     fn printf_text_is_cut_to_the_era_limit() {
         let long = format!("x{}", "y".repeat(600));
-        let old = car(Firmware::V10_1).terminal(&long);
-        let new = car(Firmware::V12_3).terminal(&long);
+        let old = car(FirmwareVersion::V10_1).terminal(&long);
+        let new = car(FirmwareVersion::V12_3).terminal(&long);
         assert_eq!(old[0].len(), 252);
         assert_eq!(new[0].len(), 508);
     }
 
     #[test]
     fn use_uwb_pos_swaps_the_estimates_in_12x_only() {
-        for firmware in [Firmware::V10_1, Firmware::V12_3] {
+        for firmware in [FirmwareVersion::V10_1, FirmwareVersion::V12_3] {
             let mut c = SimCar::new(CarOptions {
                 firmware,
                 placement: Placement {
@@ -1088,7 +1099,7 @@ mod tests {
             cfg.vehicle.use_uwb_pos = true;
             c.set_config(cfg);
             let s = c.get_state();
-            let swapped = firmware.is_12x();
+            let swapped = firmware.profile().swaps_uwb_position;
             assert_eq!((s.px, s.px_uwb) == (0.0, 3.0), swapped, "{firmware}");
             assert_eq!((s.px, s.px_uwb) == (3.0, 0.0), !swapped, "{firmware}");
         }

@@ -2,7 +2,7 @@
 
 use std::f32::consts::PI;
 
-use crate::firmware::Firmware;
+use car_link::firmware::FirmwareVersion;
 
 /// Time mode of the autopilot (`ap_mode_time`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -70,7 +70,7 @@ pub struct VehicleParams {
 
 impl VehicleParams {
     /// The defaults of a firmware generation.
-    pub fn defaults(firmware: Firmware) -> Self {
+    pub fn defaults(firmware: FirmwareVersion) -> Self {
         Self {
             gear_ratio: (1.0 / 3.0) * (21.0 / 37.0),
             wheel_diam: 0.11,
@@ -79,11 +79,11 @@ impl VehicleParams {
             steering_max_angle_rad: 0.42041,
             steering_center: 0.5,
             steering_range: 0.58,
-            steering_ramp_time: if firmware.is_12x() { 0.0 } else { 0.6 },
+            steering_ramp_time: firmware.profile().default_steering_ramp_time_s as f32,
             yaw_use_odometry: false,
             yaw_imu_gain: 0.5,
             disable_motor: false,
-            clamp_imu_yaw_stationary: firmware.is_12x(),
+            clamp_imu_yaw_stationary: firmware.profile().default_clamp_imu_yaw_stationary,
             use_uwb_pos: false,
         }
     }
@@ -100,8 +100,7 @@ impl VehicleParams {
 
     /// The speed-dependent steering scale `1 / (1 + 0.05·|v|)²`.
     pub fn steering_scale(speed: f32) -> f32 {
-        let div = 1.0 + speed.abs() * 0.05;
-        1.0 / (div * div)
+        car_link::firmware::steering::speed_scale(speed)
     }
 
     /// The servo position for a steering angle (autopilot mapping), not clamped.
@@ -160,11 +159,11 @@ pub struct FirmwareConfig {
 
 impl FirmwareConfig {
     /// The factory defaults of a firmware generation (with `simulate_motor` on: this is a HIL board).
-    pub fn defaults(firmware: Firmware) -> Self {
+    pub fn defaults(firmware: FirmwareVersion) -> Self {
         Self {
             ap_repeat_routes: true,
-            ap_base_rad: if firmware.is_12x() { 0.8 } else { 1.2 },
-            ap_rad_time_ahead: 0.8,
+            ap_base_rad: firmware.profile().default_base_radius_m as f32,
+            ap_rad_time_ahead: firmware.profile().default_radius_time_ahead_s as f32,
             ap_mode_time: ApTimeMode::Speed,
             ap_max_speed: 8.333_333,
             ap_time_add_repeat_ms: 60_000,
@@ -191,7 +190,7 @@ mod tests {
 
     #[test]
     fn derived_constants_match_the_behaviour_document() {
-        let v = VehicleParams::defaults(Firmware::V10_1);
+        let v = VehicleParams::defaults(FirmwareVersion::V10_1);
         assert!((v.speed_per_erpm() - 5.448_26e-4).abs() < 1e-8);
         assert!((v.distance_per_count() - 5.448_26e-3).abs() < 1e-7);
         assert!((1.0 / v.speed_per_erpm() - 1835.45).abs() < 0.05);
@@ -203,8 +202,8 @@ mod tests {
 
     #[test]
     fn era_defaults_differ_where_documented() {
-        let old = FirmwareConfig::defaults(Firmware::V10_1);
-        let new = FirmwareConfig::defaults(Firmware::V12_3);
+        let old = FirmwareConfig::defaults(FirmwareVersion::V10_1);
+        let new = FirmwareConfig::defaults(FirmwareVersion::V12_3);
         assert_eq!((old.ap_base_rad, new.ap_base_rad), (1.2, 0.8));
         assert_eq!(old.vehicle.steering_ramp_time, 0.6);
         assert_eq!(new.vehicle.steering_ramp_time, 0.0);

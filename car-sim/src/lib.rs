@@ -53,7 +53,6 @@ pub mod car;
 pub mod config;
 pub mod debug;
 pub mod fault;
-pub mod firmware;
 pub mod motor;
 pub mod noise;
 pub mod positioning;
@@ -69,11 +68,26 @@ pub use car::{CarOptions, GnssModel, Placement, RcMode, SimCar, StateReport};
 pub use config::{ApTimeMode, FirmwareConfig, VehicleParams};
 pub use debug::{DebugEvent, Truth};
 pub use fault::{FaultInjection, FaultKind};
-pub use firmware::Firmware;
 pub use protocol::Board;
 pub use server::{LinkImpairment, SimConfig, SimHandle, serve_tcp, serve_udp, spawn_in_process};
 pub use uwb::{RadioModel, RangeResult};
 pub use world::{RadioPath, Wall, World, WorldAnchor};
+
+use car_link::FirmwareVersion;
+
+/// A firmware the simulated car cannot be.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unsupported firmware {0:?}: the simulator is 10.1 or 12.3")]
+pub struct UnknownFirmware(pub String);
+
+/// The firmware version `text` names (`10.1`, `12.3`, or a generation's major alone), when the
+/// simulated car can be it ([`FirmwareVersion::SIMULATED`]).
+pub fn simulated_firmware(text: &str) -> Result<FirmwareVersion, UnknownFirmware> {
+    text.parse::<FirmwareVersion>()
+        .ok()
+        .filter(|v| v.profile().simulated)
+        .ok_or_else(|| UnknownFirmware(text.trim().to_string()))
+}
 
 #[cfg(test)]
 mod acceptance;

@@ -6,7 +6,7 @@ use std::collections::VecDeque;
 
 use crate::autopilot::FwPose;
 use crate::config::FirmwareConfig;
-use crate::firmware::Firmware;
+use car_link::firmware::{FirmwareProfile, FirmwareVersion};
 
 /// Entries of the pose history.
 const HISTORY_LEN: usize = 100;
@@ -64,7 +64,7 @@ pub struct OdometryInput {
 /// The fused position estimate.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FusedPosition {
-    firmware: Firmware,
+    firmware: FirmwareProfile,
     px: f32,
     py: f32,
     yaw: f32,
@@ -100,9 +100,9 @@ pub fn wrap180(mut a: f32) -> f32 {
 
 impl FusedPosition {
     /// The estimate at boot: the origin, heading from the IMU.
-    pub fn new(firmware: Firmware) -> Self {
+    pub fn new(firmware: FirmwareVersion) -> Self {
         Self {
-            firmware,
+            firmware: firmware.profile(),
             px: 0.0,
             py: 0.0,
             yaw: 0.0,
@@ -281,10 +281,10 @@ impl FusedPosition {
         let a = -self.yaw.to_radians();
         let (s, c) = a.sin_cos();
         // 10.x quirk: the y offset enters with the wrong sign.
-        let ant_y = if self.firmware.is_12x() {
-            cfg.gps_ant_y
-        } else {
+        let ant_y = if self.firmware.gnss_antenna_y_flipped {
             -cfg.gps_ant_y
+        } else {
+            cfg.gps_ant_y
         };
         let ox = cfg.gps_ant_x * c - ant_y * s;
         let oy = cfg.gps_ant_x * s + ant_y * c;
@@ -326,7 +326,7 @@ mod tests {
     use super::*;
 
     fn cfg() -> FirmwareConfig {
-        FirmwareConfig::defaults(Firmware::V10_1)
+        FirmwareConfig::defaults(FirmwareVersion::V10_1)
     }
 
     #[test]
@@ -345,7 +345,7 @@ mod tests {
     #[test]
     fn dead_reckoning_steps_along_the_imu_heading() {
         let c = cfg();
-        let mut f = FusedPosition::new(Firmware::V10_1);
+        let mut f = FusedPosition::new(FirmwareVersion::V10_1);
         f.odometry_tick(
             &c,
             OdometryInput {
@@ -378,7 +378,7 @@ mod tests {
     #[test]
     fn a_stationary_car_converges_at_a_quarter_metre_per_second_per_axis() {
         let c = cfg();
-        let mut f = FusedPosition::new(Firmware::V10_1);
+        let mut f = FusedPosition::new(FirmwareVersion::V10_1);
         for k in 0..100u64 {
             f.odometry_tick(
                 &c,
@@ -414,7 +414,7 @@ mod tests {
     #[test]
     fn non_rtk_fixes_do_not_correct_when_rtk_is_required() {
         let c = cfg();
-        let mut f = FusedPosition::new(Firmware::V10_1);
+        let mut f = FusedPosition::new(FirmwareVersion::V10_1);
         f.odometry_tick(
             &c,
             OdometryInput {
@@ -442,7 +442,7 @@ mod tests {
     #[test]
     fn latency_compensation_corrects_against_the_pose_at_fix_time() {
         let c = cfg();
-        let mut f = FusedPosition::new(Firmware::V10_1);
+        let mut f = FusedPosition::new(FirmwareVersion::V10_1);
         // Drive east at ~1 m/s for 0.5 s; a fix taken at t = 200 ms exactly where the car was.
         let mut tacho = 0;
         for k in 0..50u64 {
@@ -477,7 +477,7 @@ mod tests {
     #[test]
     fn heading_is_pulled_by_one_degree_per_metre_towards_the_gnss_track() {
         let c = cfg();
-        let mut f = FusedPosition::new(Firmware::V10_1);
+        let mut f = FusedPosition::new(FirmwareVersion::V10_1);
         f.odometry_tick(
             &c,
             OdometryInput {

@@ -5,16 +5,16 @@ use std::time::Duration;
 
 use bytes::Bytes;
 use car_link::config::{ConfigField, ConfigValue, MainConfig};
+use car_link::firmware::FirmwareVersion;
 use car_link::message::{
     CarState, Dialect, EnuRef, ID_ALL, ID_CAR_CLIENT, RcMode as LinkRcMode, Reply, Request,
     RoutePart as LinkRoutePart, RoutePoint as LinkRoutePoint,
 };
-use car_link::version::{CommandId, FirmwareVersion};
+use car_link::version::CommandId;
 
 use crate::autopilot::RoutePoint;
 use crate::car::{RcMode, SimCar, StateReport};
 use crate::config::{ApTimeMode, FirmwareConfig};
-use crate::firmware::Firmware;
 
 /// SET_MAIN_CONFIG acks only after the flash write; the simulator waits this long.
 pub const FLASH_WRITE_DELAY: Duration = Duration::from_millis(60);
@@ -28,14 +28,6 @@ pub struct Outgoing {
     pub delay: Duration,
 }
 
-/// The `car-link` version of a firmware generation.
-pub fn link_version(firmware: Firmware) -> FirmwareVersion {
-    match firmware {
-        Firmware::V10_1 => FirmwareVersion::V10_1,
-        Firmware::V12_3 => FirmwareVersion::V12_3,
-    }
-}
-
 /// The simulated controller board: the car model plus its stored configuration record.
 #[derive(Debug, Clone)]
 pub struct Board {
@@ -47,7 +39,7 @@ pub struct Board {
 impl Board {
     /// A board around a freshly built car.
     pub fn new(car: SimCar) -> Self {
-        let version = link_version(car.firmware());
+        let version = car.firmware();
         let record = default_record(version, car.car_id());
         let mut board = Self {
             car,
@@ -251,7 +243,7 @@ fn default_record(version: FirmwareVersion, car_id: u8) -> MainConfig {
 }
 
 /// The model's configuration from a record; fields absent in the version keep the defaults.
-pub fn firmware_config_from(record: &MainConfig, firmware: Firmware) -> FirmwareConfig {
+pub fn firmware_config_from(record: &MainConfig, firmware: FirmwareVersion) -> FirmwareConfig {
     let mut c = FirmwareConfig::defaults(firmware);
     let flag = |f: ConfigField, d: bool| record.get_u8(f).map_or(d, |v| v != 0);
     let real = |f: ConfigField, d: f32| record.get_f32(f).unwrap_or(d);

@@ -23,11 +23,13 @@ use tokio::time::{Instant, sleep_until, timeout};
 
 use crate::car::{CarOptions, GnssModel, Placement, SimCar, TICK_MS};
 use crate::debug::{DebugEvent, Truth};
-use crate::firmware::Firmware;
 use crate::noise::Noise;
 use crate::protocol::Board;
 use crate::uwb::RadioModel;
 use crate::world::World;
+use car_link::firmware::FirmwareVersion;
+use car_link::message::ID_CAR_CLIENT;
+use car_link::version::CommandId;
 
 /// The default port of the reference bridge.
 pub const DEFAULT_PORT: u16 = 8300;
@@ -35,10 +37,6 @@ pub const DEFAULT_PORT: u16 = 8300;
 const FIRMWARE_BYTE_TIMEOUT: Duration = Duration::from_millis(30);
 /// The bridge's parser resets after this long without a byte.
 const BRIDGE_BYTE_TIMEOUT: Duration = Duration::from_millis(500);
-/// Replies stamped with this id are not forwarded by the bridge (PRINTF excepted).
-const ID_CAR_CLIENT: u8 = 254;
-/// The PRINTF command id.
-const CMD_PRINTF: u8 = 0;
 
 /// How a byte-stream connection reaches the board.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -59,8 +57,11 @@ impl Hop {
     }
 
     fn forwards(self, payload: &[u8]) -> bool {
+        // Replies stamped with ID_CAR_CLIENT are not forwarded by the bridge, PRINTF excepted (its
+        // id is the same in every version).
+        let printf = CommandId::Printf.code(FirmwareVersion::LATEST);
         self == Hop::Direct
-            || !(payload.first() == Some(&ID_CAR_CLIENT) && payload.get(1) != Some(&CMD_PRINTF))
+            || !(payload.first() == Some(&ID_CAR_CLIENT) && payload.get(1).copied() != printf)
     }
 }
 /// Payloads queued towards a client before the simulator drops them.
@@ -87,7 +88,7 @@ pub struct LinkImpairment {
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct SimConfig {
     /// Firmware generation (default 10.1).
-    pub firmware: Firmware,
+    pub firmware: FirmwareVersion,
     /// Seed of every random draw (physics and link).
     pub seed: u64,
     /// The car id (default 1).

@@ -5,10 +5,12 @@
 use scenarios::geometry::Point;
 
 use crate::autopilot::FwPose;
-use crate::firmware::Firmware;
 use crate::noise::Noise;
 use crate::positioning::wrap180;
 use crate::world::{RadioPath, World};
+use car_link::firmware::{
+    AnchorAdd, FirmwareProfile, FirmwareVersion, UwbEstimator as Estimator, UwbReset,
+};
 
 /// Most anchors the firmware stores.
 pub use car_link::firmware::MAX_ANCHORS;
@@ -203,7 +205,7 @@ fn exchanges(
 /// The firmware's anchor list and its round-robin scheduler.
 #[derive(Debug, Clone, PartialEq)]
 pub struct AnchorList {
-    firmware: Firmware,
+    firmware: FirmwareProfile,
     anchors: Vec<FwAnchor>,
     last_used: usize,
 }
@@ -223,9 +225,9 @@ pub enum Schedule {
 
 impl AnchorList {
     /// An empty list (as after boot).
-    pub fn new(firmware: Firmware) -> Self {
+    pub fn new(firmware: FirmwareVersion) -> Self {
         Self {
-            firmware,
+            firmware: firmware.profile(),
             anchors: Vec::new(),
             last_used: 0,
         }
@@ -239,7 +241,7 @@ impl AnchorList {
     /// ADD_UWB_ANCHOR: 10.x appends duplicates, 12.x updates an existing id; beyond 20 anchors
     /// the add is ignored.
     pub fn add(&mut self, id: i16, px: f32, py: f32, height: f32) {
-        if self.firmware.is_12x()
+        if self.firmware.anchor_add == AnchorAdd::UpdateExisting
             && let Some(a) = self.anchors.iter_mut().find(|a| a.id == id)
         {
             a.px = px;
@@ -308,7 +310,7 @@ impl AnchorList {
 /// The UWB position estimator (`px_uwb`, `py_uwb`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct UwbEstimator {
-    firmware: Firmware,
+    firmware: FirmwareProfile,
     px: f32,
     py: f32,
     /// 10.x: the copied fused yaw (degrees clockwise).
@@ -333,9 +335,9 @@ pub struct UwbEstimator {
 
 impl UwbEstimator {
     /// The estimator after boot: at (0, 0).
-    pub fn new(firmware: Firmware) -> Self {
+    pub fn new(firmware: FirmwareVersion) -> Self {
         Self {
-            firmware,
+            firmware: firmware.profile(),
             px: 0.0,
             py: 0.0,
             yaw: 0.0,
@@ -366,7 +368,7 @@ impl UwbEstimator {
 
     /// The reported UWB yaw (degrees clockwise): 10.x the copied yaw, 12.x `−(yaw_s + gyro_offset)`.
     pub fn yaw(&self) -> f32 {
-        if self.firmware.is_12x() {
+        if self.firmware.uwb_estimator == Estimator::TrackedYaw {
             wrap180(-(self.yaw_s + self.gyro_offset))
         } else {
             self.yaw
@@ -397,7 +399,7 @@ impl UwbEstimator {
         dt: f32,
         clamp_enabled: bool,
     ) {
-        if !self.firmware.is_12x() {
+        if self.firmware.uwb_estimator == Estimator::CopiedYaw {
             self.yaw = yaw;
             let a = -yaw.to_radians();
             self.px += distance * a.cos();
@@ -433,12 +435,13 @@ impl UwbEstimator {
     /// A range `r` to an anchor at `(ax, ay)` (after the probe). Returns whether the estimate
     /// moved.
     pub fn range_update(&mut self, ax: f32, ay: f32, r: f32, max_corr: f32) -> bool {
-        let applied = if self.firmware.is_12x() {
+        let tracked = self.firmware.uwb_estimator == Estimator::TrackedYaw;
+        let applied = if tracked {
             self.range_update_12x(ax, ay, r, max_corr)
         } else {
             self.range_update_10x(ax, ay, r)
         };
-        if self.firmware.is_12x() {
+        if tracked {
             self.estimate_yaw();
         }
         applied
@@ -524,7 +527,7 @@ impl UwbEstimator {
     pub fn reset_to(&mut self, fused: FwPose) {
         self.px = fused.x;
         self.py = fused.y;
-        if !self.firmware.is_12x() {
+        if self.firmware.uwb_reset == UwbReset::PositionAndHeading {
             self.yaw = fused.yaw;
         }
     }
@@ -533,7 +536,7 @@ impl UwbEstimator {
     pub fn set_pose(&mut self, pose: FwPose) {
         self.px = pose.x;
         self.py = pose.y;
-        if self.firmware.is_12x() {
+        if self.firmware.uwb_estimator == Estimator::TrackedYaw {
             self.gyro_offset = wrap180(-pose.yaw - self.yaw_s);
             self.clamp_value = self.yaw_s + self.gyro_offset;
         } else {
@@ -547,7 +550,7 @@ mod tests {
     use super::*;
     use crate::world::WorldAnchor;
 
-    fn list(fw: Firmware, ids: &[i16]) -> AnchorList {
+    fn list(fw: FirmwareVersion, ids: &[i16]) -> AnchorList {
         let mut l = AnchorList::new(fw);
         for (k, id) in ids.iter().enumerate() {
             l.add(*id, k as f32 * 10.0, 0.0, 1.0);
@@ -557,7 +560,7 @@ mod tests {
 
     #[test]
     fn round_robin_skips_the_last_used_anchor_and_starts_after_index_0() {
-        let mut l = list(Firmware::V10_1, &[50, 234, 7]);
+        let mut l = list(FirmwareVersion::V10_1, &[50, 234, 7]);
         let picks: Vec<Schedule> = (0..4).map(|_| l.schedule((0.0, 0.0))).collect();
         assert_eq!(
             picks,
@@ -572,13 +575,13 @@ mod tests {
 
     #[test]
     fn a_single_anchor_is_never_ranged() {
-        let mut l = list(Firmware::V10_1, &[50]);
+        let mut l = list(FirmwareVersion::V10_1, &[50]);
         assert_eq!(l.schedule((0.0, 0.0)), Schedule::Idle);
     }
 
     #[test]
     fn the_80_m_gate_uses_the_estimate_and_can_stall() {
-        let mut l = AnchorList::new(Firmware::V10_1);
+        let mut l = AnchorList::new(FirmwareVersion::V10_1);
         l.add(1, 0.0, 0.0, 1.0);
         l.add(2, 200.0, 0.0, 1.0);
         // Only index 0 is near; it is the last used at boot, so ranging stalls.
@@ -587,7 +590,7 @@ mod tests {
 
     #[test]
     fn a_shrunk_list_would_hang_and_is_flagged() {
-        let mut l = list(Firmware::V10_1, &[1, 2, 3]);
+        let mut l = list(FirmwareVersion::V10_1, &[1, 2, 3]);
         l.schedule((0.0, 0.0));
         l.schedule((0.0, 0.0)); // last_used = 2
         l.clear();
@@ -597,13 +600,13 @@ mod tests {
 
     #[test]
     fn duplicates_append_in_10x_and_update_in_12x() {
-        let mut old = list(Firmware::V10_1, &[5, 5]);
-        let mut new = list(Firmware::V12_3, &[5, 5]);
+        let mut old = list(FirmwareVersion::V10_1, &[5, 5]);
+        let mut new = list(FirmwareVersion::V12_3, &[5, 5]);
         assert_eq!(old.anchors().len(), 2);
         assert_eq!(new.anchors().len(), 1);
         assert_eq!(new.find_mut(5).unwrap().px, 10.0);
         assert!(old.find_mut(5).is_some());
-        let mut many = AnchorList::new(Firmware::V12_3);
+        let mut many = AnchorList::new(FirmwareVersion::V12_3);
         for id in 0..30 {
             many.add(id, 0.0, 0.0, 0.0);
         }
@@ -612,7 +615,7 @@ mod tests {
 
     #[test]
     fn each_range_moves_the_10x_estimate_at_most_0_2_m_with_a_one_sided_gate() {
-        let mut e = UwbEstimator::new(Firmware::V10_1);
+        let mut e = UwbEstimator::new(FirmwareVersion::V10_1);
         e.dead_reckon(0.0, 0.0, 0.0, 0.01, false);
         // Anchor 10 m east of the antenna; measured 12 m: move 0.2 m away.
         let ax = 10.0 + ANTENNA_OFFSET_M;
@@ -623,19 +626,19 @@ mod tests {
         assert!(!e.range_update(ax, 0.0, 1.0, 0.1));
         assert_eq!(e.position(), before);
         // A small error is corrected exactly.
-        let mut e = UwbEstimator::new(Firmware::V10_1);
+        let mut e = UwbEstimator::new(FirmwareVersion::V10_1);
         e.range_update(ax, 0.0, 10.05, 0.1);
         assert!((e.position().0 + 0.05).abs() < 1e-4);
     }
 
     #[test]
     fn the_12x_step_jumps_to_0_2_beyond_max_corr_and_has_no_gate() {
-        let mut e = UwbEstimator::new(Firmware::V12_3);
+        let mut e = UwbEstimator::new(FirmwareVersion::V12_3);
         e.dead_reckon(0.0, 0.0, 0.0, 0.02, true);
         let ax = 10.0 + ANTENNA_OFFSET_M;
         e.range_update(ax, 0.0, 10.15, 0.1);
         assert!((e.position().0 + 0.2).abs() < 1e-4, "overshoots to 0.2");
-        let mut e = UwbEstimator::new(Firmware::V12_3);
+        let mut e = UwbEstimator::new(FirmwareVersion::V12_3);
         e.range_update(ax, 0.0, 0.0, 0.1);
         assert!(
             (e.position().0 - 0.2).abs() < 1e-4,
@@ -645,11 +648,11 @@ mod tests {
 
     #[test]
     fn dead_reckoning_10x_copies_the_yaw_12x_integrates_gyro_offset() {
-        let mut e = UwbEstimator::new(Firmware::V10_1);
+        let mut e = UwbEstimator::new(FirmwareVersion::V10_1);
         e.dead_reckon(1.0, 90.0, 1.0, 0.01, false);
         assert!((e.position().1 + 1.0).abs() < 1e-6);
         assert_eq!(e.yaw(), 90.0);
-        let mut e = UwbEstimator::new(Firmware::V12_3);
+        let mut e = UwbEstimator::new(FirmwareVersion::V12_3);
         e.set_pose(FwPose {
             x: 0.0,
             y: 0.0,
@@ -675,7 +678,7 @@ mod tests {
 
     #[test]
     fn the_12x_yaw_history_pointer_restarts_at_50_and_the_mean_covers_only_what_follows() {
-        let mut e = UwbEstimator::new(Firmware::V12_3);
+        let mut e = UwbEstimator::new(FirmwareVersion::V12_3);
         e.dead_reckon(0.0, 0.0, 0.0, 0.02, true);
         agreeing_range(&mut e, 0.0);
         agreeing_range(&mut e, 0.0);
@@ -697,7 +700,7 @@ mod tests {
 
     #[test]
     fn set_pos_sets_the_12x_heading_but_keeps_p_old_and_the_drift() {
-        let mut e = UwbEstimator::new(Firmware::V12_3);
+        let mut e = UwbEstimator::new(FirmwareVersion::V12_3);
         e.dead_reckon(0.0, 0.0, 0.0, 0.02, true);
         agreeing_range(&mut e, 0.0);
         agreeing_range(&mut e, 0.0);
@@ -732,10 +735,10 @@ mod tests {
             y: 4.0,
             yaw: 30.0,
         };
-        let mut old = UwbEstimator::new(Firmware::V10_1);
+        let mut old = UwbEstimator::new(FirmwareVersion::V10_1);
         old.reset_to(fused);
         assert_eq!(old.pose(), fused);
-        let mut new = UwbEstimator::new(Firmware::V12_3);
+        let mut new = UwbEstimator::new(FirmwareVersion::V12_3);
         new.reset_to(fused);
         assert_eq!(new.position(), (3.0, 4.0));
         assert_eq!(new.yaw(), 0.0);

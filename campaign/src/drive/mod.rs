@@ -98,7 +98,7 @@ pub struct Sample {
     /// unknown).
     pub yaw_deg: f64,
     /// The car's firmware version, as GET_STATE reports it (its autopilot's look-ahead law).
-    pub version: car_link::version::FirmwareVersion,
+    pub version: car_link::firmware::FirmwareVersion,
     /// The autopilot's look-ahead radius the car reports, metres (−1 while it is inactive;
     /// NaN when the car does not report one).
     pub look_ahead_radius_m: f64,

@@ -61,8 +61,8 @@ const PROGRESS_WINDOW_S: f64 = 1.0;
 /// corners and drifting, a few percent; beyond these the measurement says more about a jump in
 /// where the car is located on its route (a new route, a reset) than about the car.
 const PROGRESS_RATIO: (f64, f64) = (0.8, 1.25);
-/// Fault commands in flight at once at most (as many as the car takes on one probe).
-pub const MAX_IN_FLIGHT: usize = 5;
+/// Fault commands in flight at once at most: as many as the car takes on one probe.
+pub const MAX_IN_FLIGHT: usize = car_link::firmware::FAULTS_PER_PROBE;
 /// Wheel travel below which the progress ratio is not measured, metres.
 const MIN_WHEEL_TRAVEL_M: f64 = 0.2;
 /// How soon a command must be due, after the sample that predicts it arrived, for the car's
@@ -156,7 +156,7 @@ struct Seen {
     /// Its wheel speed, m/s.
     wheel: f64,
     /// Its firmware, whose look-ahead radius grows with the speed as its version says.
-    version: car_link::version::FirmwareVersion,
+    version: car_link::firmware::FirmwareVersion,
     /// Its distance along the route, metres.
     s: f64,
     /// Its speed along the route, m/s (its wheel speed times [`Placer::progress_ratio`]).
@@ -786,7 +786,7 @@ mod tests {
                 speed: 1.0,
                 round_trip: Duration::ZERO,
                 yaw_deg: 0.0,
-                version: car_link::version::FirmwareVersion::V10_1,
+                version: car_link::firmware::FirmwareVersion::V10_1,
                 look_ahead_radius_m: 1.0,
             };
             let progress = Progress {
@@ -827,7 +827,7 @@ mod tests {
                 speed: wheel,
                 round_trip: Duration::from_secs_f64(round_trip),
                 yaw_deg: 0.0,
-                version: car_link::version::FirmwareVersion::V10_1,
+                version: car_link::firmware::FirmwareVersion::V10_1,
                 look_ahead_radius_m: 1.0,
             };
             let progress = Progress {

@@ -80,7 +80,7 @@ fn settings(area: &Area, policy: FailurePolicy) -> DriveSettings<'_> {
         policy,
         oracle_threshold_m: 1.0,
         stop_points: 4,
-        rates: ProbeRates::firmware_10(2),
+        rates: ProbeRates::new(car_link::FirmwareVersion::V10_1, 2),
         campaign_seed: 7,
         steering: Some(Steering::of(&scenarios::Vehicle::default())),
     }
@@ -120,7 +120,7 @@ impl<'a> Harness<'a> {
             speed,
             round_trip: ms(20),
             yaw_deg: 0.0,
-            version: car_link::version::FirmwareVersion::V10_1,
+            version: car_link::firmware::FirmwareVersion::V10_1,
             look_ahead_radius_m: f64::NAN,
         };
         self.drive.handle(self.now, Event::Sample(sample))

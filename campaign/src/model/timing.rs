@@ -58,7 +58,7 @@ mod tests {
     #[test]
     fn an_anchor_fault_counts_ranges_of_the_round_robin() {
         // Two anchors at 10.x rates: one range of an anchor every 200 ms.
-        let rates = ProbeRates::firmware_10(2);
+        let rates = ProbeRates::new(car_link::FirmwareVersion::V10_1, 2);
         let window = FaultWindow::of(
             &fault(Probe::UwbRange(50), 100, 8),
             Duration::from_secs(3),
@@ -70,7 +70,7 @@ mod tests {
 
     #[test]
     fn an_odometry_fault_counts_ticks() {
-        let rates = ProbeRates::firmware_12(2);
+        let rates = ProbeRates::new(car_link::FirmwareVersion::V12_3, 2);
         let window = FaultWindow::of(&fault(Probe::UwbYaw, 50, 10), Duration::ZERO, &rates);
         assert_eq!(window.from, Duration::from_secs(1));
         assert_eq!(window.to, Duration::from_millis(1200));

@@ -5,7 +5,7 @@
 
 use car_link::frame::{FrameDecoder, FrameEncoder};
 use car_link::message::{Dialect, Reply, Request};
-use car_link::version::FirmwareVersion;
+use car_link::firmware::FirmwareVersion;
 use libfuzzer_sys::fuzz_target;
 
 const VERSIONS: [FirmwareVersion; 4] = [

@@ -26,10 +26,11 @@ use tokio_util::sync::CancellationToken;
 
 use super::{CarError, LinkConfig, LinkEvent, StateSample};
 use crate::address::CarAddress;
+use crate::firmware::FirmwareVersion;
 use crate::health::HealthRecorder;
 use crate::message::{DecodeError, Dialect, ID_ALL, POINTS_PER_PACKET, Reply, Request, RoutePoint};
 use crate::transport::{Incoming, Link, PC_BYTE_TIMEOUT};
-use crate::version::{CommandId, FirmwareVersion};
+use crate::version::CommandId;
 
 use super::DUPLICATE_POINT_THRESHOLD;
 #[derive(Debug, Clone, Copy)]
@@ -250,7 +251,7 @@ impl Shared {
         Shared {
             identity: Mutex::new(Identity {
                 car_id: config.car_id,
-                version: FirmwareVersion::default(),
+                version: FirmwareVersion::LATEST,
             }),
             keepalive_on: AtomicBool::new(config.keepalive.is_some()),
             outgoing: Mutex::new(None),

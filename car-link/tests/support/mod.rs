@@ -7,9 +7,10 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
 use car_link::config::MainConfig;
+use car_link::firmware::FirmwareVersion;
 use car_link::frame::FrameCodec;
 use car_link::message::{CarState, Dialect, EnuRef, Reply, Request, RoutePart, RoutePoint};
-use car_link::version::{CommandId, FirmwareVersion};
+use car_link::version::CommandId;
 use futures::{SinkExt, StreamExt};
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, DuplexStream};
 use tokio::sync::mpsc;

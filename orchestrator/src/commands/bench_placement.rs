@@ -11,7 +11,8 @@
 use std::process::ExitCode;
 
 use anyhow::{Result, bail};
-use car_sim::{Firmware, LinkImpairment};
+use car_link::firmware::FirmwareVersion;
+use car_sim::LinkImpairment;
 use tokio_util::sync::CancellationToken;
 
 use super::shared::{EmbeddedSims, Scratch, runtime};
@@ -25,7 +26,7 @@ const WITHIN_M: f64 = 0.2;
 
 /// Placement errors of one firmware generation, metres (signed: positive past the place).
 struct Errors {
-    firmware: Firmware,
+    firmware: FirmwareVersion,
     errors: Vec<f64>,
     /// Faults the cars added whose place could not be measured (no sample came after).
     unmeasured: usize,
@@ -57,9 +58,9 @@ impl Errors {
 pub fn run(args: &BenchPlacementArgs) -> Result<ExitCode> {
     let loaded = crate::scenario_arg::load_scenario(&args.scenario)?;
     let scenario = loaded.scenario;
-    let firmwares: Vec<Firmware> = match args.firmware.as_str() {
-        "both" => vec![Firmware::V10_1, Firmware::V12_3],
-        one => match one.parse() {
+    let firmwares: Vec<FirmwareVersion> = match args.firmware.as_str() {
+        "both" => FirmwareVersion::SIMULATED.to_vec(),
+        one => match car_sim::simulated_firmware(one) {
             Ok(firmware) => vec![firmware],
             Err(error) => bail!("--firmware {one}: {error} (or `both`)"),
         },

@@ -4,7 +4,8 @@
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use car_sim::{Firmware, LinkImpairment, SimConfig};
+use car_link::firmware::FirmwareVersion;
+use car_sim::{LinkImpairment, SimConfig};
 
 use crate::cli::SimArgs;
 use crate::scenario_arg::{load_scenario, print_warnings};
@@ -24,9 +25,7 @@ pub fn serve(args: &SimArgs) -> Result<ExitCode> {
 }
 
 fn sim_config(args: &SimArgs, scenario: &scenarios::Scenario) -> Result<SimConfig> {
-    let firmware: Firmware = args
-        .firmware
-        .parse()
+    let firmware: FirmwareVersion = car_sim::simulated_firmware(&args.firmware)
         .with_context(|| format!("--firmware {}", args.firmware))?;
     Ok(SimConfig {
         firmware,

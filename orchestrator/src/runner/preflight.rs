@@ -68,12 +68,12 @@ impl Preflight {
         journal: &Journal<'_>,
     ) -> Result<Self, RunError> {
         let version = car.version();
-        if !matches!(version.major, 10 | 12) {
+        if !version.profile().supported {
             return Err(RunError::Preflight(format!(
                 "firmware {version}: the method knows 10.x and 12.x only"
             )));
         }
-        let rates = ProbeRates::for_major(version.major, scenario.anchors.len());
+        let rates = ProbeRates::new(version, scenario.anchors.len());
         // The round trip first: every command after it waits what the link needs.
         let (rtt_p50, rtt_p99) = measure_round_trip(car, journal).await?;
         let per_try = per_try_timeout(rtt_p50, rtt_p99).map_err(RunError::Preflight)?;

@@ -17,6 +17,7 @@
 
 use std::time::Duration;
 
+use car_link::firmware::UwbReset;
 use car_link::{CarError, StateSample};
 use recovery::{PlanConfig, ReturnRoute};
 use tokio::time::{Instant, MissedTickBehavior, sleep_until};
@@ -119,7 +120,7 @@ pub(crate) async fn reset(
         .await
         .map_err(|e| car_stop("reading the state", e))?;
     journal.state(&standing);
-    if car.version().major >= 11 {
+    if car.version().profile().uwb_reset == UwbReset::PositionOnly {
         // From 11.0 `pos_uwb_reset_pos` resets the position only
         // (`docs/firmware.md#resetting-the-estimate`); SET_POS with the RTK pose also sets the UWB
         // heading.

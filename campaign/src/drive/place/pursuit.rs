@@ -10,6 +10,8 @@
 //! compensation and the speed-dependent clamp, the route's speed at the goal, a kinematic bicycle;
 //! and it reads the predicted positions' distance along the route as it reads the samples'.
 
+use car_link::firmware::FirmwareProfile;
+use car_link::firmware::steering::{self, Compensation, LOOK_AHEAD_STRETCHES, PursuitPose};
 use trajgen::Point;
 
 use super::{Placer, Seen};
@@ -17,8 +19,6 @@ use crate::streaming::Progress;
 
 /// The firmware's control period, seconds.
 const TICK_S: f64 = 0.01;
-/// The stretches the firmware's goal search looks at (`ap_set_look_ahead`, 8 by default).
-const LOOK_AHEAD_STRETCHES: usize = 8;
 /// The motor's acceleration in RPM mode, m/s² (25 000 ERPM/s).
 const MOTOR_ACCEL_MPS2: f64 = 13.6;
 /// The longest pursuit, ticks (8 s).
@@ -43,28 +43,32 @@ impl Steering {
     }
 
     /// The steering angle towards `goal` of a car at `position` heading `heading` (radians
-    /// counter-clockwise from east) at `speed`: pure pursuit, its radius divided by
-    /// `min(1 + 0.2·D, 5)` (D the goal's distance), clamped to `±max / (1 + 0.05·|v|)²`. Positive
-    /// turns left.
+    /// counter-clockwise from east) at `speed`: the firmware's law
+    /// (`car_link::firmware::steering`), pure pursuit with its radius divided by
+    /// `min(1 + 0.2·D, 5)`, clamped to `±max / (1 + 0.05·|v|)²`. Positive turns left.
     fn angle(&self, position: Point, heading: f64, goal: Point, speed: f64) -> f64 {
-        let to_goal = (goal - position).rotated(-heading);
-        let d2 = to_goal.dot(to_goal);
-        if to_goal.y.abs() <= 1e-9 || d2 <= 1e-12 {
-            return 0.0;
-        }
-        let d = d2.sqrt();
-        let curvature = 2.0 * to_goal.y / d2 * (1.0 + 0.2 * d).min(5.0);
-        let scale = 1.0 + 0.05 * speed.abs();
-        let max = self.max_angle_rad / (scale * scale);
-        (self.wheelbase_m * curvature).atan().clamp(-max, max)
+        let car = PursuitPose {
+            x: position.x,
+            y: position.y,
+            heading,
+        };
+        let angle = steering::pursuit_angle(
+            car,
+            goal.x,
+            goal.y,
+            self.wheelbase_m,
+            Compensation::DivideRadius,
+        );
+        let max = steering::max_steering_angle(self.max_angle_rad, speed);
+        angle.clamp(-max, max)
     }
 }
 
 impl Seen {
     /// The car's look-ahead radius at `speed`: the one it reported, grown or shrunk by its
-    /// firmware's law.
-    fn radius_at(&self, speed: f64) -> f64 {
-        let law = |v: f64| self.version.look_ahead_radius_m(v);
+    /// firmware's law (`profile`, its version's).
+    fn radius_at(&self, profile: &FirmwareProfile, speed: f64) -> f64 {
+        let law = |v: f64| profile.look_ahead_radius_m(v);
         self.radius * law(speed) / law(self.wheel)
     }
 }
@@ -79,13 +83,14 @@ impl Placer {
         if target <= seen.s {
             return Some(0.0);
         }
+        let profile = seen.version.profile();
         let mut position = seen.position;
         let mut stretch = seen.stretch;
         let mut speed = seen.wheel;
         let mut s = seen.s;
         for tick in 0..MAX_TICKS {
             stretch = self.closest_stretch(position, stretch);
-            let goal = self.goal(position, seen.radius_at(speed), stretch)?;
+            let goal = self.goal(position, seen.radius_at(&profile, speed), stretch)?;
             // The speed at the goal: its stretch's two speeds interpolated at it.
             let at = self.route_s[goal.1] + goal.0.dist(self.route[goal.1].position);
             let wanted = self.route_speed(at).unwrap_or(speed);
@@ -185,7 +190,7 @@ fn circle_cut(center: Point, radius: f64, a: Point, b: Point) -> Option<Point> {
 mod tests {
     use std::time::Duration;
 
-    use car_link::version::FirmwareVersion;
+    use car_link::firmware::FirmwareVersion;
     use trajgen::Point;
 
     use super::super::{Placer, Seen};
@@ -215,7 +220,7 @@ mod tests {
             round_trip: Duration::ZERO,
             yaw_deg,
             version: FirmwareVersion::V10_1,
-            look_ahead_radius_m: FirmwareVersion::V10_1.look_ahead_radius_m(speed),
+            look_ahead_radius_m: FirmwareVersion::V10_1.profile().look_ahead_radius_m(speed),
         };
         let progress = locate(&route, points[0], 0).unwrap();
         placer.observe(Duration::ZERO, &sample, progress);

@@ -1,11 +1,23 @@
-//! What the reference firmware does that the rest of drivecheck relies on: its limits, its rates and
-//! its watchdog, in one place (`docs/firmware.md#where-the-code-keeps-these-facts` says where each
-//! is explained). The campaign model, the runner and the simulated car take these values from here,
-//! never from a literal of their own.
+//! The model of the reference firmware: every fact about the car that drivecheck relies on, in one
+//! place. Its limits, rates and watchdog (the constants below), its versions and what each is like
+//! ([`FirmwareVersion`], [`Generation`], [`FirmwareProfile`]), and the laws its autopilot steers by
+//! ([`steering`]). `docs/firmware.md#where-the-code-keeps-these-facts` says where each is explained.
+//!
+//! The wire protocol (`crate::message`, `crate::version`, `crate::config`), the client, the
+//! simulated car (`car-sim`), the campaign's fault placement and the runner's preflight and reset
+//! take every version-dependent fact from a [`FirmwareProfile`]: no other code compares version
+//! numbers. Adding a firmware generation is a [`Generation`] variant and its arm in
+//! [`FirmwareVersion::profile`] (ARCHITECTURE.md, "Recipes").
 
 use std::time::Duration;
 
 use crate::fault::Probe;
+
+mod profile;
+pub mod steering;
+
+pub use profile::{AnchorAdd, LookAheadLaw, RouteEnd, UwbEstimator, UwbReset, WatchdogBrake};
+pub use profile::{FirmwareProfile, FirmwareVersion, Generation, UnknownVersion};
 
 /// The communication watchdog: without a command that feeds it for this long, the car brakes and
 /// stops its autopilot.
@@ -42,7 +54,7 @@ pub const MAX_SPEED_KMH: f64 = 30.0;
 /// (counted in probe calls) into time.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ProbeRates {
-    /// One odometry tick (10 ms in 10.x, 20 ms in 12.x): one call of `uwb_travel_dist` and
+    /// One odometry tick ([`FirmwareProfile::odometry_tick`]): one call of `uwb_travel_dist` and
     /// `uwb_yaw`.
     pub odometry_tick: Duration,
     /// One ranging slot of the round robin (100 ms).
@@ -52,31 +64,13 @@ pub struct ProbeRates {
 }
 
 impl ProbeRates {
-    /// Firmware 10.x rates with `anchors` anchors in range: odometry on every tick.
-    pub fn firmware_10(anchors: usize) -> Self {
+    /// The rates of firmware `version` with `anchors` anchors in range: its odometry tick
+    /// ([`FirmwareProfile::odometry_tick`]) and one ranging slot per anchor.
+    pub fn new(version: FirmwareVersion, anchors: usize) -> Self {
         Self {
-            odometry_tick: TICK,
+            odometry_tick: version.profile().odometry_tick,
             ranging_slot: RANGING_SLOT,
             anchors_in_range: anchors,
-        }
-    }
-
-    /// Firmware 12.x rates (default board) with `anchors` anchors in range: odometry on every
-    /// second tick.
-    pub fn firmware_12(anchors: usize) -> Self {
-        Self {
-            odometry_tick: TICK * 2,
-            ..Self::firmware_10(anchors)
-        }
-    }
-
-    /// The rates of firmware `major` (12 and later: 12.x; anything earlier: 10.x) with `anchors`
-    /// anchors in range.
-    pub fn for_major(major: u8, anchors: usize) -> Self {
-        if major >= 12 {
-            Self::firmware_12(anchors)
-        } else {
-            Self::firmware_10(anchors)
         }
     }
 
@@ -103,14 +97,14 @@ mod tests {
 
     #[test]
     fn a_range_probe_is_called_once_per_round_of_ranging() {
-        let rates = ProbeRates::firmware_12(2);
+        let rates = ProbeRates::new(FirmwareVersion::V12_3, 2);
         assert_eq!(
             rates.iteration(Probe::UwbRange(50)),
             Duration::from_millis(200)
         );
         assert_eq!(rates.iteration(Probe::UwbYaw), Duration::from_millis(20));
         assert_eq!(
-            ProbeRates::firmware_10(0).iteration(Probe::UwbRange(1)),
+            ProbeRates::new(FirmwareVersion::V10_1, 0).iteration(Probe::UwbRange(1)),
             RANGING_SLOT
         );
     }
