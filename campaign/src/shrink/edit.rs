@@ -266,7 +266,7 @@ impl Joins {
                         Pose::new(from.end, from.heading),
                         route,
                         &scenario.constraints(),
-                        &mut crate::seed::rng(seed),
+                        &mut crate::seed::rng_for(seed, crate::seed::Purpose::ShrinkJoin),
                     )
                     .map_err(|e| format!("no joining route: {e}"))
             })

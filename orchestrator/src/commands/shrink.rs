@@ -24,6 +24,7 @@ use crate::cli::ShrinkArgs;
 use crate::runner::run_dir_name;
 use crate::seed::choose_seed;
 use campaign::case::{Case, CommandRecord, ScenarioRef, tool_version};
+use campaign::seed::{Purpose, derive};
 use campaign::shrink::{
     CaseSummary, Confirmation, Ended, MINIMAL_FILE, RunResult, SHRINK_FILE, SHRINK_FORMAT,
     ShrinkReport, Shrinker, Size, Target,
@@ -255,7 +256,12 @@ pub(super) async fn shrink_case(
     // runs happened to fail. Confirm the last one with twice as many other seeds; when it does
     // not fail the same way in all of them, step back to the case kept before it.
     let confirmer = SimDriver {
-        seed: options.seed.wrapping_add(u64::from(options.runs)),
+        seed: derive(
+            options.seed,
+            Purpose::Run {
+                run: u64::from(options.runs),
+            },
+        ),
         runs: options.runs * 2,
         count: std::cell::Cell::new(0),
         scratch: driver.scratch.clone(),

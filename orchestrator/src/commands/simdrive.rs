@@ -16,6 +16,7 @@ use crate::runner::{ReplaySource, RunConfig, Silent, run_campaign};
 use campaign::case::{Case, ReplayOf};
 use campaign::model::{Campaign, TestPlan};
 use campaign::oracle::FailurePolicy;
+use campaign::seed::{Purpose, derive};
 use campaign::shrink::{RunResult, Target};
 
 /// Settings of the simulated car that differ from the scenario's car (simulation only).
@@ -121,7 +122,7 @@ impl<'a> SimDriver<'a> {
         let mut results = Vec::new();
         let mut cases = Vec::new();
         for k in 0..self.runs {
-            let seed = self.seed.wrapping_add(u64::from(k));
+            let seed = derive(self.seed, Purpose::Run { run: u64::from(k) });
             let driven = self.drive_once(&plan, seed, settings).await?;
             let result = RunResult::of(seed, &driven);
             results.push(result);
