@@ -48,7 +48,7 @@ mod report;
 #[cfg(test)]
 mod tests;
 
-pub use edit::{Edit, FaultField};
+pub use edit::{Edit, EditError, FaultField};
 pub use report::{
     CaseSummary, Confirmation, Ended, MINIMAL_FILE, SHRINK_FILE, SHRINK_FORMAT, ShrinkReport,
 };
@@ -75,6 +75,17 @@ pub enum ShrinkError {
         /// Segments in the case.
         segments: usize,
     },
+}
+
+/// Why a candidate is not drivable (a step's `not_drivable`, in words).
+#[derive(Debug, Error)]
+enum NotDrivable {
+    /// The edit gives no case.
+    #[error(transparent)]
+    Edit(EditError),
+    /// The case it gives is refused (route, margins, faults).
+    #[error(transparent)]
+    Case(CaseError),
 }
 
 /// What one run of a candidate showed: what the shrink judges by.
@@ -402,10 +413,11 @@ impl<'a> Shrinker<'a> {
                     self.seed,
                     &mut self.joins,
                 )
+                .map_err(NotDrivable::Edit)
                 .and_then(|(case, target)| {
                     prepared(&case, self.scenario, &self.generator, self.seed)
                         .map(|case| (case, target))
-                        .map_err(|e| e.to_string())
+                        .map_err(NotDrivable::Case)
                 });
             match applied {
                 Ok((case, target)) => return Some(Candidate { edit, case, target }),
@@ -414,7 +426,7 @@ impl<'a> Shrinker<'a> {
                         description: key.clone(),
                         edit,
                         outcome: Outcome::NotDrivable,
-                        not_drivable: Some(reason),
+                        not_drivable: Some(reason.to_string()),
                         runs: Vec::new(),
                         commands: 0,
                         target: self.target,
