@@ -17,13 +17,47 @@ use crate::shrink::{FaultField, RunResult};
 pub const SWEEP_FORMAT: &str = "drivecheck-sweep";
 
 /// A `--set` that cannot be used.
-#[derive(Debug, Clone, PartialEq, Eq, Error)]
-#[error("--set {arg}: {message}")]
+#[derive(Debug, Clone, PartialEq, Error)]
+#[error("--set {arg}: {problem}")]
 pub struct SweepError {
     /// The argument as given.
     pub arg: String,
-    /// What is wrong.
-    pub message: String,
+    /// What is wrong with it.
+    pub problem: SetProblem,
+}
+
+/// What is wrong with a `--set NAME=V1,V2,…`.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum SetProblem {
+    /// No `=`.
+    #[error("expected NAME=V1,V2,…")]
+    NoValues,
+    /// A name that is neither a fault's value nor a simulator setting.
+    #[error(
+        "expected fault[i].param, fault[i].start, fault[i].duration or one of {}",
+        SimSetting::ALL.map(|(_, n)| n).join(", ")
+    )]
+    UnknownName,
+    /// `fault[i]` with an `i` that is not a number.
+    #[error("`{0}` is not a fault index")]
+    FaultIndex(String),
+    /// `fault[i]` beyond the case's fault commands.
+    #[error("the case has {faults} fault command(s): fault[0] to fault[{}]", .faults.saturating_sub(1))]
+    NoSuchFault {
+        /// The case's fault commands.
+        faults: usize,
+    },
+    /// A value that is not a finite number.
+    #[error("`{0}` is not a finite number")]
+    NotANumber(String),
+    /// A value out of the parameter's range.
+    #[error("{value} is not a value for {parameter} ({})", expected(*.parameter))]
+    OutOfRange {
+        /// The parameter.
+        parameter: Parameter,
+        /// The value.
+        value: f64,
+    },
 }
 
 /// A setting of the simulated car a sweep can vary (none of them is a setting of the reference
@@ -104,13 +138,13 @@ pub struct Axis {
 impl Axis {
     /// Parses `NAME=V1,V2,…` for `case` (a fault parameter must name one of its faults).
     pub fn parse(arg: &str, case: &Case) -> Result<Self, SweepError> {
-        let error = |message: String| SweepError {
+        let error = |problem: SetProblem| SweepError {
             arg: arg.to_owned(),
-            message,
+            problem,
         };
         let (name, values) = arg
             .split_once('=')
-            .ok_or_else(|| error("expected NAME=V1,V2,…".to_owned()))?;
+            .ok_or_else(|| error(SetProblem::NoValues))?;
         let parameter = parse_name(name.trim(), case).map_err(error)?;
         let values = values
             .split(',')
@@ -119,7 +153,7 @@ impl Axis {
                 v.parse::<f64>()
                     .ok()
                     .filter(|x| x.is_finite())
-                    .ok_or_else(|| error(format!("`{v}` is not a finite number")))
+                    .ok_or_else(|| error(SetProblem::NotANumber(v.to_owned())))
             })
             .collect::<Result<Vec<f64>, _>>()?;
         for &v in &values {
@@ -129,38 +163,29 @@ impl Axis {
     }
 }
 
-fn parse_name(name: &str, case: &Case) -> Result<Parameter, String> {
+fn parse_name(name: &str, case: &Case) -> Result<Parameter, SetProblem> {
     if let Some(&(setting, _)) = SimSetting::ALL.iter().find(|(_, n)| *n == name) {
         return Ok(Parameter::Sim { setting });
     }
-    let known = || {
-        format!(
-            "expected fault[i].param, fault[i].start, fault[i].duration or one of {}",
-            SimSetting::ALL.map(|(_, n)| n).join(", ")
-        )
-    };
-    let rest = name.strip_prefix("fault[").ok_or_else(known)?;
-    let (index, field) = rest.split_once("].").ok_or_else(known)?;
+    let rest = name.strip_prefix("fault[").ok_or(SetProblem::UnknownName)?;
+    let (index, field) = rest.split_once("].").ok_or(SetProblem::UnknownName)?;
     let index: usize = index
         .parse()
-        .map_err(|_| format!("`{index}` is not a fault index"))?;
+        .map_err(|_| SetProblem::FaultIndex(index.to_owned()))?;
     let field = match field {
         "param" => FaultField::Param,
         "start" => FaultField::Start,
         "duration" => FaultField::Duration,
-        _ => return Err(known()),
+        _ => return Err(SetProblem::UnknownName),
     };
     let faults = fault_commands(case).len();
     if index >= faults {
-        return Err(format!(
-            "the case has {faults} fault command(s): fault[0] to fault[{}]",
-            faults.saturating_sub(1)
-        ));
+        return Err(SetProblem::NoSuchFault { faults });
     }
     Ok(Parameter::Fault { index, field })
 }
 
-fn check_value(parameter: Parameter, v: f64) -> Result<(), String> {
+fn check_value(parameter: Parameter, v: f64) -> Result<(), SetProblem> {
     let ok = match parameter {
         Parameter::Fault {
             field: FaultField::Param,
@@ -182,20 +207,25 @@ fn check_value(parameter: Parameter, v: f64) -> Result<(), String> {
     if ok {
         Ok(())
     } else {
-        Err(format!(
-            "{v} is not a value for {parameter} ({})",
-            match parameter {
-                Parameter::Fault {
-                    field: FaultField::Start,
-                    ..
-                } => "a whole number of probe calls, 0 or more",
-                Parameter::Fault { .. } => "a whole number of probe calls, 1 or more",
-                Parameter::Sim {
-                    setting: SimSetting::UwbClampM,
-                } => "metres, above 0 and at most 10",
-                Parameter::Sim { .. } => "metres, 0 to 10",
-            }
-        ))
+        Err(SetProblem::OutOfRange {
+            parameter,
+            value: v,
+        })
+    }
+}
+
+/// The values `parameter` takes, in words.
+fn expected(parameter: Parameter) -> &'static str {
+    match parameter {
+        Parameter::Fault {
+            field: FaultField::Start,
+            ..
+        } => "a whole number of probe calls, 0 or more",
+        Parameter::Fault { .. } => "a whole number of probe calls, 1 or more",
+        Parameter::Sim {
+            setting: SimSetting::UwbClampM,
+        } => "metres, above 0 and at most 10",
+        Parameter::Sim { .. } => "metres, 0 to 10",
     }
 }
 
@@ -430,6 +460,14 @@ mod tests {
         assert!(error("sim.uwb_clamp_m=0").contains("above 0"));
         assert!(error("fault[0].param=x").contains("`x` is not a finite number"));
         assert!(error("fault[0].param").contains("NAME=V1"));
+        let faults = fault_commands(&case).len();
+        assert_eq!(
+            Axis::parse("fault[9].param=1", &case).unwrap_err(),
+            SweepError {
+                arg: "fault[9].param=1".to_owned(),
+                problem: SetProblem::NoSuchFault { faults }
+            }
+        );
     }
 
     #[test]

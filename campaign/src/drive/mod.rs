@@ -40,11 +40,12 @@ use scenarios::Route;
 use trajgen::{Area, Generator, Point, RouteTail};
 
 use crate::case::{Case, SegmentResult, StreamingRecord};
-use crate::model::{Command, Fault, FaultWindow, ProbeRates, Segment, TestPlan, test_rng_seed};
+use crate::model::{Command, Fault, FaultWindow, ProbeRates, Segment, TestPlan};
 use crate::oracle::{
     FailurePolicy, JudgedSegment, SegmentOracle, SegmentOutcome, SegmentVerdict, test_verdict,
 };
 use crate::safety::{Abort, AbortReason, CarSample, SafetyConfig, SafetyMonitor, StopAction};
+use crate::seed::{Purpose, rng_for};
 use crate::streaming::{Decision, Streamer, StreamingConfig, Waypoint};
 
 /// Speed of the safe stop's extension, m/s (`docs/method.md#the-model`).
@@ -717,8 +718,11 @@ impl<'a> TestDrive<'a> {
     /// braking at once when none can be generated.
     fn extension(&mut self, now: Duration) -> Option<Operation> {
         let count = self.settings.stop_points.max(1);
-        let mut rng =
-            crate::seed::rng(stop_seed(self.settings.campaign_seed, self.plan.test_index));
+        let test_index = self.plan.test_index;
+        let mut rng = rng_for(
+            self.settings.campaign_seed,
+            Purpose::SafeStop { test_index },
+        );
         let extension = match self.settings.generator.extend(
             self.settings.area,
             &self.route.tail,
@@ -918,14 +922,6 @@ impl<'a> TestDrive<'a> {
             smallest_margin_s: self.streamer.smallest_margin_s(),
         }
     }
-}
-
-/// The seed of test `test_index`'s safe stop extension.
-fn stop_seed(campaign_seed: u64, test_index: usize) -> u64 {
-    let seed = test_rng_seed(campaign_seed, test_index);
-    let mut last = [0u8; 8];
-    last.copy_from_slice(&seed[24..]);
-    u64::from_le_bytes(last)
 }
 
 mod place;

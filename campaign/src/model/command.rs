@@ -47,7 +47,7 @@ impl Command {
 /// from the same route tail.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SegmentIntent {
-    /// Seed of the generator's RNG (`rand_pcg::Pcg64Mcg::seed_from_u64`).
+    /// Seed of the generator's RNG (`crate::seed::rng`).
     pub seed: u64,
     /// Number of points to append.
     pub points: usize,

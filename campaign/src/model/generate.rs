@@ -12,7 +12,6 @@ use std::sync::{Arc, Mutex};
 use proptest::prelude::*;
 use proptest::sample::select;
 use proptest::strategy::Union;
-use rand::SeedableRng;
 use scenarios::{CampaignSettings, Interval};
 use trajgen::{GenerationError, Generator, RouteTail};
 
@@ -39,7 +38,7 @@ impl PlanContext {
         tail: &RouteTail,
         intent: SegmentIntent,
     ) -> Result<Segment, GenerationError> {
-        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(intent.seed);
+        let mut rng = crate::seed::rng(intent.seed);
         let area = &self.preconditions.area;
         let extension = self.generator.extend(area, tail, intent.points, &mut rng)?;
         Ok(Segment::generated_from(

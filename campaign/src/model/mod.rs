@@ -23,11 +23,12 @@
 //!
 //! One campaign seed determines everything:
 //! 1. test `i` of campaign seed `s` gets a 32-byte seed from SplitMix64 over `(s, i)`
-//!    ([`test_rng_seed`]), which seeds proptest's ChaCha `TestRng` and a `TestRunner`;
+//!    ([`crate::seed::plan_seed`], the seed map), which seeds proptest's ChaCha `TestRng` and a
+//!    `TestRunner`;
 //! 2. the test's size grows linearly over the campaign ([`test_size`]);
 //! 3. the `Sequential` strategy draws each command from the weighted union of the commands
 //!    allowed in the current state; a `RunSegments` draws an intent `(seed, points, speed)` and its
-//!    points come from `trajgen::Generator::extend` seeded with `Pcg64Mcg::seed_from_u64(seed)`
+//!    points come from `trajgen::Generator::extend` seeded with `crate::seed::rng(seed)`
 //!    from the current tail (scenario generator settings, [`trajgen::Strategy::Wedge`]);
 //! 4. with `no_faults` the test is generated exactly the same way and its `AddFault` commands are
 //!    then removed, so a campaign with and without faults drives the same routes (what "the same
@@ -173,26 +174,6 @@ pub fn test_size(size: Interval<usize>, test_index: usize, tests: usize) -> usiz
     let (span, index, last) = (span as u128, index as u128, last as u128);
     let step = (2 * span * index + last) / (2 * last);
     size.min + usize::try_from(step).unwrap_or(usize::MAX - size.min)
-}
-
-/// The 32-byte seed of proptest's ChaCha RNG for test `test_index` of campaign `campaign_seed`:
-/// four SplitMix64 outputs from a state mixing both.
-pub fn test_rng_seed(campaign_seed: u64, test_index: usize) -> [u8; 32] {
-    let mut state = splitmix64_mix(splitmix64_mix(campaign_seed) ^ test_index as u64);
-    let mut seed = [0u8; 32];
-    for chunk in seed.chunks_exact_mut(8) {
-        state = state.wrapping_add(SPLITMIX_GAMMA);
-        chunk.copy_from_slice(&splitmix64_mix(state).to_le_bytes());
-    }
-    seed
-}
-
-const SPLITMIX_GAMMA: u64 = 0x9E37_79B9_7F4A_7C15;
-
-fn splitmix64_mix(mut z: u64) -> u64 {
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
 }
 
 /// The route tail after a scenario's start route: where every test starts.
@@ -385,7 +366,7 @@ fn runner(campaign_seed: u64, test_index: usize) -> TestRunner {
     };
     let rng = TestRng::from_seed(
         RngAlgorithm::ChaCha,
-        &test_rng_seed(campaign_seed, test_index),
+        &crate::seed::plan_seed(campaign_seed, test_index),
     );
     TestRunner::new_with_rng(config, rng)
 }

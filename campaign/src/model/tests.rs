@@ -75,14 +75,6 @@ fn test_sizes_grow_from_5_to_20_over_the_campaign() {
 }
 
 #[test]
-fn each_test_of_a_campaign_gets_its_own_rng_seed() {
-    let a = test_rng_seed(7, 0);
-    assert_eq!(a, test_rng_seed(7, 0));
-    assert_ne!(a, test_rng_seed(7, 1));
-    assert_ne!(a, test_rng_seed(8, 0));
-}
-
-#[test]
 fn a_plan_has_the_size_of_its_place_in_the_campaign() {
     let s = parking_lot();
     for index in [0, 9] {

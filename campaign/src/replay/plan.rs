@@ -162,7 +162,7 @@ impl Case {
         seed: u64,
     ) -> Result<Case, CaseError> {
         let mut tail = start_tail(scenario)?;
-        let mut rng = crate::seed::rng(seed);
+        let mut rng = crate::seed::rng_for(seed, crate::seed::Purpose::Margins);
         let mut case = self.clone();
         for (command, record) in case.commands.iter_mut().enumerate() {
             let CommandRecord::RunSegments { points, margin, .. } = record else {

@@ -7,10 +7,11 @@ use std::collections::HashMap;
 use recovery::{PlanConfig, Pose, ReturnRoute, SearchConfig};
 use scenarios::Scenario;
 use serde::{Deserialize, Serialize};
+use thiserror::Error;
 use trajgen::{Point, RouteTail};
 
 use crate::case::{Case, CommandRecord, PlaceRecord, RoutePointRecord};
-use crate::model::{FaultKind, start_tail};
+use crate::model::{FaultKind, ModelError, start_tail};
 
 use super::Target;
 
@@ -229,6 +230,29 @@ fn polyline_length(points: &[Point]) -> f64 {
     points.windows(2).map(|w| w[0].dist(w[1])).sum()
 }
 
+/// Why an edit gives no case to drive (recorded as the step's `not_drivable`).
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum EditError {
+    /// The edit names a command that is not a fault command.
+    #[error("commands[{command_index}] is not a fault")]
+    NotAFault {
+        /// The command.
+        command_index: usize,
+    },
+    /// Segments to drop have no segment after them to join to.
+    #[error("no segment after segment {last} to join")]
+    NothingToJoin {
+        /// The last segment to drop.
+        last: usize,
+    },
+    /// The return-route planner found no route joining the segments around the dropped ones.
+    #[error("no joining route: {0}")]
+    NoJoin(#[source] recovery::RecoveryError),
+    /// The scenario's start route gives no route tail.
+    #[error("the scenario's start route: {0}")]
+    StartTail(#[source] ModelError),
+}
+
 /// Nodes a joining route's search may expand: a join that needs more is a long detour, not a
 /// simpler test (a return route gets 20 000).
 const JOIN_EXPANSIONS: u64 = 3_000;
@@ -236,7 +260,7 @@ const JOIN_EXPANSIONS: u64 = 3_000;
 /// The joining routes planned so far, by their inputs: a shrink tries the same join again after
 /// every kept edit, and a failed search is the costliest thing it does.
 #[derive(Debug, Default)]
-pub(super) struct Joins(HashMap<Vec<u64>, Result<ReturnRoute, String>>);
+pub(super) struct Joins(HashMap<Vec<u64>, Result<ReturnRoute, EditError>>);
 
 impl Joins {
     /// The joining route from `from` to `route` (deterministic: seeded with `seed`).
@@ -246,7 +270,7 @@ impl Joins {
         from: RouteTail,
         route: &[Point],
         seed: u64,
-    ) -> Result<ReturnRoute, String> {
+    ) -> Result<ReturnRoute, EditError> {
         let key: Vec<u64> = [from.end.x, from.end.y, from.heading]
             .into_iter()
             .chain(route.iter().flat_map(|p| [p.x, p.y]))
@@ -266,9 +290,9 @@ impl Joins {
                         Pose::new(from.end, from.heading),
                         route,
                         &scenario.constraints(),
-                        &mut crate::seed::rng(seed),
+                        &mut crate::seed::rng_for(seed, crate::seed::Purpose::ShrinkJoin),
                     )
-                    .map_err(|e| format!("no joining route: {e}"))
+                    .map_err(EditError::NoJoin)
             })
             .clone()
     }
@@ -276,7 +300,7 @@ impl Joins {
 
 /// What applying an edit gives: the changed case (results not yet cleared) and where the
 /// failing segment now is.
-pub(super) type Applied = Result<(Case, Target), String>;
+pub(super) type Applied = Result<(Case, Target), EditError>;
 
 impl Edit {
     /// Applies the edit to `case`, whose failing segment is `target`.
@@ -320,7 +344,7 @@ impl Edit {
                     case.commands.get(command_index),
                     Some(CommandRecord::AddFault { .. })
                 ) {
-                    return Err(format!("commands[{command_index}] is not a fault"));
+                    return Err(EditError::NotAFault { command_index });
                 }
                 out.commands.remove(command_index);
                 Ok((out, target))
@@ -341,7 +365,7 @@ impl Edit {
                 if set {
                     Ok((out, target))
                 } else {
-                    Err(format!("commands[{command_index}] is not a fault"))
+                    Err(EditError::NotAFault { command_index })
                 }
             }
             Self::SlowSegment {
@@ -397,8 +421,8 @@ fn tail_before(
     case: &Case,
     scenario: &Scenario,
     segment_index: usize,
-) -> Result<RouteTail, String> {
-    let mut tail = start_tail(scenario).map_err(|e| e.to_string())?;
+) -> Result<RouteTail, EditError> {
+    let mut tail = start_tail(scenario).map_err(EditError::StartTail)?;
     for &command in segment_commands(case).iter().take(segment_index) {
         let points: Vec<Point> = points_of(&case.commands[command])
             .iter()
@@ -423,7 +447,7 @@ fn drop_segments(
     let segments = segment_commands(case);
     let next = last + 1;
     if first > last || next >= segments.len() {
-        return Err(format!("no segment after segment {last} to join"));
+        return Err(EditError::NothingToJoin { last });
     }
     let from = tail_before(case, scenario, first)?;
     let before_next = tail_before(case, scenario, next)?.end;

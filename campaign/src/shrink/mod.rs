@@ -2,8 +2,10 @@
 //! smallest test that still fails the same way, every time.
 //!
 //! A [`Shrinker`] holds the smallest case found so far and proposes simpler candidates, one at a
-//! time ([`Shrinker::next_candidate`]); the caller drives each candidate several times in the
-//! simulator, with varied seeds, and reports the runs ([`Shrinker::record`]). A candidate is
+//! time ([`Shrinker::next_candidate`]); each candidate is driven several times in the simulator,
+//! with varied seeds, and its runs are reported ([`Shrinker::record`]). [`shrink`] is the whole
+//! policy around it (which runs, the margin, when to stop, the confirmation with other seeds and
+//! stepping back), given the driving as a [`Drive`]: the orchestrator drives fresh simulators. A candidate is
 //! kept only when **every** run failed the same way (Erlang QuickCheck's `?ALWAYS`), so the
 //! minimal case is robust, not lucky.
 //!
@@ -44,11 +46,13 @@ use crate::case::{Case, CaseError, CommandRecord};
 use crate::oracle::{SegmentVerdict, Verdict};
 
 mod edit;
+mod policy;
 mod report;
 #[cfg(test)]
 mod tests;
 
-pub use edit::{Edit, FaultField};
+pub use edit::{Edit, EditError, FaultField};
+pub use policy::{Drive, Progress, Settings, ShrinkFailure, Shrunk, shrink};
 pub use report::{
     CaseSummary, Confirmation, Ended, MINIMAL_FILE, SHRINK_FILE, SHRINK_FORMAT, ShrinkReport,
 };
@@ -75,6 +79,17 @@ pub enum ShrinkError {
         /// Segments in the case.
         segments: usize,
     },
+}
+
+/// Why a candidate is not drivable (a step's `not_drivable`, in words).
+#[derive(Debug, Error)]
+enum NotDrivable {
+    /// The edit gives no case.
+    #[error(transparent)]
+    Edit(EditError),
+    /// The case it gives is refused (route, margins, faults).
+    #[error(transparent)]
+    Case(CaseError),
 }
 
 /// What one run of a candidate showed: what the shrink judges by.
@@ -402,10 +417,11 @@ impl<'a> Shrinker<'a> {
                     self.seed,
                     &mut self.joins,
                 )
+                .map_err(NotDrivable::Edit)
                 .and_then(|(case, target)| {
                     prepared(&case, self.scenario, &self.generator, self.seed)
                         .map(|case| (case, target))
-                        .map_err(|e| e.to_string())
+                        .map_err(NotDrivable::Case)
                 });
             match applied {
                 Ok((case, target)) => return Some(Candidate { edit, case, target }),
@@ -414,7 +430,7 @@ impl<'a> Shrinker<'a> {
                         description: key.clone(),
                         edit,
                         outcome: Outcome::NotDrivable,
-                        not_drivable: Some(reason),
+                        not_drivable: Some(reason.to_string()),
                         runs: Vec::new(),
                         commands: 0,
                         target: self.target,

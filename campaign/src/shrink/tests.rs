@@ -1,5 +1,6 @@
 use proptest::prelude::*;
 
+use super::policy::{Drive, ShrinkFailure, shrink};
 use super::*;
 use crate::case::tests::scenario;
 use crate::model::{Campaign, FaultKind, Probe, plan_test, start_tail};
@@ -268,4 +269,212 @@ proptest! {
         prop_assert!(after.commands <= before.commands);
         prop_assert!(shrinker.target().last < after.segments);
     }
+}
+
+/// A stand-in for the simulated car behind the shrink's policy: a run fails at the case's last
+/// segment (by 1.5 m against a 1 m threshold) when `fails(param, run)` says so for the
+/// parameter of its fault on anchor 234 (none: 0) and the run (seed − `base`), else passes.
+struct FakeCar<F> {
+    base: u64,
+    fails: F,
+    /// The runs driven: (run, commands of the case).
+    driven: Vec<(u64, usize)>,
+    /// Stop before a candidate once this many runs were driven.
+    stop_after: Option<(usize, Ended)>,
+}
+
+impl<F: Fn(f64, u64) -> bool> FakeCar<F> {
+    fn new(base: u64, fails: F) -> Self {
+        Self {
+            base,
+            fails,
+            driven: Vec::new(),
+            stop_after: None,
+        }
+    }
+}
+
+/// The largest parameter of the case's faults on anchor 234 (0 without one).
+fn fault_param(case: &Case) -> f64 {
+    case.commands
+        .iter()
+        .filter_map(|c| match c {
+            CommandRecord::AddFault {
+                probe: Probe::UwbRange(234),
+                param,
+                ..
+            } => Some(*param),
+            _ => None,
+        })
+        .fold(0.0, f64::max)
+}
+
+impl<F: Fn(f64, u64) -> bool> Drive for FakeCar<F> {
+    type Error = String;
+
+    fn drive(&mut self, case: &Case, seed: u64) -> Result<Case, String> {
+        use crate::case::SegmentResult;
+        use crate::oracle::{DeviationStats, SegmentOutcome};
+        let run = seed - self.base;
+        self.driven.push((run, case.commands.len()));
+        let segments = segment_commands(case);
+        let fails = (self.fails)(fault_param(case), run);
+        let mut driven = case.clone();
+        driven.segments = segments
+            .iter()
+            .enumerate()
+            .map(|(segment_index, &command_index)| {
+                let failed = fails && segment_index + 1 == segments.len();
+                let max_m = if failed { 1.5 } else { 0.5 };
+                SegmentResult {
+                    segment_index,
+                    command_index,
+                    faults_preceding: Vec::new(),
+                    faults_active: Vec::new(),
+                    oracle: SegmentOutcome {
+                        stats: Some(DeviationStats {
+                            samples: 10,
+                            max_m,
+                            rms_m: max_m / 2.0,
+                            p95_m: max_m,
+                        }),
+                        invalid_uwb_samples: 0,
+                        unjudged_samples: 0,
+                        threshold_m: 1.0,
+                        verdict: if failed {
+                            SegmentVerdict::Failed
+                        } else {
+                            SegmentVerdict::Passed
+                        },
+                    },
+                }
+            })
+            .collect();
+        driven.verdict = Some(if fails {
+            Verdict::Failed
+        } else {
+            Verdict::Passed
+        });
+        Ok(driven)
+    }
+
+    fn stop(&mut self) -> Option<Ended> {
+        self.stop_after
+            .and_then(|(runs, ended)| (self.driven.len() >= runs).then_some(ended))
+    }
+}
+
+/// A long generated test with a strong fault, and the shrink's settings for it.
+fn strong_case() -> (Scenario, Case, Settings) {
+    let (s, case) = generated(3, 9);
+    let settings = Settings {
+        runs: 3,
+        seed: 40,
+        margin_m: 0.1,
+    };
+    (s, with_strong_fault(case), settings)
+}
+
+#[test]
+fn the_policy_keeps_a_candidate_only_when_every_run_fails_and_stops_at_the_first_that_does_not() {
+    let (s, case, settings) = strong_case();
+    // Strong enough (≥ 2) fails in every run; between 1 and 2 only in the first run.
+    let mut car = FakeCar::new(40, |param, run| param >= 2.0 || (param >= 1.0 && run == 0));
+    let shrunk = shrink(&case, &s, &settings, &mut car).unwrap();
+    assert_eq!(shrunk.ended, Ended::Minimal);
+    let param = fault_param(&shrunk.minimal);
+    assert!((2.0..2.5).contains(&param), "{param}");
+    // A kept candidate failed in all of its runs; one that passed in its second run was driven
+    // no further.
+    for step in shrunk.steps.iter().filter(|s| s.outcome == Outcome::Kept) {
+        assert_eq!(step.runs.len(), 3, "{step:?}");
+        assert!(step.runs.iter().all(|r| r.fails_at(step.target)));
+    }
+    let sometimes = shrunk
+        .steps
+        .iter()
+        .filter(|s| s.outcome == Outcome::Passed && s.runs.len() == 2)
+        .count();
+    assert!(sometimes > 0, "{:#?}", shrunk.steps);
+    assert!(shrunk.steps.iter().all(|s| s.runs.len() <= 3));
+    // Runs 0–2 of every candidate have seeds 40–42; the confirmation 43–48.
+    let seeds: Vec<u64> = shrunk.before.runs.iter().map(|r| r.seed).collect();
+    assert_eq!(seeds, [40, 41, 42]);
+    let confirmation = shrunk.confirmation.as_ref().unwrap();
+    let seeds: Vec<u64> = confirmation.runs.iter().map(|r| r.seed).collect();
+    assert_eq!(seeds, [43, 44, 45, 46, 47, 48]);
+    assert_eq!((confirmation.failed, confirmation.stepped_back), (6, 0));
+    assert!(confirmation.confirmed && confirmation.case_failed.is_none());
+    // Without its fault the minimal case passes.
+    let bare = shrunk.without_faults.as_ref().unwrap();
+    assert!(bare.iter().all(|r| r.verdict == Some(Verdict::Passed)));
+    assert_eq!(shrunk.runs_driven, car.driven.len());
+    assert_eq!(shrunk.minimal.campaign_seed, case.campaign_seed);
+    assert_eq!(shrunk.after.size, Size::of(&shrunk.minimal));
+    assert_eq!(shrunk.min_deviation_m, 1.1);
+}
+
+#[test]
+fn a_kept_case_that_fails_only_with_the_shrinks_own_seeds_is_stepped_back() {
+    let (s, case, settings) = strong_case();
+    // Between 2 and 3 the fault fails with the candidates' seeds (runs 0–2) only; 3 and more
+    // always.
+    let mut car = FakeCar::new(40, |param, run| param >= 3.0 || (param >= 2.0 && run < 3));
+    let shrunk = shrink(&case, &s, &settings, &mut car).unwrap();
+    let kept_weak = shrunk.steps.iter().any(|s| {
+        s.outcome == Outcome::Kept && matches!(s.edit, Edit::FaultValue { to, .. } if to < 3.0)
+    });
+    assert!(kept_weak, "{:#?}", shrunk.steps);
+    let confirmation = shrunk.confirmation.as_ref().unwrap();
+    assert!(confirmation.stepped_back >= 1, "{confirmation:?}");
+    // The case itself fails with every confirming seed, so the minimal case must as well.
+    assert_eq!(confirmation.case_failed, Some(6));
+    assert_eq!(confirmation.failed, 6);
+    assert!(confirmation.confirmed);
+    assert!(fault_param(&shrunk.minimal) >= 3.0, "{:?}", shrunk.minimal);
+    assert_eq!(shrunk.after.runs.len(), 3);
+}
+
+#[test]
+fn a_case_that_does_not_fail_in_every_run_is_not_shrunk() {
+    let (s, case, settings) = strong_case();
+    let mut car = FakeCar::new(40, |_, run| run != 1);
+    match shrink(&case, &s, &settings, &mut car) {
+        Err(failure @ ShrinkFailure::NotReproducible { .. }) => {
+            let text = failure.to_string();
+            assert!(text.contains("seed 41: passed;"), "{text}");
+            assert!(text.contains("seed 40: failed at segment"), "{text}");
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(car.driven.len(), 3);
+}
+
+#[test]
+fn the_driver_stops_the_shrink_between_candidates() {
+    let (s, case, settings) = strong_case();
+    let mut car = FakeCar::new(40, |param, _| param >= 2.0);
+    car.stop_after = Some((7, Ended::Budget));
+    let shrunk = shrink(&case, &s, &settings, &mut car).unwrap();
+    assert_eq!(shrunk.ended, Ended::Budget);
+    // Candidates were driven until 7 runs were, not one more; then the confirmation (6 runs,
+    // all failing); no runs without faults, as the case is not minimal.
+    let runs: Vec<usize> = shrunk.steps.iter().map(|s| s.runs.len()).collect();
+    let candidates: usize = runs.iter().sum();
+    let last = runs.iter().rev().find(|&&n| n > 0).copied().unwrap_or(0);
+    assert!(3 + candidates >= 7 && 3 + candidates - last < 7, "{runs:?}");
+    let confirmation = shrunk.confirmation.as_ref().unwrap();
+    assert_eq!((confirmation.failed, confirmation.runs.len()), (6, 6));
+    assert!(shrunk.without_faults.is_none());
+    assert_eq!(car.driven.len(), 3 + candidates + 6);
+    assert_eq!(shrunk.runs_driven, car.driven.len());
+    // Interrupted: nothing more is driven, not even the confirmation.
+    let mut car = FakeCar::new(40, |param, _| param >= 2.0);
+    car.stop_after = Some((3, Ended::Interrupted));
+    let shrunk = shrink(&case, &s, &settings, &mut car).unwrap();
+    assert_eq!(shrunk.ended, Ended::Interrupted);
+    assert!(shrunk.steps.iter().all(|s| s.runs.is_empty()));
+    assert!(shrunk.confirmation.is_none() && shrunk.without_faults.is_none());
+    assert_eq!(car.driven.len(), 3);
+    assert_eq!(fault_param(&shrunk.minimal), fault_param(&case));
 }

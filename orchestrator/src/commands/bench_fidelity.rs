@@ -31,6 +31,7 @@ use crate::runner::{RecordMode, ReplaySource, RunConfig, Silent, run_campaign_fr
 use campaign::case::{Case, ReplayOf};
 use campaign::model::{Campaign, Command, Fault, TestPlan, TestPlanner};
 use campaign::oracle::Verdict;
+use campaign::seed::Purpose;
 
 /// The published sequence's faults, in order, with the segment each follows (0-based: the fault
 /// is sent once segment `after` is appended and the car has 4 route points or fewer left).
@@ -202,7 +203,12 @@ pub fn run(args: &BenchFidelityArgs) -> Result<ExitCode> {
         let clean = maxima(&drive(&august, &plan, seed, true)?);
         let mut reruns = vec![faulted.clone()];
         for k in 1..args.reruns {
-            let rerun_seed = seed.wrapping_add(u64::from(k) * 1_000_003);
+            let rerun_seed = campaign::seed::derive(
+                seed,
+                Purpose::FidelityRerun {
+                    rerun: u64::from(k),
+                },
+            );
             reruns.push(maxima(&drive(&august, &plan, rerun_seed, false)?));
         }
         for segment in 0..SEGMENTS {

@@ -20,6 +20,7 @@ use crate::cli::BenchPlacementArgs;
 use crate::runner::{RecordMode, RunConfig, Silent, run_campaign_fresh};
 use campaign::model::Campaign;
 use campaign::oracle::FailurePolicy;
+use campaign::seed::Purpose;
 
 /// The error the issue of anchored faults allows, metres.
 const WITHIN_M: f64 = 0.2;
@@ -97,7 +98,7 @@ pub fn run(args: &BenchPlacementArgs) -> Result<ExitCode> {
                     firmware,
                     link,
                     // The link's draws differ per link seed, the car's per test (as `run`).
-                    seed: seed.wrapping_mul(1_000_003).wrapping_add(link_seed),
+                    seed: campaign::seed::derive(seed, Purpose::PlacementSim { link_seed }),
                     ..car_sim::SimConfig::from_scenario(&scenario)
                 };
                 let cars = EmbeddedSims::with_config(sim, true);

@@ -21,6 +21,7 @@ use trajgen::{Constraints, Point, Pose};
 use super::bench::percentile;
 use crate::cli::BenchRecoveryArgs;
 use crate::seed::{RunRng, rng};
+use campaign::seed::{Purpose, rng_for};
 
 /// Poses drawn before giving up on finding enough with the clearance asked for.
 const MAX_DRAWS_PER_POSE: usize = 10_000;
@@ -119,7 +120,7 @@ fn measure(scenario: &Scenario, planner: PlannerKind, poses: &[Pose], seed: u64)
     let constraints = scenario.constraints();
     let mut figures = Figures::default();
     for (i, &pose) in poses.iter().enumerate() {
-        let mut rng = rng(seed.wrapping_add(i as u64));
+        let mut rng = rng_for(seed, Purpose::RecoveryPose { pose: i });
         let started = Instant::now();
         let result = config.plan(
             &scenario.area,

@@ -170,7 +170,7 @@ fn counterfactual(
                 &cancel,
             );
             let settings = SimSettings::default();
-            let (_, base) = driver.drive_all(&case, None, &settings).await?;
+            let base = driver.drive_all(&case, &settings).await?;
             let faults: BTreeSet<usize> = scored
                 .iter()
                 .filter(|s| &s.case == path && s.needs_counterfactual())
@@ -178,8 +178,8 @@ fn counterfactual(
                 .collect();
             let mut without = BTreeMap::new();
             for &k in &faults {
-                let (_, driven) = driver
-                    .drive_all(&with_fault_silenced(&case, k), None, &settings)
+                let driven = driver
+                    .drive_all(&with_fault_silenced(&case, k), &settings)
                     .await?;
                 without.insert(k, driven);
             }

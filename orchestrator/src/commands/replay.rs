@@ -33,6 +33,7 @@ use campaign::drive::EARLIER_TOOL_POINTS_LEFT;
 use campaign::model::{Campaign, TestPlan};
 use campaign::oracle::Verdict;
 use campaign::replay::{Comparison, REPLAY_FILE, ReplayRun};
+use campaign::seed::{Purpose, derive};
 
 /// Replays the case and prints the comparison. Exit status: 0 every run passed, 1 a run failed
 /// or was aborted, 2 an error (the case refused, the link lost, interrupted, …).
@@ -174,7 +175,7 @@ impl Job<'_> {
         let mut runs = Vec::new();
         for k in 0..self.args.times {
             let seed = if self.args.vary_seed {
-                self.seed.wrapping_add(u64::from(k))
+                derive(self.seed, Purpose::Run { run: u64::from(k) })
             } else {
                 self.seed
             };

@@ -10,8 +10,7 @@ use car_link::firmware::{MAX_STALE_LIMIT, WATCHDOG};
 use scenarios::Scenario;
 
 use super::shared::{
-    CampaignFailed, EmbeddedSims, Interrupt, Progress, cancel_on_ctrl_c, connect, print_report,
-    runtime, sim_view,
+    CampaignFailed, EmbeddedSims, Interrupt, Progress, connect, print_report, runtime, sim_view,
 };
 use super::{explain, shrink};
 use crate::cli::{OnFailure, RecordArg, RunArgs};
@@ -274,10 +273,7 @@ fn shrink_failed(report: &CampaignReport, scenario: &Scenario, budget: Duration)
             seed: case.campaign_seed.unwrap_or(report.record.seed),
             margin: shrink::DEFAULT_MARGIN_M,
         };
-        let result = runtime.block_on(async {
-            let cancel = cancel_on_ctrl_c();
-            shrink::shrink_case(&path, &case, scenario, &options, &out, &cancel, true).await
-        });
+        let result = shrink::shrink_case(&runtime, &path, &case, scenario, &options, &out, true);
         match result {
             Ok(r) => lines.push(format!(
                 "| {} | {} → {} | {} → {} | {} → {} | {} → {} | {} | {:.1} s |",

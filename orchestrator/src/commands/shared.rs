@@ -21,6 +21,7 @@ use crate::scenario_arg::{load_scenario, print_warnings};
 use anyhow::bail;
 use campaign::case::Case;
 use campaign::oracle::Verdict;
+use campaign::seed::Purpose;
 
 /// The async runtime: on one thread with a paused clock (virtual time, the embedded simulated
 /// car) or on two threads against the wall clock.
@@ -111,18 +112,6 @@ impl EmbeddedSims {
     }
 }
 
-/// The simulator seed of test `test_index` of a campaign with `seed` (SplitMix64 of both: seeds
-/// of neighbouring tests share no bits of pattern).
-pub(super) fn test_sim_seed(seed: u64, test_index: usize) -> u64 {
-    let mut z = seed
-        ^ (test_index as u64)
-            .wrapping_add(1)
-            .wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
 impl FreshCars for EmbeddedSims {
     fn virtual_time(&self) -> bool {
         self.virtual_time
@@ -130,7 +119,7 @@ impl FreshCars for EmbeddedSims {
 
     fn connect(&self, test_index: usize, start: Option<StartPose>) -> Connecting<'_> {
         let mut config = car_sim::SimConfig {
-            seed: test_sim_seed(self.config.seed, test_index),
+            seed: campaign::seed::derive(self.config.seed, Purpose::Simulator { test_index }),
             ..self.config.clone()
         };
         if let Some(start) = start {

@@ -2,9 +2,9 @@
 //! smallest test that still fails the same way every time, on the embedded simulated car in
 //! virtual time.
 //!
-//! The strategy is [`campaign::shrink`]'s; this module drives its candidates. Every candidate is
-//! driven `--runs` times (run k with seed + k, so the sensor noise differs), each on a fresh
-//! simulator, and its runs stop at the first that does not fail the same way. The candidates'
+//! The strategy and the policy (which runs, what is kept, the confirmation) are
+//! [`campaign::shrink`]'s; this module drives its runs (run k with seed + k, so the sensor noise
+//! differs), each on a fresh simulator. The candidates'
 //! runs record no MCAP and their run directories are scratch (removed at the end); the shrink
 //! directory keeps `minimal.json` (the minimal case as its first confirming run wrote it: a case
 //! file every command takes, e.g. `drivecheck replay`) and `shrink.json` (every step).
@@ -16,17 +16,17 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use scenarios::Scenario;
-use tokio_util::sync::CancellationToken;
+use tokio::runtime::Runtime;
 
 use super::shared::{cancel_on_ctrl_c, check_hash, read_case, runtime, scenario_of};
 use super::simdrive::{SimDriver, SimSettings};
 use crate::cli::ShrinkArgs;
 use crate::runner::run_dir_name;
 use crate::seed::choose_seed;
-use campaign::case::{Case, CommandRecord, ScenarioRef, tool_version};
+use campaign::case::{Case, ScenarioRef, tool_version};
 use campaign::shrink::{
-    CaseSummary, Confirmation, Ended, MINIMAL_FILE, RunResult, SHRINK_FILE, SHRINK_FORMAT,
-    ShrinkReport, Shrinker, Size, Target,
+    Drive, Ended, MINIMAL_FILE, Progress, SHRINK_FILE, SHRINK_FORMAT, Settings, ShrinkFailure,
+    ShrinkReport,
 };
 
 /// `--margin`'s default (and `run --shrink`'s margin), metres.
@@ -77,10 +77,7 @@ pub fn shrink(args: &ShrinkArgs) -> Result<ExitCode> {
         margin: args.margin,
     };
     let runtime = runtime(true)?;
-    let report = runtime.block_on(async {
-        let cancel = cancel_on_ctrl_c();
-        shrink_case(path, &case, &scenario, &options, &out, &cancel, true).await
-    })?;
+    let report = shrink_case(&runtime, path, &case, &scenario, &options, &out, true)?;
     print_summary(&report, &out);
     Ok(ExitCode::SUCCESS)
 }
@@ -142,190 +139,59 @@ pub(super) fn print_summary(report: &ShrinkReport, out: &Path) {
 }
 
 /// Shrinks `case` (read from `path`) in `scenario` and writes the shrink directory `out` (which
-/// must be new or empty). With `progress`, shows a spinner on standard error.
-pub(super) async fn shrink_case(
+/// must be new or empty). The policy is [`campaign::shrink::shrink`]'s; this drives its runs on
+/// fresh embedded simulators on `runtime` (virtual time); the first signal (Ctrl-C) ends it with
+/// the smallest case so far. With `progress`, shows a spinner on standard error.
+pub(super) fn shrink_case(
+    runtime: &Runtime,
     path: &Path,
     case: &Case,
     scenario: &Scenario,
     options: &Options,
     out: &Path,
-    cancel: &CancellationToken,
     progress: bool,
 ) -> Result<ShrinkReport> {
     let started = Instant::now();
+    let cancel = runtime.block_on(async { cancel_on_ctrl_c() });
     if crate::runner::is_used(out) {
         bail!(crate::runner::RunError::OutDirUsed {
             path: out.to_owned()
         });
     }
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
-    let driver = SimDriver::new(
+    let sim = SimDriver::new(
         scenario,
         path,
         case,
         out.join(".scratch"),
         (options.runs, options.seed),
-        cancel,
+        &cancel,
     );
-    let plain = SimSettings::default();
-    let bar = spinner(progress);
-    bar.set_message(format!("driving {} to confirm its failure", path.display()));
-    // The case as it is: it must fail at the same segment in every run.
-    let (before_runs, before_cases) = driver.drive_all(case, None, &plain).await?;
-    let before_case = before_cases.into_iter().next().map(|(_, c)| c);
-    let target = match Target::of_runs(&before_runs) {
-        Some(target) => target,
-        None => {
-            let seen: Vec<String> = before_runs.iter().map(describe).collect();
-            bail!(
-                "{}: does not fail in every run at one segment or two neighbouring ones ({}): \
-                 nothing to shrink; replay it with --vary-seed to see how it varies",
-                path.display(),
-                seen.join("; ")
-            );
-        }
+    let mut driver = SimRuns {
+        sim: &sim,
+        runtime,
+        started,
+        budget: options.budget,
+        bar: spinner(progress),
+        path,
     };
-    // Every run must fail by the margin above the threshold, or by as much as the case itself
-    // did in its least clear run if that is less.
-    let threshold = before_case
-        .as_ref()
-        .and_then(|c| c.segments.first())
-        .map_or(0.0, |s| s.oracle.threshold_m);
-    let least = before_runs
-        .iter()
-        .filter_map(|r| r.max_deviation_m)
-        .fold(f64::INFINITY, f64::min);
-    let min_deviation = (threshold + options.margin).min(least);
-    let mut shrinker = Shrinker::new(case, scenario, target, options.seed)
-        .with_context(|| format!("{}: cannot be shrunk", path.display()))?
-        .with_min_deviation(min_deviation);
-    let before = CaseSummary {
-        size: Size::of(case),
-        target,
-        runs: before_runs.clone(),
+    let settings = Settings {
+        runs: options.runs,
+        seed: options.seed,
+        margin_m: options.margin,
     };
-    // Every case kept, the case itself first: the confirmation may step back through them.
-    let mut kept = vec![Kept {
-        case: shrinker.current().clone(),
-        target,
-        runs: before_runs,
-        first: before_case,
-    }];
-    let mut ended = Ended::Minimal;
-    while let Some(candidate) = shrinker.next_candidate() {
-        if cancel.is_cancelled() {
-            ended = Ended::Interrupted;
-            break;
+    let shrunk = campaign::shrink::shrink(case, scenario, &settings, &mut driver);
+    driver.bar.finish_and_clear();
+    let _ = std::fs::remove_dir_all(&sim.scratch);
+    let shrunk = shrunk.map_err(|failure| match failure {
+        ShrinkFailure::Drive(error) => error,
+        ShrinkFailure::Shrinker(error) => {
+            anyhow::Error::new(error).context(format!("{}: cannot be shrunk", path.display()))
         }
-        if started.elapsed() > options.budget {
-            ended = Ended::Budget;
-            break;
-        }
-        bar.set_message(format!(
-            "step {}: {} ({} commands now)",
-            shrinker.steps().len() + 1,
-            candidate.edit,
-            shrinker.current().commands.len()
-        ));
-        let (runs, cases) = match driver
-            .drive_all(
-                &candidate.case,
-                Some((candidate.target, min_deviation)),
-                &plain,
-            )
-            .await
-        {
-            Err(_) if cancel.is_cancelled() => {
-                ended = Ended::Interrupted;
-                break;
-            }
-            result => result?,
-        };
-        if shrinker.record(candidate, runs.clone()) {
-            kept.push(Kept {
-                case: shrinker.current().clone(),
-                target: shrinker.target(),
-                runs,
-                first: cases.into_iter().next().map(|(_, c)| c),
-            });
-        }
-        bar.tick();
-    }
-    // A greedy shrink moves values to where the case only just fails: a case kept because its
-    // runs happened to fail. Confirm the last one with twice as many other seeds; when it does
-    // not fail the same way in all of them, step back to the case kept before it.
-    let confirmer = SimDriver {
-        seed: options.seed.wrapping_add(u64::from(options.runs)),
-        runs: options.runs * 2,
-        count: std::cell::Cell::new(0),
-        scratch: driver.scratch.clone(),
-        of: driver.of.clone(),
-        ..driver
-    };
-    let mut stepped_back = 0;
-    let mut case_failed: Option<usize> = None;
-    let confirmation = loop {
-        if ended == Ended::Interrupted {
-            break None;
-        }
-        let last = kept.last().expect("the case itself is always kept");
-        bar.set_message(format!(
-            "confirming the minimal case with {} other seeds",
-            confirmer.runs
-        ));
-        let failed_runs = |runs: &[RunResult], target| {
-            runs.iter()
-                .filter(|r| r.fails_clearly(target, min_deviation))
-                .count()
-        };
-        let (runs, _) = confirmer.drive_all(&last.case, None, &plain).await?;
-        let failed = failed_runs(&runs, last.target);
-        if failed < runs.len() && case_failed.is_none() {
-            // Not every run failed: how robust is the case itself with these seeds?
-            let case = &kept[0];
-            let (case_runs, _) = confirmer.drive_all(&case.case, None, &plain).await?;
-            case_failed = Some(failed_runs(&case_runs, case.target));
-        }
-        let as_robust = failed == runs.len() || case_failed.is_some_and(|c| failed >= c);
-        if as_robust || kept.len() == 1 {
-            break Some(Confirmation {
-                runs,
-                failed,
-                case_failed,
-                confirmed: as_robust,
-                stepped_back,
-            });
-        }
-        kept.pop();
-        stepped_back += 1;
-    };
-    let Kept {
-        case: current,
-        target,
-        runs: after_runs,
-        first: after_case,
-    } = kept.pop().expect("the case itself is always kept");
-    let has_faults = current
-        .commands
-        .iter()
-        .any(|c| matches!(c, CommandRecord::AddFault { .. }));
-    let without_faults = if has_faults && ended == Ended::Minimal {
-        bar.set_message("driving the minimal case without its faults");
-        let mut bare = current.clone();
-        bare.commands
-            .retain(|c| matches!(c, CommandRecord::RunSegments { .. }));
-        Some(driver.drive_all(&bare, None, &plain).await?.0)
-    } else {
-        None
-    };
-    bar.finish_and_clear();
-    let _ = std::fs::remove_dir_all(&driver.scratch);
-    // The minimal case as its first confirming run wrote it (with results), or as planned.
-    let mut written = after_case.unwrap_or(current);
-    written.campaign_seed = case.campaign_seed.or(Some(options.seed));
-    written.test_index = case.test_index;
+        failure => anyhow::anyhow!("{}: {failure}", path.display()),
+    })?;
     let minimal_file = out.join(MINIMAL_FILE);
-    crate::atomic::write(&minimal_file, format!("{}\n", written.to_json()?))
+    crate::atomic::write(&minimal_file, format!("{}\n", shrunk.minimal.to_json()?))
         .with_context(|| format!("cannot write {}", minimal_file.display()))?;
     let report = ShrinkReport {
         format: SHRINK_FORMAT.to_owned(),
@@ -335,18 +201,14 @@ pub(super) async fn shrink_case(
         scenario: ScenarioRef::of(scenario),
         seed: options.seed,
         runs_per_candidate: options.runs,
-        min_deviation_m: min_deviation,
-        ended,
-        before,
-        after: CaseSummary {
-            size: Size::of(&written),
-            target,
-            runs: after_runs,
-        },
-        without_faults,
-        confirmation,
-        steps: shrinker.steps().to_vec(),
-        simulator_runs: driver.count.get() + confirmer.count.get(),
+        min_deviation_m: shrunk.min_deviation_m,
+        ended: shrunk.ended,
+        before: shrunk.before,
+        after: shrunk.after,
+        without_faults: shrunk.without_faults,
+        confirmation: shrunk.confirmation,
+        steps: shrunk.steps,
+        simulator_runs: shrunk.runs_driven,
         wall_s: started.elapsed().as_secs_f64(),
         replay_on_car: format!(
             "drivecheck replay {} --car tcp://HOST:PORT",
@@ -359,22 +221,51 @@ pub(super) async fn shrink_case(
     Ok(report)
 }
 
-/// A case the shrink kept, with its runs and the case its first run wrote.
-struct Kept {
-    case: Case,
-    target: Target,
-    runs: Vec<RunResult>,
-    first: Option<Case>,
+/// The shrink's runs, each on a fresh embedded simulator, unrecorded; its stop (interrupt,
+/// budget) and its progress line.
+struct SimRuns<'a> {
+    sim: &'a SimDriver<'a>,
+    runtime: &'a Runtime,
+    started: Instant,
+    budget: Duration,
+    bar: ProgressBar,
+    path: &'a Path,
 }
 
-/// A run in words, for the error that a case does not fail the same way.
-fn describe(run: &RunResult) -> String {
-    let verdict = run
-        .verdict
-        .map_or("no verdict", campaign::oracle::Verdict::as_str);
-    match run.first_failing_segment {
-        Some(segment) => format!("seed {}: {verdict} at segment {segment}", run.seed),
-        None => format!("seed {}: {verdict}", run.seed),
+impl Drive for SimRuns<'_> {
+    type Error = anyhow::Error;
+
+    fn drive(&mut self, case: &Case, seed: u64) -> Result<Case> {
+        let plan = self.sim.plan(case)?;
+        self.runtime
+            .block_on(self.sim.drive_once(&plan, seed, &SimSettings::default()))
+    }
+
+    fn stop(&mut self) -> Option<Ended> {
+        if self.sim.cancel.is_cancelled() {
+            Some(Ended::Interrupted)
+        } else if self.started.elapsed() > self.budget {
+            Some(Ended::Budget)
+        } else {
+            None
+        }
+    }
+
+    fn progress(&mut self, now: Progress<'_>) {
+        self.bar.set_message(match now {
+            Progress::Reproducing => {
+                format!("driving {} to confirm its failure", self.path.display())
+            }
+            Progress::Candidate {
+                step,
+                edit,
+                commands,
+            } => format!("step {step}: {edit} ({commands} commands now)"),
+            Progress::Confirming { runs } => {
+                format!("confirming the minimal case with {runs} other seeds")
+            }
+            Progress::WithoutFaults => "driving the minimal case without its faults".to_owned(),
+        });
     }
 }
 

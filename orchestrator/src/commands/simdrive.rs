@@ -1,8 +1,7 @@
 //! Driving a case on fresh embedded simulated cars in virtual time, unrecorded, as `shrink` and
-//! `sweep` do: run k with seed + k, each on a simulator of its own, optionally with simulator
+//! `sweep` do: run k with seed + k ([`Purpose::Run`]), each on a simulator of its own, optionally with simulator
 //! settings changed (`sweep`'s `sim.…` parameters).
 
-use std::cell::Cell;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
@@ -16,7 +15,7 @@ use crate::runner::{ReplaySource, RunConfig, Silent, run_campaign};
 use campaign::case::{Case, ReplayOf};
 use campaign::model::{Campaign, TestPlan};
 use campaign::oracle::FailurePolicy;
-use campaign::shrink::{RunResult, Target};
+use campaign::seed::{Purpose, derive};
 
 /// Settings of the simulated car that differ from the scenario's car (simulation only).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -68,8 +67,6 @@ pub(super) struct SimDriver<'a> {
     /// Seed of run 1.
     pub seed: u64,
     pub cancel: &'a CancellationToken,
-    /// Simulator runs so far.
-    pub count: Cell<usize>,
 }
 
 impl<'a> SimDriver<'a> {
@@ -100,42 +97,37 @@ impl<'a> SimDriver<'a> {
             runs,
             seed,
             cancel,
-            count: Cell::new(0),
         }
     }
 
-    /// Drives `case` up to `runs` times (run k with seed + k) with `settings`; with `target`
-    /// (a segment and a deviation), stops at the first run that does not fail there by that
-    /// much. Each run's result and case.
-    pub async fn drive_all(
-        &self,
-        case: &Case,
-        target: Option<(Target, f64)>,
-        settings: &SimSettings,
-    ) -> Result<(Vec<RunResult>, Vec<(u64, Case)>)> {
+    /// The plan that drives `case`: its commands with proven ahead margins (missing ones
+    /// generated from the seed of run 1, [`Purpose::Margins`]).
+    pub fn plan(&self, case: &Case) -> Result<TestPlan> {
         let generator = Generator::new(self.scenario.generator.generator_config(Strategy::Wedge))
             .context("the scenario's generator settings")?;
-        let plan = case
-            .replay_plan(self.scenario, &generator, self.seed, false, 0)
-            .context("the case cannot be driven")?;
-        let mut results = Vec::new();
+        case.replay_plan(self.scenario, &generator, self.seed, false, 0)
+            .context("the case cannot be driven")
+    }
+
+    /// Drives `case` `runs` times (run k with seed + k, [`Purpose::Run`]) with `settings`:
+    /// each run's seed and case.
+    pub async fn drive_all(&self, case: &Case, settings: &SimSettings) -> Result<Vec<(u64, Case)>> {
+        let plan = self.plan(case)?;
         let mut cases = Vec::new();
         for k in 0..self.runs {
-            let seed = self.seed.wrapping_add(u64::from(k));
-            let driven = self.drive_once(&plan, seed, settings).await?;
-            let result = RunResult::of(seed, &driven);
-            results.push(result);
-            cases.push((seed, driven));
-            if target.is_some_and(|(t, m)| !result.fails_clearly(t, m)) {
-                break;
-            }
+            let seed = derive(self.seed, Purpose::Run { run: u64::from(k) });
+            cases.push((seed, self.drive_once(&plan, seed, settings).await?));
         }
-        Ok((results, cases))
+        Ok(cases)
     }
 
     /// One run of `plan` with `seed` on a fresh simulator, unrecorded: the case it wrote.
-    async fn drive_once(&self, plan: &TestPlan, seed: u64, settings: &SimSettings) -> Result<Case> {
-        self.count.set(self.count.get() + 1);
+    pub async fn drive_once(
+        &self,
+        plan: &TestPlan,
+        seed: u64,
+        settings: &SimSettings,
+    ) -> Result<Case> {
         let dir = self.scratch.join("run");
         let _ = std::fs::remove_dir_all(&dir);
         let mut config = RunConfig::new(

@@ -55,8 +55,8 @@ pub fn sweep(args: &SweepArgs) -> Result<ExitCode> {
             let swept = with_fault_values(&case, &axes, &values);
             let settings = sim_settings(&axes, &values);
             let what = describe(&axes, &values);
-            let (_, driven) = driver
-                .drive_all(&swept, None, &settings)
+            let driven = driver
+                .drive_all(&swept, &settings)
                 .await
                 .with_context(|| what.clone())?;
             let point = Point::new(values, &driven);

@@ -190,10 +190,8 @@ pub(crate) fn reentry(area: &Area, car: Pose) -> Option<Pose> {
 /// band, the largest fallback clearance that gives a route (see the module doc).
 fn plan_return(ctx: &Context<'_>, from: Pose, test_index: usize) -> Result<ReturnRoute, Stopped> {
     let scenario = ctx.scenario;
-    let seed = campaign::model::test_rng_seed(ctx.config.campaign.seed, test_index);
-    let mut first = [0u8; 8];
-    first.copy_from_slice(&seed[..8]);
-    let mut rng = crate::seed::rng(u64::from_le_bytes(first));
+    let purpose = campaign::seed::Purpose::Reset { test_index };
+    let mut rng = campaign::seed::rng_for(ctx.config.campaign.seed, purpose);
     PlanConfig::default()
         .plan_with_fallback(
             &scenario.area,
@@ -232,7 +230,7 @@ pub(crate) fn plan_start_join(
     let lead_in = first - along * JOIN_LEAD_IN_M;
     let target = [lead_in, first];
     let from = Pose::new(end, (end - before_end).heading());
-    let mut rng = crate::seed::rng(seed);
+    let mut rng = campaign::seed::rng_for(seed, campaign::seed::Purpose::StartJoin);
     let route = PlanConfig::default()
         .plan_with_fallback(
             &scenario.area,
