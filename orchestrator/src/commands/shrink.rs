@@ -10,7 +10,6 @@
 //! file every command takes, e.g. `drivecheck replay`) and `shrink.json` (every step).
 
 use std::path::Path;
-use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
@@ -21,6 +20,7 @@ use tokio_util::sync::CancellationToken;
 use super::shared::{cancel_on_ctrl_c, check_hash, read_case, runtime, scenario_of};
 use super::simdrive::{SimDriver, SimSettings};
 use crate::cli::ShrinkArgs;
+use crate::exit::Exit;
 use crate::runner::run_dir_name;
 use crate::seed::choose_seed;
 use campaign::case::{Case, CommandRecord, ScenarioRef, tool_version};
@@ -46,9 +46,25 @@ pub(super) struct Options {
     pub margin: f64,
 }
 
-/// `drivecheck shrink`. Exit status: 0 the case was shrunk (or was minimal already), 2 an error
-/// (the case refused, or it does not fail the same way every time).
-pub fn shrink(args: &ShrinkArgs) -> Result<ExitCode> {
+/// The case does not fail at one segment (or two neighbouring ones) in every run: nothing to
+/// shrink. A finding about the case, not an error of the tool ([`Exit::Found`]).
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "{}: does not fail in every run at one segment or two neighbouring ones ({}): nothing to \
+     shrink; replay it with --vary-seed to see how it varies",
+    case.display(),
+    runs.join("; ")
+)]
+pub(super) struct NotReproduced {
+    /// The case file.
+    case: std::path::PathBuf,
+    /// How each run ended.
+    runs: Vec<String>,
+}
+
+/// `drivecheck shrink`. Exit status: 0 the case was shrunk (or was minimal already), 1 it does
+/// not fail the same way in every run ([`NotReproduced`]), 2 an error (the case refused).
+pub fn shrink(args: &ShrinkArgs) -> Result<Exit> {
     if !(args.margin.is_finite() && args.margin >= 0.0) {
         bail!(
             "--margin {}: must be a finite number of metres, 0 or more",
@@ -77,12 +93,19 @@ pub fn shrink(args: &ShrinkArgs) -> Result<ExitCode> {
         margin: args.margin,
     };
     let runtime = runtime(true)?;
-    let report = runtime.block_on(async {
+    let report = match runtime.block_on(async {
         let cancel = cancel_on_ctrl_c();
         shrink_case(path, &case, &scenario, &options, &out, &cancel, true).await
-    })?;
+    }) {
+        Ok(report) => report,
+        Err(error) => {
+            let not_reproduced = error.downcast::<NotReproduced>()?;
+            eprintln!("{not_reproduced}");
+            return Ok(Exit::Found);
+        }
+    };
     print_summary(&report, &out);
-    Ok(ExitCode::SUCCESS)
+    Ok(Exit::Success)
 }
 
 /// Prints the before/after table and where the files are.
@@ -176,13 +199,11 @@ pub(super) async fn shrink_case(
     let target = match Target::of_runs(&before_runs) {
         Some(target) => target,
         None => {
-            let seen: Vec<String> = before_runs.iter().map(describe).collect();
-            bail!(
-                "{}: does not fail in every run at one segment or two neighbouring ones ({}): \
-                 nothing to shrink; replay it with --vary-seed to see how it varies",
-                path.display(),
-                seen.join("; ")
-            );
+            return Err(NotReproduced {
+                case: path.to_owned(),
+                runs: before_runs.iter().map(describe).collect(),
+            }
+            .into());
         }
     };
     // Every run must fail by the margin above the threshold, or by as much as the case itself
