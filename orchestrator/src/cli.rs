@@ -7,7 +7,13 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 /// drivecheck tests a vehicle by driving it: random drivable trajectories in a test area, faults
 /// injected into UWB positioning, UWB checked against RTK.
 #[derive(Debug, Parser)]
-#[command(name = "drivecheck", version, about, max_term_width = 100)]
+#[command(
+    name = "drivecheck",
+    version,
+    about,
+    max_term_width = 100,
+    after_help = crate::exit::Exit::help()
+)]
 pub struct Cli {
     /// What to do.
     #[command(subcommand)]
@@ -24,13 +30,15 @@ pub enum Command {
     /// segment. Exit status: 0 every run passed, 1 a run failed or was aborted, 2 error.
     Replay(ReplayArgs),
     /// Shrink a failing case to the smallest test that still fails the same way every time (on
-    /// the embedded simulated car, in virtual time). Exit status: 0 shrunk, 2 error.
+    /// the embedded simulated car, in virtual time). Exit status: 0 shrunk, 1 the case does not
+    /// fail the same way in every run (nothing to shrink), 2 error.
     Shrink(ShrinkArgs),
     /// Drive a case for every value of fault parameters or simulator settings (`--set`) on the
     /// embedded simulated car and tabulate each segment's largest deviation. Exit status: 0 ran,
     /// 2 error.
     Sweep(SweepArgs),
-    /// List run directories (campaigns and replays) with their summary, or show one.
+    /// List run directories (campaigns and replays) with their summary, or show one. Exit
+    /// status: 0 listed or shown, 2 error.
     Runs(RunsArgs),
     /// Write a self-contained HTML report of a run, replay or shrink directory (maps, deviation
     /// plots, tables; inline SVG, no network or script needed). Exit status: 0 written, 2 error.
@@ -39,7 +47,8 @@ pub enum Command {
     /// anchor's ranges, the odometry, the heading), from the recorded samples. Exit status: 0
     /// explained, 2 error.
     Explain(ExplainArgs),
-    /// Serve a simulated car over TCP (like the reference bridge) or UDP.
+    /// Serve a simulated car over TCP (like the reference bridge) or UDP, until Ctrl-C. Exit
+    /// status: 0 stopped by Ctrl-C, 2 error.
     Sim(SimArgs),
     /// Check a test area before any car drives in it.
     #[command(subcommand)]
@@ -50,7 +59,8 @@ pub enum Command {
     /// Read, check and convert scenario files.
     #[command(subcommand)]
     Scenario(ScenarioCommand),
-    /// Measure drivecheck's own speed (run with `cargo run --release`).
+    /// Measure drivecheck's own speed (run with `cargo run --release`). Exit status: 0 measured,
+    /// 2 error.
     #[command(subcommand)]
     Bench(BenchCommand),
 }
@@ -336,7 +346,8 @@ pub struct RunsArgs {
 /// Subcommands of `drivecheck runs`.
 #[derive(Debug, Subcommand)]
 pub enum RunsCommand {
-    /// Show a run directory: its campaign record and every test, or a replay's comparison.
+    /// Show a run directory: its campaign record and every test, or a replay's comparison. Exit
+    /// status: 0 shown (whatever its tests' verdicts), 2 error.
     Show {
         /// The run directory (a path, or a name inside `--dir`).
         #[arg(value_name = "DIR")]
@@ -349,7 +360,7 @@ pub enum RunsCommand {
     /// Join the run directories of a campaign's shards (`run --shard K/N`) into the run
     /// directory of the whole campaign: every case file, `campaign.json` with the summary over all
     /// tests, one `campaign.mcap` in test order. Refuses shards of different campaigns and names
-    /// the shards missing.
+    /// the shards missing. Exit status: 0 merged (whatever its tests' verdicts), 2 error.
     Merge {
         /// The shards' run directories.
         #[arg(value_name = "DIR", required = true, num_args = 1..)]
@@ -427,18 +438,22 @@ pub fn parse_probability(text: &str) -> Result<f64, String> {
 #[derive(Debug, Subcommand)]
 pub enum BenchCommand {
     /// Both generator strategies side by side on every bundled area: time per extension
-    /// (p50/p99/max), outer tries, failures, and the wall time of an area validation.
+    /// (p50/p99/max), outer tries, failures, and the wall time of an area validation. Exit
+    /// status: 0 measured, 2 error.
     Generator(BenchGeneratorArgs),
     /// Both return-route planners side by side on every bundled area, from random poses with
     /// at least 1 m clearance: success, plan time p50/p99, length and ratio to the lower bound.
+    /// Exit status: 0 measured, 2 error.
     Recovery(BenchRecoveryArgs),
     /// The simulated car's fault effects next to the published real-car experiments: the
     /// published fault sequence on generated tests of `parking-lot-august` (with and without its
-    /// faults, and rerun with other simulator seeds), and the rock lot without faults.
+    /// faults, and rerun with other simulator seeds), and the rock lot without faults. Exit
+    /// status: 0 measured, 2 error.
     Fidelity(BenchFidelityArgs),
     /// How close to its place on the route each fault is added over a slow, jittery link:
     /// campaigns in virtual time on simulated cars behind the simulator's impaired link, per
-    /// firmware generation, the distribution of the placement errors.
+    /// firmware generation, the distribution of the placement errors. Exit status: 0 measured,
+    /// 2 error.
     Placement(BenchPlacementArgs),
 }
 
@@ -566,7 +581,8 @@ pub struct ValidateArgs {
 #[derive(Debug, Subcommand)]
 pub enum RouteCommand {
     /// Extend the scenario's start route by N points, in extensions of the scenario's segment
-    /// size (4–7 points by default), each proven drivable by the ahead margin.
+    /// size (4–7 points by default), each proven drivable by the ahead margin. Exit status: 0 a
+    /// route, 2 error (an extension the generator could not find, a bad argument).
     Generate(GenerateArgs),
     /// Plan the return route from a pose to the scenario's recovery route (what the car drives
     /// between tests), with its length, a lower bound and their ratio. Exit status: 0 a route,
@@ -623,11 +639,12 @@ pub struct GenerateArgs {
 /// `drivecheck scenario …`
 #[derive(Debug, Subcommand)]
 pub enum ScenarioCommand {
-    /// Convert a reference route XML file into a scenario TOML file.
+    /// Convert a reference route XML file into a scenario TOML file. Exit status: 0 converted,
+    /// 2 error (a file that cannot be read or is invalid).
     Import(ImportArgs),
     /// Load and validate a scenario; print its warnings. Exit status: 0 valid, 2 invalid.
     Check(CheckArgs),
-    /// List the bundled scenarios.
+    /// List the bundled scenarios. Exit status: 0 listed, 2 error.
     List,
 }
 

@@ -13,6 +13,7 @@
 pub mod atomic;
 pub mod cli;
 pub mod commands;
+pub mod exit;
 pub mod junit;
 pub mod recording;
 pub mod report;

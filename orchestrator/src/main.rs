@@ -4,25 +4,35 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use orchestrator::cli::Cli;
+use orchestrator::exit::Exit;
 
 fn main() -> ExitCode {
     exit_quietly_when_stdout_closes();
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        // `--help` and `--version` are not errors; a command line that does not parse is.
+        Err(error) => {
+            let _ = error.print();
+            return if error.use_stderr() {
+                Exit::Error
+            } else {
+                Exit::Success
+            }
+            .into();
+        }
+    };
     match orchestrator::commands::run(cli) {
-        Ok(code) => code,
+        Ok(exit) => exit.into(),
         Err(error) => {
             eprintln!("error: {error:#}");
-            ExitCode::from(2)
+            Exit::Error.into()
         }
     }
 }
 
-/// The status of a Unix tool killed by SIGPIPE (128 + 13), which is what `drivecheck … | head`
-/// reports when `head` has read enough.
-const CLOSED_STDOUT_STATUS: i32 = 141;
-
 /// `drivecheck runs | head`: when the reader of standard output goes away, ends the process as a
-/// Unix tool ends then, quietly with status 141, instead of with a panic message. Rust ignores
+/// Unix tool ends then, quietly with status 141 ([`Exit::ClosedStdout`]), instead of with a panic
+/// message. Rust ignores
 /// SIGPIPE, so `println!` panics with "Broken pipe" instead. Nothing is cut short by exiting: the
 /// commands write to standard output only after their work is done (a campaign prints its table
 /// after the car has stopped and the run directory is complete).
@@ -36,7 +46,7 @@ fn exit_quietly_when_stdout_closes() {
             .or_else(|| payload.downcast_ref::<&str>().copied())
             .unwrap_or_default();
         if message.starts_with("failed printing to stdout") && message.contains("Broken pipe") {
-            std::process::exit(CLOSED_STDOUT_STATUS);
+            Exit::ClosedStdout.exit();
         }
         default(info);
     }));

@@ -1,6 +1,5 @@
 //! `drivecheck area validate`: one long generated trajectory through the area, and a verdict.
 
-use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result, ensure};
@@ -9,6 +8,7 @@ use serde::Serialize;
 use trajgen::{AreaVerdict, ValidationConfig, ValidationReport, validate_area};
 
 use crate::cli::ValidateArgs;
+use crate::exit::Exit;
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::{choose_seed, rng};
 use crate::svg::area_picture;
@@ -52,7 +52,7 @@ struct HotSpotSummary {
 const LOW_COVERAGE: f64 = 0.9;
 
 /// Validates the area and exits 0 when safe, 1 when unsafe.
-pub fn validate(args: &ValidateArgs) -> Result<ExitCode> {
+pub fn validate(args: &ValidateArgs) -> Result<Exit> {
     ensure!(
         args.km.is_finite() && args.km > 0.0,
         "--km must be a positive number, got {}",
@@ -99,8 +99,8 @@ pub fn validate(args: &ValidateArgs) -> Result<ExitCode> {
         print_summary(&summary);
     }
     Ok(match report.verdict {
-        AreaVerdict::Safe => ExitCode::SUCCESS,
-        AreaVerdict::Unsafe => ExitCode::from(1),
+        AreaVerdict::Safe => Exit::Success,
+        AreaVerdict::Unsafe => Exit::Found,
     })
 }
 

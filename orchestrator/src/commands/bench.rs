@@ -5,7 +5,6 @@
 //! validation run. Run it in release mode; the machine's noise is part of the figures, so compare
 //! strategies measured in the same run.
 
-use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{Result, ensure};
@@ -14,6 +13,7 @@ use scenarios::Scenario;
 use trajgen::{Generator, Strategy, ValidationConfig, validate_area};
 
 use crate::cli::BenchGeneratorArgs;
+use crate::exit::Exit;
 use crate::seed::rng;
 
 /// One row of the table.
@@ -32,7 +32,7 @@ struct Row {
 }
 
 /// Runs the benchmark and prints a Markdown table.
-pub fn generator(args: &BenchGeneratorArgs) -> Result<ExitCode> {
+pub fn generator(args: &BenchGeneratorArgs) -> Result<Exit> {
     if let Some(clearance) = args.clearance {
         ensure!(
             clearance.is_finite() && clearance >= 0.0,
@@ -54,7 +54,7 @@ pub fn generator(args: &BenchGeneratorArgs) -> Result<ExitCode> {
             print_row(&row);
         }
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(Exit::Success)
 }
 
 fn measure(scenario: &Scenario, strategy: Strategy, args: &BenchGeneratorArgs) -> Result<Row> {

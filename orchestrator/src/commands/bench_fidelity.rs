@@ -18,8 +18,6 @@
 //!
 //! Every run is a fresh embedded simulated car in virtual time, unrecorded.
 
-use std::process::ExitCode;
-
 use anyhow::{Context, Result};
 use car_link::fault::{FaultKind, Probe};
 use scenarios::Scenario;
@@ -27,6 +25,7 @@ use tokio_util::sync::CancellationToken;
 
 use super::shared::{EmbeddedSims, Scratch, runtime};
 use crate::cli::BenchFidelityArgs;
+use crate::exit::Exit;
 use crate::runner::{RecordMode, ReplaySource, RunConfig, Silent, run_campaign_fresh};
 use campaign::case::{Case, ReplayOf};
 use campaign::model::{Campaign, Command, Fault, TestPlan, TestPlanner};
@@ -182,7 +181,7 @@ fn spread(values: &[f64]) -> String {
 }
 
 /// Runs the benchmark and prints its tables.
-pub fn run(args: &BenchFidelityArgs) -> Result<ExitCode> {
+pub fn run(args: &BenchFidelityArgs) -> Result<Exit> {
     let august = crate::scenario_arg::load_scenario(&args.scenario)?.scenario;
     let runtime_guard = runtime(false)?;
     let _context = runtime_guard.enter();
@@ -267,7 +266,7 @@ pub fn run(args: &BenchFidelityArgs) -> Result<ExitCode> {
     }
     println!("\npublished without faults: 0.42–0.56 m per segment\n");
     rock_lot(args)?;
-    Ok(ExitCode::SUCCESS)
+    Ok(Exit::Success)
 }
 
 /// The rock lot without faults: the share of tests and of the route above 1 m.

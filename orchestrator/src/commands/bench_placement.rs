@@ -8,8 +8,6 @@
 //! the cars added gives one placement error (`fault_places[].error_m` of the case files: where the
 //! car was when it added the fault, less the place). The table gives their distribution.
 
-use std::process::ExitCode;
-
 use anyhow::{Result, bail};
 use car_link::firmware::FirmwareVersion;
 use car_sim::LinkImpairment;
@@ -17,6 +15,7 @@ use tokio_util::sync::CancellationToken;
 
 use super::shared::{EmbeddedSims, Scratch, runtime};
 use crate::cli::BenchPlacementArgs;
+use crate::exit::Exit;
 use crate::runner::{RecordMode, RunConfig, Silent, run_campaign_fresh};
 use campaign::model::Campaign;
 use campaign::oracle::FailurePolicy;
@@ -56,7 +55,7 @@ impl Errors {
 }
 
 /// Runs the benchmark and prints its table.
-pub fn run(args: &BenchPlacementArgs) -> Result<ExitCode> {
+pub fn run(args: &BenchPlacementArgs) -> Result<Exit> {
     let loaded = crate::scenario_arg::load_scenario(&args.scenario)?;
     let scenario = loaded.scenario;
     let firmwares: Vec<FirmwareVersion> = match args.firmware.as_str() {
@@ -138,5 +137,5 @@ pub fn run(args: &BenchPlacementArgs) -> Result<ExitCode> {
     for row in &rows {
         println!("{}", row.row());
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(Exit::Success)
 }

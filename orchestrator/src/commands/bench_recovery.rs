@@ -9,7 +9,6 @@
 //! after the table.
 //! Run it in release mode.
 
-use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{Result, ensure};
@@ -20,6 +19,7 @@ use trajgen::{Constraints, Point, Pose};
 
 use super::bench::percentile;
 use crate::cli::BenchRecoveryArgs;
+use crate::exit::Exit;
 use crate::seed::{RunRng, rng};
 use campaign::seed::{Purpose, rng_for};
 
@@ -27,7 +27,7 @@ use campaign::seed::{Purpose, rng_for};
 const MAX_DRAWS_PER_POSE: usize = 10_000;
 
 /// Runs the benchmark and prints a Markdown table.
-pub fn run(args: &BenchRecoveryArgs) -> Result<ExitCode> {
+pub fn run(args: &BenchRecoveryArgs) -> Result<Exit> {
     println!(
         "| area | planner | success | with clearance fallback | with fallback, where the car can turn | p50 | p99 | max | mean length before → after shortening | mean ratio before → after | mean total ratio |"
     );
@@ -60,7 +60,7 @@ pub fn run(args: &BenchRecoveryArgs) -> Result<ExitCode> {
             );
         }
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(Exit::Success)
 }
 
 fn random_poses(

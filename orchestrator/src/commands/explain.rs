@@ -5,13 +5,13 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
 use std::path::Path;
-use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 
 use super::shared::{cancel_on_ctrl_c, read_case as read_case_file, runtime};
 use super::simdrive::{SimDriver, SimSettings};
 use crate::cli::ExplainArgs;
+use crate::exit::Exit;
 use crate::report::explain::{
     CaseExplanation, ExplainOptions, Explanations, FaultEffect, Scored, calibrate, explain_run,
     score_run, settle_by_counterfactual,
@@ -22,7 +22,7 @@ use campaign::explain::{Cause, Source};
 use campaign::sweep::with_fault_silenced;
 
 /// Explains the target's failing segments (see the module doc). Exit status 0, or 2 on an error.
-pub fn explain(args: &ExplainArgs) -> Result<ExitCode> {
+pub fn explain(args: &ExplainArgs) -> Result<Exit> {
     let scenario = optional_scenario(args.scenario.as_deref())?;
     let (dir, only) = if args.target.is_dir() {
         (args.target.clone(), None)
@@ -62,7 +62,7 @@ pub fn explain(args: &ExplainArgs) -> Result<ExitCode> {
                 c.min_growth_m
             );
         }
-        return Ok(ExitCode::SUCCESS);
+        return Ok(Exit::Success);
     }
     let mut options = ExplainOptions {
         all_segments: args.all_segments,
@@ -110,7 +110,7 @@ pub fn explain(args: &ExplainArgs) -> Result<ExitCode> {
         } else {
             print!("{}", score_table(&scored));
         }
-        return Ok(ExitCode::SUCCESS);
+        return Ok(Exit::Success);
     }
     let mut explanations = Explanations {
         cases: Vec::new(),
@@ -127,7 +127,7 @@ pub fn explain(args: &ExplainArgs) -> Result<ExitCode> {
     } else {
         print!("{}", text(&explanations));
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(Exit::Success)
 }
 
 /// Settles the truth of every scored segment in which several faults moved the estimate by a

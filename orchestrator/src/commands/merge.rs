@@ -10,10 +10,10 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 
+use crate::exit::Exit;
 use crate::recording::{Recorder, RecordingStart, Span, Spans};
 use crate::runner::{CAMPAIGN_FILE, RECORDING_FILE, RunDirectory, SPAN_GAP_NS, is_used};
 use campaign::case::{CampaignRecord, Case, Settings};
@@ -32,7 +32,7 @@ pub fn merge(
     out: &Path,
     scenario: Option<&str>,
     junit: Option<&Path>,
-) -> Result<ExitCode> {
+) -> Result<Exit> {
     if is_used(out) {
         bail!(crate::runner::RunError::OutDirUsed {
             path: out.to_owned()
@@ -107,7 +107,7 @@ pub fn merge(
     if let Some(file) = junit {
         super::run::write_junit(&report, file)?;
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(Exit::Success)
 }
 
 /// Reads every shard's `campaign.json` and checks that they are the shards of one campaign, each

@@ -20,16 +20,15 @@ mod sim;
 mod simdrive;
 mod sweep;
 
-use std::process::ExitCode;
-
 pub use runs::coverage_text;
 
 use anyhow::Result;
 
 use crate::cli::{AreaCommand, BenchCommand, Cli, Command, RouteCommand, ScenarioCommand};
+use crate::exit::Exit;
 
 /// Runs a parsed command line and returns the process's exit status.
-pub fn run(cli: Cli) -> Result<ExitCode> {
+pub fn run(cli: Cli) -> Result<Exit> {
     match cli.command {
         Command::Run(args) => run::run(&args),
         Command::Replay(args) => replay::replay(&args),

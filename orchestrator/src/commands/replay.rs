@@ -9,7 +9,6 @@
 //! [`campaign::replay`]) is written and printed at the end, also when a run ended the replay early.
 
 use std::path::Path;
-use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
@@ -22,6 +21,7 @@ use super::shared::{
     sim_view,
 };
 use crate::cli::ReplayArgs;
+use crate::exit::Exit;
 use crate::report::REPORT_FILE;
 use crate::runner::{
     ReplaySource, RunConfig, Silent, TestSummary, rfc3339_now, run_campaign, run_dir_name,
@@ -37,7 +37,7 @@ use campaign::seed::{Purpose, derive};
 
 /// Replays the case and prints the comparison. Exit status: 0 every run passed, 1 a run failed
 /// or was aborted, 2 an error (the case refused, the link lost, interrupted, …).
-pub fn replay(args: &ReplayArgs) -> Result<ExitCode> {
+pub fn replay(args: &ReplayArgs) -> Result<Exit> {
     let path = &args.case;
     let case = read_case(path)?;
     let unplaced = case
@@ -148,9 +148,9 @@ pub fn replay(args: &ReplayArgs) -> Result<ExitCode> {
         .iter()
         .all(|r| r.verdict == Some(Verdict::Passed));
     Ok(if all_passed {
-        ExitCode::SUCCESS
+        Exit::Success
     } else {
-        ExitCode::from(1)
+        Exit::Found
     })
 }
 

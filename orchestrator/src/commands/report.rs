@@ -2,24 +2,24 @@
 //! directory ([`crate::report`]); also what `run --report` and `replay --report` call at the end.
 
 use std::path::Path;
-use std::process::ExitCode;
 
 use anyhow::Result;
 
 use crate::cli::ReportArgs;
+use crate::exit::Exit;
 use crate::report::{self, REPORT_FILE, ReportKind};
 use crate::scenario_arg::optional_scenario;
 
 /// Writes the report. Exit status 0, or 2 on an error (not a run directory, a file that cannot
 /// be read or written).
-pub fn report(args: &ReportArgs) -> Result<ExitCode> {
+pub fn report(args: &ReportArgs) -> Result<Exit> {
     let scenario = optional_scenario(args.scenario.as_deref())?;
     let out = args
         .out
         .clone()
         .unwrap_or_else(|| args.dir.join(REPORT_FILE));
     write(&args.dir, &out, scenario.as_ref())?;
-    Ok(ExitCode::SUCCESS)
+    Ok(Exit::Success)
 }
 
 /// Writes `dir`'s report to `out` and says so on standard error.

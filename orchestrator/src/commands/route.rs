@@ -1,7 +1,5 @@
 //! `drivecheck route generate`: extend the start route with generated, margin-proven extensions.
 
-use std::process::ExitCode;
-
 use anyhow::{Context, Result, ensure};
 use rand::RngExt;
 use scenarios::Interval;
@@ -9,6 +7,7 @@ use serde::Serialize;
 use trajgen::{ExtensionStats, Generator, Point, RouteTail};
 
 use crate::cli::GenerateArgs;
+use crate::exit::Exit;
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::{choose_seed, rng};
 
@@ -48,7 +47,7 @@ impl RouteStats {
 }
 
 /// Generates `--points` points after the start route, in extensions of the scenario's size.
-pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
+pub fn generate(args: &GenerateArgs) -> Result<Exit> {
     let loaded = load_scenario(&args.scenario)?;
     print_warnings(&loaded);
     let scenario = &loaded.scenario;
@@ -91,7 +90,7 @@ pub fn generate(args: &GenerateArgs) -> Result<ExitCode> {
     } else {
         print_route(&route);
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(Exit::Success)
 }
 
 /// The size of the next extension when `remaining` points are still to come: drawn within

@@ -1,6 +1,5 @@
 //! `drivecheck route return`: the return route from a pose to the recovery route.
 
-use std::process::ExitCode;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
@@ -9,6 +8,7 @@ use serde::Serialize;
 use trajgen::{Point, Pose};
 
 use crate::cli::ReturnArgs;
+use crate::exit::Exit;
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::{choose_seed, rng};
 
@@ -58,7 +58,7 @@ pub fn parse_pose(text: &str) -> Result<Pose> {
 }
 
 /// Plans and prints the return route.
-pub fn plan(args: &ReturnArgs) -> Result<ExitCode> {
+pub fn plan(args: &ReturnArgs) -> Result<Exit> {
     let loaded = load_scenario(&args.scenario)?;
     print_warnings(&loaded);
     let scenario = &loaded.scenario;
@@ -86,7 +86,7 @@ pub fn plan(args: &ReturnArgs) -> Result<ExitCode> {
                  ahead to turn away) must be moved by hand",
                 args.from
             );
-            return Ok(ExitCode::from(1));
+            return Ok(Exit::Found);
         }
         Err(error) => {
             return Err(error).with_context(|| format!("no return route from {}", args.from));
@@ -99,7 +99,7 @@ pub fn plan(args: &ReturnArgs) -> Result<ExitCode> {
     } else {
         print_summary(&summary);
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(Exit::Success)
 }
 
 fn summarise(scenario: &str, seed: u64, route: &ReturnRoute, plan_ms: f64) -> ReturnSummary {

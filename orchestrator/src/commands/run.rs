@@ -1,7 +1,6 @@
 //! `drivecheck run`: a test campaign against the embedded simulated car (in virtual time by
 //! default, or against the wall clock) or a car behind TCP, UDP or a serial port.
 
-use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
@@ -14,6 +13,7 @@ use super::shared::{
 };
 use super::{explain, shrink};
 use crate::cli::{OnFailure, RecordArg, RunArgs};
+use crate::exit::Exit;
 use crate::junit;
 use crate::recording::live::LiveView;
 use crate::report::REPORT_FILE;
@@ -31,7 +31,7 @@ use campaign::shrink::MINIMAL_FILE;
 
 /// Runs the campaign and prints the final table. Exit status: 0 every test passed, 1 a test
 /// failed or was aborted, 2 an error (preflight refused, link lost, interrupted, …).
-pub fn run(args: &RunArgs) -> Result<ExitCode> {
+pub fn run(args: &RunArgs) -> Result<Exit> {
     let loaded = load_scenario(&args.scenario)?;
     print_warnings(&loaded);
     let scenario = loaded.scenario;
@@ -136,9 +136,9 @@ pub fn run(args: &RunArgs) -> Result<ExitCode> {
     let all_passed =
         summary.is_some_and(|s| s.passed == s.tests && (s.tests > 0 || args.shard.is_some()));
     Ok(if all_passed {
-        ExitCode::SUCCESS
+        Exit::Success
     } else {
-        ExitCode::from(1)
+        Exit::Found
     })
 }
 

@@ -3,12 +3,12 @@
 //! replay's comparison.
 
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 
 use super::shared::{metres, print_report};
 use crate::cli::{RunsArgs, RunsCommand};
+use crate::exit::Exit;
 use crate::runner::{CampaignReport, TestSummary};
 use campaign::case::{CampaignRecord, Case};
 use campaign::replay::{Comparison, REPLAY_FILE};
@@ -16,7 +16,7 @@ use campaign::replay::{Comparison, REPLAY_FILE};
 use crate::runner::CAMPAIGN_FILE;
 
 /// Lists or shows run directories. Exit status 0, or 2 when the directory cannot be read.
-pub fn runs(args: &RunsArgs) -> Result<ExitCode> {
+pub fn runs(args: &RunsArgs) -> Result<Exit> {
     match &args.command {
         None => list(&args.dir),
         Some(RunsCommand::Show { run, coverage }) => {
@@ -74,7 +74,7 @@ fn read_campaign(path: &Path) -> Result<CampaignRecord> {
     CampaignRecord::from_json(&text).with_context(|| path.display().to_string())
 }
 
-fn list(root: &Path) -> Result<ExitCode> {
+fn list(root: &Path) -> Result<Exit> {
     let entries = match std::fs::read_dir(root) {
         Ok(entries) => entries,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
@@ -82,7 +82,7 @@ fn list(root: &Path) -> Result<ExitCode> {
                 "no run directories in {} (it does not exist)",
                 root.display()
             );
-            return Ok(ExitCode::SUCCESS);
+            return Ok(Exit::Success);
         }
         Err(e) => return Err(e).with_context(|| format!("cannot read {}", root.display())),
     };
@@ -107,7 +107,7 @@ fn list(root: &Path) -> Result<ExitCode> {
         println!("| {name} | {} |", row(&entry));
     }
     println!("\n{shown} run directories in {}", root.display());
-    Ok(ExitCode::SUCCESS)
+    Ok(Exit::Success)
 }
 
 fn row(entry: &Entry) -> String {
@@ -176,7 +176,7 @@ fn row(entry: &Entry) -> String {
     }
 }
 
-fn show(dir: &Path, coverage: bool) -> Result<ExitCode> {
+fn show(dir: &Path, coverage: bool) -> Result<Exit> {
     match read_entry(dir) {
         None => bail!(
             "{} is not a run directory (no {CAMPAIGN_FILE} or {REPLAY_FILE})",
@@ -208,11 +208,11 @@ fn show(dir: &Path, coverage: bool) -> Result<ExitCode> {
             }
             println!();
             print!("{}", c.table());
-            Ok(ExitCode::SUCCESS)
+            Ok(Exit::Success)
         }
         Some(Entry::Campaign(record)) => {
             show_campaign(dir, *record, coverage)?;
-            Ok(ExitCode::SUCCESS)
+            Ok(Exit::Success)
         }
     }
 }

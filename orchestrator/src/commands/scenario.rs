@@ -1,14 +1,13 @@
 //! `drivecheck scenario import | check | list`.
 
-use std::process::ExitCode;
-
 use anyhow::{Context, Result};
 
 use crate::cli::{CheckArgs, ImportArgs};
+use crate::exit::Exit;
 use crate::scenario_arg::{load_scenario, print_warnings};
 
 /// Converts a reference XML file into scenario TOML.
-pub fn import(args: &ImportArgs) -> Result<ExitCode> {
+pub fn import(args: &ImportArgs) -> Result<Exit> {
     let loaded = match &args.anchors {
         None => scenarios::load(&args.xml)?,
         Some(anchors) => {
@@ -44,11 +43,11 @@ pub fn import(args: &ImportArgs) -> Result<ExitCode> {
         }
         None => print!("{toml}"),
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(Exit::Success)
 }
 
 /// Loads and validates a scenario, printing a summary and its warnings.
-pub fn check(args: &CheckArgs) -> Result<ExitCode> {
+pub fn check(args: &CheckArgs) -> Result<Exit> {
     let loaded = load_scenario(&args.scenario)?;
     print_warnings(&loaded);
     let s = &loaded.scenario;
@@ -62,11 +61,11 @@ pub fn check(args: &CheckArgs) -> Result<ExitCode> {
         loaded.warnings.len(),
         &s.hash()[..12],
     );
-    Ok(ExitCode::SUCCESS)
+    Ok(Exit::Success)
 }
 
 /// Lists the bundled scenarios with a one-line summary each.
-pub fn list() -> Result<ExitCode> {
+pub fn list() -> Result<Exit> {
     for name in scenarios::bundled::names() {
         let loaded = scenarios::bundled::load(name)?;
         let s = &loaded.scenario;
@@ -78,5 +77,5 @@ pub fn list() -> Result<ExitCode> {
             s.description.as_deref().unwrap_or("")
         );
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(Exit::Success)
 }

@@ -199,7 +199,7 @@ impl Interrupt {
             let second = signals.next().await;
             eprintln!("{second} again: braking at once and exiting");
             listener.brake_now().await;
-            std::process::exit(2);
+            crate::exit::Exit::Error.exit();
         });
         interrupt
     }

@@ -10,7 +10,6 @@
 //! file every command takes, e.g. `drivecheck replay`) and `shrink.json` (every step).
 
 use std::path::Path;
-use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
@@ -21,6 +20,7 @@ use tokio::runtime::Runtime;
 use super::shared::{cancel_on_ctrl_c, check_hash, read_case, runtime, scenario_of};
 use super::simdrive::{SimDriver, SimSettings};
 use crate::cli::ShrinkArgs;
+use crate::exit::Exit;
 use crate::runner::run_dir_name;
 use crate::seed::choose_seed;
 use campaign::case::{Case, ScenarioRef, tool_version};
@@ -46,9 +46,20 @@ pub(super) struct Options {
     pub margin: f64,
 }
 
-/// `drivecheck shrink`. Exit status: 0 the case was shrunk (or was minimal already), 2 an error
-/// (the case refused, or it does not fail the same way every time).
-pub fn shrink(args: &ShrinkArgs) -> Result<ExitCode> {
+/// The case does not fail at one segment (or two neighbouring ones) in every run: nothing to
+/// shrink. A finding about the case, not an error of the tool ([`Exit::Found`]).
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {reason}", case.display())]
+pub(super) struct NotReproduced {
+    /// The case file.
+    case: std::path::PathBuf,
+    /// How its runs ended ([`ShrinkFailure::NotReproducible`]'s text).
+    reason: String,
+}
+
+/// `drivecheck shrink`. Exit status: 0 the case was shrunk (or was minimal already), 1 it does
+/// not fail the same way in every run ([`NotReproduced`]), 2 an error (the case refused).
+pub fn shrink(args: &ShrinkArgs) -> Result<Exit> {
     if !(args.margin.is_finite() && args.margin >= 0.0) {
         bail!(
             "--margin {}: must be a finite number of metres, 0 or more",
@@ -77,9 +88,16 @@ pub fn shrink(args: &ShrinkArgs) -> Result<ExitCode> {
         margin: args.margin,
     };
     let runtime = runtime(true)?;
-    let report = shrink_case(&runtime, path, &case, &scenario, &options, &out, true)?;
+    let report = match shrink_case(&runtime, path, &case, &scenario, &options, &out, true) {
+        Ok(report) => report,
+        Err(error) => {
+            let not_reproduced = error.downcast::<NotReproduced>()?;
+            eprintln!("{not_reproduced}");
+            return Ok(Exit::Found);
+        }
+    };
     print_summary(&report, &out);
-    Ok(ExitCode::SUCCESS)
+    Ok(Exit::Success)
 }
 
 /// Prints the before/after table and where the files are.
@@ -185,6 +203,10 @@ pub(super) fn shrink_case(
     let _ = std::fs::remove_dir_all(&sim.scratch);
     let shrunk = shrunk.map_err(|failure| match failure {
         ShrinkFailure::Drive(error) => error,
+        failure @ ShrinkFailure::NotReproducible { .. } => anyhow::Error::new(NotReproduced {
+            case: path.to_owned(),
+            reason: failure.to_string(),
+        }),
         ShrinkFailure::Shrinker(error) => {
             anyhow::Error::new(error).context(format!("{}: cannot be shrunk", path.display()))
         }

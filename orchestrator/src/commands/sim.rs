@@ -1,17 +1,16 @@
 //! `drivecheck sim`: a simulated car served over TCP (like the reference bridge) or UDP, in real
 //! time, with optional impairment of its side of the link, until Ctrl-C.
 
-use std::process::ExitCode;
-
 use anyhow::{Context, Result};
 use car_link::firmware::FirmwareVersion;
 use car_sim::{LinkImpairment, SimConfig};
 
 use crate::cli::SimArgs;
+use crate::exit::Exit;
 use crate::scenario_arg::{load_scenario, print_warnings};
 
 /// Serves the simulated car until Ctrl-C.
-pub fn serve(args: &SimArgs) -> Result<ExitCode> {
+pub fn serve(args: &SimArgs) -> Result<Exit> {
     let loaded = load_scenario(&args.scenario)?;
     print_warnings(&loaded);
     let config = sim_config(args, &loaded.scenario)?;
@@ -21,7 +20,7 @@ pub fn serve(args: &SimArgs) -> Result<ExitCode> {
         .build()
         .context("cannot start the async runtime")?;
     runtime.block_on(serve_until_ctrl_c(args, &config))?;
-    Ok(ExitCode::SUCCESS)
+    Ok(Exit::Success)
 }
 
 fn sim_config(args: &SimArgs, scenario: &scenarios::Scenario) -> Result<SimConfig> {

@@ -3,13 +3,12 @@
 //! each (run k with seed + k), and a table of each segment's largest deviation per value (JSON
 //! with `--json`). The pure part (parameters, grid, result) is [`campaign::sweep`].
 
-use std::process::ExitCode;
-
 use anyhow::{Context, Result};
 
 use super::shared::{cancel_on_ctrl_c, check_hash, read_case, runtime, scenario_of};
 use super::simdrive::{SimDriver, SimSettings};
 use crate::cli::SweepArgs;
+use crate::exit::Exit;
 use crate::seed::choose_seed;
 use campaign::case::{ScenarioRef, tool_version};
 use campaign::sweep::{
@@ -17,7 +16,7 @@ use campaign::sweep::{
 };
 
 /// Runs the sweep and prints its table (or JSON). Exit status 0 when it ran, 2 on an error.
-pub fn sweep(args: &SweepArgs) -> Result<ExitCode> {
+pub fn sweep(args: &SweepArgs) -> Result<Exit> {
     let path = &args.case;
     let case = read_case(path)?;
     let axes = args
@@ -87,7 +86,7 @@ pub fn sweep(args: &SweepArgs) -> Result<ExitCode> {
         print!("{}", report.table());
         println!("median of each segment's largest deviation over the runs; * a run failed it");
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(Exit::Success)
 }
 
 /// The simulator settings of a grid point.

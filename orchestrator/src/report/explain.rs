@@ -38,6 +38,16 @@ pub struct CaseExplanation {
     pub segments: Vec<SegmentExplanation>,
 }
 
+/// Why a test's segments could not be explained (a note on the page or in the output, not an
+/// error of the run: the other tests are explained).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum NotExplained {
+    /// The recording holds no state samples of the test (`--record failing` or `none`, or a
+    /// recording cut short).
+    #[error("the recording has no samples of this test")]
+    NoSamples,
+}
+
 /// What to explain.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct ExplainOptions {
@@ -93,7 +103,7 @@ fn explain_test(
     test: &TestData,
     scenario: &Scenario,
     options: &ExplainOptions,
-) -> Result<CaseExplanation, String> {
+) -> Result<CaseExplanation, NotExplained> {
     Ok(CaseExplanation {
         case: data.dir.join(&test.file),
         test_index: test.index,
@@ -107,12 +117,9 @@ pub(crate) fn explain_segments(
     test: &TestData,
     scenario: &Scenario,
     options: &ExplainOptions,
-) -> Result<Vec<SegmentExplanation>, String> {
+) -> Result<Vec<SegmentExplanation>, NotExplained> {
     let case = &test.case;
-    let track = test
-        .track
-        .as_ref()
-        .ok_or("the recording has no samples of this test")?;
+    let track = test.track.as_ref().ok_or(NotExplained::NoSamples)?;
     let samples: Vec<ExplainSample> = track
         .samples
         .iter()

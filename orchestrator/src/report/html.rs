@@ -504,7 +504,11 @@ fn test_section(
         match explain_segments(test, scenario, &ExplainOptions::default()) {
             Ok(explained) => causes_table(out, case, &explained),
             Err(why) => {
-                let _ = writeln!(out, "<p class=\"sub\">Not explained: {}.</p>", escape(&why));
+                let _ = writeln!(
+                    out,
+                    "<p class=\"sub\">Not explained: {}.</p>",
+                    escape(&why.to_string())
+                );
             }
         }
     }
