@@ -10,6 +10,9 @@
 //! only through [`Sequential::new`] (see the module doc of `model`); `StateMachineTest`, which
 //! executes while it generates, never was.
 
+// The copy keeps the original's paths (`Shrink::InitialState` beside `use Shrink::*`).
+#![allow(unused_qualifications)]
+
 use std::fmt::{Debug, Formatter, Result};
 use std::sync::Arc;
 use std::sync::atomic::{self, AtomicUsize};
