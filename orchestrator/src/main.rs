@@ -1,12 +1,15 @@
 //! The `drivecheck` command: parses the command line and hands over to the orchestrator library.
 
+use std::io::IsTerminal;
 use std::process::ExitCode;
 
 use clap::Parser;
 use orchestrator::cli::Cli;
+use tracing_subscriber::EnvFilter;
 
 fn main() -> ExitCode {
     exit_quietly_when_stdout_closes();
+    log_as_rust_log_says();
     let cli = Cli::parse();
     match orchestrator::commands::run(cli) {
         Ok(code) => code,
@@ -15,6 +18,28 @@ fn main() -> ExitCode {
             ExitCode::from(2)
         }
     }
+}
+
+/// Diagnostics (`tracing`: the car link's events, the runner's steps) go to standard error as
+/// `RUST_LOG` selects them (`RUST_LOG=debug`, `RUST_LOG=orchestrator=debug,car_link=info`). Without
+/// it nothing is logged, so what drivecheck prints is what its commands print.
+fn log_as_rust_log_says() {
+    if std::env::var_os(EnvFilter::DEFAULT_ENV).is_none_or(|v| v.is_empty()) {
+        return;
+    }
+    let filter = match EnvFilter::try_from_default_env() {
+        Ok(filter) => filter,
+        Err(error) => {
+            eprintln!("warning: {} ignored: {error}", EnvFilter::DEFAULT_ENV);
+            return;
+        }
+    };
+    // The only subscriber of the process, set before anything logs: this cannot fail.
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
+        .try_init();
 }
 
 /// The status of a Unix tool killed by SIGPIPE (128 + 13), which is what `drivecheck … | head`
