@@ -1,13 +1,16 @@
 //! The `drivecheck` command: parses the command line and hands over to the orchestrator library.
 
+use std::io::IsTerminal;
 use std::process::ExitCode;
 
 use clap::Parser;
 use orchestrator::cli::Cli;
 use orchestrator::exit::Exit;
+use tracing_subscriber::EnvFilter;
 
 fn main() -> ExitCode {
     exit_quietly_when_stdout_closes();
+    log_as_rust_log_says();
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         // `--help` and `--version` are not errors; a command line that does not parse is.
@@ -28,6 +31,28 @@ fn main() -> ExitCode {
             Exit::Error.into()
         }
     }
+}
+
+/// Diagnostics (`tracing`: the car link's events, the runner's steps) go to standard error as
+/// `RUST_LOG` selects them (`RUST_LOG=debug`, `RUST_LOG=orchestrator=debug,car_link=info`). Without
+/// it nothing is logged, so what drivecheck prints is what its commands print.
+fn log_as_rust_log_says() {
+    if std::env::var_os(EnvFilter::DEFAULT_ENV).is_none_or(|v| v.is_empty()) {
+        return;
+    }
+    let filter = match EnvFilter::try_from_default_env() {
+        Ok(filter) => filter,
+        Err(error) => {
+            eprintln!("warning: {} ignored: {error}", EnvFilter::DEFAULT_ENV);
+            return;
+        }
+    };
+    // The only subscriber of the process, set before anything logs: this cannot fail.
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
+        .try_init();
 }
 
 /// `drivecheck runs | head`: when the reader of standard output goes away, ends the process as a

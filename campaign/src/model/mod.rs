@@ -14,9 +14,9 @@
 //!
 //! Generation is separate from execution: a test is planned completely before the car drives
 //! it, because a car cannot be asked to re-run a prefix. The plan is built with
-//! `proptest-state-machine`'s `Sequential` strategy (its `ReferenceStateMachine` half only), but
-//! constructed with [`proptest_state_machine::Sequential::new`] and closures rather than through
-//! the trait: the trait's `init_state()` and `transitions()` take no arguments, and the scenario,
+//! `proptest-state-machine`'s `Sequential` strategy (its `ReferenceStateMachine` half only, copied
+//! into `model::sequential`, which says why), but constructed with `Sequential::new` and closures
+//! rather than through the trait: the trait's `init_state()` and `transitions()` take no arguments, and the scenario,
 //! the start tail and the settings would have to come from global state. Its
 //! `StateMachineTest` half (which executes while it generates) is not used: executing is the
 //! runner's job, in real time, with streaming and a safety monitor.
@@ -52,6 +52,7 @@
 
 mod command;
 mod generate;
+mod sequential;
 mod state;
 mod timing;
 
@@ -59,7 +60,6 @@ use std::sync::{Arc, Mutex};
 
 use proptest::strategy::{BoxedStrategy, Just, Strategy as _, ValueTree};
 use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
-use proptest_state_machine::Sequential;
 use scenarios::{CampaignSettings, Interval, Scenario};
 use thiserror::Error;
 use trajgen::{GenerationError, Generator, RouteTail, Strategy};
@@ -71,6 +71,7 @@ pub use state::{FaultInFlight, FaultSlots, Preconditions, ReferenceState, SlotEr
 pub use timing::{FaultWindow, ProbeRates};
 
 use generate::PlanContext;
+use sequential::Sequential;
 
 /// Local rejects (intents whose generation failed) allowed while planning one test.
 const MAX_REJECTS: u32 = 16;

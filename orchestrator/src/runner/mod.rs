@@ -556,6 +556,13 @@ async fn plan_and_run(
     let started = tokio::time::Instant::now();
     let plan = tests.plan(test_index)?;
     let per_segment = started.elapsed() / plan.segments().count().max(1) as u32;
+    tracing::debug!(
+        test = test_index,
+        commands = plan.commands.len(),
+        segments = plan.segments().count(),
+        faults = plan.faults().count(),
+        "test planned"
+    );
     let config = ctx.config;
     let mut case = Case::planned(
         &plan,
@@ -635,6 +642,12 @@ async fn run_test(
         }
     };
     let reset_s = seconds(started.elapsed());
+    tracing::debug!(
+        test = test_index,
+        return_points = reset.return_route.len(),
+        clearance_m = reset.clearance_m,
+        "car reset"
+    );
     let driving = tokio::time::Instant::now();
     record_test_start(ctx.journal, plan);
     case.return_route = reset
@@ -651,6 +664,13 @@ async fn run_test(
         reset_s,
         drive_s: seconds(driving.elapsed()),
     });
+    tracing::debug!(
+        test = test_index,
+        verdict = case.verdict.map(Verdict::as_str),
+        reason = case.reason.as_deref(),
+        error = error.as_ref().map(tracing::field::display),
+        "test driven"
+    );
     match error {
         Some(error) => TestEnd::Stop(error),
         None if outcome

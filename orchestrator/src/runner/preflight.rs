@@ -77,6 +77,7 @@ impl Preflight {
         // The round trip first: every command after it waits what the link needs.
         let (rtt_p50, rtt_p99) = measure_round_trip(car, journal).await?;
         let per_try = per_try_timeout(rtt_p50, rtt_p99).map_err(RunError::Preflight)?;
+        tracing::debug!(?rtt_p50, ?rtt_p99, ?per_try, "round trip measured");
         car.set_request_timeout(per_try);
         car.set_tries(tries_within(TRY_BUDGET, per_try).max(car.config().tries));
         let switched_off = prepare_configuration(car).await?;
