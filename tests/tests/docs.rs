@@ -256,3 +256,143 @@ fn every_cited_docs_page_and_anchor_exists() {
         problems.join("\n")
     );
 }
+
+/// Our crates by the name code uses, with their directories.
+const CRATES: [(&str, &str); 7] = [
+    ("trajgen", "trajgen"),
+    ("recovery", "recovery"),
+    ("scenarios", "scenarios"),
+    ("car_link", "car-link"),
+    ("car_sim", "car-sim"),
+    ("campaign", "campaign"),
+    ("orchestrator", "orchestrator"),
+];
+
+/// Crates of others that ARCHITECTURE.md may name in a path.
+const OTHERS: [&str; 3] = ["std", "rand_pcg", "tokio"];
+
+/// The module file of `name` inside the module directory `dir` (`name.rs` or `name/mod.rs`).
+fn module_file(dir: &Path, name: &str) -> Option<PathBuf> {
+    [
+        dir.join(format!("{name}.rs")),
+        dir.join(name).join("mod.rs"),
+    ]
+    .into_iter()
+    .find(|p| p.is_file())
+}
+
+/// The text of every Rust file of the module whose file is `file` (its directory included).
+fn module_text(file: &Path) -> String {
+    let mut text = fs::read_to_string(file).unwrap_or_default();
+    let dir = if file.ends_with("mod.rs") || file.ends_with("lib.rs") {
+        file.parent().map(Path::to_path_buf)
+    } else {
+        file.parent()
+            .zip(file.file_stem())
+            .map(|(parent, stem)| parent.join(stem))
+    };
+    if let Some(dir) = dir.filter(|d| d.is_dir()) {
+        let mut found = Vec::new();
+        files(&dir, &[".rs"], &mut found);
+        for path in found {
+            text.push_str(&fs::read_to_string(path).unwrap_or_default());
+        }
+    }
+    text
+}
+
+/// Why the code path `path` (`crate::module::Item`, or `module::…` of one of our crates) does not
+/// resolve in the workspace `root`, if it does not.
+fn unresolved(root: &Path, path: &str) -> Option<String> {
+    let segments: Vec<&str> = path.split("::").collect();
+    let first = segments[0];
+    let (mut file, rest) = if let Some((_, dir)) = CRATES.iter().find(|(name, _)| *name == first) {
+        (root.join(dir).join("src").join("lib.rs"), &segments[1..])
+    } else if OTHERS.contains(&first) {
+        return None;
+    } else {
+        // A module of one of our crates, named without its crate.
+        let found = CRATES
+            .iter()
+            .find_map(|(_, dir)| module_file(&root.join(dir).join("src"), first));
+        match found {
+            Some(file) => (file, &segments[1..]),
+            None => return Some(format!("no crate or module `{first}`")),
+        }
+    };
+    for (i, segment) in rest.iter().enumerate() {
+        let dir = if file.ends_with("lib.rs") || file.ends_with("mod.rs") {
+            file.parent().map(Path::to_path_buf)
+        } else {
+            file.parent()
+                .zip(file.file_stem())
+                .map(|(parent, stem)| parent.join(stem))
+        };
+        if let Some(next) = dir.and_then(|d| module_file(&d, segment)) {
+            file = next;
+            continue;
+        }
+        // An item: it and what follows it are named in the module.
+        let text = module_text(&file);
+        return rest[i..]
+            .iter()
+            .find(|name| !text.contains(*name))
+            .map(|name| format!("`{name}` is not in {}", file.display()));
+    }
+    None
+}
+
+/// ARCHITECTURE.md is the map of the code: every file or directory it names in backticks exists,
+/// and every module path of ours it names (`campaign::seed`, `runner::reset`,
+/// `car_link::firmware::steering`, an item in one) resolves to a module that holds it.
+#[test]
+fn the_architecture_names_only_what_exists() {
+    let root = workspace();
+    let text = fs::read_to_string(root.join("ARCHITECTURE.md")).expect("ARCHITECTURE.md");
+    let mut problems = Vec::new();
+    let mut checked = (0, 0);
+    for span in text.split('`').skip(1).step_by(2) {
+        let plain = !span.contains([' ', '<', '>', '#', '*', '{', '|', '(']);
+        if !plain {
+            continue;
+        }
+        let is_path = span.contains('/')
+            && !span.contains(':')
+            && (span.ends_with('/') || span.rsplit('/').next().is_some_and(|f| f.contains('.')));
+        if is_path {
+            checked.0 += 1;
+            if !root.join(span).exists() {
+                problems.push(format!("{span}: no such file or directory"));
+            }
+            continue;
+        }
+        let starts_lower = span.chars().next().is_some_and(|c| c.is_ascii_lowercase());
+        if span.contains("::") && starts_lower && !span.contains(['.', '/']) {
+            checked.1 += 1;
+            if let Some(problem) = unresolved(&root, span) {
+                problems.push(format!("{span}: {problem}"));
+            }
+        }
+    }
+    assert!(
+        checked.0 >= 20 && checked.1 >= 20,
+        "too few names checked: {checked:?}"
+    );
+    assert!(
+        problems.is_empty(),
+        "ARCHITECTURE.md names what does not exist:\n{}",
+        problems.join("\n")
+    );
+}
+
+#[test]
+fn a_misnamed_module_or_item_is_found() {
+    let root = workspace();
+    assert_eq!(unresolved(&root, "campaign::seed"), None);
+    assert_eq!(unresolved(&root, "runner::reset"), None);
+    assert_eq!(unresolved(&root, "car_link::firmware::steering"), None);
+    assert_eq!(unresolved(&root, "campaign::drive::TestDrive"), None);
+    assert!(unresolved(&root, "campaign::no_such_module").is_some());
+    assert!(unresolved(&root, "runner::reset::NoSuchItem").is_some());
+    assert!(unresolved(&root, "nosuchcrate::x").is_some());
+}

@@ -210,7 +210,6 @@ pub(super) fn shrink_case(
         ShrinkFailure::Shrinker(error) => {
             anyhow::Error::new(error).context(format!("{}: cannot be shrunk", path.display()))
         }
-        failure => anyhow::anyhow!("{}: {failure}", path.display()),
     })?;
     let minimal_file = out.join(MINIMAL_FILE);
     crate::atomic::write(&minimal_file, format!("{}\n", shrunk.minimal.to_json()?))
