@@ -24,7 +24,7 @@ pub const EXCHANGES: usize = 5;
 const GATE_10X_M: f32 = 8.0;
 /// Largest correction per range, m: a compile-time constant of the firmware (both eras), the
 /// method's "correction clamp". A simulation may change it ([`UwbEstimator::set_step_clamp`]).
-pub const MAX_STEP_M: f32 = 0.2;
+pub const MAX_STEP_M: f32 = car_link::firmware::UWB_CORRECTION_CLAMP_M as f32;
 /// 12.x yaw history length.
 const YAW_HISTORY: usize = 50;
 /// 12.x stationary clamp speed: 0.5 km/h in m/s.

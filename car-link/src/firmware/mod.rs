@@ -47,6 +47,10 @@ pub const MAX_ANCHORS: usize = 20;
 /// the replies of an anchor with a larger id never match it.
 pub const MAX_RANGED_ANCHOR_ID: u16 = 255;
 
+/// The UWB estimator's largest correction per range, metres: a compile-time constant of the
+/// firmware (both generations), the method's "correction clamp" (`docs/firmware.md#uwb-positioning`).
+pub const UWB_CORRECTION_CLAMP_M: f64 = 0.2;
+
 /// The autopilot's top speed, km/h (8.33 m/s).
 pub const MAX_SPEED_KMH: f64 = 30.0;
 

@@ -7,7 +7,9 @@ use std::time::Duration;
 
 use thiserror::Error;
 
-use super::{FAULT_PROBES, FAULTS_PER_PROBE, MAX_STALE_LIMIT, TICK, WATCHDOG};
+use super::{
+    FAULT_PROBES, FAULTS_PER_PROBE, MAX_STALE_LIMIT, TICK, UWB_CORRECTION_CLAMP_M, WATCHDOG,
+};
 
 /// A firmware version as reported by GET_STATE (`fw_major`, `fw_minor`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -111,6 +113,7 @@ impl FirmwareVersion {
             max_stale_limit: MAX_STALE_LIMIT,
             fault_probes: FAULT_PROBES,
             faults_per_probe: FAULTS_PER_PROBE,
+            uwb_correction_clamp_m: UWB_CORRECTION_CLAMP_M,
             look_ahead: g.look_ahead,
             default_base_radius_m: g.default_base_radius_m,
             default_radius_time_ahead_s: 0.8,
@@ -194,6 +197,9 @@ pub enum Generation {
 }
 
 impl Generation {
+    /// Every generation, oldest first.
+    pub const ALL: [Generation; 3] = [Generation::V10, Generation::V11, Generation::V12];
+
     /// The version drivecheck takes as the generation's representative (what the simulated car is
     /// of it).
     pub fn reference(self) -> FirmwareVersion {
@@ -293,6 +299,8 @@ pub struct FirmwareProfile {
     pub fault_probes: usize,
     /// Faults one probe holds ([`FAULTS_PER_PROBE`]).
     pub faults_per_probe: usize,
+    /// The UWB estimator's largest correction per range ([`UWB_CORRECTION_CLAMP_M`]).
+    pub uwb_correction_clamp_m: f64,
 
     // The autopilot.
     /// How the look-ahead radius grows with the speed.

@@ -155,10 +155,11 @@ pub fn pursuit_angle<F: Real>(
 /// The largest look-ahead radius at `speed` of every generation the method tests, with the
 /// factory settings: how close to its route's end a car of any of them may stop, metres.
 pub fn largest_look_ahead_radius_m(speed: f64) -> f64 {
-    use super::Generation;
-    [Generation::V10, Generation::V12]
+    super::Generation::ALL
         .into_iter()
-        .map(|g| g.reference().profile().look_ahead_radius_m(speed))
+        .map(|g| g.reference().profile())
+        .filter(|p| p.supported)
+        .map(|p| p.look_ahead_radius_m(speed))
         .fold(0.0, f64::max)
 }
 
