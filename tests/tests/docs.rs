@@ -281,17 +281,22 @@ fn module_file(dir: &Path, name: &str) -> Option<PathBuf> {
     .find(|p| p.is_file())
 }
 
-/// The text of every Rust file of the module whose file is `file` (its directory included).
-fn module_text(file: &Path) -> String {
-    let mut text = fs::read_to_string(file).unwrap_or_default();
-    let dir = if file.ends_with("mod.rs") || file.ends_with("lib.rs") {
+/// Where the submodules of the module whose file is `file` live: beside a `lib.rs` or `mod.rs`,
+/// in the directory named after any other module file.
+fn submodule_dir(file: &Path) -> Option<PathBuf> {
+    if file.ends_with("lib.rs") || file.ends_with("mod.rs") {
         file.parent().map(Path::to_path_buf)
     } else {
         file.parent()
             .zip(file.file_stem())
             .map(|(parent, stem)| parent.join(stem))
-    };
-    if let Some(dir) = dir.filter(|d| d.is_dir()) {
+    }
+}
+
+/// The text of every Rust file of the module whose file is `file` (its directory included).
+fn module_text(file: &Path) -> String {
+    let mut text = fs::read_to_string(file).unwrap_or_default();
+    if let Some(dir) = submodule_dir(file).filter(|d| d.is_dir()) {
         let mut found = Vec::new();
         files(&dir, &[".rs"], &mut found);
         for path in found {
@@ -321,14 +326,7 @@ fn unresolved(root: &Path, path: &str) -> Option<String> {
         }
     };
     for (i, segment) in rest.iter().enumerate() {
-        let dir = if file.ends_with("lib.rs") || file.ends_with("mod.rs") {
-            file.parent().map(Path::to_path_buf)
-        } else {
-            file.parent()
-                .zip(file.file_stem())
-                .map(|(parent, stem)| parent.join(stem))
-        };
-        if let Some(next) = dir.and_then(|d| module_file(&d, segment)) {
+        if let Some(next) = submodule_dir(&file).and_then(|d| module_file(&d, segment)) {
             file = next;
             continue;
         }
