@@ -480,11 +480,7 @@ pub fn explain_segment(
 /// equal parts otherwise (mixed kinds, set_to, bitflip).
 fn together_weights<'a>(faults: impl Iterator<Item = &'a ExplainFault>) -> Vec<(Source, f64)> {
     let faults: Vec<&ExplainFault> = faults.collect();
-    let size = |f: &ExplainFault| match f.kind {
-        FaultKind::Offset => f.param.abs(),
-        FaultKind::Amplification => (f.param - 1.0).abs(),
-        _ => f64::NAN,
-    };
+    let size = |f: &ExplainFault| f.kind.size(f.param).unwrap_or(f64::NAN);
     let comparable = faults.windows(2).all(|w| w[0].kind == w[1].kind);
     let sizes: Vec<f64> = faults.iter().map(|f| size(f)).collect();
     let total: f64 = sizes.iter().sum();

@@ -94,38 +94,8 @@ impl TryFrom<String> for Probe {
     }
 }
 
-/// What a fault does to the probed value. With the `serde` feature it is written in snake case
-/// (`bitflip`, `offset`, `amplification`, `set_to`, `none`), as in case files.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-#[cfg_attr(
-    feature = "serde",
-    derive(serde::Serialize, serde::Deserialize, schemars::JsonSchema),
-    serde(rename_all = "snake_case")
-)]
-pub enum FaultKind {
-    /// Nothing, but it occupies a slot.
-    None,
-    /// XOR bit `clamp(trunc(param), 0, 31)` of the binary32 pattern.
-    Bitflip,
-    /// `x += param`.
-    Offset,
-    /// `x *= param`.
-    Amplification,
-    /// `x = param`.
-    SetTo,
-}
-
-impl fmt::Display for FaultKind {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            FaultKind::None => "NONE",
-            FaultKind::Bitflip => "BITFLIP",
-            FaultKind::Offset => "OFFSET",
-            FaultKind::Amplification => "AMPLIFICATION",
-            FaultKind::SetTo => "SET_TO",
-        })
-    }
-}
+/// What a fault does to the probed value: the kinds and their table live in the firmware model.
+pub use crate::firmware::fault_kinds::FaultKind;
 
 /// One reason the firmware gave for refusing a fault-injection command.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -240,6 +240,9 @@ pub enum Problem {
         /// Largest allowed.
         high: f64,
     },
+    /// A value that must be a whole number is not.
+    #[error("must be a whole number, found {0}")]
+    NotWhole(f64),
     /// A range whose minimum exceeds its maximum.
     #[error("min {min} is greater than max {max}")]
     MinAboveMax {

@@ -1,5 +1,7 @@
 //! Vehicle, generator and campaign settings: every field has the method's default.
 
+use std::collections::BTreeMap;
+
 use serde::{Deserialize, Serialize};
 use trajgen::{Constraints, GeneratorConfig, Strategy};
 
@@ -184,136 +186,264 @@ impl Default for CommandWeights {
     }
 }
 
-/// Parameter ranges of the three fault commands. Start and duration count probe iterations.
-#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct FaultSettings {
+/// The three fault commands a campaign draws (a scenario's `[campaign.faults.<section>]`), each
+/// on its probes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum FaultTarget {
     /// Reflection / NLOS on one anchor's range (probe `uwb_range_<id>`).
-    pub anchor_range: AnchorRangeFault,
+    AnchorRange,
     /// Odometry over-reading (probe `uwb_travel_dist`).
-    pub wheel_slip: WheelSlipFault,
+    WheelSlip,
     /// Heading error (probe `uwb_yaw`).
-    pub yaw: YawFault,
+    Yaw,
+}
+
+impl FaultTarget {
+    /// The three, in the order scenario files write them.
+    pub const ALL: [FaultTarget; 3] = [
+        FaultTarget::AnchorRange,
+        FaultTarget::WheelSlip,
+        FaultTarget::Yaw,
+    ];
+
+    /// The section's name (`anchor_range`).
+    pub fn section(self) -> &'static str {
+        match self {
+            FaultTarget::AnchorRange => "anchor_range",
+            FaultTarget::WheelSlip => "wheel_slip",
+            FaultTarget::Yaw => "yaw",
+        }
+    }
+
+    /// What its probes carry.
+    pub fn quantity(self) -> Quantity {
+        match self {
+            FaultTarget::AnchorRange => Quantity::Range,
+            FaultTarget::WheelSlip => Quantity::Travel,
+            FaultTarget::Yaw => Quantity::Yaw,
+        }
+    }
+
+    /// The kinds it draws when a scenario lists none (the fault table's defaults).
+    pub fn default_kinds(self) -> Vec<FaultKind> {
+        FaultKind::drawable()
+            .filter(|kind| kind.drawn_by_default(self.quantity()))
+            .collect()
+    }
+
+    /// The key a scenario writes `kind`'s range under in this section (`offset_deg`); `None` for
+    /// a kind without a parameter.
+    pub fn key(self, kind: FaultKind) -> Option<String> {
+        kind.scenario_key(self.quantity())
+    }
+}
+
+/// The key under which `anchor_range` gives one range for both offset and amplification (the
+/// format's first form, still read and written when the two ranges are equal).
+pub const SHARED_PARAM_KEY: &str = "param";
+
+/// One fault command's ranges: the kinds it draws, the parameter range of every kind (a map kind
+/// → range, so a new kind in the fault table needs no field here), when it starts and how long it
+/// lasts. Start and duration count probe iterations.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProbeFaults {
+    /// Fault types to choose from.
+    pub kinds: Vec<FaultKind>,
+    /// The parameter range of every kind with a parameter (the table's default where the file
+    /// gives none); a bitflip's range holds bit numbers.
+    pub ranges: BTreeMap<FaultKind, Interval<f64>>,
+    /// Probe iteration at which the fault starts (0–100).
+    pub start: Interval<u32>,
+    /// Probe iterations it lasts (1–8 on ranges, 1–10 otherwise).
+    pub duration: Interval<u32>,
+}
+
+impl ProbeFaults {
+    /// The method's ranges of `target` (the fault table's defaults).
+    pub fn defaults(target: FaultTarget) -> Self {
+        let quantity = target.quantity();
+        Self {
+            kinds: target.default_kinds(),
+            ranges: FaultKind::drawable()
+                .map(|kind| {
+                    let (min, max) = kind.default_range(quantity);
+                    (kind, Interval::new(min, max))
+                })
+                .collect(),
+            start: Interval::new(0, 100),
+            duration: match target {
+                FaultTarget::AnchorRange => Interval::new(1, 8),
+                FaultTarget::WheelSlip | FaultTarget::Yaw => Interval::new(1, 10),
+            },
+        }
+    }
+
+    /// The parameter range of `kind` (a kind without a parameter: `0..=0`).
+    pub fn range(&self, kind: FaultKind) -> Interval<f64> {
+        self.ranges
+            .get(&kind)
+            .copied()
+            .unwrap_or(Interval::new(0.0, 0.0))
+    }
+}
+
+/// Parameter ranges of the three fault commands.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(try_from = "RawFaultSettings")]
+pub struct FaultSettings {
+    /// Reflection / NLOS on one anchor's range (offset and amplification by default).
+    pub anchor_range: ProbeFaults,
+    /// Odometry over-reading (amplification by default; one call of the probe is one odometry
+    /// step: 1–3 cm at test speeds).
+    pub wheel_slip: ProbeFaults,
+    /// Heading error (an offset on the heading fed to the UWB estimator, degrees, by default).
+    pub yaw: ProbeFaults,
+}
+
+impl Default for FaultSettings {
+    fn default() -> Self {
+        Self {
+            anchor_range: ProbeFaults::defaults(FaultTarget::AnchorRange),
+            wheel_slip: ProbeFaults::defaults(FaultTarget::WheelSlip),
+            yaw: ProbeFaults::defaults(FaultTarget::Yaw),
+        }
+    }
+}
+
+impl FaultSettings {
+    /// The ranges of `target`.
+    pub fn get(&self, target: FaultTarget) -> &ProbeFaults {
+        match target {
+            FaultTarget::AnchorRange => &self.anchor_range,
+            FaultTarget::WheelSlip => &self.wheel_slip,
+            FaultTarget::Yaw => &self.yaw,
+        }
+    }
+
+    /// The ranges of `target`, to change.
+    pub fn get_mut(&mut self, target: FaultTarget) -> &mut ProbeFaults {
+        match target {
+            FaultTarget::AnchorRange => &mut self.anchor_range,
+            FaultTarget::WheelSlip => &mut self.wheel_slip,
+            FaultTarget::Yaw => &mut self.yaw,
+        }
+    }
 }
 
 /// The firmware's fault types (`offset`, `amplification`, `set_to`, `bitflip`; `none` is refused
-/// in scenarios: it does nothing), as car-link names them.
+/// in scenarios: it does nothing), as car-link's fault table names them.
 pub use car_link::fault::FaultKind;
+use car_link::firmware::Quantity;
 
-/// The bits a generated `bitflip` flips by default: the top of the mantissa (18–22: the value
-/// changes by 3–50 %), the exponent (23–30: it is halved or doubled up to a blow-up to ±inf or
-/// near 0) and the sign (31).
-pub const DEFAULT_BITFLIP_BITS: Interval<u32> = Interval::new(18, 31);
+/// The `[campaign.faults]` table as written: each section's keys as they come.
+#[derive(Debug, Default, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+struct RawFaultSettings {
+    anchor_range: RawProbeFaults,
+    wheel_slip: RawProbeFaults,
+    yaw: RawProbeFaults,
+}
 
-/// The name of a fault kind in scenario and case files.
-pub fn fault_kind_name(kind: FaultKind) -> &'static str {
-    match kind {
-        FaultKind::None => "none",
-        FaultKind::Bitflip => "bitflip",
-        FaultKind::Offset => "offset",
-        FaultKind::Amplification => "amplification",
-        FaultKind::SetTo => "set_to",
+/// One section as written: its kinds, start and duration, and every other key a range (which
+/// kind's, the section's quantity says: [`FaultTarget::key`]).
+#[derive(Debug, Default)]
+struct RawProbeFaults {
+    kinds: Option<Vec<FaultKind>>,
+    start: Option<Interval<u32>>,
+    duration: Option<Interval<u32>>,
+    ranges: Vec<(String, Interval<f64>)>,
+}
+
+impl<'de> Deserialize<'de> for RawProbeFaults {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Visitor;
+        impl<'de> serde::de::Visitor<'de> for Visitor {
+            type Value = RawProbeFaults;
+
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a table of fault kinds, ranges, start and duration")
+            }
+
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                mut map: A,
+            ) -> Result<RawProbeFaults, A::Error> {
+                let mut raw = RawProbeFaults::default();
+                while let Some(key) = map.next_key::<String>()? {
+                    let duplicate = match key.as_str() {
+                        "kinds" => raw.kinds.replace(map.next_value()?).is_some(),
+                        "start" => raw.start.replace(map.next_value()?).is_some(),
+                        "duration" => raw.duration.replace(map.next_value()?).is_some(),
+                        _ => {
+                            let duplicate = raw.ranges.iter().any(|(k, _)| *k == key);
+                            raw.ranges.push((key.clone(), map.next_value()?));
+                            duplicate
+                        }
+                    };
+                    if duplicate {
+                        return Err(serde::de::Error::custom(format!("duplicate key `{key}`")));
+                    }
+                }
+                Ok(raw)
+            }
+        }
+        deserializer.deserialize_map(Visitor)
     }
 }
 
-/// Ranges of the anchor range fault.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct AnchorRangeFault {
-    /// Fault types to choose from (offset and amplification by default; set_to and bitflip when
-    /// listed).
-    pub kinds: Vec<FaultKind>,
-    /// The parameter of an offset (metres) or an amplification (a factor) (0–5).
-    pub param: Interval<f64>,
-    /// The range a `set_to` fault reports, metres (0–20).
-    pub set_to_m: Interval<f64>,
-    /// The bit a `bitflip` fault flips (18–31, see [`DEFAULT_BITFLIP_BITS`]).
-    pub bitflip_bits: Interval<u32>,
-    /// Probe iteration at which the fault starts (0–100).
-    pub start: Interval<u32>,
-    /// Probe iterations it lasts (1–8).
-    pub duration: Interval<u32>,
-}
+impl TryFrom<RawFaultSettings> for FaultSettings {
+    type Error = String;
 
-impl Default for AnchorRangeFault {
-    fn default() -> Self {
-        Self {
-            kinds: vec![FaultKind::Offset, FaultKind::Amplification],
-            param: Interval::new(0.0, 5.0),
-            set_to_m: Interval::new(0.0, 20.0),
-            bitflip_bits: DEFAULT_BITFLIP_BITS,
-            start: Interval::new(0, 100),
-            duration: Interval::new(1, 8),
-        }
+    fn try_from(raw: RawFaultSettings) -> Result<Self, Self::Error> {
+        Ok(Self {
+            anchor_range: raw.anchor_range.build(FaultTarget::AnchorRange)?,
+            wheel_slip: raw.wheel_slip.build(FaultTarget::WheelSlip)?,
+            yaw: raw.yaw.build(FaultTarget::Yaw)?,
+        })
     }
 }
 
-/// Ranges of the wheel slip fault (by default an amplification of the travelled distance). One
-/// call of the probe is one odometry step: 1–3 cm at test speeds.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct WheelSlipFault {
-    /// Fault types to choose from (amplification by default).
-    pub kinds: Vec<FaultKind>,
-    /// Amplification factor (1.0–5.0).
-    pub amplification: Interval<f64>,
-    /// The distance an `offset` fault adds to one odometry step, metres (0–0.05).
-    pub offset_m: Interval<f64>,
-    /// The distance a `set_to` fault reports for one odometry step, metres (0–0.05).
-    pub set_to_m: Interval<f64>,
-    /// The bit a `bitflip` fault flips (18–31).
-    pub bitflip_bits: Interval<u32>,
-    /// Probe iteration at which the fault starts (0–100).
-    pub start: Interval<u32>,
-    /// Probe iterations it lasts (1–10).
-    pub duration: Interval<u32>,
-}
-
-impl Default for WheelSlipFault {
-    fn default() -> Self {
-        Self {
-            kinds: vec![FaultKind::Amplification],
-            amplification: Interval::new(1.0, 5.0),
-            offset_m: Interval::new(0.0, 0.05),
-            set_to_m: Interval::new(0.0, 0.05),
-            bitflip_bits: DEFAULT_BITFLIP_BITS,
-            start: Interval::new(0, 100),
-            duration: Interval::new(1, 10),
+impl RawProbeFaults {
+    /// The section's ranges over the defaults of `target`; an error names a key the section
+    /// does not have.
+    fn build(self, target: FaultTarget) -> Result<ProbeFaults, String> {
+        let mut out = ProbeFaults::defaults(target);
+        out.kinds = self.kinds.unwrap_or(out.kinds);
+        out.start = self.start.unwrap_or(out.start);
+        out.duration = self.duration.unwrap_or(out.duration);
+        let shared = target == FaultTarget::AnchorRange;
+        let section = target.section();
+        // Which key gave each kind's range, to refuse two keys for one kind.
+        let mut given: BTreeMap<FaultKind, String> = BTreeMap::new();
+        for (key, range) in self.ranges {
+            let kinds = if shared && key == SHARED_PARAM_KEY {
+                vec![FaultKind::Offset, FaultKind::Amplification]
+            } else if let Some(kind) =
+                FaultKind::drawable().find(|&k| target.key(k).as_deref() == Some(key.as_str()))
+            {
+                vec![kind]
+            } else {
+                let expected: Vec<String> = ["kinds".to_owned(), "start".into(), "duration".into()]
+                    .into_iter()
+                    .chain(shared.then(|| SHARED_PARAM_KEY.to_owned()))
+                    .chain(FaultKind::drawable().filter_map(|k| target.key(k)))
+                    .map(|k| format!("`{k}`"))
+                    .collect();
+                return Err(format!(
+                    "unknown field `{key}` in {section}, expected one of {}",
+                    expected.join(", ")
+                ));
+            };
+            for kind in kinds {
+                if let Some(earlier) = given.insert(kind, key.clone()) {
+                    return Err(format!(
+                        "{section}.{earlier} and {section}.{key} both give the range of {}",
+                        kind.name()
+                    ));
+                }
+                out.ranges.insert(kind, range);
+            }
         }
-    }
-}
-
-/// Ranges of the yaw fault (by default an offset on the heading fed to the UWB estimator,
-/// degrees).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct YawFault {
-    /// Fault types to choose from (offset by default).
-    pub kinds: Vec<FaultKind>,
-    /// Offset, degrees (−20..20).
-    pub offset_deg: Interval<f64>,
-    /// Amplification factor (0.5–1.5).
-    pub amplification: Interval<f64>,
-    /// The heading a `set_to` fault reports, degrees (−180..180).
-    pub set_to_deg: Interval<f64>,
-    /// The bit a `bitflip` fault flips (18–31).
-    pub bitflip_bits: Interval<u32>,
-    /// Probe iteration at which the fault starts (0–100).
-    pub start: Interval<u32>,
-    /// Probe iterations it lasts (1–10).
-    pub duration: Interval<u32>,
-}
-
-impl Default for YawFault {
-    fn default() -> Self {
-        Self {
-            kinds: vec![FaultKind::Offset],
-            offset_deg: Interval::new(-20.0, 20.0),
-            amplification: Interval::new(0.5, 1.5),
-            set_to_deg: Interval::new(-180.0, 180.0),
-            bitflip_bits: DEFAULT_BITFLIP_BITS,
-            start: Interval::new(0, 100),
-            duration: Interval::new(1, 10),
-        }
+        Ok(out)
     }
 }

@@ -15,8 +15,10 @@ use trajgen::{Area, Point, Waypoint};
 use crate::error::{Problem, ScenarioError, Warning, WarningKind};
 use crate::model::{Route, Scenario};
 use crate::settings::{
-    CampaignSettings, FaultKind, GeneratorSettings, Interval, Vehicle, fault_kind_name,
+    CampaignSettings, FaultKind, FaultTarget, GeneratorSettings, Interval, SHARED_PARAM_KEY,
+    Vehicle,
 };
+use car_link::firmware::{Param, Quantity};
 
 pub use car_link::firmware::{MAX_ANCHORS, MAX_SPEED_KMH};
 
@@ -196,62 +198,61 @@ fn fault_kinds(kinds: &[FaultKind], field: &str) -> Check {
         return Err((format!("{field}.kinds"), Problem::Empty));
     }
     for (i, &kind) in kinds.iter().enumerate() {
-        if kind == FaultKind::None {
+        if kind.spec().param == Param::Unused {
             return Err((format!("{field}.kinds[{i}]"), Problem::NoneKind));
         }
         if kinds[..i].contains(&kind) {
             return Err((
                 format!("{field}.kinds[{i}]"),
-                Problem::DuplicateKind(fault_kind_name(kind)),
+                Problem::DuplicateKind(kind.name()),
             ));
         }
     }
     Ok(())
 }
 
-/// The bits a `bitflip` may flip: an ordered range within 0–31 (a binary32 value's bits).
-fn bitflip_bits(bits: Interval<u32>, field: &str) -> Check {
-    let field = format!("{field}.bitflip_bits");
-    ordered(as_f64(bits), &field)?;
-    within(f64::from(bits.max), 0.0, 31.0, &format!("{field}.max"))
+/// The bits a `bitflip` may flip: whole numbers within 0–31 (a binary32 value's bits).
+fn bits(range: Interval<f64>, field: &str) -> Check {
+    ordered(range, field)?;
+    for (end, value) in [("min", range.min), ("max", range.max)] {
+        let field = format!("{field}.{end}");
+        if value.fract() != 0.0 {
+            return Err((field, Problem::NotWhole(value)));
+        }
+        within(value, 0.0, 31.0, &field)?;
+    }
+    Ok(())
 }
 
+/// Every fault section: its kinds, every kind's range as its parameter needs (a yaw within
+/// ±180°), start and duration.
 fn check_faults(c: &CampaignSettings) -> Check {
-    let range = &c.faults.anchor_range;
-    let field = "campaign.faults.anchor_range";
-    fault_kinds(&range.kinds, field)?;
-    ordered(range.param, &format!("{field}.param"))?;
-    ordered(range.set_to_m, &format!("{field}.set_to_m"))?;
-    bitflip_bits(range.bitflip_bits, field)?;
-    probe_window(range.start, range.duration, field)?;
-    let slip = &c.faults.wheel_slip;
-    let field = "campaign.faults.wheel_slip";
-    fault_kinds(&slip.kinds, field)?;
-    ordered(slip.amplification, &format!("{field}.amplification"))?;
-    ordered(slip.offset_m, &format!("{field}.offset_m"))?;
-    ordered(slip.set_to_m, &format!("{field}.set_to_m"))?;
-    bitflip_bits(slip.bitflip_bits, field)?;
-    probe_window(slip.start, slip.duration, field)?;
-    let yaw = &c.faults.yaw;
-    let field = "campaign.faults.yaw";
-    fault_kinds(&yaw.kinds, field)?;
-    ordered(yaw.amplification, &format!("{field}.amplification"))?;
-    ordered(yaw.set_to_deg, &format!("{field}.set_to_deg"))?;
-    bitflip_bits(yaw.bitflip_bits, field)?;
-    ordered(yaw.offset_deg, &format!("{field}.offset_deg"))?;
-    within(
-        yaw.offset_deg.min,
-        -180.0,
-        180.0,
-        &format!("{field}.offset_deg.min"),
-    )?;
-    within(
-        yaw.offset_deg.max,
-        -180.0,
-        180.0,
-        &format!("{field}.offset_deg.max"),
-    )?;
-    probe_window(yaw.start, yaw.duration, field)
+    for target in FaultTarget::ALL {
+        let f = c.faults.get(target);
+        let field = format!("campaign.faults.{}", target.section());
+        fault_kinds(&f.kinds, &field)?;
+        let shared = target == FaultTarget::AnchorRange
+            && f.range(FaultKind::Offset) == f.range(FaultKind::Amplification);
+        for kind in FaultKind::drawable() {
+            let key = match (shared, kind) {
+                (true, FaultKind::Offset | FaultKind::Amplification) => SHARED_PARAM_KEY.into(),
+                _ => target.key(kind).unwrap_or_default(),
+            };
+            let field = format!("{field}.{key}");
+            let range = f.range(kind);
+            match kind.spec().param {
+                Param::Bit => bits(range, &field)?,
+                Param::Value if target.quantity() == Quantity::Yaw => {
+                    ordered(range, &field)?;
+                    within(range.min, -180.0, 180.0, &format!("{field}.min"))?;
+                    within(range.max, -180.0, 180.0, &format!("{field}.max"))?;
+                }
+                Param::Value | Param::Factor | Param::Unused => ordered(range, &field)?,
+            }
+        }
+        probe_window(f.start, f.duration, &field)?;
+    }
+    Ok(())
 }
 
 /// Start and duration intervals of a fault, in probe iterations: ordered, duration at least 1.
@@ -660,6 +661,47 @@ mod tests {
     }
 
     #[test]
+    fn fault_ranges_load_from_the_first_form_and_from_the_tables_keys() {
+        use crate::settings::{FaultKind, FaultTarget, Interval};
+        // The format's first form: one `param` for an anchor's offset and amplification.
+        let old = "[campaign.faults.anchor_range]\nparam = { min = 0.5, max = 2.0 }\n\
+                   [campaign.faults.wheel_slip]\noffset_m = { min = 0.0, max = 0.01 }";
+        let loaded = from_toml_str(&format!("{SQUARE}\n{old}\n"), "s.toml").unwrap();
+        let faults = &loaded.scenario.campaign.faults;
+        for kind in [FaultKind::Offset, FaultKind::Amplification] {
+            assert_eq!(faults.anchor_range.range(kind), Interval::new(0.5, 2.0));
+        }
+        assert_eq!(
+            faults.wheel_slip.range(FaultKind::Offset),
+            Interval::new(0.0, 0.01)
+        );
+        // Each kind under its own key; the canonical form writes them apart while they differ.
+        let new = "[campaign.faults.anchor_range]\noffset_m = { min = 0.5, max = 2.0 }\n\
+                   amplification = { min = 1.0, max = 3.0 }";
+        let loaded = from_toml_str(&format!("{SQUARE}\n{new}\n"), "s.toml").unwrap();
+        let anchor = loaded
+            .scenario
+            .campaign
+            .faults
+            .get(FaultTarget::AnchorRange);
+        assert_eq!(anchor.range(FaultKind::Offset), Interval::new(0.5, 2.0));
+        assert_eq!(
+            anchor.range(FaultKind::Amplification),
+            Interval::new(1.0, 3.0)
+        );
+        let text = crate::to_toml(&loaded.scenario);
+        assert!(
+            text.contains("offset_m = { min = 0.5, max = 2.0 }"),
+            "{text}"
+        );
+        assert!(!text.contains("param ="), "{text}");
+        assert_eq!(
+            from_toml_str(&text, "again.toml").unwrap().scenario,
+            loaded.scenario
+        );
+    }
+
+    #[test]
     fn origin_and_settings_are_range_checked() {
         let cases = [
             (
@@ -705,6 +747,29 @@ mod tests {
             (
                 "[campaign.faults.anchor_range]\nkinds = [\"bitflip\"]\nbitflip_bits = { min = 20, max = 32 }",
                 "campaign.faults.anchor_range.bitflip_bits.max: 32 is outside 0..=31",
+            ),
+            (
+                "[campaign.faults.yaw]\nkinds = [\"bitflip\"]\nbitflip_bits = { min = 20.5, max = 30 }",
+                "campaign.faults.yaw.bitflip_bits.min: must be a whole number, found 20.5",
+            ),
+            (
+                "[campaign.faults.yaw]\nset_to_deg = { min = -190.0, max = 0.0 }",
+                "campaign.faults.yaw.set_to_deg.min: -190 is outside -180..=180",
+            ),
+            (
+                "[campaign.faults.anchor_range]\noffset_m = { min = 2.0, max = 1.0 }",
+                "campaign.faults.anchor_range.offset_m: min 2 is greater than max 1",
+            ),
+            (
+                "[campaign.faults.wheel_slip]\noffset_deg = { min = 0.0, max = 1.0 }",
+                "campaign.faults: unknown field `offset_deg` in wheel_slip, expected one of \
+                 `kinds`, `start`, `duration`, `offset_m`, `amplification`, `set_to_m`, \
+                 `bitflip_bits`",
+            ),
+            (
+                "[campaign.faults.anchor_range]\nparam = { min = 0.0, max = 1.0 }\namplification = { min = 1.0, max = 2.0 }",
+                "campaign.faults: anchor_range.amplification and anchor_range.param both give the \
+                 range of amplification",
             ),
             (
                 "[[environment.obstacles]]\nname = \" \"\npolygon = [{ x = 0.0, y = -1.0 }, { x = 1.0, y = -1.0 }, { x = 1.0, y = -2.0 }]",

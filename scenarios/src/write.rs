@@ -9,9 +9,10 @@ use trajgen::Point;
 
 use crate::model::{Anchor, Obstacle, Route, Scenario, Wall};
 use crate::settings::{
-    AnchorRangeFault, CampaignSettings, FaultKind, GeneratorSettings, Interval, Vehicle,
-    WheelSlipFault, YawFault, fault_kind_name,
+    CampaignSettings, FaultKind, FaultTarget, GeneratorSettings, Interval, ProbeFaults,
+    SHARED_PARAM_KEY, Vehicle,
 };
+use car_link::firmware::Param;
 
 /// The scenario in canonical TOML.
 pub fn to_toml(s: &Scenario) -> String {
@@ -188,72 +189,59 @@ fn campaign(out: &mut String, c: &CampaignSettings) {
         &c.weights.wheel_slip_fault.to_string(),
     );
     line(out, "yaw_fault", &c.weights.yaw_fault.to_string());
-    anchor_range(out, &c.faults.anchor_range);
-    wheel_slip(out, &c.faults.wheel_slip);
-    yaw(out, &c.faults.yaw);
-}
-
-// The canonical form writes a kind's range only when the kind is listed (and a probe's kinds only
-// when they are not its default), so that adding a kind to the format leaves the hash of every
-// scenario that does not use it unchanged.
-
-fn kinds(out: &mut String, kinds: &[FaultKind]) {
-    let names: Vec<String> = kinds.iter().map(|&k| string(fault_kind_name(k))).collect();
-    line(out, "kinds", &format!("[{}]", names.join(", ")));
-}
-
-fn kind_range(out: &mut String, f: &[FaultKind], kind: FaultKind, key: &str, range: Interval<f64>) {
-    if f.contains(&kind) {
-        line(out, key, &floats(range));
+    for target in FaultTarget::ALL {
+        probe_faults(out, target, c.faults.get(target));
     }
 }
 
-fn bitflip_bits(out: &mut String, f: &[FaultKind], bits: Interval<u32>) {
-    if f.contains(&FaultKind::Bitflip) {
-        line(out, "bitflip_bits", &ints(bits));
-    }
-}
+// The canonical form writes a section's default kinds' ranges always and another kind's only
+// when it is listed (and a section's kinds only when they are not its default, except
+// anchor_range's, always written as the format began), so that adding a kind to the fault table
+// leaves the hash of every scenario that does not use it unchanged. anchor_range writes offset
+// and amplification as one `param` while their ranges are equal, as the format began.
 
-fn anchor_range(out: &mut String, f: &AnchorRangeFault) {
-    out.push_str("\n[campaign.faults.anchor_range]\n");
-    kinds(out, &f.kinds);
-    line(out, "param", &floats(f.param));
-    kind_range(out, &f.kinds, FaultKind::SetTo, "set_to_m", f.set_to_m);
-    bitflip_bits(out, &f.kinds, f.bitflip_bits);
+fn probe_faults(out: &mut String, target: FaultTarget, f: &ProbeFaults) {
+    let _ = writeln!(out, "\n[campaign.faults.{}]", target.section());
+    let defaults = target.default_kinds();
+    if target == FaultTarget::AnchorRange || f.kinds != defaults {
+        let names: Vec<String> = f.kinds.iter().map(|k| string(k.name())).collect();
+        line(out, "kinds", &format!("[{}]", names.join(", ")));
+    }
+    let shared = target == FaultTarget::AnchorRange
+        && f.range(FaultKind::Offset) == f.range(FaultKind::Amplification);
+    if shared {
+        line(out, SHARED_PARAM_KEY, &floats(f.range(FaultKind::Offset)));
+    }
+    let written = defaults
+        .iter()
+        .copied()
+        .filter(|_| !shared)
+        .chain(FaultKind::drawable().filter(|k| !defaults.contains(k) && f.kinds.contains(k)));
+    for kind in written {
+        if let Some(key) = target.key(kind) {
+            let range = f.range(kind);
+            let value = match kind.spec().param {
+                Param::Bit => bits(range),
+                Param::Value | Param::Factor | Param::Unused => floats(range),
+            };
+            line(out, &key, &value);
+        }
+    }
     line(out, "start", &ints(f.start));
     line(out, "duration", &ints(f.duration));
 }
 
-fn wheel_slip(out: &mut String, f: &WheelSlipFault) {
-    out.push_str("\n[campaign.faults.wheel_slip]\n");
-    if f.kinds != WheelSlipFault::default().kinds {
-        kinds(out, &f.kinds);
-    }
-    line(out, "amplification", &floats(f.amplification));
-    kind_range(out, &f.kinds, FaultKind::Offset, "offset_m", f.offset_m);
-    kind_range(out, &f.kinds, FaultKind::SetTo, "set_to_m", f.set_to_m);
-    bitflip_bits(out, &f.kinds, f.bitflip_bits);
-    line(out, "start", &ints(f.start));
-    line(out, "duration", &ints(f.duration));
-}
-
-fn yaw(out: &mut String, f: &YawFault) {
-    out.push_str("\n[campaign.faults.yaw]\n");
-    if f.kinds != YawFault::default().kinds {
-        kinds(out, &f.kinds);
-    }
-    line(out, "offset_deg", &floats(f.offset_deg));
-    kind_range(
-        out,
-        &f.kinds,
-        FaultKind::Amplification,
-        "amplification",
-        f.amplification,
-    );
-    kind_range(out, &f.kinds, FaultKind::SetTo, "set_to_deg", f.set_to_deg);
-    bitflip_bits(out, &f.kinds, f.bitflip_bits);
-    line(out, "start", &ints(f.start));
-    line(out, "duration", &ints(f.duration));
+/// A range of bit numbers: integers (a value that is not one, which validation refuses, as a
+/// float so that it reads back).
+fn bits(range: Interval<f64>) -> String {
+    let int = |x: f64| {
+        if x.fract() == 0.0 && (0.0..=f64::from(u32::MAX)).contains(&x) {
+            format!("{}", x as u32)
+        } else {
+            float(x)
+        }
+    };
+    format!("{{ min = {}, max = {} }}", int(range.min), int(range.max))
 }
 
 #[cfg(test)]
@@ -335,7 +323,26 @@ mod tests {
         s.generator.segment_max_m = numbers[5];
         s.generator.outer_tries = counts[0];
         s.campaign.test_size = Interval::new(counts[1], counts[2]);
-        s.campaign.faults.yaw.offset_deg = Interval::new(numbers[0], numbers[1]);
+        let faults = &mut s.campaign.faults;
+        faults
+            .yaw
+            .ranges
+            .insert(FaultKind::Offset, Interval::new(numbers[0], numbers[1]));
+        // Every kind listed, and anchor ranges that no longer share one `param` when the numbers
+        // differ.
+        faults.wheel_slip.kinds = FaultKind::drawable().collect();
+        faults
+            .wheel_slip
+            .ranges
+            .insert(FaultKind::SetTo, Interval::new(numbers[2], numbers[3]));
+        faults.wheel_slip.ranges.insert(
+            FaultKind::Bitflip,
+            Interval::new((counts[0] % 32) as f64, (counts[1] % 32) as f64),
+        );
+        faults.anchor_range.ranges.insert(
+            FaultKind::Amplification,
+            Interval::new(numbers[4], numbers[5]),
+        );
         Some(s)
     }
 

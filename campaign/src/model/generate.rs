@@ -9,10 +9,11 @@
 
 use std::sync::{Arc, Mutex};
 
+use car_link::firmware::Param;
 use proptest::prelude::*;
 use proptest::sample::select;
 use proptest::strategy::Union;
-use scenarios::{CampaignSettings, Interval};
+use scenarios::{CampaignSettings, Interval, ProbeFaults};
 use trajgen::{GenerationError, Generator, RouteTail};
 
 use super::command::{Command, Fault, FaultKind, FaultPlace, Probe, Segment, SegmentIntent};
@@ -141,15 +142,9 @@ fn anchor_fault(ctx: &PlanContext, state: &ReferenceState) -> Option<BoxedStrate
     if probes.is_empty() || settings.kinds.is_empty() {
         return None;
     }
-    let ranges = KindRanges {
-        offset: settings.param,
-        amplification: settings.param,
-        set_to: settings.set_to_m,
-        bitflip_bits: settings.bitflip_bits,
-    };
     let strategy = (
         select(probes),
-        kind_and_param(&settings.kinds, ranges),
+        kind_and_param(settings),
         range_u32(settings.start),
         range_u32(settings.duration),
     )
@@ -160,94 +155,62 @@ fn anchor_fault(ctx: &PlanContext, state: &ReferenceState) -> Option<BoxedStrate
 }
 
 fn wheel_slip_fault(settings: &CampaignSettings) -> BoxedStrategy<Command> {
-    let slip = &settings.faults.wheel_slip;
-    let ranges = KindRanges {
-        offset: slip.offset_m,
-        amplification: slip.amplification,
-        set_to: slip.set_to_m,
-        bitflip_bits: slip.bitflip_bits,
-    };
-    probe_fault(
-        Probe::UwbTravelDist,
-        kind_and_param(&slip.kinds, ranges),
-        slip.start,
-        slip.duration,
-    )
+    probe_fault(Probe::UwbTravelDist, &settings.faults.wheel_slip)
 }
 
 fn yaw_fault(settings: &CampaignSettings) -> BoxedStrategy<Command> {
-    let yaw = &settings.faults.yaw;
-    let ranges = KindRanges {
-        offset: yaw.offset_deg,
-        amplification: yaw.amplification,
-        set_to: yaw.set_to_deg,
-        bitflip_bits: yaw.bitflip_bits,
-    };
-    probe_fault(
-        Probe::UwbYaw,
-        kind_and_param(&yaw.kinds, ranges),
-        yaw.start,
-        yaw.duration,
-    )
+    probe_fault(Probe::UwbYaw, &settings.faults.yaw)
 }
 
-/// The parameter range of each fault kind on one probe.
-#[derive(Debug, Clone, Copy)]
-struct KindRanges {
-    offset: Interval<f64>,
-    amplification: Interval<f64>,
-    set_to: Interval<f64>,
-    bitflip_bits: Interval<u32>,
-}
-
-impl KindRanges {
-    /// The parameter of a `kind` fault: a value of its range; for a bitflip, the bit's number.
-    fn param(self, kind: FaultKind) -> BoxedStrategy<f64> {
-        match kind {
-            FaultKind::Offset => range_f64(self.offset).boxed(),
-            FaultKind::Amplification => range_f64(self.amplification).boxed(),
-            FaultKind::SetTo => range_f64(self.set_to).boxed(),
-            FaultKind::Bitflip => range_u32(self.bitflip_bits).prop_map(f64::from).boxed(),
-            FaultKind::None => Just(0.0).boxed(),
-        }
+/// The parameter of a `kind` fault: a value of its range; for a bitflip, a bit's number (the
+/// scenario's validation keeps those whole).
+fn param(faults: &ProbeFaults, kind: FaultKind) -> BoxedStrategy<f64> {
+    let range = faults.range(kind);
+    match kind.spec().param {
+        Param::Value | Param::Factor => range_f64(range).boxed(),
+        Param::Bit => (range.min as u32..=range.max as u32)
+            .prop_map(f64::from)
+            .boxed(),
+        Param::Unused => Just(0.0).boxed(),
     }
 }
 
-/// A kind among `kinds` (the scenario's validation keeps the list non-empty) and its parameter.
-/// A probe with one kind draws no kind, and kinds that share one parameter range (an anchor's
-/// offset and amplification) draw the kind and the parameter independently, so the method's
-/// default tests are drawn exactly as before the other kinds existed.
-fn kind_and_param(kinds: &[FaultKind], ranges: KindRanges) -> BoxedStrategy<(FaultKind, f64)> {
-    let shared = |range: Interval<f64>| {
-        kinds.iter().all(|&kind| match kind {
-            FaultKind::Offset => ranges.offset == range,
-            FaultKind::Amplification => ranges.amplification == range,
-            FaultKind::SetTo => ranges.set_to == range,
-            FaultKind::Bitflip | FaultKind::None => false,
-        })
-    };
-    match kinds {
+/// A kind among the section's kinds (the scenario's validation keeps the list non-empty) and its
+/// parameter. A probe with one kind draws no kind, and kinds that share one parameter range (an
+/// anchor's offset and amplification) draw the kind and the parameter independently, so the
+/// method's default tests are drawn exactly as before the other kinds existed.
+fn kind_and_param(faults: &ProbeFaults) -> BoxedStrategy<(FaultKind, f64)> {
+    let kinds = &faults.kinds;
+    let continuous = |kind: FaultKind| matches!(kind.spec().param, Param::Value | Param::Factor);
+    match kinds.as_slice() {
         [kind] => {
             let kind = *kind;
-            ranges
-                .param(kind)
+            param(faults, kind)
                 .prop_map(move |param| (kind, param))
                 .boxed()
         }
-        _ if shared(ranges.offset) => (select(kinds.to_vec()), range_f64(ranges.offset)).boxed(),
-        _ => select(kinds.to_vec())
-            .prop_flat_map(move |kind| ranges.param(kind).prop_map(move |param| (kind, param)))
-            .boxed(),
+        [first, ..]
+            if kinds
+                .iter()
+                .all(|&k| continuous(k) && faults.range(k) == faults.range(*first)) =>
+        {
+            (select(kinds.clone()), range_f64(faults.range(*first))).boxed()
+        }
+        _ => {
+            let faults = faults.clone();
+            select(kinds.clone())
+                .prop_flat_map(move |kind| param(&faults, kind).prop_map(move |p| (kind, p)))
+                .boxed()
+        }
     }
 }
 
-fn probe_fault(
-    probe: Probe,
-    kind_and_param: BoxedStrategy<(FaultKind, f64)>,
-    start: Interval<u32>,
-    duration: Interval<u32>,
-) -> BoxedStrategy<Command> {
-    (kind_and_param, range_u32(start), range_u32(duration))
+fn probe_fault(probe: Probe, faults: &ProbeFaults) -> BoxedStrategy<Command> {
+    (
+        kind_and_param(faults),
+        range_u32(faults.start),
+        range_u32(faults.duration),
+    )
         .prop_map(move |(kind_param, start, duration)| {
             fault_command(probe, kind_param, start, duration)
         })

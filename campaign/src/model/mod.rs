@@ -60,7 +60,7 @@ use std::sync::{Arc, Mutex};
 
 use proptest::strategy::{BoxedStrategy, Just, Strategy as _, ValueTree};
 use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
-use scenarios::{CampaignSettings, Interval, Scenario};
+use scenarios::{CampaignSettings, FaultTarget, Interval, Scenario};
 use thiserror::Error;
 use trajgen::{GenerationError, Generator, RouteTail, Strategy};
 
@@ -398,35 +398,30 @@ fn check_settings(s: &CampaignSettings) -> Result<(), ModelError> {
             weight_sum(s) > u64::from(u32::MAX),
             "the weights' sum overflows",
         ),
-        (
-            bad_f64(f.anchor_range.param),
-            "faults.anchor_range.param: bad range",
-        ),
-        (
-            bad_u32(f.anchor_range.start) || bad_duration(f.anchor_range.duration),
-            "faults.anchor_range: bad start or duration",
-        ),
-        (
-            bad_f64(f.wheel_slip.amplification),
-            "faults.wheel_slip.amplification: bad range",
-        ),
-        (
-            bad_u32(f.wheel_slip.start) || bad_duration(f.wheel_slip.duration),
-            "faults.wheel_slip: bad start or duration",
-        ),
-        (
-            bad_f64(f.yaw.offset_deg),
-            "faults.yaw.offset_deg: bad range",
-        ),
-        (
-            bad_u32(f.yaw.start) || bad_duration(f.yaw.duration),
-            "faults.yaw: bad start or duration",
-        ),
     ];
-    match problems.iter().find(|(bad, _)| *bad) {
-        Some((_, reason)) => Err(ModelError::InvalidSettings((*reason).to_owned())),
-        None => Ok(()),
+    if let Some((_, reason)) = problems.iter().find(|(bad, _)| *bad) {
+        return Err(ModelError::InvalidSettings((*reason).to_owned()));
     }
+    for target in FaultTarget::ALL {
+        let faults = f.get(target);
+        let section = target.section();
+        if let Some(kind) = faults
+            .kinds
+            .iter()
+            .find(|&&kind| bad_f64(faults.range(kind)))
+        {
+            return Err(ModelError::InvalidSettings(format!(
+                "faults.{section}: bad {} range",
+                kind.name()
+            )));
+        }
+        if bad_u32(faults.start) || bad_duration(faults.duration) {
+            return Err(ModelError::InvalidSettings(format!(
+                "faults.{section}: bad start or duration"
+            )));
+        }
+    }
+    Ok(())
 }
 
 fn inverted<T: PartialOrd>(i: Interval<T>) -> bool {

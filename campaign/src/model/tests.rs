@@ -3,7 +3,7 @@
 use std::collections::HashMap;
 
 use proptest::prelude::*;
-use scenarios::Scenario;
+use scenarios::{FaultTarget, Scenario};
 use trajgen::{Point, check_route};
 
 use super::*;
@@ -148,18 +148,18 @@ fn fault_parameters_stay_in_the_scenario_ranges() {
             let ok = match fault.probe {
                 Probe::UwbRange(anchor) => {
                     s.anchors.iter().any(|a| u16::from(a.id) == anchor)
-                        && within(f.anchor_range.param, fault.param)
+                        && within(f.anchor_range.range(fault.kind), fault.param)
                         && within_u(f.anchor_range.start, fault.start)
                         && within_u(f.anchor_range.duration, fault.duration)
                 }
                 Probe::UwbTravelDist => {
                     fault.kind == FaultKind::Amplification
-                        && within(f.wheel_slip.amplification, fault.param)
+                        && within(f.wheel_slip.range(FaultKind::Amplification), fault.param)
                         && within_u(f.wheel_slip.duration, fault.duration)
                 }
                 Probe::UwbYaw => {
                     fault.kind == FaultKind::Offset
-                        && within(f.yaw.offset_deg, fault.param)
+                        && within(f.yaw.range(FaultKind::Offset), fault.param)
                         && within_u(f.yaw.duration, fault.duration)
                 }
                 Probe::Px => false,
@@ -347,12 +347,7 @@ proptest! {
 /// The parking lot with every fault kind of the firmware enabled on every probe.
 fn all_kinds() -> Scenario {
     let mut s = parking_lot();
-    let all = vec![
-        FaultKind::Offset,
-        FaultKind::Amplification,
-        FaultKind::SetTo,
-        FaultKind::Bitflip,
-    ];
+    let all: Vec<FaultKind> = FaultKind::drawable().collect();
     s.campaign.faults.anchor_range.kinds = all.clone();
     s.campaign.faults.wheel_slip.kinds = all.clone();
     s.campaign.faults.yaw.kinds = all;
@@ -369,43 +364,20 @@ fn every_fault_kind_is_generated_within_its_range_when_the_scenario_asks() {
             *seen
                 .entry((fault.probe.to_string(), fault.kind))
                 .or_insert(0) += 1;
-            let (range, bits) = match (fault.probe, fault.kind) {
-                (Probe::UwbRange(_), FaultKind::Offset | FaultKind::Amplification) => {
-                    (Some(f.anchor_range.param), None)
-                }
-                (Probe::UwbRange(_), FaultKind::SetTo) => (Some(f.anchor_range.set_to_m), None),
-                (Probe::UwbRange(_), FaultKind::Bitflip) => {
-                    (None, Some(f.anchor_range.bitflip_bits))
-                }
-                (Probe::UwbTravelDist, FaultKind::Offset) => (Some(f.wheel_slip.offset_m), None),
-                (Probe::UwbTravelDist, FaultKind::Amplification) => {
-                    (Some(f.wheel_slip.amplification), None)
-                }
-                (Probe::UwbTravelDist, FaultKind::SetTo) => (Some(f.wheel_slip.set_to_m), None),
-                (Probe::UwbTravelDist, FaultKind::Bitflip) => {
-                    (None, Some(f.wheel_slip.bitflip_bits))
-                }
-                (Probe::UwbYaw, FaultKind::Offset) => (Some(f.yaw.offset_deg), None),
-                (Probe::UwbYaw, FaultKind::Amplification) => (Some(f.yaw.amplification), None),
-                (Probe::UwbYaw, FaultKind::SetTo) => (Some(f.yaw.set_to_deg), None),
-                (Probe::UwbYaw, FaultKind::Bitflip) => (None, Some(f.yaw.bitflip_bits)),
-                other => panic!("not generated: {other:?}"),
+            let target = match fault.probe {
+                Probe::UwbRange(_) => FaultTarget::AnchorRange,
+                Probe::UwbTravelDist => FaultTarget::WheelSlip,
+                Probe::UwbYaw => FaultTarget::Yaw,
+                Probe::Px => panic!("not generated: {fault:?}"),
             };
-            if let Some(r) = range {
-                assert!(r.min <= fault.param && fault.param <= r.max, "{fault:?}");
-            }
-            if let Some(b) = bits {
+            let r = f.get(target).range(fault.kind);
+            assert!(r.min <= fault.param && fault.param <= r.max, "{fault:?}");
+            if fault.kind == FaultKind::Bitflip {
                 assert_eq!(fault.param.fract(), 0.0, "{fault:?}");
-                assert!(f64::from(b.min) <= fault.param && fault.param <= f64::from(b.max));
             }
         }
     }
-    for kind in [
-        FaultKind::Offset,
-        FaultKind::Amplification,
-        FaultKind::SetTo,
-        FaultKind::Bitflip,
-    ] {
+    for kind in FaultKind::drawable() {
         for probe in ["uwb_travel_dist", "uwb_yaw"] {
             assert!(
                 seen.contains_key(&(probe.to_owned(), kind)),

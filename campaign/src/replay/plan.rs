@@ -3,10 +3,10 @@
 use scenarios::Scenario;
 use trajgen::{Generator, Point};
 
-use car_link::firmware::{FAULT_PROBES, FAULTS_PER_PROBE};
+use car_link::firmware::{FAULT_PROBES, FAULTS_PER_PROBE, Param};
 
 use crate::case::{Case, CaseError, CommandRecord, RoutePointRecord, invalid};
-use crate::model::{FaultKind, Probe, TestPlan, start_tail};
+use crate::model::{Probe, TestPlan, start_tail};
 
 /// How far past a segment's computed length a written place may lie (rounding).
 const PLACE_TOLERANCE_M: f64 = 1e-3;
@@ -104,7 +104,7 @@ impl Case {
                     ),
                 ));
             }
-            if kind == FaultKind::Bitflip
+            if kind.spec().param == Param::Bit
                 && !(param.fract() == 0.0 && (0.0..=31.0).contains(&param))
             {
                 return Err(invalid(
@@ -193,6 +193,7 @@ mod tests {
 
     use super::*;
     use crate::case::tests::{doc_examples, scenario};
+    use crate::model::FaultKind;
 
     #[test]
     fn a_hand_written_case_gets_a_proven_ahead_margin_for_every_segment() {

@@ -177,15 +177,13 @@ fn short(value: f64) -> String {
     text.to_owned()
 }
 
-/// The value a fault's field shrinks toward, if it has one (set_to and bitflip parameters have
-/// no neutral value).
+/// The value a fault's field shrinks toward, if it has one (a parameter: its kind's neutral one,
+/// from the fault table; set_to and bitflip have none).
 pub(super) fn neutral(kind: FaultKind, field: FaultField) -> Option<f64> {
     match (field, kind) {
         (FaultField::Start, _) => Some(0.0),
         (FaultField::Duration, _) => Some(1.0),
-        (FaultField::Param, FaultKind::Offset) => Some(0.0),
-        (FaultField::Param, FaultKind::Amplification) => Some(1.0),
-        (FaultField::Param, _) => None,
+        (FaultField::Param, kind) => kind.spec().neutral,
     }
 }
 

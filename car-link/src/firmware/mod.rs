@@ -1,7 +1,7 @@
 //! The model of the reference firmware: every fact about the car that drivecheck relies on, in one
 //! place. Its limits, rates and watchdog (the constants below), its versions and what each is like
-//! ([`FirmwareVersion`], [`Generation`], [`FirmwareProfile`]), and the laws its autopilot steers by
-//! ([`steering`]). `docs/firmware.md#where-the-code-keeps-these-facts` says where each is explained.
+//! ([`FirmwareVersion`], [`Generation`], [`FirmwareProfile`]), the laws its autopilot steers by
+//! ([`steering`]) and its fault kinds ([`fault_kinds`], one row each in [`KINDS`]). `docs/firmware.md#where-the-code-keeps-these-facts` says where each is explained.
 //!
 //! The wire protocol (`crate::message`, `crate::version`, `crate::config`), the client, the
 //! simulated car (`car-sim`), the campaign's fault placement and the runner's preflight and reset
@@ -13,9 +13,11 @@ use std::time::Duration;
 
 use crate::fault::Probe;
 
+pub mod fault_kinds;
 mod profile;
 pub mod steering;
 
+pub use fault_kinds::{Defaults, KINDS, KindSpec, Param, Quantity};
 pub use profile::{AnchorAdd, LookAheadLaw, RouteEnd, UwbEstimator, UwbReset, WatchdogBrake};
 pub use profile::{FirmwareProfile, FirmwareVersion, Generation, UnknownVersion};
 

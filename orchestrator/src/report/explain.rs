@@ -461,7 +461,6 @@ fn command_of_slot(case: &Case, probe: &str, slot: usize) -> Option<usize> {
 /// change is replayed from the value before. Equal shares when the changes cannot be told (the
 /// value before is not finite, or no slot changed it).
 fn slot_shares(case: &Case, applied: &crate::recording::SimFault) -> Vec<(usize, f64)> {
-    use car_sim::fault::FaultEffect;
     let mut value = applied.before as f32;
     let mut changes: Vec<(usize, f64)> = Vec::new();
     for slot in (0..8).filter(|slot| applied.slots & (1 << slot) != 0) {
@@ -470,7 +469,9 @@ fn slot_shares(case: &Case, applied: &crate::recording::SimFault) -> Vec<(usize,
         };
         let change = match case.commands.get(command) {
             Some(CommandRecord::AddFault { kind, param, .. }) => {
-                let next = kind.apply(value, *param as f32);
+                // The record keeps no slot's start, so a kind whose effect grows with the calls
+                // since it started is replayed as at its first call.
+                let next = kind.apply(value, *param as f32, 0);
                 let change = f64::from((next - value).abs());
                 value = next;
                 change
