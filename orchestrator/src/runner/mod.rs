@@ -25,9 +25,10 @@
 //!    routes, the fault commands, the oracle results, the safety stops, each test's start and
 //!    end, and with the embedded simulator its truth and debug events.
 //!
-//! Progress reaches the caller through a [`CampaignObserver`], and the simulator's debug view
-//! reaches the journal through a [`SimulatorView`] (`events`): the runner knows neither the
-//! terminal nor the simulator.
+//! The car is any [`Vehicle`] (the runner is generic over it), progress reaches the caller
+//! through a [`CampaignObserver`], and the simulator's debug view reaches the journal through a
+//! [`SimulatorView`] (`events`): the runner knows neither the car's protocol nor the terminal nor
+//! the simulator.
 //!
 //! Invariants: a lost link is never a pass (the test is `aborted` with reason `link lost` and the
 //! campaign ends as an error); every random choice derives from the campaign seed; in virtual
