@@ -1,8 +1,9 @@
 //! The drivecheck orchestrator: the command line and what it drives.
 //!
 //! It runs campaigns against a car ([`runner`]: preflight, reset with a return route, the test
-//! drive's loop, the run directory of case files) and writes a [`recording`]; it also validates
-//! test areas, generates routes and reads scenarios. The `drivecheck` binary in `src/main.rs` only
+//! drive's loop, the run directory of case files), driven through the seam [`vehicle::Vehicle`],
+//! and writes a [`recording`]; it also validates test areas, generates routes and reads
+//! scenarios. The `drivecheck` binary in `src/main.rs` only
 //! parses the command line and calls [`commands::run`].
 //!
 //! Not here: what a campaign decides (the pure core [`campaign`]: the test model and planner, the
@@ -21,3 +22,4 @@ pub mod runner;
 mod scenario_arg;
 mod seed;
 mod svg;
+pub mod vehicle;

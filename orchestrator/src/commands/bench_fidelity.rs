@@ -23,10 +23,11 @@ use car_link::fault::{FaultKind, Probe};
 use scenarios::Scenario;
 use tokio_util::sync::CancellationToken;
 
-use super::shared::{EmbeddedSims, Scratch, runtime};
+use super::shared::{Scratch, runtime};
 use crate::cli::BenchFidelityArgs;
 use crate::exit::Exit;
 use crate::runner::{RecordMode, ReplaySource, RunConfig, Silent, run_campaign_fresh};
+use crate::vehicle::EmbeddedSims;
 use campaign::case::{Case, ReplayOf};
 use campaign::model::{Campaign, Command, Fault, TestPlan, TestPlanner};
 use campaign::oracle::Verdict;

@@ -13,10 +13,11 @@ use car_link::firmware::FirmwareVersion;
 use car_sim::LinkImpairment;
 use tokio_util::sync::CancellationToken;
 
-use super::shared::{EmbeddedSims, Scratch, runtime};
+use super::shared::{Scratch, runtime};
 use crate::cli::BenchPlacementArgs;
 use crate::exit::Exit;
 use crate::runner::{RecordMode, RunConfig, Silent, run_campaign_fresh};
+use crate::vehicle::EmbeddedSims;
 use campaign::model::Campaign;
 use campaign::oracle::FailurePolicy;
 use campaign::seed::Purpose;

@@ -12,13 +12,13 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use car_link::{Car, CarAddress};
+use car_link::CarAddress;
+use car_sim::SimHandle;
 use scenarios::Scenario;
 use trajgen::{Generator, Strategy};
 
 use super::shared::{
-    CampaignFailed, Interrupt, check_hash, connect, metres, read_case, runtime, scenario_of,
-    sim_view,
+    CampaignFailed, Interrupt, check_hash, metres, read_case, runtime, scenario_of, sim_view,
 };
 use crate::cli::ReplayArgs;
 use crate::exit::Exit;
@@ -27,6 +27,7 @@ use crate::runner::{
     ReplaySource, RunConfig, Silent, TestSummary, rfc3339_now, run_campaign, run_dir_name,
 };
 use crate::seed::choose_seed;
+use crate::vehicle::{ConnectError, Vehicle, connect};
 use campaign::case::{CASE_SCHEMA_VERSION, CommandRecord};
 use campaign::case::{Case, ReplayOf, ScenarioRef};
 use campaign::drive::EARLIER_TOOL_POINTS_LEFT;
@@ -171,7 +172,7 @@ impl Job<'_> {
     async fn run_all(&self) -> (Vec<(ReplayRun, Option<Case>)>, Option<anyhow::Error>) {
         let interrupt = Interrupt::listen();
         // A real car is connected once; the simulated one is fresh for every run.
-        let mut shared: Option<Car> = None;
+        let mut shared = None;
         let mut runs = Vec::new();
         for k in 0..self.args.times {
             let seed = if self.args.vary_seed {
@@ -180,7 +181,11 @@ impl Job<'_> {
                 self.seed
             };
             let dir = format!("run-{}", k + 1);
-            let (case, result) = self.run_one(&mut shared, seed, &dir, &interrupt).await;
+            let connecting = connect(self.address, self.scenario, seed);
+            let (case, result) = match car_for_run(&mut shared, connecting).await {
+                Ok((car, sim)) => self.run_one(&car, sim, seed, &dir, &interrupt).await,
+                Err(error) => (None, Err(error.into())),
+            };
             let run = ReplayRun {
                 dir,
                 seed,
@@ -205,10 +210,12 @@ impl Job<'_> {
         (runs, None)
     }
 
-    /// Drives run `dir` with `seed`: the case it wrote (if it got that far), and how it ended.
-    async fn run_one(
+    /// Drives run `dir` with `seed` on `car` (`sim` its simulator, shut down after the run): the
+    /// case it wrote (if it got that far), and how it ended.
+    async fn run_one<V: Vehicle>(
         &self,
-        shared: &mut Option<Car>,
+        car: &V,
+        sim: Option<SimHandle>,
         seed: u64,
         dir: &str,
         interrupt: &Interrupt,
@@ -229,21 +236,9 @@ impl Job<'_> {
         if let Some(policy) = self.policy {
             config.policy = policy;
         }
-        let (car, sim) = match shared {
-            Some(car) => (car.clone(), None),
-            None => match connect(self.address, self.scenario, seed).await {
-                Ok((car, sim)) => {
-                    if sim.is_none() {
-                        *shared = Some(car.clone());
-                    }
-                    (car, sim)
-                }
-                Err(error) => return (None, Err(error)),
-            },
-        };
-        let _brake = interrupt.brake_on_second(&car);
+        let _brake = interrupt.brake_on_second(car);
         let result = run_campaign(
-            &car,
+            car,
             self.scenario,
             &config,
             interrupt.token(),
@@ -265,6 +260,23 @@ impl Job<'_> {
             ),
         }
     }
+}
+
+/// The car of the next run: the real car connected before, if any, or the one `connecting`
+/// gives (awaited only then); a real car is kept in `slot` for the runs after it, a simulated
+/// one is fresh for every run.
+async fn car_for_run<V: Vehicle>(
+    slot: &mut Option<V>,
+    connecting: impl Future<Output = Result<(V, Option<SimHandle>), ConnectError>>,
+) -> Result<(V, Option<SimHandle>), ConnectError> {
+    if let Some(car) = slot {
+        return Ok((car.clone(), None));
+    }
+    let (car, sim) = connecting.await?;
+    if sim.is_none() {
+        *slot = Some(car.clone());
+    }
+    Ok((car, sim))
 }
 
 /// The worst deviation of a run, for messages.

@@ -8,9 +8,7 @@ use car_link::CarAddress;
 use car_link::firmware::{MAX_STALE_LIMIT, WATCHDOG};
 use scenarios::Scenario;
 
-use super::shared::{
-    CampaignFailed, EmbeddedSims, Interrupt, Progress, connect, print_report, runtime, sim_view,
-};
+use super::shared::{CampaignFailed, Interrupt, Progress, print_report, runtime, sim_view};
 use super::{explain, shrink};
 use crate::cli::{OnFailure, RecordArg, RunArgs};
 use crate::exit::Exit;
@@ -23,6 +21,7 @@ use crate::runner::{
 };
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::choose_seed;
+use crate::vehicle::{EmbeddedSims, connect};
 use campaign::case::Case;
 use campaign::model::Campaign;
 use campaign::oracle::FailurePolicy;

@@ -1,27 +1,28 @@
 //! What the commands that drive a car (`run`, `replay`) share, and what `runs` shows the same
-//! way: the async runtime, the connection to the car (or the embedded simulator, whose debug view
-//! the runner records), Ctrl-C, the progress bar, a failed campaign as an error, and the table of
-//! a campaign's tests.
+//! way: the async runtime, the embedded simulator's debug view the runner records, Ctrl-C, the
+//! progress bar, a failed campaign as an error, and the table of a campaign's tests. The
+//! connection itself is made in [`crate::vehicle`]; the commands see only the
+//! [`Vehicle`](crate::vehicle::Vehicle) it returns.
 
+use std::future::Future;
 use std::path::{Path, PathBuf};
+use std::pin::Pin;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use anyhow::{Context, Result};
-use car_link::{Car, CarAddress, LinkConfig};
 use car_sim::{DebugEvent, SimHandle, Truth};
 use indicatif::{ProgressBar, ProgressStyle};
 use scenarios::Scenario;
 use tokio_util::sync::CancellationToken;
 
-use crate::runner::{
-    CampaignObserver, CampaignReport, Connecting, FreshCars, RunError, SimulatorView, StartPose,
-};
+use crate::runner::{CampaignObserver, CampaignReport, RunError, SimulatorView};
 use crate::scenario_arg::{load_scenario, print_warnings};
+use crate::vehicle::Vehicle;
 use anyhow::bail;
 use campaign::case::Case;
 use campaign::oracle::Verdict;
-use campaign::seed::Purpose;
+use car_link::CarError;
 
 /// The async runtime: on one thread with a paused clock (virtual time, the embedded simulated
 /// car) or on two threads against the wall clock.
@@ -38,104 +39,6 @@ pub(super) fn runtime(virtual_time: bool) -> Result<tokio::runtime::Runtime> {
             .build()
     };
     runtime.context("cannot start the async runtime")
-}
-
-/// How the runner talks to any car: round trips on a radio link can exceed the 250 ms default,
-/// and a lossy one (30 % each way) loses about half the round trips, so an acked request gets 10
-/// tries (all lost together about once in a thousand).
-pub(super) fn car_config() -> LinkConfig {
-    LinkConfig {
-        request_timeout: Duration::from_secs(1),
-        terminal_timeout: Duration::from_secs(2),
-        tries: 10,
-        ..LinkConfig::default()
-    }
-}
-
-/// The car at `address`; for `sim` a fresh embedded simulated car seeded with `seed`, with its
-/// handle.
-pub(super) async fn connect(
-    address: &CarAddress,
-    scenario: &Scenario,
-    seed: u64,
-) -> Result<(Car, Option<SimHandle>)> {
-    if *address != CarAddress::Sim {
-        let car = Car::connect(address, car_config())
-            .await
-            .with_context(|| format!("cannot connect to the car at {address}"))?;
-        return Ok((car, None));
-    }
-    let (car, sim) = connect_sim(&recorded_sim(scenario, seed)).await?;
-    Ok((car, Some(sim)))
-}
-
-/// The embedded simulator of `scenario` seeded with `seed`, its debug events on: they are recorded
-/// on the `/sim/…` channels of the campaign's MCAP (ranges, fault applications, watchdog).
-fn recorded_sim(scenario: &Scenario, seed: u64) -> car_sim::SimConfig {
-    car_sim::SimConfig {
-        seed,
-        record_events: true,
-        ..car_sim::SimConfig::from_scenario(scenario)
-    }
-}
-
-/// A fresh embedded simulated car with `config`, with its handle.
-pub(super) async fn connect_sim(config: &car_sim::SimConfig) -> Result<(Car, SimHandle)> {
-    let (stream, sim) = car_sim::spawn_in_process(config);
-    let car = Car::over_stream(stream, car_config())
-        .await
-        .context("cannot connect to the embedded simulated car")?;
-    Ok((car, sim))
-}
-
-/// The simulated cars of a campaign with a fresh car per test (`run` on the embedded simulator):
-/// test *i*'s car is seeded from the campaign's seed and *i*, and stands where the runner says.
-pub(super) struct EmbeddedSims {
-    /// The simulator of the scenario, with the campaign's seed.
-    config: car_sim::SimConfig,
-    /// Virtual time (the default) or the wall clock (`--realtime`, `--live`).
-    virtual_time: bool,
-}
-
-impl EmbeddedSims {
-    /// The cars of a campaign with `seed` in `scenario`.
-    pub(super) fn new(scenario: &Scenario, seed: u64, virtual_time: bool) -> Self {
-        Self::with_config(recorded_sim(scenario, seed), virtual_time)
-    }
-
-    /// The cars of a campaign on simulators configured as `config` (its seed the campaign's).
-    pub(super) fn with_config(config: car_sim::SimConfig, virtual_time: bool) -> Self {
-        Self {
-            config,
-            virtual_time,
-        }
-    }
-}
-
-impl FreshCars for EmbeddedSims {
-    fn virtual_time(&self) -> bool {
-        self.virtual_time
-    }
-
-    fn connect(&self, test_index: usize, start: Option<StartPose>) -> Connecting<'_> {
-        let mut config = car_sim::SimConfig {
-            seed: campaign::seed::derive(self.config.seed, Purpose::Simulator { test_index }),
-            ..self.config.clone()
-        };
-        if let Some(start) = start {
-            config.placement = Some(car_sim::Placement {
-                x: start.position.x,
-                y: start.position.y,
-                heading: start.heading,
-            });
-        }
-        Box::pin(async move {
-            let (car, sim) = connect_sim(&config).await.map_err(|error| {
-                RunError::Preflight(format!("the simulated car of test {test_index}: {error:#}"))
-            })?;
-            Ok((car, Box::new(sim) as Box<dyn SimulatorView>))
-        })
-    }
 }
 
 /// The embedded simulator's debug view, as the runner records it.
@@ -166,10 +69,25 @@ pub(super) fn cancel_on_ctrl_c() -> CancellationToken {
 
 /// The interrupt path of a command that drives (see [`cancel_on_ctrl_c`]): the token the first
 /// signal cancels, and the car the second signal brakes.
-#[derive(Debug, Clone)]
+#[derive(Clone)]
 pub(super) struct Interrupt {
     cancel: CancellationToken,
-    car: Arc<Mutex<Option<Car>>>,
+    car: Slot,
+}
+
+/// The registered car's brake: a clone of the car, braking with the current given.
+type Brake = Box<dyn Fn(f64) -> Pin<Box<dyn Future<Output = Result<(), CarError>> + Send>> + Send>;
+
+/// Where the car the second signal brakes is registered.
+type Slot = Arc<Mutex<Option<Brake>>>;
+
+impl std::fmt::Debug for Interrupt {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Interrupt")
+            .field("cancel", &self.cancel)
+            .field("registered", &lock(&self.car).is_some())
+            .finish()
+    }
 }
 
 /// The brake the second signal sends, as the runner's safe stop does.
@@ -211,8 +129,13 @@ impl Interrupt {
 
     /// Registers `car` as the one the second signal brakes, until the returned guard is dropped
     /// (a registered car keeps its link, and so its keepalive, alive).
-    pub(super) fn brake_on_second(&self, car: &Car) -> BrakeOnSecond {
-        *lock(&self.car) = Some(car.clone());
+    pub(super) fn brake_on_second<V: Vehicle>(&self, car: &V) -> BrakeOnSecond {
+        let car = car.clone();
+        let brake: Brake = Box::new(move |current_a| {
+            let car = car.clone();
+            Box::pin(async move { car.brake(current_a).await })
+        });
+        *lock(&self.car) = Some(brake);
         BrakeOnSecond {
             car: Arc::clone(&self.car),
         }
@@ -220,10 +143,13 @@ impl Interrupt {
 
     /// Brakes the registered car, if any, and gives the link a moment to send the command.
     async fn brake_now(&self) {
-        let Some(car) = lock(&self.car).clone() else {
+        let Some(braking) = lock(&self.car)
+            .as_ref()
+            .map(|brake| brake(SECOND_SIGNAL_BRAKE_A))
+        else {
             return;
         };
-        match tokio::time::timeout(BRAKE_SEND_LIMIT, car.brake(SECOND_SIGNAL_BRAKE_A)).await {
+        match tokio::time::timeout(BRAKE_SEND_LIMIT, braking).await {
             Ok(Ok(())) => tokio::time::sleep(BRAKE_FLUSH).await,
             Ok(Err(error)) => eprintln!("cannot brake: {error}"),
             Err(_) => eprintln!("cannot brake: the link's send queue stayed full"),
@@ -233,9 +159,14 @@ impl Interrupt {
 
 /// While it lives, the second signal brakes the car registered with
 /// [`Interrupt::brake_on_second`].
-#[derive(Debug)]
 pub(super) struct BrakeOnSecond {
-    car: Arc<Mutex<Option<Car>>>,
+    car: Slot,
+}
+
+impl std::fmt::Debug for BrakeOnSecond {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BrakeOnSecond").finish_non_exhaustive()
+    }
 }
 
 impl Drop for BrakeOnSecond {
@@ -245,7 +176,7 @@ impl Drop for BrakeOnSecond {
 }
 
 /// The slot's car, whether or not a thread panicked while holding it.
-fn lock(slot: &Mutex<Option<Car>>) -> std::sync::MutexGuard<'_, Option<Car>> {
+fn lock(slot: &Mutex<Option<Brake>>) -> std::sync::MutexGuard<'_, Option<Brake>> {
     slot.lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
@@ -515,11 +446,13 @@ impl Drop for Scratch {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use car_link::message::{RcControl, RcMode};
+    use crate::vehicle::connect_sim;
+    use car_link::RoutePoint;
 
-    /// Drives the embedded simulated car at 1.5 m/s (the speed controller) for 3 s, then, when
-    /// `brake`, registers it with an interrupt and brakes as the second signal does; the car's
-    /// speed 0.5 s later.
+    /// Drives the embedded simulated car on its autopilot at 1.5 m/s for 3 s (a straight route
+    /// onward from where it stands, along the scenario's start route), then, when `brake`,
+    /// registers it with an interrupt and brakes as the second signal does; the car's speed 0.5 s
+    /// later.
     async fn speed_after(brake: bool) -> f64 {
         let scenario = scenarios::bundled::load("parking-lot-2anchors")
             .expect("bundled")
@@ -527,15 +460,20 @@ mod tests {
         let (car, sim) = connect_sim(&car_sim::SimConfig::from_scenario(&scenario))
             .await
             .expect("the simulated car");
-        let drive = RcControl {
-            mode: RcMode::Pid,
-            throttle: 1.5,
-            steering: 0.0,
-        };
-        for _ in 0..30 {
-            car.rc_control(drive).await.expect("sent");
-            tokio::time::sleep(Duration::from_millis(100)).await;
-        }
+        let start = scenario.start_route.positions();
+        let (from, to) = (start[0], start[1]);
+        let (dx, dy) = (to.x - from.x, to.y - from.y);
+        let step = 2.0 / dx.hypot(dy);
+        let route: Vec<RoutePoint> = (1..=15)
+            .map(|k| {
+                let k = f64::from(k) * step;
+                RoutePoint::at(from.x + k * dx, from.y + k * dy, 1.5)
+            })
+            .collect();
+        car.clear_route().await.expect("cleared");
+        car.add_points(&route).await.expect("uploaded");
+        car.set_autopilot(true, false).await.expect("started");
+        tokio::time::sleep(Duration::from_secs(3)).await;
         assert!(sim.truth().speed > 1.0, "the car drives: {:?}", sim.truth());
         let interrupt = Interrupt {
             cancel: CancellationToken::new(),

@@ -10,8 +10,9 @@ use scenarios::Scenario;
 use tokio_util::sync::CancellationToken;
 use trajgen::{Generator, Point, Strategy};
 
-use super::shared::{CampaignFailed, connect_sim, sim_view};
+use super::shared::{CampaignFailed, sim_view};
 use crate::runner::{ReplaySource, RunConfig, Silent, run_campaign};
+use crate::vehicle::connect_sim;
 use campaign::case::{Case, ReplayOf};
 use campaign::model::{Campaign, TestPlan};
 use campaign::oracle::FailurePolicy;

@@ -18,7 +18,7 @@ use std::pin::Pin;
 use std::time::Duration;
 
 use car_link::fault::FaultError;
-use car_link::{Car, CarError, StateSample};
+use car_link::{CarError, StateSample};
 use tokio::time::{Instant, MissedTickBehavior};
 use trajgen::Point;
 
@@ -26,6 +26,7 @@ use super::reset::car_stop;
 use super::telemetry::{Sample, Telemetry};
 use super::{BRAKE_CURRENT_A, Context, RunError, Stopped};
 use crate::recording::{CarCommand, FaultRecord, SafetyRecord};
+use crate::vehicle::Vehicle;
 use campaign::drive::{
     Action, DriveOutcome, Event, LinkStatus, Operation, Reply, TestDrive, start_route,
 };
@@ -39,8 +40,8 @@ use campaign::streaming::{Waypoint, route_points};
 /// Timeout: none of its own beyond the safety monitor's staleness limit, the link's timeouts
 /// and [`campaign::drive::BRAKE_TIMEOUT`]; the drive ends when the plan is done or the test is
 /// stopped. Cancellation: the context's token performs the safe stop and records `interrupted`.
-pub(crate) async fn drive(
-    ctx: &Context<'_>,
+pub(crate) async fn drive<V: Vehicle>(
+    ctx: &Context<'_, V>,
     telemetry: &mut Telemetry,
     plan: &TestPlan,
     standing: Point,
@@ -68,8 +69,8 @@ pub(crate) async fn drive(
     (machine.finish(t0.elapsed()), error)
 }
 
-async fn upload_start(
-    ctx: &Context<'_>,
+async fn upload_start<V: Vehicle>(
+    ctx: &Context<'_, V>,
     route: &[Waypoint],
     test_index: usize,
 ) -> Result<(), Stopped> {
@@ -123,8 +124,8 @@ enum Woke {
 }
 
 /// The loop (see the module doc), until the machine is done.
-async fn run(
-    ctx: &Context<'_>,
+async fn run<V: Vehicle>(
+    ctx: &Context<'_, V>,
     telemetry: &mut Telemetry,
     machine: &mut TestDrive<'_>,
     test_index: usize,
@@ -223,8 +224,8 @@ struct InFlightOps<'o> {
 }
 
 /// Carries out `actions` in order (and those of a lost link the brake command finds).
-async fn carry_out(
-    ctx: &Context<'_>,
+async fn carry_out<V: Vehicle>(
+    ctx: &Context<'_, V>,
     machine: &mut TestDrive<'_>,
     in_flight: InFlightOps<'_>,
     actions: Vec<Action>,
@@ -278,7 +279,7 @@ fn drive_sample(sample: &StateSample) -> campaign::drive::Sample {
 }
 
 /// Records and starts `operation` on the car.
-fn start(ctx: &Context<'_>, test_index: usize, operation: Operation) -> InFlight {
+fn start<V: Vehicle>(ctx: &Context<'_, V>, test_index: usize, operation: Operation) -> InFlight {
     let car = ctx.car.clone();
     match operation {
         Operation::AddFault {
@@ -306,8 +307,8 @@ fn start(ctx: &Context<'_>, test_index: usize, operation: Operation) -> InFlight
 }
 
 /// Records the answer to an operation.
-fn record_answer<E: std::fmt::Display>(
-    ctx: &Context<'_>,
+fn record_answer<V, E: std::fmt::Display>(
+    ctx: &Context<'_, V>,
     test_index: usize,
     recorded: Recorded,
     result: &Result<bool, E>,
@@ -363,8 +364,8 @@ const FAULT_LIST_READS: usize = 8;
 /// Each block that arrives is a fault the car holds; at 30 % loss a given one shows in a read
 /// about half the time, so eight reads all miss it about once in 200. `Ok(false)` after eight
 /// reads without it; an error when no read got any answer.
-async fn holds_more_than(
-    car: &Car,
+async fn holds_more_than<V: Vehicle>(
+    car: &V,
     probe: &car_link::Probe,
     before: usize,
 ) -> Result<bool, CarError> {
@@ -410,9 +411,9 @@ fn same_fault(a: &car_link::fault::ListedFault, b: &car_link::fault::ListedFault
 /// neither aborts the test nor adds the fault twice. `Ok(true)`: added, found in the car's list
 /// after a lost reply.
 ///
-/// Timeout: each try as `Car::add_fault` and `Car::list_faults`. Cancellation: safe between
+/// Timeout: each try as [`Vehicle::add_fault`] and [`Vehicle::list_faults_part`]. Cancellation: safe between
 /// tries; a fault command cancelled in flight may or may not have taken effect.
-async fn add_fault_once(car: &Car, fault: Fault, before: usize) -> OpResult {
+async fn add_fault_once<V: Vehicle>(car: &V, fault: Fault, before: usize) -> OpResult {
     let (probe, kind) = (fault.probe, fault.kind);
     let mut tries = 1;
     loop {

@@ -12,8 +12,8 @@
 //! *k − 1*'s, log time shifted to start 1 ms after the last message before them, and a
 //! `drivecheck.test.<k>` metadata record gives their span (`drivecheck runs merge` reads it).
 //!
-//! Not here: how a simulated car is made (`FreshCars`, implemented by the command line with
-//! `car-sim`).
+//! Not here: how a simulated car is made (`FreshCars`, implemented with `car-sim` by
+//! `crate::vehicle::EmbeddedSims`).
 
 use std::collections::BTreeMap;
 use std::future::Future;
@@ -21,7 +21,6 @@ use std::pin::Pin;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::mpsc;
 
-use car_link::Car;
 use scenarios::Scenario;
 use tokio_util::sync::CancellationToken;
 use trajgen::Point;
@@ -34,6 +33,7 @@ use super::{
     record_test_end, reset, start_join_note, switched_off_note,
 };
 use crate::recording::{DEFAULT_CHUNK_INTERVAL, Held, Recorder, RecordingStart};
+use crate::vehicle::Vehicle;
 use campaign::case::{Case, Settings};
 use campaign::model::TestPlan;
 use campaign::oracle::Verdict;
@@ -49,19 +49,24 @@ pub struct StartPose {
 }
 
 /// A connected car and its simulator's debug view.
-pub type FreshCar = (Car, Box<dyn SimulatorView>);
+pub type FreshCar<V> = (V, Box<dyn SimulatorView>);
 
 /// What [`FreshCars::connect`] returns.
-pub type Connecting<'a> = Pin<Box<dyn Future<Output = Result<FreshCar, RunError>> + 'a>>;
+pub type Connecting<'a, V> = Pin<Box<dyn Future<Output = Result<FreshCar<V>, RunError>> + 'a>>;
 
-/// Makes the simulated car of each test (the command line implements it with `car-sim`).
+/// Makes the simulated car of each test (`crate::vehicle::EmbeddedSims` makes them with
+/// `car-sim`).
 pub trait FreshCars: Sync {
+    /// The cars it makes.
+    type Vehicle: Vehicle;
+
     /// Whether the cars run in virtual time: each test's runtime then has a paused clock.
     fn virtual_time(&self) -> bool;
 
     /// A fresh simulated car for test `test_index`, standing at `start` (`None`: at the start
     /// of the scenario's start route), connected. Called inside the test's runtime.
-    fn connect(&self, test_index: usize, start: Option<StartPose>) -> Connecting<'_>;
+    fn connect(&self, test_index: usize, start: Option<StartPose>)
+    -> Connecting<'_, Self::Vehicle>;
 }
 
 /// Where the car stands when test `test_index` begins: where the plan of the test before it ends
@@ -110,8 +115,8 @@ struct Ran {
 }
 
 /// What the campaign shares with its workers.
-struct Shared<'a> {
-    cars: &'a dyn FreshCars,
+struct Shared<'a, C: ?Sized> {
+    cars: &'a C,
     scenario: &'a Scenario,
     config: &'a RunConfig,
     cancel: &'a CancellationToken,
@@ -133,8 +138,8 @@ struct Shared<'a> {
     clippy::result_large_err,
     reason = "the failure of run_campaign, returned once per campaign"
 )]
-pub fn run_campaign_fresh(
-    cars: &dyn FreshCars,
+pub fn run_campaign_fresh<C: FreshCars + ?Sized>(
+    cars: &C,
     scenario: &Scenario,
     config: &RunConfig,
     jobs: usize,
@@ -178,13 +183,13 @@ pub fn run_campaign_fresh(
     finish_campaign(dir, journal, result)
 }
 
-fn prepare<'a>(
+fn prepare<'a, C: FreshCars + ?Sized>(
     scenario: &'a Scenario,
     config: &'a RunConfig,
-    cars: &'a dyn FreshCars,
+    cars: &'a C,
     cancel: &'a CancellationToken,
     settings: Settings,
-) -> Result<Shared<'a>, RunError> {
+) -> Result<Shared<'a, C>, RunError> {
     Ok(Shared {
         cars,
         scenario,
@@ -197,8 +202,8 @@ fn prepare<'a>(
 }
 
 /// Runs the tests on `jobs` threads and writes what they give in test order.
-fn run_tests(
-    shared: &Shared<'_>,
+fn run_tests<C: FreshCars + ?Sized>(
+    shared: &Shared<'_, C>,
     jobs: usize,
     observer: &dyn CampaignObserver,
     dir: &mut RunDirectory,
@@ -304,8 +309,8 @@ impl InOrder {
 }
 
 /// Writes test `test_index`'s case file and recording, and reports it.
-fn write_test(
-    shared: &Shared<'_>,
+fn write_test<C: FreshCars + ?Sized>(
+    shared: &Shared<'_, C>,
     observer: &dyn CampaignObserver,
     dir: &mut RunDirectory,
     journal: &Journal<'_>,
@@ -345,7 +350,10 @@ fn write_test(
 }
 
 /// Runs test `test_index` on a fresh car, on a runtime of its own.
-fn run_one(shared: &Shared<'_>, test_index: usize) -> Result<Ran, RunError> {
+fn run_one<C: FreshCars + ?Sized>(
+    shared: &Shared<'_, C>,
+    test_index: usize,
+) -> Result<Ran, RunError> {
     // Time only: a fresh car is in process (no sockets), and without an I/O driver a runtime
     // parks without a system call, which in virtual time is most of its parking.
     let runtime = tokio::runtime::Builder::new_current_thread()
@@ -360,7 +368,10 @@ fn run_one(shared: &Shared<'_>, test_index: usize) -> Result<Ran, RunError> {
 }
 
 /// Test `test_index` on a fresh car: the car, preflight, reset and drive.
-async fn fresh_test(shared: &Shared<'_>, test_index: usize) -> Result<Ran, RunError> {
+async fn fresh_test<C: FreshCars + ?Sized>(
+    shared: &Shared<'_, C>,
+    test_index: usize,
+) -> Result<Ran, RunError> {
     let Shared {
         cars,
         scenario,

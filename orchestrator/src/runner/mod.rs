@@ -25,9 +25,10 @@
 //!    routes, the fault commands, the oracle results, the safety stops, each test's start and
 //!    end, and with the embedded simulator its truth and debug events.
 //!
-//! Progress reaches the caller through a [`CampaignObserver`], and the simulator's debug view
-//! reaches the journal through a [`SimulatorView`] (`events`): the runner knows neither the
-//! terminal nor the simulator.
+//! The car is any [`Vehicle`] (the runner is generic over it), progress reaches the caller
+//! through a [`CampaignObserver`], and the simulator's debug view reaches the journal through a
+//! [`SimulatorView`] (`events`): the runner knows neither the car's protocol nor the terminal nor
+//! the simulator.
 //!
 //! Invariants: a lost link is never a pass (the test is `aborted` with reason `link lost` and the
 //! campaign ends as an error); every random choice derives from the campaign seed; in virtual
@@ -51,7 +52,7 @@ mod telemetry;
 use std::path::PathBuf;
 use std::time::Duration;
 
-use car_link::{Car, CarError};
+use car_link::CarError;
 use scenarios::Scenario;
 use thiserror::Error;
 use tokio_util::sync::CancellationToken;
@@ -61,6 +62,7 @@ use crate::recording::{
     DEFAULT_CHUNK_INTERVAL, FaultRecord, OracleRecord, PlannedSegment, Recorder, RecordingError,
     RecordingStart, SafetyRecord, TestEvent, TestEventKind,
 };
+use crate::vehicle::Vehicle;
 use campaign::case::{
     Case, CaseError, CommandRecord, ReplayOf, RoutePointRecord, Settings, TestTiming,
 };
@@ -283,8 +285,8 @@ impl CampaignFailure {
 
 /// Everything a test needs that stays the same over the campaign.
 #[derive(Debug)]
-pub(crate) struct Context<'a> {
-    pub(crate) car: &'a Car,
+pub(crate) struct Context<'a, V> {
+    pub(crate) car: &'a V,
     pub(crate) scenario: &'a Scenario,
     pub(crate) config: &'a RunConfig,
     /// The safety limits in force: [`RunConfig::safety`] with the stale-telemetry limit preflight
@@ -301,7 +303,7 @@ pub(crate) struct Context<'a> {
     pub(crate) start_join: Vec<Point>,
 }
 
-impl Context<'_> {
+impl<V> Context<'_, V> {
     /// What the test drive's state machine needs of the campaign.
     pub(crate) fn drive_settings(&self) -> DriveSettings<'_> {
         DriveSettings {
@@ -337,8 +339,8 @@ impl Context<'_> {
 /// and ends the campaign with [`RunError::Interrupted`]. Dropping the future instead stops at
 /// once without a safe stop (the car's watchdog then brakes it within 2 s) and leaves
 /// `campaign.json` without an end.
-pub async fn run_campaign(
-    car: &Car,
+pub async fn run_campaign<V: Vehicle>(
+    car: &V,
     scenario: &Scenario,
     config: &RunConfig,
     cancel: &CancellationToken,
@@ -407,8 +409,8 @@ fn finish_campaign(
 }
 
 /// What [`run_campaign`] was given, with the journal it opened: what [`run_tests`] works with.
-struct Inputs<'a> {
-    car: &'a Car,
+struct Inputs<'a, V> {
+    car: &'a V,
     scenario: &'a Scenario,
     config: &'a RunConfig,
     cancel: &'a CancellationToken,
@@ -416,7 +418,10 @@ struct Inputs<'a> {
     journal: &'a Journal<'a>,
 }
 
-async fn run_tests(inputs: &Inputs<'_>, dir: &mut RunDirectory) -> Result<(), RunError> {
+async fn run_tests<V: Vehicle>(
+    inputs: &Inputs<'_, V>,
+    dir: &mut RunDirectory,
+) -> Result<(), RunError> {
     let Inputs {
         car,
         scenario,
@@ -478,14 +483,14 @@ fn start_join_note(start_join: &[Point]) -> String {
 
 /// A car ready for tests: preflight passed (which measured the link and prepared the car), the
 /// state samples flowing. Returns the test's context, the telemetry and what preflight found.
-async fn open_session<'a>(
-    car: &'a Car,
+async fn open_session<'a, V: Vehicle>(
+    car: &'a V,
     scenario: &'a Scenario,
     config: &'a RunConfig,
     cancel: &'a CancellationToken,
     journal: &'a Journal<'a>,
     start_join: Vec<Point>,
-) -> Result<(Context<'a>, Telemetry, Preflight), RunError> {
+) -> Result<(Context<'a, V>, Telemetry, Preflight), RunError> {
     let preflight = Preflight::run(car, scenario, config, journal).await?;
     let safety = SafetyConfig {
         stale_after: preflight.stale_after,
@@ -546,8 +551,8 @@ impl<'a> TestSource<'a> {
 }
 
 /// Plans test `test_index` and runs it (reset and drive); its case and how it ended.
-async fn plan_and_run(
-    ctx: &Context<'_>,
+async fn plan_and_run<V: Vehicle>(
+    ctx: &Context<'_, V>,
     telemetry: &mut Telemetry,
     tests: &TestSource<'_>,
     test_index: usize,
@@ -621,8 +626,8 @@ fn record_test_start(journal: &Journal<'_>, plan: &TestPlan) {
 }
 
 /// Resets the car, drives the test and records the outcome in `case`.
-async fn run_test(
-    ctx: &Context<'_>,
+async fn run_test<V: Vehicle>(
+    ctx: &Context<'_, V>,
     telemetry: &mut Telemetry,
     plan: &TestPlan,
     case: &mut Case,

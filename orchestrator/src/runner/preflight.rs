@@ -16,14 +16,15 @@
 
 use std::time::Duration;
 
+use car_link::CarError;
 use car_link::message::Anchor;
-use car_link::{Car, CarError};
 use scenarios::Scenario;
 use trajgen::Point;
 
 use super::journal::Journal;
 use super::{RunConfig, RunError, retried};
 use crate::recording::CarCommand;
+use crate::vehicle::Vehicle;
 use campaign::model::ProbeRates;
 use car_link::firmware::MAX_STALE_LIMIT;
 
@@ -61,8 +62,8 @@ impl Preflight {
     ///
     /// Timeout: each command as bounded by the car's link configuration. Cancellation: the car
     /// may be left partly prepared; run the preflight again.
-    pub(crate) async fn run(
-        car: &Car,
+    pub(crate) async fn run<V: Vehicle>(
+        car: &V,
         scenario: &Scenario,
         config: &RunConfig,
         journal: &Journal<'_>,
@@ -79,7 +80,7 @@ impl Preflight {
         let per_try = per_try_timeout(rtt_p50, rtt_p99).map_err(RunError::Preflight)?;
         tracing::debug!(?rtt_p50, ?rtt_p99, ?per_try, "round trip measured");
         car.set_request_timeout(per_try);
-        car.set_tries(tries_within(TRY_BUDGET, per_try).max(car.config().tries));
+        car.set_tries(tries_within(TRY_BUDGET, per_try).max(car.configured_tries()));
         let switched_off = prepare_configuration(car).await?;
         let anchors = anchors(scenario);
         retried(|| car.upload_anchors(&anchors))
@@ -155,7 +156,7 @@ pub(crate) fn stale_limit(
     configured.max(needed)
 }
 
-async fn prepare_configuration(car: &Car) -> Result<Vec<String>, RunError> {
+async fn prepare_configuration<V: Vehicle>(car: &V) -> Result<Vec<String>, RunError> {
     let changed = car.prepare_for_test_drive().await.map_err(|e| {
         RunError::Preflight(format!(
             "cannot switch off repeated routes (and time mode, UWB-reported position): {e}"
@@ -193,8 +194,8 @@ fn anchors(scenario: &Scenario) -> Vec<Anchor> {
         .collect()
 }
 
-async fn check_inside_fence(
-    car: &Car,
+async fn check_inside_fence<V: Vehicle>(
+    car: &V,
     scenario: &Scenario,
     journal: &Journal<'_>,
 ) -> Result<(), RunError> {
@@ -270,8 +271,8 @@ fn per_try_timeout(p50: Duration, p99: Duration) -> Result<Duration, String> {
 /// trip. A lossy link loses some probes: up to [`RTT_PROBE_TRIES`] × [`RTT_PROBES`] are sent to
 /// get [`RTT_PROBES`] answers; with fewer than half of them answered the link is refused with its
 /// measured loss.
-async fn measure_round_trip(
-    car: &Car,
+async fn measure_round_trip<V: Vehicle>(
+    car: &V,
     journal: &Journal<'_>,
 ) -> Result<(Duration, Duration), RunError> {
     car.set_keepalive(false);
@@ -281,8 +282,8 @@ async fn measure_round_trip(
 }
 
 /// The probes of [`measure_round_trip`], with the keepalive off.
-async fn probe_round_trips(
-    car: &Car,
+async fn probe_round_trips<V: Vehicle>(
+    car: &V,
     journal: &Journal<'_>,
 ) -> Result<(Duration, Duration), RunError> {
     if car.health().timeouts > 0 {

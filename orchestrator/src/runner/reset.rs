@@ -29,6 +29,7 @@ use super::{
     BRAKE_CURRENT_A, BRAKE_TIMEOUT, Context, RunError, STOPPED_SPEED_MPS, Stopped, retried,
 };
 use crate::recording::{CarCommand, PlannedReturnRoute, Pose as RecordedPose};
+use crate::vehicle::Vehicle;
 use campaign::safety::{Abort, AbortReason, CarSample, SafetyConfig, SafetyMonitor};
 use campaign::streaming::{Streamer, route_points};
 
@@ -70,8 +71,8 @@ pub(crate) enum BrakeEnd {
 /// Timeout: the drive is bounded by the route's length at its speeds plus 60 s, braking by
 /// [`BRAKE_TIMEOUT`]. Cancellation: the context's token brakes the car and returns an
 /// `Interrupted` abort; dropping the future leaves the car driving until its watchdog stops it.
-pub(crate) async fn reset(
-    ctx: &Context<'_>,
+pub(crate) async fn reset<V: Vehicle>(
+    ctx: &Context<'_, V>,
     telemetry: &mut Telemetry,
     test_index: usize,
 ) -> Result<ResetDone, Stopped> {
@@ -188,7 +189,11 @@ pub(crate) fn reentry(area: &Area, car: Pose) -> Option<Pose> {
 
 /// The return route from `from`, keeping the scenario's clearance or, from inside the clearance
 /// band, the largest fallback clearance that gives a route (see the module doc).
-fn plan_return(ctx: &Context<'_>, from: Pose, test_index: usize) -> Result<ReturnRoute, Stopped> {
+fn plan_return<V: Vehicle>(
+    ctx: &Context<'_, V>,
+    from: Pose,
+    test_index: usize,
+) -> Result<ReturnRoute, Stopped> {
     let scenario = ctx.scenario;
     let purpose = campaign::seed::Purpose::Reset { test_index };
     let mut rng = campaign::seed::rng_for(ctx.config.campaign.seed, purpose);
@@ -244,7 +249,7 @@ pub(crate) fn plan_start_join(
 }
 
 /// The speed of the reset drive: the recovery route's (its first point's).
-fn recovery_speed(ctx: &Context<'_>) -> f64 {
+fn recovery_speed<V: Vehicle>(ctx: &Context<'_, V>) -> f64 {
     ctx.scenario
         .recovery_route
         .first()
@@ -252,7 +257,7 @@ fn recovery_speed(ctx: &Context<'_>) -> f64 {
 }
 
 /// The recovery route after the return route's joint, at the recovery speed.
-fn recovery_rest(ctx: &Context<'_>, route: &ReturnRoute) -> Vec<Waypoint> {
+fn recovery_rest<V: Vehicle>(ctx: &Context<'_, V>, route: &ReturnRoute) -> Vec<Waypoint> {
     let speed = recovery_speed(ctx);
     route
         .joined(&ctx.scenario.recovery_route.positions())
@@ -264,8 +269,8 @@ fn recovery_rest(ctx: &Context<'_>, route: &ReturnRoute) -> Vec<Waypoint> {
 
 /// Uploads `route`, drives it until the car stops at its end (watched with `safety`), then
 /// brakes to a stop.
-async fn follow_to_end(
-    ctx: &Context<'_>,
+async fn follow_to_end<V: Vehicle>(
+    ctx: &Context<'_, V>,
     telemetry: &mut Telemetry,
     route: &[Waypoint],
     safety: SafetyConfig,
@@ -315,8 +320,8 @@ async fn follow_to_end(
 /// Watches the car drive `route` until it stands at its end (`true`) or the time it needs plus
 /// [`RESET_SLACK`] has passed (`false`); an abort from the safety monitor, the link or the
 /// operator.
-async fn watch_until_end(
-    ctx: &Context<'_>,
+async fn watch_until_end<V: Vehicle>(
+    ctx: &Context<'_, V>,
     telemetry: &mut Telemetry,
     route: &[Waypoint],
     config: SafetyConfig,
@@ -376,7 +381,10 @@ fn expected_duration(route: &[Waypoint]) -> Duration {
 
 /// Brakes with [`BRAKE_CURRENT_A`] at every state sample until the car is slower than
 /// [`STOPPED_SPEED_MPS`], at most [`BRAKE_TIMEOUT`].
-pub(crate) async fn brake_until_stopped(ctx: &Context<'_>, telemetry: &mut Telemetry) -> BrakeEnd {
+pub(crate) async fn brake_until_stopped<V: Vehicle>(
+    ctx: &Context<'_, V>,
+    telemetry: &mut Telemetry,
+) -> BrakeEnd {
     let deadline = Instant::now() + BRAKE_TIMEOUT;
     let journal = ctx.journal;
     telemetry.drain(journal);

@@ -1,10 +1,10 @@
 //! State samples at a fixed rate, polled by a task of their own so that a slow command never
 //! delays them.
 //!
-//! The task runs car-link's pipelined state stream ([`Car::poll_states`]): a GET_STATE request
-//! every state period without waiting for the replies, as many in flight as the sample timeout
-//! needs, so that on a link whose round trip is longer than the period a sample still comes
-//! every period. A request without a reply within the sample timeout counts as unanswered (a
+//! The task runs the car's pipelined state stream ([`Vehicle::poll_states`], for a RISE car
+//! car-link's): a GET_STATE request every state period without waiting for the replies, as many
+//! in flight as the sample timeout needs, so that on a link whose round trip is longer than the
+//! period a sample still comes every period. A request without a reply within the sample timeout counts as unanswered (a
 //! sign of a lossy link); the requests after it are not held up.
 //!
 //! The task polls all the time, also while nobody listens (between the drive loops): when a loop
@@ -20,12 +20,13 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
-use car_link::{Car, CarError, StatePolling, StateSample};
+use car_link::{CarError, StatePolling, StateSample};
 use futures::StreamExt;
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 
 use super::journal::Journal;
+use crate::vehicle::Vehicle;
 
 /// How much telemetry waits in the channel while nobody listens before the polling pauses.
 const BUFFERED: Duration = Duration::from_secs(60);
@@ -50,7 +51,7 @@ pub(crate) struct Telemetry {
 impl Telemetry {
     /// Starts polling `car` every `period`, each request bounded by `timeout` (with up to
     /// `ceil(timeout / period)` requests in flight).
-    pub(crate) fn start(car: &Car, period: Duration, timeout: Duration) -> Self {
+    pub(crate) fn start<V: Vehicle>(car: &V, period: Duration, timeout: Duration) -> Self {
         let capacity = BUFFERED.as_nanos() / period.max(Duration::from_millis(1)).as_nanos();
         let capacity = usize::try_from(capacity).unwrap_or(4096).clamp(16, 4096);
         let (tx, rx) = mpsc::channel(capacity);
@@ -95,8 +96,8 @@ impl Drop for Telemetry {
     }
 }
 
-async fn poll(
-    car: Car,
+async fn poll<V: Vehicle>(
+    car: V,
     period: Duration,
     timeout: Duration,
     tx: mpsc::Sender<Sample>,
