@@ -8,11 +8,10 @@
 //! windows. The safety monitor keeps the car within its cross-track limit of the planned route,
 //! so the planned route is where it drove to within that limit.
 
-use serde::{Deserialize, Serialize};
 use trajgen::validation::CoverageGrid;
 use trajgen::{Area, Point};
 
-use crate::case::{Case, CommandRecord};
+use crate::files::{Case, CommandRecord, CoverageRecord, FaultCoverageRecord};
 
 /// Side of a coverage cell, metres.
 pub const CELL_M: f64 = 0.5;
@@ -21,9 +20,9 @@ pub const HEADING_BIN_DEG: f64 = 30.0;
 /// Width of a speed bin, km/h.
 pub const SPEED_BIN_KMH: f64 = 2.0;
 
-/// A campaign's coverage statistics (what `campaign.json` keeps).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+/// A campaign's coverage statistics (what `campaign.json` keeps, as a
+/// [`CoverageRecord`]).
+#[derive(Debug, Clone, PartialEq)]
 pub struct CoverageStats {
     /// Tests counted.
     pub tests: usize,
@@ -48,8 +47,7 @@ pub struct CoverageStats {
 }
 
 /// One probe and fault type of [`CoverageStats::faults`].
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct FaultCoverage {
     /// The probe (`uwb_range_50`, `uwb_travel_dist`, `uwb_yaw`).
     pub probe: String,
@@ -61,6 +59,58 @@ pub struct FaultCoverage {
     pub confirmed: usize,
     /// Estimated to begin acting before their test's drive ended.
     pub acted: usize,
+}
+
+impl From<CoverageStats> for CoverageRecord {
+    fn from(c: CoverageStats) -> Self {
+        Self {
+            tests: c.tests,
+            cell_m: c.cell_m,
+            drivable_cells: c.drivable_cells,
+            driven_cells: c.driven_cells,
+            area_share: c.area_share,
+            heading_m: c.heading_m,
+            speed_m: c.speed_m,
+            faults: c
+                .faults
+                .into_iter()
+                .map(|f| FaultCoverageRecord {
+                    probe: f.probe,
+                    kind: f.kind,
+                    planned: f.planned,
+                    confirmed: f.confirmed,
+                    acted: f.acted,
+                })
+                .collect(),
+            segments_per_test: c.segments_per_test,
+        }
+    }
+}
+
+impl From<CoverageRecord> for CoverageStats {
+    fn from(r: CoverageRecord) -> Self {
+        Self {
+            tests: r.tests,
+            cell_m: r.cell_m,
+            drivable_cells: r.drivable_cells,
+            driven_cells: r.driven_cells,
+            area_share: r.area_share,
+            heading_m: r.heading_m,
+            speed_m: r.speed_m,
+            faults: r
+                .faults
+                .into_iter()
+                .map(|f| FaultCoverage {
+                    probe: f.probe,
+                    kind: f.kind,
+                    planned: f.planned,
+                    confirmed: f.confirmed,
+                    acted: f.acted,
+                })
+                .collect(),
+            segments_per_test: r.segments_per_test,
+        }
+    }
 }
 
 /// The coverage statistics with the grid behind them.

@@ -10,7 +10,8 @@
 //! - [`drive`]: the test drive as a state machine fed with events (samples, answers, ticks) and
 //!   returning actions (segments and faults to send, stops, brake): streaming, oracle bookkeeping,
 //!   safety decisions and the safe stop.
-//! - [`case`]: the versioned case-file and `campaign.json` formats and their checks.
+//! - [`files`]: every JSON file drivecheck writes (case files, `campaign.json`, `replay.json`,
+//!   `shrink.json`, `sweep.json`): their header, schema versions, record types and checks.
 //! - [`replay`]: replay planning (the test a recorded case is driven as) and the comparison of a
 //!   replay's runs.
 //! - [`seed`]: the one random number generator of every run.
@@ -19,10 +20,10 @@
 //! Not here: the wire protocol and the client (`car-link`; only its protocol layer and firmware
 //! facts are used here), the run directory, the recording and the command line (`orchestrator`).
 
-pub mod case;
 pub mod coverage;
 pub mod drive;
 pub mod explain;
+pub mod files;
 pub mod model;
 pub mod oracle;
 pub mod replay;
@@ -32,3 +33,6 @@ pub mod shard;
 pub mod shrink;
 pub mod streaming;
 pub mod sweep;
+
+/// The old path of [`files`], kept for the code that still names it.
+pub use files as case;

@@ -15,10 +15,7 @@
 use std::collections::VecDeque;
 use std::time::Duration;
 
-use serde::{Deserialize, Serialize};
 use trajgen::Point;
-
-use crate::safety::millis;
 
 /// Segments searched ahead of the last closest one when locating the car. Segments are at least
 /// 0.6 m long, so this covers ≥ 4.8 m: far more than the car drives between two state samples.
@@ -26,18 +23,14 @@ use crate::safety::millis;
 /// left look longer than it is.
 const ROUTE_WINDOW: usize = 8;
 
-/// The streaming rule's constants.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+/// The streaming rule's constants (on record: `crate::files::StreamingConfigRecord`).
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StreamingConfig {
-    /// Added to the measured delays, milliseconds in files (1000).
-    #[serde(with = "millis")]
+    /// Added to the measured delays (1000 ms).
     pub margin: Duration,
-    /// Round trip assumed before any is measured, milliseconds in files (500).
-    #[serde(with = "millis")]
+    /// Round trip assumed before any is measured (500 ms).
     pub initial_round_trip: Duration,
-    /// Generation time assumed before any is measured, milliseconds in files (100).
-    #[serde(with = "millis")]
+    /// Generation time assumed before any is measured (100 ms).
     pub initial_generation: Duration,
     /// Most recent measurements the percentiles are taken over (200).
     pub window: usize,
@@ -239,22 +232,16 @@ pub struct Decision {
     pub starved: bool,
 }
 
-/// One append, as recorded.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+/// One append (on record: `crate::files::AppendRecord`).
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Append {
-    /// When it was decided, milliseconds in files.
-    #[serde(with = "millis")]
+    /// When it was decided.
     pub decided_at: Duration,
-    /// Time the car still needed then, milliseconds in files.
-    #[serde(with = "millis")]
+    /// Time the car still needed then.
     pub time_to_end: Duration,
-    /// The lead time then, milliseconds in files.
-    #[serde(with = "millis")]
+    /// The lead time then.
     pub lead: Duration,
-    /// Delay from the decision to the car's confirmation, milliseconds in files; absent until
-    /// confirmed.
-    #[serde(default, skip_serializing_if = "Option::is_none", with = "opt_millis")]
+    /// Delay from the decision to the car's confirmation; absent until confirmed.
     pub confirmed_after: Option<Duration>,
 }
 
@@ -264,25 +251,6 @@ impl Append {
     pub fn margin_left_s(&self) -> Option<f64> {
         self.confirmed_after
             .map(|delay| self.time_to_end.as_secs_f64() - delay.as_secs_f64())
-    }
-}
-
-mod opt_millis {
-    use std::time::Duration;
-
-    use serde::{Deserialize, Deserializer, Serializer};
-
-    pub(crate) fn serialize<S: Serializer>(d: &Option<Duration>, s: S) -> Result<S::Ok, S::Error> {
-        match d {
-            Some(d) => s.serialize_u64(u64::try_from(d.as_millis()).unwrap_or(u64::MAX)),
-            None => s.serialize_none(),
-        }
-    }
-
-    pub(crate) fn deserialize<'de, D: Deserializer<'de>>(
-        d: D,
-    ) -> Result<Option<Duration>, D::Error> {
-        Option::<u64>::deserialize(d).map(|v| v.map(Duration::from_millis))
     }
 }
 
@@ -572,15 +540,13 @@ mod tests {
     }
 
     #[test]
-    fn an_append_survives_a_round_trip_through_json() {
+    fn an_append_knows_the_margin_it_left() {
         let append = Append {
             decided_at: ms(1000),
             time_to_end: ms(2400),
             lead: ms(1700),
             confirmed_after: Some(ms(180)),
         };
-        let json = serde_json::to_string(&append).unwrap();
-        assert_eq!(serde_json::from_str::<Append>(&json).unwrap(), append);
         assert!((append.margin_left_s().unwrap() - 2.22).abs() < 1e-9);
     }
 }

@@ -9,12 +9,11 @@ use std::fmt;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-use crate::case::{Case, CaseError, CommandRecord, ScenarioRef};
+use crate::files::{Case, CaseError, CommandRecord, ScenarioRef};
 use crate::oracle::{SegmentVerdict, Verdict};
 use crate::shrink::{FaultField, RunResult};
 
-/// The `format` of a sweep result.
-pub const SWEEP_FORMAT: &str = "drivecheck-sweep";
+pub use crate::files::SWEEP_FORMAT;
 
 /// A `--set` that cannot be used.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -361,12 +360,9 @@ impl Point {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SweepReport {
-    /// Always `drivecheck-sweep`.
-    pub format: String,
-    /// 1.
-    pub schema_version: u32,
-    /// The drivecheck version.
-    pub tool_version: String,
+    /// `drivecheck-sweep` ([`SWEEP_FORMAT`]), its schema version and the drivecheck version.
+    #[serde(flatten)]
+    pub header: crate::files::Header,
     /// The case file, as given.
     pub case: String,
     /// The scenario.
@@ -426,7 +422,7 @@ impl SweepReport {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::case::tests::doc_examples;
+    use crate::files::tests::doc_examples;
 
     fn case() -> Case {
         Case::from_json(doc_examples()[0]).unwrap()

@@ -14,7 +14,7 @@ use std::io;
 use quick_xml::Writer;
 use quick_xml::events::{BytesDecl, BytesText, Event};
 
-use campaign::case::Case;
+use campaign::files::Case;
 use campaign::oracle::{SegmentVerdict, Verdict};
 
 /// One test or run.
@@ -174,7 +174,7 @@ fn write_case(w: &mut Writer<Vec<u8>>, suite: &Suite<'_>, case: &TestCase<'_>) -
 #[cfg(test)]
 mod tests {
     use super::*;
-    use campaign::case::TestTiming;
+    use campaign::files::TestTiming;
 
     fn case(verdict: Option<Verdict>, reason: Option<&str>) -> Case {
         let mut case = Case::from_json(

@@ -74,7 +74,7 @@ fn a_run_with_faults_is_explained_by_them_and_cannot_be_calibrated_on() {
     let dir = tempfile::tempdir().unwrap();
     let run = campaign(dir.path(), 1, 6, &["--on-failure", "continue"], 1);
     // `run` wrote each failed case's explanation into its case file.
-    let explained: Vec<campaign::case::Case> = std::fs::read_dir(&run)
+    let explained: Vec<campaign::files::Case> = std::fs::read_dir(&run)
         .unwrap()
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| {
@@ -83,7 +83,7 @@ fn a_run_with_faults_is_explained_by_them_and_cannot_be_calibrated_on() {
                 .to_string_lossy()
                 .starts_with("case-")
         })
-        .map(|p| campaign::case::Case::from_json(&std::fs::read_to_string(p).unwrap()).unwrap())
+        .map(|p| campaign::files::Case::from_json(&std::fs::read_to_string(p).unwrap()).unwrap())
         .filter(|c| c.verdict == Some(campaign::oracle::Verdict::Failed))
         .collect();
     assert!(!explained.is_empty());

@@ -6,8 +6,8 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use campaign::case::{CampaignRecord, Case, CommandRecord};
-use campaign::drive::PlaceRule;
+use campaign::files::PlaceRuleRecord;
+use campaign::files::{CampaignRecord, Case, CommandRecord};
 use common::{campaign, drivecheck, path, text};
 
 /// A failing case of a 10-test campaign with seed 2.
@@ -49,7 +49,7 @@ fn a_replay_sends_each_fault_at_its_place_or_by_the_earlier_tools_rule() {
     assert!(!log.contains("without a place"), "{log}");
     assert!(!placed.fault_places.is_empty());
     for p in &placed.fault_places {
-        assert_eq!(p.rule, PlaceRule::Planned);
+        assert_eq!(p.rule, PlaceRuleRecord::Planned);
         assert!(
             places.contains(&(p.segment_index, p.planned_along_m)),
             "{p:?}"
@@ -70,7 +70,7 @@ fn a_replay_sends_each_fault_at_its_place_or_by_the_earlier_tools_rule() {
     assert!(log.contains("without a place"), "{log}");
     assert!(!earlier.fault_places.is_empty());
     for p in &earlier.fault_places {
-        assert_eq!(p.rule, PlaceRule::EarlierTool);
+        assert_eq!(p.rule, PlaceRuleRecord::EarlierTool);
         assert!(p.error_m.unwrap().abs() < 0.1, "{p:?}");
     }
     // The earlier tool's place is where 4 points are left of the segment: the segment's fourth
@@ -137,7 +137,7 @@ fn a_case_without_places_keeps_the_earlier_tools_timing_and_its_failing_segment(
         let [placement] = run.fault_places.as_slice() else {
             panic!("one fault: {:?}", run.fault_places)
         };
-        assert_eq!(placement.rule, PlaceRule::EarlierTool);
+        assert_eq!(placement.rule, PlaceRuleRecord::EarlierTool);
         assert_eq!(placement.segment_index, 3);
         assert!(placement.planned_along_m > 3.0, "{placement:?}");
         let failing = first_failing(run);
@@ -150,7 +150,7 @@ fn a_case_without_places_keeps_the_earlier_tools_timing_and_its_failing_segment(
 
     let mut placed = case.clone();
     if let CommandRecord::AddFault { at, .. } = &mut placed.commands[fault] {
-        *at = Some(campaign::case::PlaceRecord {
+        *at = Some(campaign::files::PlaceRecord {
             segment_index: 3,
             along_m: 0.0,
         });
@@ -160,7 +160,7 @@ fn a_case_without_places_keeps_the_earlier_tools_timing_and_its_failing_segment(
     let (placed, log) = replay_three(&placed_file, &dir.path().join("placed"));
     assert!(!log.contains("without a place"), "{log}");
     for run in &placed {
-        assert_eq!(run.fault_places[0].rule, PlaceRule::Planned);
+        assert_eq!(run.fault_places[0].rule, PlaceRuleRecord::Planned);
         assert_eq!(first_failing(run), Some(3), "{:?}", run.segments);
     }
 }

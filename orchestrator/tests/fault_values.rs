@@ -9,7 +9,7 @@ use common::{campaign, drivecheck, path, text};
 
 use std::path::Path;
 
-use campaign::case::{Case, CommandRecord};
+use campaign::files::{Case, CommandRecord};
 use campaign::model::{FaultKind, Probe};
 use campaign::oracle::Verdict;
 

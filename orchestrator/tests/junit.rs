@@ -99,7 +99,7 @@ fn a_campaign_and_a_replay_write_junit_xml() {
     let junit = dir.path().join("campaign.xml");
     let run = campaign(dir.path(), 2, 10, &["--junit", path(&junit)], 1);
     let doc = read(&junit);
-    let record: campaign::case::CampaignRecord =
+    let record: campaign::files::CampaignRecord =
         serde_json::from_str(&std::fs::read_to_string(run.join("campaign.json")).unwrap()).unwrap();
     let summary = record.summary.unwrap();
     assert_eq!(doc.tests, 10);

@@ -9,7 +9,7 @@ use common::{campaign, drivecheck, path, text};
 
 use std::path::{Path, PathBuf};
 
-use campaign::case::{CampaignRecord, Case};
+use campaign::files::{CampaignRecord, Case};
 use campaign::oracle::Verdict;
 use campaign::replay::Comparison;
 
@@ -116,7 +116,7 @@ fn a_failing_case_replays_the_same_way_and_passes_without_its_faults() {
         replayed
             .commands
             .iter()
-            .all(|c| matches!(c, campaign::case::CommandRecord::RunSegments { .. }))
+            .all(|c| matches!(c, campaign::files::CommandRecord::RunSegments { .. }))
     );
 
     // `runs` lists the campaign and the replays; `runs show` shows each kind.
@@ -214,7 +214,7 @@ fn the_documented_hand_written_case_replays() {
 fn a_case_that_leaves_the_area_is_refused_before_driving() {
     let example = hand_written_example();
     let mut case = Case::from_json(example).unwrap();
-    if let campaign::case::CommandRecord::RunSegments { points, .. } = &mut case.commands[3] {
+    if let campaign::files::CommandRecord::RunSegments { points, .. } = &mut case.commands[3] {
         points[3].x = 500.0;
     }
     let tmp = tempfile::tempdir().unwrap();

@@ -7,7 +7,7 @@ mod common;
 use std::path::Path;
 use std::process::Command;
 
-use campaign::case::CampaignRecord;
+use campaign::files::CampaignRecord;
 use common::{drivecheck, path, text};
 
 /// The page's sections with the given id prefix, each as its text up to `</section>`.

@@ -58,11 +58,11 @@ fn continuing_after_a_failure_drives_and_records_every_segment() {
     assert_eq!(out.status.code(), Some(1), "{}", text(&out));
     let record = std::fs::read_to_string(dir.path().join("campaign.json")).unwrap();
     assert!(record.contains("\"failure_policy\": \"continue_and_record\""));
-    let failed: Vec<campaign::case::Case> = (0..4)
+    let failed: Vec<campaign::files::Case> = (0..4)
         .map(|i| {
             let text =
                 std::fs::read_to_string(dir.path().join(format!("case-{i:03}.json"))).unwrap();
-            campaign::case::Case::from_json(&text).unwrap()
+            campaign::files::Case::from_json(&text).unwrap()
         })
         .filter(|c| c.verdict == Some(campaign::oracle::Verdict::Failed))
         .collect();
@@ -71,7 +71,7 @@ fn continuing_after_a_failure_drives_and_records_every_segment() {
         let segments = case
             .commands
             .iter()
-            .filter(|c| matches!(c, campaign::case::CommandRecord::RunSegments { .. }))
+            .filter(|c| matches!(c, campaign::files::CommandRecord::RunSegments { .. }))
             .count();
         // Every segment was driven and judged, not only those up to the first failure.
         assert_eq!(case.segments.len(), segments, "{:?}", case.reason);
@@ -174,7 +174,7 @@ fn a_scenario_without_anchors_runs_only_when_allowed_and_says_uwb_was_not_tested
         &["--scenario", "courtyard", "--allow-no-anchors"],
         0,
     );
-    let record = campaign::case::CampaignRecord::from_json(
+    let record = campaign::files::CampaignRecord::from_json(
         &std::fs::read_to_string(run.join("campaign.json")).unwrap(),
     )
     .unwrap();
@@ -222,7 +222,7 @@ fn a_campaign_records_and_shows_what_it_covered() {
     let dir = tempfile::tempdir().unwrap();
     let out = run(&["--seed", "1", "--tests", "3"], dir.path());
     assert_eq!(out.status.code(), Some(1), "{}", text(&out));
-    let record = campaign::case::CampaignRecord::from_json(
+    let record = campaign::files::CampaignRecord::from_json(
         &std::fs::read_to_string(dir.path().join("campaign.json")).unwrap(),
     )
     .unwrap();

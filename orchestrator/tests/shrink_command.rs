@@ -6,7 +6,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use campaign::case::{Case, CommandRecord};
+use campaign::files::{Case, CommandRecord};
 use campaign::shrink::{Outcome, ShrinkReport, Target};
 use common::{drivecheck, path, text};
 

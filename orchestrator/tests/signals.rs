@@ -9,7 +9,7 @@ mod common;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use campaign::case::{CampaignRecord, Case};
+use campaign::files::{CampaignRecord, Case};
 use campaign::oracle::Verdict;
 use common::path;
 use orchestrator::recording::Recording;

@@ -14,7 +14,7 @@ use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use campaign::case::{Case, CommandRecord};
+use campaign::files::{Case, CommandRecord};
 use campaign::model::{Campaign, Command};
 use car_link::config::{ConfigField, MainConfig};
 use car_link::fault::ListedFault;

@@ -8,7 +8,7 @@ mod common;
 use std::path::Path;
 use std::time::Duration;
 
-use campaign::case::{Case, ReplayOf};
+use campaign::files::{Case, ReplayOf};
 use campaign::model::Campaign;
 use campaign::oracle::Verdict;
 use car_sim::{LinkImpairment, SimConfig};

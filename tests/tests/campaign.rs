@@ -9,7 +9,7 @@ mod common;
 use std::path::Path;
 use std::time::Duration;
 
-use campaign::case::{CampaignRecord, Case};
+use campaign::files::{CampaignRecord, Case};
 use campaign::model::Campaign;
 use campaign::oracle::{SegmentVerdict, Verdict};
 use car_link::Car;
@@ -201,7 +201,7 @@ async fn a_lossy_slow_link_ends_no_test_early() {
             read_case(dir.path(), i)
                 .commands
                 .iter()
-                .filter(|c| matches!(c, campaign::case::CommandRecord::AddFault { .. }))
+                .filter(|c| matches!(c, campaign::files::CommandRecord::AddFault { .. }))
                 .count()
         })
         .sum();

@@ -166,7 +166,7 @@ fn fuzz_parsers(inputs: u64, seed: u64) -> (u64, u64, u64) {
         mutate(&mut rng, &mut bytes);
         let text = String::from_utf8_lossy(&bytes);
         if is_case {
-            if let Ok(case) = campaign::case::Case::from_json(&text) {
+            if let Ok(case) = campaign::files::Case::from_json(&text) {
                 cases_ok += 1;
                 let _ = case.check();
                 let _ = case.check_route(&scenario);

@@ -9,7 +9,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Duration;
 
-use campaign::case::{Case, CommandRecord};
+use campaign::files::{Case, CommandRecord};
 use campaign::model::Campaign;
 use car_sim::SimConfig;
 use orchestrator::recording::{
@@ -190,7 +190,9 @@ fn check_faults(case: &Case, faults: &[FaultRecord]) -> usize {
         })
         .collect();
     assert_eq!(placed.len(), confirmed.len(), "test {test_index}");
-    assert_eq!(placed, case.fault_places, "test {test_index}");
+    let recorded: Vec<campaign::drive::FaultPlacement> =
+        case.fault_places.iter().map(|&p| p.into()).collect();
+    assert_eq!(placed, recorded, "test {test_index}");
     for placement in &placed {
         let Some(CommandRecord::AddFault { at: Some(at), .. }) =
             case.commands.get(placement.command_index)
@@ -312,7 +314,7 @@ async fn a_recording_that_cannot_be_written_ends_the_campaign_as_an_error() {
     assert!(error.to_string().contains("campaign.mcap"), "{error}");
     // The run directory is still complete.
     let text = std::fs::read_to_string(dir.path().join("campaign.json")).unwrap();
-    let record = campaign::case::CampaignRecord::from_json(&text).unwrap();
+    let record = campaign::files::CampaignRecord::from_json(&text).unwrap();
     assert!(record.ended_at.is_some());
 }
 

@@ -39,7 +39,7 @@ use car_link::message::POINTS_PER_PACKET;
 use scenarios::Route;
 use trajgen::{Area, Generator, Point, RouteTail};
 
-use crate::case::{Case, SegmentResult, StreamingRecord};
+use crate::files::{Case, SegmentResult, StreamingRecord};
 use crate::model::{Command, Fault, FaultWindow, ProbeRates, Segment, TestPlan};
 use crate::oracle::{
     FailurePolicy, JudgedSegment, SegmentOracle, SegmentOutcome, SegmentVerdict, test_verdict,
@@ -251,7 +251,7 @@ impl DriveOutcome {
         case.reason = verdict.reason;
         case.abort = self.abort;
         case.streaming = Some(self.streaming.clone());
-        case.fault_places = self.fault_places.clone();
+        case.fault_places = self.fault_places.iter().map(|&p| p.into()).collect();
     }
 }
 
@@ -911,7 +911,7 @@ impl<'a> TestDrive<'a> {
         let began = self.stopping.began;
         let during_test = |at: &&Duration| began.is_none_or(|stop| **at < stop);
         StreamingRecord {
-            appends: self.streamer.appends().to_vec(),
+            appends: self.streamer.appends().iter().map(|&a| a.into()).collect(),
             starvations_ms: self
                 .streamer
                 .starvations()

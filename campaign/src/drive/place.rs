@@ -41,6 +41,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use trajgen::Point;
 
+use crate::files::{FaultPlacementRecord, PlaceRuleRecord};
 use crate::model::{Command, Fault, FaultPlace, FaultWindow, ProbeRates, TestPlan};
 use crate::streaming::{Progress, Waypoint, look_ahead_radius_m};
 
@@ -109,6 +110,58 @@ pub struct FaultPlacement {
     pub acts_from_s: f64,
     /// The window's end.
     pub acts_to_s: f64,
+}
+
+impl From<PlaceRule> for PlaceRuleRecord {
+    fn from(rule: PlaceRule) -> Self {
+        match rule {
+            PlaceRule::Planned => Self::Planned,
+            PlaceRule::EarlierTool => Self::EarlierTool,
+        }
+    }
+}
+
+impl From<FaultPlacement> for FaultPlacementRecord {
+    fn from(p: FaultPlacement) -> Self {
+        Self {
+            command_index: p.command_index,
+            rule: p.rule.into(),
+            segment_index: p.segment_index,
+            planned_along_m: p.planned_along_m,
+            sent_s: p.sent_s,
+            added_s: p.added_s,
+            actual_along_m: p.actual_along_m,
+            error_m: p.error_m,
+            acts_from_s: p.acts_from_s,
+            acts_to_s: p.acts_to_s,
+        }
+    }
+}
+
+impl From<PlaceRuleRecord> for PlaceRule {
+    fn from(rule: PlaceRuleRecord) -> Self {
+        match rule {
+            PlaceRuleRecord::Planned => Self::Planned,
+            PlaceRuleRecord::EarlierTool => Self::EarlierTool,
+        }
+    }
+}
+
+impl From<FaultPlacementRecord> for FaultPlacement {
+    fn from(p: FaultPlacementRecord) -> Self {
+        Self {
+            command_index: p.command_index,
+            rule: p.rule.into(),
+            segment_index: p.segment_index,
+            planned_along_m: p.planned_along_m,
+            sent_s: p.sent_s,
+            added_s: p.added_s,
+            actual_along_m: p.actual_along_m,
+            error_m: p.error_m,
+            acts_from_s: p.acts_from_s,
+            acts_to_s: p.acts_to_s,
+        }
+    }
 }
 
 /// A fault not sent yet.

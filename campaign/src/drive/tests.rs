@@ -197,7 +197,7 @@ fn the_first_segment_is_appended_when_the_time_to_the_end_falls_to_the_lead_time
     assert!(points.iter().all(|w| w.speed == 1.0));
     let outcome = h.drive.finish(h.now);
     assert_eq!(outcome.streaming.appends.len(), 1);
-    assert_eq!(outcome.streaming.appends[0].lead, ms(1020));
+    assert_eq!(outcome.streaming.appends[0].lead, 1020);
     assert_eq!(outcome.streaming.appends[0].confirmed_after, None);
 }
 
@@ -214,7 +214,7 @@ fn the_next_segment_waits_for_the_previous_one_to_be_confirmed() {
     assert!(h.reply(Reply::Done).is_empty());
     assert_eq!(h.next().as_ref().and_then(append_index), Some(1));
     let outcome = h.drive.finish(h.now);
-    assert_eq!(outcome.streaming.appends[0].confirmed_after, Some(ms(80)));
+    assert_eq!(outcome.streaming.appends[0].confirmed_after, Some(80));
 }
 
 #[test]

@@ -6,75 +6,14 @@
 //! same with and without the fault commands. A segment a run did not drive (the test stopped
 //! earlier) has no value for that run and is left out of the mean.
 //!
-use serde::{Deserialize, Serialize};
-
-use crate::case::{Case, ReplayOf, ScenarioRef};
+use crate::files::{
+    Case, Comparison, Header, REPLAY_FORMAT, REPLAY_SCHEMA_VERSION, ReplayOf, ReplayRun,
+    ScenarioRef, SegmentComparison,
+};
 use crate::oracle::Verdict;
 
-/// The `format` of a replay comparison (`replay.json`).
-pub const REPLAY_FORMAT: &str = "drivecheck-replay";
 /// The file name of the comparison in a replay directory.
 pub const REPLAY_FILE: &str = "replay.json";
-
-/// One run of a replay.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ReplayRun {
-    /// Its run directory, relative to the replay directory (`run-1`, …).
-    pub dir: String,
-    /// The seed it ran with (the simulator's and the reset's).
-    pub seed: u64,
-    /// Its verdict (`None` when it never ran).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub verdict: Option<Verdict>,
-    /// Why it failed or was aborted.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub reason: Option<String>,
-}
-
-/// One segment across the runs.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SegmentComparison {
-    /// The segment's index among the test's segments.
-    pub segment_index: usize,
-    /// The recorded case's maximum deviation for it, metres (when it was driven).
-    pub original_max_m: Option<f64>,
-    /// Each run's maximum deviation, metres (`None`: not driven or no samples).
-    pub max_m: Vec<Option<f64>>,
-    /// Mean of the runs' maxima that exist, metres.
-    pub mean_m: Option<f64>,
-    /// Each run's maximum minus the mean, metres.
-    pub diff_from_mean_m: Vec<Option<f64>>,
-}
-
-/// The comparison written to `replay.json`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Comparison {
-    /// Always `drivecheck-replay`.
-    pub format: String,
-    /// The schema version (1).
-    pub schema_version: u32,
-    /// The case replayed.
-    pub replay_of: ReplayOf,
-    /// The scenario it was replayed in.
-    pub scenario: ScenarioRef,
-    /// Every run, in order.
-    pub runs: Vec<ReplayRun>,
-    /// Every segment driven by the case or by any run, by index.
-    pub segments: Vec<SegmentComparison>,
-    /// The largest |difference from the mean| over all segments and runs, metres.
-    pub max_abs_diff_m: Option<f64>,
-    /// True when every run ended with the same verdict.
-    pub same_verdict: bool,
-    /// True when every run's verdict equals the recorded case's (`None` for a case never run).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub same_as_original: Option<bool>,
-    /// For a replay without faults of a case that failed: true when every run passed.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub failure_disappeared: Option<bool>,
-}
 
 /// The largest deviation of segment `segment_index` in `case`, if driven with samples.
 fn segment_max(case: &Case, segment_index: usize) -> Option<f64> {
@@ -135,8 +74,7 @@ impl Comparison {
             && matches!(original.verdict, Some(Verdict::Failed)))
         .then(|| verdicts.iter().all(|&r| r == Some(Verdict::Passed)));
         Self {
-            format: REPLAY_FORMAT.to_owned(),
-            schema_version: crate::case::SCHEMA_VERSION,
+            header: Header::untooled(REPLAY_FORMAT, REPLAY_SCHEMA_VERSION),
             replay_of,
             scenario,
             runs: runs.iter().map(|(run, _)| run.clone()).collect(),
@@ -146,16 +84,6 @@ impl Comparison {
             same_as_original,
             failure_disappeared,
         }
-    }
-
-    /// The comparison as pretty-printed JSON.
-    pub fn to_json(&self) -> Result<String, serde_json::Error> {
-        serde_json::to_string_pretty(self)
-    }
-
-    /// Reads a comparison from JSON.
-    pub fn from_json(text: &str) -> Result<Self, serde_json::Error> {
-        serde_json::from_str(text)
     }
 
     /// The comparison as a Markdown table with a summary below it.
@@ -210,9 +138,7 @@ impl Comparison {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::case::{
-        CASE_FORMAT, CommandRecord, RoutePointRecord, SCHEMA_VERSION, SegmentResult,
-    };
+    use crate::files::{CASE_FORMAT, CommandRecord, RoutePointRecord, SegmentResult};
     use crate::oracle::SegmentOracle;
     use trajgen::Point;
 
@@ -233,9 +159,7 @@ mod tests {
             })
             .collect();
         Case {
-            format: CASE_FORMAT.to_owned(),
-            schema_version: SCHEMA_VERSION,
-            tool_version: None,
+            header: Header::untooled(CASE_FORMAT, 1),
             campaign_seed: Some(1),
             test_index: Some(0),
             scenario: ScenarioRef {

@@ -1,7 +1,7 @@
 //! Replay (`drivecheck replay`, `docs/method.md#replay-and-shrinking`): a recorded case driven
 //! again.
 //!
-//! - planning ([`Case::replay_plan`](crate::case::Case::replay_plan)): the test a case is driven
+//! - planning ([`Case::replay_plan`](crate::files::Case::replay_plan)): the test a case is driven
 //!   as: its recorded commands (without the fault commands when asked) from the end of the
 //!   scenario's start route, after the case's values and geometry are checked, with an ahead
 //!   margin generated for every segment written without one;
@@ -15,4 +15,5 @@
 mod compare;
 mod plan;
 
-pub use compare::{Comparison, REPLAY_FILE, REPLAY_FORMAT, ReplayRun, SegmentComparison};
+pub use crate::files::{Comparison, REPLAY_FORMAT, ReplayRun, SegmentComparison};
+pub use compare::REPLAY_FILE;

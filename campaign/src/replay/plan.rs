@@ -5,7 +5,7 @@ use trajgen::{Generator, Point};
 
 use car_link::firmware::{FAULT_PROBES, FAULTS_PER_PROBE, Param};
 
-use crate::case::{Case, CaseError, CommandRecord, RoutePointRecord, invalid};
+use crate::files::{Case, CaseError, CommandRecord, RoutePointRecord, invalid};
 use crate::model::{Probe, TestPlan, start_tail};
 
 /// How far past a segment's computed length a written place may lie (rounding).
@@ -192,7 +192,7 @@ mod tests {
     use trajgen::check_route;
 
     use super::*;
-    use crate::case::tests::{doc_examples, scenario};
+    use crate::files::tests::{doc_examples, scenario};
     use crate::model::FaultKind;
 
     #[test]
@@ -256,7 +256,7 @@ mod tests {
         assert!(bit_99.is_err_and(|e| e.contains("bits 0 to 31")));
         let far = with(&|c| {
             if let CommandRecord::AddFault { at, .. } = c {
-                *at = Some(crate::case::PlaceRecord {
+                *at = Some(crate::files::PlaceRecord {
                     segment_index: 0,
                     along_m: 500.0,
                 });

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 use trajgen::{Point, RouteTail};
 
-use crate::case::{Case, CommandRecord, PlaceRecord, RoutePointRecord};
+use crate::files::{Case, CommandRecord, PlaceRecord, RoutePointRecord};
 use crate::model::{FaultKind, ModelError, start_tail};
 
 use super::Target;

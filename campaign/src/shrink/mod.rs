@@ -42,7 +42,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 use trajgen::{Generator, Strategy};
 
-use crate::case::{Case, CaseError, CommandRecord};
+use crate::files::{Case, CaseError, CommandRecord};
 use crate::oracle::{SegmentVerdict, Verdict};
 
 mod edit;
@@ -51,11 +51,10 @@ mod report;
 #[cfg(test)]
 mod tests;
 
+pub use crate::files::SHRINK_FORMAT;
 pub use edit::{Edit, EditError, FaultField};
 pub use policy::{Drive, Progress, Settings, ShrinkFailure, Shrunk, shrink};
-pub use report::{
-    CaseSummary, Confirmation, Ended, MINIMAL_FILE, SHRINK_FILE, SHRINK_FORMAT, ShrinkReport,
-};
+pub use report::{CaseSummary, Confirmation, Ended, MINIMAL_FILE, SHRINK_FILE, ShrinkReport};
 
 use edit::{Joins, neutral, part_way, segment_commands};
 
@@ -116,7 +115,7 @@ impl RunResult {
             .segments
             .iter()
             .find(|s| s.oracle.verdict == SegmentVerdict::Failed);
-        let max = |s: &crate::case::SegmentResult| s.oracle.stats.as_ref().map(|st| st.max_m);
+        let max = |s: &crate::files::SegmentResult| s.oracle.stats.as_ref().map(|st| st.max_m);
         Self {
             seed,
             verdict: case.verdict,
@@ -607,7 +606,7 @@ fn prepared(
     case.abort = None;
     case.streaming = None;
     case.fault_places.clear();
-    case.schema_version = crate::case::CASE_SCHEMA_VERSION;
+    case.header.schema_version = crate::files::CASE_SCHEMA_VERSION;
     case.check()?;
     case.check_route(scenario)?;
     case.check_faults_act(scenario)?;

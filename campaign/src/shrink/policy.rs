@@ -24,7 +24,7 @@ use thiserror::Error;
 use super::{
     CaseSummary, Confirmation, Edit, Ended, RunResult, ShrinkError, Shrinker, Size, Step, Target,
 };
-use crate::case::{Case, CommandRecord};
+use crate::files::{Case, CommandRecord};
 use crate::seed::{Purpose, derive};
 
 /// What drives a case for the shrink.

@@ -3,10 +3,9 @@
 use serde::{Deserialize, Serialize};
 
 use super::{RunResult, Size, Step, Target};
-use crate::case::{CaseError, ScenarioRef};
-
-/// The `format` of a shrink report.
-pub const SHRINK_FORMAT: &str = "drivecheck-shrink";
+use crate::files::{
+    CaseError, Header, SHRINK_FORMAT, SHRINK_READABLE, ScenarioRef, check_header, parse,
+};
 /// Its file name in the shrink directory.
 pub const SHRINK_FILE: &str = "shrink.json";
 /// The minimal case's file name in the shrink directory.
@@ -61,12 +60,10 @@ pub struct Confirmation {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ShrinkReport {
-    /// Always `drivecheck-shrink`.
-    pub format: String,
-    /// 1.
-    pub schema_version: u32,
-    /// The drivecheck version that shrank it.
-    pub tool_version: String,
+    /// `drivecheck-shrink` ([`crate::files::SHRINK_FORMAT`]), its schema version and the
+    /// drivecheck version that shrank it.
+    #[serde(flatten)]
+    pub header: Header,
     /// The case file shrunk, as given.
     pub case: String,
     /// The scenario it was driven in.
@@ -102,9 +99,16 @@ pub struct ShrinkReport {
 }
 
 impl ShrinkReport {
+    /// Reads a shrink report from JSON: shape, format name and version.
+    pub fn from_json(text: &str) -> Result<Self, CaseError> {
+        let report: Self = parse(text)?;
+        check_header(&report.header, SHRINK_FORMAT, SHRINK_READABLE)?;
+        Ok(report)
+    }
+
     /// The report as pretty-printed JSON.
     pub fn to_json(&self) -> Result<String, CaseError> {
-        serde_json::to_string_pretty(self).map_err(CaseError::Write)
+        crate::files::to_json(self)
     }
 
     /// The before/after table the command prints.

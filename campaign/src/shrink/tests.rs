@@ -2,7 +2,7 @@ use proptest::prelude::*;
 
 use super::policy::{Drive, ShrinkFailure, shrink};
 use super::*;
-use crate::case::tests::scenario;
+use crate::files::tests::scenario;
 use crate::model::{Campaign, FaultKind, Probe, plan_test, start_tail};
 use crate::oracle::FailurePolicy;
 
@@ -15,7 +15,7 @@ fn generated(seed: u64, index: usize) -> (Scenario, Case) {
         no_faults: false,
     };
     let plan = plan_test(&s, &campaign, index, start_tail(&s).unwrap()).unwrap();
-    let settings = crate::case::Settings::new(&s, 10, FailurePolicy::default());
+    let settings = crate::files::Settings::new(&s, 10, FailurePolicy::default());
     let case = Case::planned(&plan, &s, seed, false, settings);
     (s, case)
 }
@@ -89,7 +89,7 @@ fn with_strong_fault(mut case: Case) -> Case {
             param: 4.0,
             start: 12,
             duration: 9,
-            at: Some(crate::case::PlaceRecord {
+            at: Some(crate::files::PlaceRecord {
                 segment_index: 1,
                 along_m: 0.5,
             }),
@@ -313,7 +313,7 @@ impl<F: Fn(f64, u64) -> bool> Drive for FakeCar<F> {
     type Error = String;
 
     fn drive(&mut self, case: &Case, seed: u64) -> Result<Case, String> {
-        use crate::case::SegmentResult;
+        use crate::files::SegmentResult;
         use crate::oracle::{DeviationStats, SegmentOutcome};
         let run = seed - self.base;
         self.driven.push((run, case.commands.len()));

@@ -28,7 +28,7 @@ use crate::cli::BenchFidelityArgs;
 use crate::exit::Exit;
 use crate::runner::{RecordMode, ReplaySource, RunConfig, Silent, run_campaign_fresh};
 use crate::vehicle::EmbeddedSims;
-use campaign::case::{Case, ReplayOf};
+use campaign::files::{Case, ReplayOf};
 use campaign::model::{Campaign, Command, Fault, TestPlan, TestPlanner};
 use campaign::oracle::Verdict;
 use campaign::seed::Purpose;

@@ -16,7 +16,7 @@ use anyhow::{Context, Result, bail};
 use crate::exit::Exit;
 use crate::recording::{Recorder, RecordingStart, Span, Spans};
 use crate::runner::{CAMPAIGN_FILE, RECORDING_FILE, RunDirectory, SPAN_GAP_NS, is_used};
-use campaign::case::{CampaignRecord, Case, Settings};
+use campaign::files::{CampaignRecord, Case, Settings};
 use campaign::shard::Shard;
 
 /// One shard's run directory, read.
@@ -208,8 +208,8 @@ fn difference(a: &CampaignRecord, b: &CampaignRecord) -> Option<String> {
         .or_else(|| {
             differs(
                 "tool version",
-                a.tool_version.clone(),
-                b.tool_version.clone(),
+                a.header.tool().to_owned(),
+                b.header.tool().to_owned(),
             )
         })
         .or_else(|| differs("shard count", shard_count(a), shard_count(b)))

@@ -28,9 +28,9 @@ use crate::runner::{
 };
 use crate::seed::choose_seed;
 use crate::vehicle::{ConnectError, Vehicle, connect};
-use campaign::case::{CASE_SCHEMA_VERSION, CommandRecord};
-use campaign::case::{Case, ReplayOf, ScenarioRef};
 use campaign::drive::EARLIER_TOOL_POINTS_LEFT;
+use campaign::files::{CASE_SCHEMA_VERSION, CommandRecord};
+use campaign::files::{Case, ReplayOf, ScenarioRef};
 use campaign::model::{Campaign, TestPlan};
 use campaign::oracle::Verdict;
 use campaign::replay::{Comparison, REPLAY_FILE, ReplayRun};
@@ -47,10 +47,10 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
         .filter(|c| matches!(c, CommandRecord::AddFault { at: None, .. }))
         .count();
     if unplaced > 0 && !args.no_faults {
-        let why = if case.schema_version < CASE_SCHEMA_VERSION {
+        let why = if case.header.schema_version < CASE_SCHEMA_VERSION {
             format!(
                 "a version-{} case: the places of its faults are unknown",
-                case.schema_version
+                case.header.schema_version
             )
         } else {
             "no place given".to_owned()
@@ -318,7 +318,7 @@ fn write_junit(
             ("no_faults".to_owned(), of.no_faults.to_string()),
             (
                 "tool_version".to_owned(),
-                campaign::case::tool_version().to_owned(),
+                campaign::files::tool_version().to_owned(),
             ),
             ("replay_directory".to_owned(), out.display().to_string()),
         ],

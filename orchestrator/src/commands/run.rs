@@ -22,7 +22,7 @@ use crate::runner::{
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::choose_seed;
 use crate::vehicle::{EmbeddedSims, connect};
-use campaign::case::Case;
+use campaign::files::Case;
 use campaign::model::Campaign;
 use campaign::oracle::FailurePolicy;
 use campaign::oracle::Verdict;
@@ -216,7 +216,7 @@ pub(super) fn write_junit(report: &CampaignReport, file: &std::path::Path) -> Re
         ("seed".to_owned(), record.seed.to_string()),
         ("scenario".to_owned(), record.scenario.name.clone()),
         ("car".to_owned(), record.car.clone()),
-        ("tool_version".to_owned(), record.tool_version.clone()),
+        ("tool_version".to_owned(), record.header.tool().to_owned()),
         ("no_faults".to_owned(), record.no_faults.to_string()),
         ("run_directory".to_owned(), report.dir.display().to_string()),
     ];

@@ -10,7 +10,7 @@ use super::shared::{metres, print_report};
 use crate::cli::{RunsArgs, RunsCommand};
 use crate::exit::Exit;
 use crate::runner::{CampaignReport, TestSummary};
-use campaign::case::{CampaignRecord, Case};
+use campaign::files::{CampaignRecord, Case};
 use campaign::replay::{Comparison, REPLAY_FILE};
 
 use crate::runner::CAMPAIGN_FILE;
@@ -230,7 +230,7 @@ fn show_campaign(dir: &Path, record: CampaignRecord, coverage: bool) -> Result<(
         if record.no_faults { ", no faults" } else { "" },
         record.car,
         record.car_firmware_version.as_deref().unwrap_or("unknown"),
-        record.tool_version
+        record.header.tool()
     );
     if let Some(of) = &record.replay_of {
         println!("replay of {}", of.case);
@@ -275,6 +275,7 @@ fn show_campaign(dir: &Path, record: CampaignRecord, coverage: bool) -> Result<(
             .summary
             .as_ref()
             .and_then(|s| s.coverage.clone())
+            .map(campaign::coverage::CoverageStats::from)
             .ok_or_else(|| format!("{CAMPAIGN_FILE} has no coverage (an older version wrote it)"))
             .or_else(|why| {
                 let scenario = scenarios::bundled::load(&record.scenario.name)

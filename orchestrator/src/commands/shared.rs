@@ -20,7 +20,7 @@ use crate::runner::{CampaignObserver, CampaignReport, RunError, SimulatorView};
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::vehicle::Vehicle;
 use anyhow::bail;
-use campaign::case::Case;
+use campaign::files::Case;
 use campaign::oracle::Verdict;
 use car_link::CarError;
 

@@ -23,10 +23,9 @@ use crate::cli::ShrinkArgs;
 use crate::exit::Exit;
 use crate::runner::run_dir_name;
 use crate::seed::choose_seed;
-use campaign::case::{Case, ScenarioRef, tool_version};
+use campaign::files::{Case, Header, SHRINK_FORMAT, SHRINK_SCHEMA_VERSION, ScenarioRef};
 use campaign::shrink::{
-    Drive, Ended, MINIMAL_FILE, Progress, SHRINK_FILE, SHRINK_FORMAT, Settings, ShrinkFailure,
-    ShrinkReport,
+    Drive, Ended, MINIMAL_FILE, Progress, SHRINK_FILE, Settings, ShrinkFailure, ShrinkReport,
 };
 
 /// `--margin`'s default (and `run --shrink`'s margin), metres.
@@ -215,9 +214,7 @@ pub(super) fn shrink_case(
     crate::atomic::write(&minimal_file, format!("{}\n", shrunk.minimal.to_json()?))
         .with_context(|| format!("cannot write {}", minimal_file.display()))?;
     let report = ShrinkReport {
-        format: SHRINK_FORMAT.to_owned(),
-        schema_version: 1,
-        tool_version: tool_version().to_owned(),
+        header: Header::current(SHRINK_FORMAT, SHRINK_SCHEMA_VERSION),
         case: path.display().to_string(),
         scenario: ScenarioRef::of(scenario),
         seed: options.seed,

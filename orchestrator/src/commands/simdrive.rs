@@ -13,7 +13,7 @@ use trajgen::{Generator, Point, Strategy};
 use super::shared::{CampaignFailed, sim_view};
 use crate::runner::{ReplaySource, RunConfig, Silent, run_campaign};
 use crate::vehicle::connect_sim;
-use campaign::case::{Case, ReplayOf};
+use campaign::files::{Case, ReplayOf};
 use campaign::model::{Campaign, TestPlan};
 use campaign::oracle::FailurePolicy;
 use campaign::seed::{Purpose, derive};

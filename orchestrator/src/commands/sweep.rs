@@ -10,10 +10,8 @@ use super::simdrive::{SimDriver, SimSettings};
 use crate::cli::SweepArgs;
 use crate::exit::Exit;
 use crate::seed::choose_seed;
-use campaign::case::{ScenarioRef, tool_version};
-use campaign::sweep::{
-    Axis, Parameter, Point, SWEEP_FORMAT, SimSetting, SweepReport, grid, with_fault_values,
-};
+use campaign::files::{Header, SWEEP_FORMAT, SWEEP_SCHEMA_VERSION, ScenarioRef};
+use campaign::sweep::{Axis, Parameter, Point, SimSetting, SweepReport, grid, with_fault_values};
 
 /// Runs the sweep and prints its table (or JSON). Exit status 0 when it ran, 2 on an error.
 pub fn sweep(args: &SweepArgs) -> Result<Exit> {
@@ -67,9 +65,7 @@ pub fn sweep(args: &SweepArgs) -> Result<Exit> {
             results.push(point);
         }
         anyhow::Ok(SweepReport {
-            format: SWEEP_FORMAT.to_owned(),
-            schema_version: 1,
-            tool_version: tool_version().to_owned(),
+            header: Header::current(SWEEP_FORMAT, SWEEP_SCHEMA_VERSION),
             case: path.display().to_string(),
             scenario: ScenarioRef::of(&scenario),
             seed,

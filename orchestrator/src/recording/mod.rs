@@ -96,7 +96,7 @@ pub enum RecordingError {
     },
     /// The campaign record could not be written as JSON.
     #[error("cannot encode the campaign record: {0}")]
-    Campaign(#[source] campaign::case::CaseError),
+    Campaign(#[source] campaign::files::CaseError),
     /// The bytes do not start like an MCAP file.
     #[error("not an MCAP file: {0}")]
     NotMcap(#[source] mcap::McapError),

@@ -14,8 +14,8 @@ use serde::{Deserialize, Deserializer, Serialize};
 use tokio::time::Instant;
 
 use super::topic::{Record, Topic};
-use campaign::case::{IntentRecord, PointRecord, RoutePointRecord, SegmentResult};
 use campaign::drive::FaultPlacement;
+use campaign::files::{IntentRecord, PointRecord, RoutePointRecord, SegmentResult};
 use campaign::model::{Fault, FaultKind, Probe, Segment};
 use campaign::oracle::{Verdict, deviation};
 use campaign::safety::Abort;

@@ -11,9 +11,9 @@ use serde_json::Value;
 use tokio::time::{Instant, advance};
 
 use super::*;
-use campaign::case::{
-    CAMPAIGN_FORMAT, CampaignRecord, RoutePointRecord, SCHEMA_VERSION, ScenarioRef, SegmentResult,
-    Settings, tool_version,
+use campaign::files::{
+    CAMPAIGN_FORMAT, CAMPAIGN_SCHEMA_VERSION, CampaignRecord, Header, RoutePointRecord,
+    ScenarioRef, SegmentResult, Settings,
 };
 use campaign::model::{Fault, FaultKind, Probe, Segment, SegmentIntent};
 use campaign::oracle::{FailurePolicy, SegmentOracle, Verdict};
@@ -27,9 +27,7 @@ fn scenario() -> Scenario {
 
 fn campaign(s: &Scenario) -> CampaignRecord {
     CampaignRecord {
-        format: CAMPAIGN_FORMAT.to_owned(),
-        schema_version: SCHEMA_VERSION,
-        tool_version: tool_version().to_owned(),
+        header: Header::current(CAMPAIGN_FORMAT, CAMPAIGN_SCHEMA_VERSION),
         seed: 42,
         no_faults: false,
         scenario: ScenarioRef::of(s),

@@ -26,7 +26,7 @@ use super::records::{
 };
 use super::topic::{Record, Topic};
 use super::{RECORDING_FORMAT, RECORDING_VERSION, RecordingError, foxglove, schema};
-use campaign::case::{CampaignRecord, tool_version};
+use campaign::files::{CampaignRecord, tool_version};
 
 /// The default [`RecordingStart::chunk_interval`]: at most one second of messages is lost when the
 /// process is killed while messages flow.

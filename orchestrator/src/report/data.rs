@@ -299,8 +299,7 @@ fn read_replay(dir: &Path) -> Result<ReplayData, ReportError> {
 
 fn read_shrink(dir: &Path) -> Result<ShrinkData, ReportError> {
     let path = dir.join(SHRINK_FILE);
-    let report: ShrinkReport =
-        serde_json::from_str(&read_text(&path)?).map_err(|e| invalid(&path, e))?;
+    let report = ShrinkReport::from_json(&read_text(&path)?).map_err(|e| invalid(&path, e))?;
     let mut notes = Vec::new();
     let minimal_path = dir.join(MINIMAL_FILE);
     let minimal = match read_text(&minimal_path) {

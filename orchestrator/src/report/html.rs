@@ -555,7 +555,7 @@ pub(crate) fn campaign_page(
             record.scenario.hash.as_deref().map_or("–", short)
         ),
     );
-    fact(&mut out, "drivecheck", &escape(&record.tool_version));
+    fact(&mut out, "drivecheck", &escape(record.header.tool()));
     fact(
         &mut out,
         "car",
@@ -1034,7 +1034,7 @@ pub(crate) fn shrink_page(data: &ShrinkData, page_notes: Vec<String>) -> String 
             r.scenario.hash.as_deref().map_or("–", short)
         ),
     );
-    fact(&mut out, "drivecheck", &escape(&r.tool_version));
+    fact(&mut out, "drivecheck", &escape(r.header.tool()));
     fact(
         &mut out,
         "seed, runs per candidate",

@@ -34,7 +34,7 @@ use super::{
 };
 use crate::recording::{DEFAULT_CHUNK_INTERVAL, Held, Recorder, RecordingStart};
 use crate::vehicle::Vehicle;
-use campaign::case::{Case, Settings};
+use campaign::files::{Case, Settings};
 use campaign::model::TestPlan;
 use campaign::oracle::Verdict;
 use campaign::safety::SafetyConfig;

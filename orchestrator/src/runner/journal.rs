@@ -13,7 +13,7 @@ use std::sync::{Mutex, MutexGuard};
 use super::RunError;
 use super::events::SimulatorView;
 use crate::recording::{CarCommand, Held, Record, Recorder, RecordingError};
-use campaign::case::CampaignRecord;
+use campaign::files::CampaignRecord;
 use car_link::{CarError, StateSample};
 
 /// The recorder and the first error it returned.

@@ -19,7 +19,7 @@
 //!    extension generated with the ahead margin, then braking until the speed is below 0.1 m/s
 //!    (or braking at once when the monitor demands it).
 //! 4. The **run directory** (`run_dir`): `campaign.json` (written at the start and again at
-//!    the end) and one case file per test, in the formats of [`campaign::case`]; and all along,
+//!    the end) and one case file per test, in the formats of [`campaign::files`]; and all along,
 //!    the telemetry recording `campaign.mcap` ([`crate::recording`], written through a journal):
 //!    every state sample, every command sent with its answer, the planned segments and return
 //!    routes, the fault commands, the oracle results, the safety stops, each test's start and
@@ -63,10 +63,10 @@ use crate::recording::{
     RecordingStart, SafetyRecord, TestEvent, TestEventKind,
 };
 use crate::vehicle::Vehicle;
-use campaign::case::{
+use campaign::drive::DriveSettings;
+use campaign::files::{
     Case, CaseError, CommandRecord, ReplayOf, RoutePointRecord, Settings, TestTiming,
 };
-use campaign::drive::DriveSettings;
 use campaign::model::{Campaign, Command, ModelError, ProbeRates, TestPlan, TestPlanner};
 use campaign::oracle::{FailurePolicy, Verdict};
 use campaign::safety::{Abort, AbortReason, SafetyConfig};
@@ -585,7 +585,11 @@ fn record_test_end(journal: &Journal<'_>, test_index: usize, case: &Case) {
     for placement in &case.fault_places {
         let command = case.commands.get(placement.command_index);
         if let Some(Command::AddFault(fault)) = command.map(CommandRecord::to_command) {
-            journal.write(&FaultRecord::placed(test_index, &fault, *placement));
+            journal.write(&FaultRecord::placed(
+                test_index,
+                &fault,
+                (*placement).into(),
+            ));
         }
     }
     for result in &case.segments {

@@ -1,6 +1,6 @@
 //! The run directory: `campaign.json` (written when the campaign starts, and again with its end
 //! time and summary when it ends, however it ends), one case file per test,
-//! `case-000.json`, `case-001.json`, … in the formats of [`campaign::case`], and the recording
+//! `case-000.json`, `case-001.json`, … in the formats of [`campaign::files`], and the recording
 //! `campaign.mcap` (written by [`crate::recording::Recorder`], see `docs/recording.md`).
 
 use std::path::{Path, PathBuf};
@@ -9,9 +9,9 @@ use std::time::{SystemTime, UNIX_EPOCH};
 use scenarios::Scenario;
 
 use super::{RunConfig, RunError};
-use campaign::case::{
-    CAMPAIGN_FORMAT, CampaignRecord, CampaignSummary, Case, SCHEMA_VERSION, ScenarioRef, Settings,
-    tool_version,
+use campaign::files::{
+    CAMPAIGN_FORMAT, CAMPAIGN_SCHEMA_VERSION, CampaignRecord, CampaignSummary, Case, Header,
+    ScenarioRef, Settings,
 };
 use campaign::oracle::Verdict;
 use campaign::safety::SafetyConfig;
@@ -81,9 +81,7 @@ impl RunDirectory {
             source,
         })?;
         let record = CampaignRecord {
-            format: CAMPAIGN_FORMAT.to_owned(),
-            schema_version: SCHEMA_VERSION,
-            tool_version: tool_version().to_owned(),
+            header: Header::current(CAMPAIGN_FORMAT, CAMPAIGN_SCHEMA_VERSION),
             seed: config.campaign.seed,
             no_faults: config.campaign.no_faults,
             scenario: ScenarioRef::of(scenario),
@@ -209,7 +207,11 @@ impl RunDirectory {
                  test says anything about UWB positioning"
                     .to_owned()
             }),
-            coverage: Some(campaign::coverage::of_scenario(&self.scenario, &self.cases).stats),
+            coverage: Some(
+                campaign::coverage::of_scenario(&self.scenario, &self.cases)
+                    .stats
+                    .into(),
+            ),
         }
     }
 

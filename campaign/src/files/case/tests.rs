@@ -1,6 +1,12 @@
 use super::*;
+use crate::files::{
+    CAMPAIGN_FORMAT, CAMPAIGN_SCHEMA_VERSION, CampaignRecord, CampaignSummary, CaseError,
+};
 use crate::model::{Campaign, plan_test, start_tail};
+use crate::oracle::FailurePolicy;
 use crate::oracle::{SegmentOracle, SegmentVerdict};
+use crate::safety::SafetyConfig;
+use crate::streaming::StreamingConfig;
 
 pub(crate) fn scenario(name: &str) -> Scenario {
     scenarios::bundled::load(name).unwrap().scenario
@@ -41,11 +47,11 @@ fn run_case() -> (Scenario, Case) {
         std::time::Duration::from_millis(9000),
     ));
     case.streaming = Some(StreamingRecord {
-        appends: vec![Append {
-            decided_at: std::time::Duration::from_millis(1500),
-            time_to_end: std::time::Duration::from_millis(2100),
-            lead: std::time::Duration::from_millis(1800),
-            confirmed_after: Some(std::time::Duration::from_millis(160)),
+        appends: vec![AppendRecord {
+            decided_at: 1500,
+            time_to_end: 2100,
+            lead: 1800,
+            confirmed_after: Some(160),
         }],
         starvations_ms: vec![],
         smallest_margin_s: Some(1.94),
@@ -83,9 +89,7 @@ fn recorded_commands_give_back_the_planned_commands() {
 fn a_campaign_record_survives_a_round_trip_through_json() {
     let s = scenario("parking-lot-2anchors");
     let record = CampaignRecord {
-        format: CAMPAIGN_FORMAT.to_owned(),
-        schema_version: SCHEMA_VERSION,
-        tool_version: tool_version().to_owned(),
+        header: Header::current(CAMPAIGN_FORMAT, CAMPAIGN_SCHEMA_VERSION),
         seed: 42,
         no_faults: true,
         scenario: ScenarioRef::of(&s),
@@ -113,7 +117,7 @@ fn a_campaign_record_survives_a_round_trip_through_json() {
 
 /// The JSON blocks of the documentation page, in order.
 pub(crate) fn doc_examples() -> Vec<&'static str> {
-    let doc = include_str!("../../../docs/case-format.md");
+    let doc = include_str!("../../../../docs/case-format.md");
     doc.split("```json\n")
         .skip(1)
         .filter_map(|block| block.split("\n```").next())
@@ -143,11 +147,11 @@ fn the_documented_recorded_case_and_campaign_parse() {
 fn another_format_or_a_newer_version_is_refused() {
     let (_, case) = run_case();
     let mut other = case.clone();
-    other.format = CAMPAIGN_FORMAT.to_owned();
+    other.header.format = CAMPAIGN_FORMAT.to_owned();
     let error = Case::from_json(&other.to_json().unwrap()).unwrap_err();
     assert!(matches!(error, CaseError::WrongFormat { .. }));
     let mut newer = case;
-    newer.schema_version = 3;
+    newer.header.schema_version = 3;
     let error = Case::from_json(&newer.to_json().unwrap()).unwrap_err();
     assert!(matches!(
         error,
@@ -172,9 +176,7 @@ fn a_parse_error_names_the_field() {
 #[test]
 fn check_refuses_unusable_values() {
     let base = |command: CommandRecord| Case {
-        format: CASE_FORMAT.to_owned(),
-        schema_version: SCHEMA_VERSION,
-        tool_version: None,
+        header: Header::untooled(CASE_FORMAT, 1),
         campaign_seed: None,
         test_index: None,
         scenario: ScenarioRef {
@@ -313,4 +315,59 @@ fn a_recorded_verdict_that_contradicts_the_segments_is_refused() {
     assert!(failed.check().is_ok());
     failed.verdict = None;
     assert!(failed.check().is_ok());
+}
+
+#[test]
+fn an_unknown_field_is_refused_beside_the_header() {
+    let text = r#"{"format": "drivecheck-case", "schema_version": 2, "colour": "red",
+        "scenario": {"name": "x"}, "commands": []}"#;
+    let error = Case::from_json(text).unwrap_err().to_string();
+    assert!(error.contains("unknown field `colour`"), "{error}");
+    let text = r#"{"schema_version": 2, "scenario": {"name": "x"}, "commands": []}"#;
+    let error = Case::from_json(text).unwrap_err().to_string();
+    assert!(error.contains("missing field `format`"), "{error}");
+}
+
+#[test]
+fn the_header_comes_first_and_a_missing_tool_version_is_left_out() {
+    let (_, case) = run_case();
+    let json = case.to_json().unwrap();
+    let expected = format!(
+        "{{\n  \"format\": \"drivecheck-case\",\n  \"schema_version\": {CASE_SCHEMA_VERSION},\n  \
+         \"tool_version\": \"{}\",\n  \"campaign_seed\": 99,",
+        crate::files::tool_version()
+    );
+    assert!(json.starts_with(&expected), "{json}");
+    let mut hand = case;
+    hand.header.tool_version = None;
+    let json = hand.to_json().unwrap();
+    assert!(!json.contains("tool_version"), "{json}");
+}
+
+#[test]
+fn the_runtime_constants_are_written_in_milliseconds() {
+    let safety = crate::files::SafetyConfigRecord::from(SafetyConfig::default());
+    assert_eq!(
+        serde_json::to_string(&safety).unwrap(),
+        r#"{"area_margin_m":0.3,"max_cross_track_m":1.5,"stale_after":250}"#
+    );
+    assert_eq!(SafetyConfig::from(safety), SafetyConfig::default());
+    let streaming = crate::files::StreamingConfigRecord::from(StreamingConfig::default());
+    assert_eq!(
+        serde_json::to_string(&streaming).unwrap(),
+        r#"{"margin":1000,"initial_round_trip":500,"initial_generation":100,"window":200,"min_speed_mps":0.1}"#
+    );
+    assert_eq!(StreamingConfig::from(streaming), StreamingConfig::default());
+    let append = crate::streaming::Append {
+        decided_at: std::time::Duration::from_millis(1000),
+        time_to_end: std::time::Duration::from_millis(2400),
+        lead: std::time::Duration::from_millis(1700),
+        confirmed_after: Some(std::time::Duration::from_millis(180)),
+    };
+    let record = AppendRecord::from(append);
+    assert_eq!(
+        serde_json::to_string(&record).unwrap(),
+        r#"{"decided_at":1000,"time_to_end":2400,"lead":1700,"confirmed_after":180}"#
+    );
+    assert_eq!(record.margin_left_s(), append.margin_left_s());
 }

@@ -5,7 +5,8 @@ use car_link::firmware::MAX_RANGED_ANCHOR_ID;
 use scenarios::Scenario;
 use trajgen::{Point, check_route};
 
-use super::{Case, CaseError, CommandRecord, PlaceRecord, RoutePointRecord, invalid};
+use super::{Case, CommandRecord, PlaceRecord, RoutePointRecord};
+use crate::files::{CaseError, invalid};
 use crate::model::{Probe, start_tail};
 
 impl Case {

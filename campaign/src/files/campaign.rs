@@ -1,0 +1,150 @@
+//! Campaign records (`campaign.json`): what a run directory says about its campaign.
+
+use serde::{Deserialize, Serialize};
+
+use super::{
+    CAMPAIGN_FORMAT, CAMPAIGN_READABLE, CaseError, Header, ScenarioRef, Settings, check_header,
+    parse,
+};
+use crate::oracle::Verdict;
+use crate::shard::Shard;
+
+/// What a campaign's run directory says about it (`campaign.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CampaignRecord {
+    /// `drivecheck-campaign`, its schema version and the drivecheck version that ran it.
+    #[serde(flatten)]
+    pub header: Header,
+    /// The one seed every test derives from.
+    pub seed: u64,
+    /// True when it ran without fault commands.
+    pub no_faults: bool,
+    /// The scenario.
+    pub scenario: ScenarioRef,
+    /// The settings.
+    pub settings: Settings,
+    /// The car it drove (`sim`, `tcp://…`, `udp://…`, `serial://…`).
+    pub car: String,
+    /// The car's firmware version as it reported it (absent if unknown).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub car_firmware_version: Option<String>,
+    /// When it started, RFC 3339 (for example `2026-11-22T10:55:21Z`).
+    pub started_at: String,
+    /// When it ended, RFC 3339; absent while running or if the process died.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ended_at: Option<String>,
+    /// The outcome, once it ended.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub summary: Option<CampaignSummary>,
+    /// For a replay (`drivecheck replay`): the case every test drove again.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub replay_of: Option<ReplayOf>,
+    /// For one shard of a campaign (`drivecheck run --shard K/N`): which one. Its run directory
+    /// holds the shard's tests only; `drivecheck runs merge` joins the shards.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shard: Option<Shard>,
+}
+
+/// The case a replay drove again.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReplayOf {
+    /// The case file as given on the command line.
+    pub case: String,
+    /// Its campaign's seed, if recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub campaign_seed: Option<u64>,
+    /// Its test index, if recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_index: Option<usize>,
+    /// Its verdict, if it was run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub verdict: Option<Verdict>,
+    /// True when the replay left out its fault commands.
+    pub no_faults: bool,
+}
+
+/// A campaign's outcome.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CampaignSummary {
+    /// Tests run.
+    pub tests: usize,
+    /// Tests passed.
+    pub passed: usize,
+    /// Tests failed.
+    pub failed: usize,
+    /// Tests aborted.
+    pub aborted: usize,
+    /// Largest deviation seen in any segment, metres (absent without samples).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub worst_deviation_m: Option<f64>,
+    /// Case files of the failed and aborted tests, relative to the run directory.
+    pub failing_cases: Vec<String>,
+    /// Why the UWB positioning was not tested, when it was not (an area without anchors: the
+    /// estimate is dead reckoning only, so a pass says nothing about UWB).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uwb_not_tested: Option<String>,
+    /// What the tests covered: the share of the area driven, headings and speeds, fault kinds
+    /// per probe (`campaign::coverage`); absent in records of older versions.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coverage: Option<CoverageRecord>,
+}
+
+impl CampaignRecord {
+    /// Reads a campaign record from JSON: shape, format name and version.
+    pub fn from_json(text: &str) -> Result<Self, CaseError> {
+        let record: Self = parse(text)?;
+        check_header(&record.header, CAMPAIGN_FORMAT, CAMPAIGN_READABLE)?;
+        Ok(record)
+    }
+
+    /// The record as pretty-printed JSON.
+    pub fn to_json(&self) -> Result<String, CaseError> {
+        super::to_json(self)
+    }
+}
+
+/// A campaign's coverage statistics as `campaign.json` keeps them (`summary.coverage`; computed
+/// by `crate::coverage`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CoverageRecord {
+    /// Tests counted.
+    pub tests: usize,
+    /// Side of a cell, metres.
+    pub cell_m: f64,
+    /// Drivable cells of the area.
+    pub drivable_cells: usize,
+    /// Drivable cells a driven segment passed through.
+    pub driven_cells: usize,
+    /// `driven_cells / drivable_cells`.
+    pub area_share: f64,
+    /// Metres driven per heading bin: bin *k* holds headings from `k × 30°` (counter-clockwise
+    /// from east) up to the next.
+    pub heading_m: Vec<f64>,
+    /// Metres driven per speed bin: bin *k* holds speeds from `k × 2 km/h` up to the next.
+    pub speed_m: Vec<f64>,
+    /// Per probe and fault type: how many fault commands the tests held, sent and confirmed by
+    /// the car, and estimated to begin acting before their test ended.
+    pub faults: Vec<FaultCoverageRecord>,
+    /// `segments_per_test[n]`: how many tests drove `n` segments.
+    pub segments_per_test: Vec<usize>,
+}
+
+/// One probe and fault type of [`CoverageRecord::faults`].
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FaultCoverageRecord {
+    /// The probe (`uwb_range_50`, `uwb_travel_dist`, `uwb_yaw`).
+    pub probe: String,
+    /// The fault type (`OFFSET`, `AMPLIFICATION`, `SET_TO`, `BITFLIP`).
+    pub kind: String,
+    /// Fault commands of that probe and type in the tests' plans.
+    pub planned: usize,
+    /// Sent and confirmed by the car.
+    pub confirmed: usize,
+    /// Estimated to begin acting before their test's drive ended.
+    pub acted: usize,
+}
