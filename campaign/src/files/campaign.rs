@@ -3,8 +3,8 @@
 use serde::{Deserialize, Serialize};
 
 use super::{
-    CAMPAIGN_FORMAT, CAMPAIGN_READABLE, CaseError, Header, ScenarioRef, Settings, check_header,
-    parse,
+    CAMPAIGN_FAULT_SECTIONS_SINCE, CAMPAIGN_FORMAT, CAMPAIGN_READABLE, CaseError, Header,
+    ScenarioRef, Settings, check_header, parse,
 };
 use crate::oracle::Verdict;
 use crate::shard::Shard;
@@ -97,6 +97,11 @@ impl CampaignRecord {
     pub fn from_json(text: &str) -> Result<Self, CaseError> {
         let record: Self = parse(text)?;
         check_header(&record.header, CAMPAIGN_FORMAT, CAMPAIGN_READABLE)?;
+        let version = record.header.schema_version;
+        record
+            .settings
+            .faults
+            .check_form(version >= CAMPAIGN_FAULT_SECTIONS_SINCE, version)?;
         Ok(record)
     }
 

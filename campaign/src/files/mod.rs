@@ -3,8 +3,8 @@
 //!
 //! | file | `format` | record type | written | read | bump when |
 //! |---|---|---|---|---|---|
-//! | `case-NNN.json`, `minimal.json` | `drivecheck-case` | [`Case`] | [`CASE_SCHEMA_VERSION`] 2 | 1, 2 | a field of a case or of its settings is removed, renamed or changes meaning |
-//! | `campaign.json` | `drivecheck-campaign` | [`CampaignRecord`] | [`CAMPAIGN_SCHEMA_VERSION`] 1 | 1 | a field of the record, its settings or its summary is removed, renamed or changes meaning |
+//! | `case-NNN.json`, `minimal.json` | `drivecheck-case` | [`Case`] | [`CASE_SCHEMA_VERSION`] 3 | 1, 2, 3 | a field of a case or of its settings is removed, renamed or changes meaning |
+//! | `campaign.json` | `drivecheck-campaign` | [`CampaignRecord`] | [`CAMPAIGN_SCHEMA_VERSION`] 2 | 1, 2 | a field of the record, its settings or its summary is removed, renamed or changes meaning |
 //! | `replay.json` | `drivecheck-replay` | [`Comparison`] | [`REPLAY_SCHEMA_VERSION`] 1 | 1 | a field of the comparison changes |
 //! | `shrink.json` | `drivecheck-shrink` | [`crate::shrink::ShrinkReport`] | [`SHRINK_SCHEMA_VERSION`] 1 | 1 | a field of the report changes |
 //! | `sweep.json` | `drivecheck-sweep` | [`crate::sweep::SweepReport`] | [`SWEEP_SCHEMA_VERSION`] 1 | not read back | a field of the report changes |
@@ -28,6 +28,11 @@
 //! version would misread the new file; an added optional field does not need one. Keep reading
 //! the old version (list it in the format's readable versions).
 //!
+//! Versions: case 2 gave every fault its place on the route; case 3 and campaign record 2 give
+//! every fault section of the settings whole ([`FaultRanges`]) where the older versions kept
+//! flat ranges ([`FlatFaultRanges`]: the offset range of anchor faults only, no set_to or bitflip
+//! range). [`FaultRangesForm`] reads both, and a file's form must be its version's.
+//!
 //! The case format is documented field by field in `docs/case-format.md`.
 
 use scenarios::Scenario;
@@ -50,25 +55,36 @@ pub use case::{
     PlaceRuleRecord, PointRecord, RoutePointRecord, SegmentResult, StreamingRecord, TestTiming,
 };
 pub use replay::{Comparison, ReplayRun, SegmentComparison};
-pub use settings::{FaultRanges, SafetyConfigRecord, Settings, StreamingConfigRecord, Weights};
+pub use settings::{
+    FaultRanges, FaultRangesForm, FlatFaultRanges, ProbeFaultsRecord, SafetyConfigRecord, Settings,
+    StreamingConfigRecord, Weights,
+};
 
 #[cfg(test)]
 pub(crate) use case::tests;
 
 /// The `format` of a case file.
 pub const CASE_FORMAT: &str = "drivecheck-case";
-/// The schema version of case files this build writes: 2 gives every fault its place on the
-/// route. Version 1 is still read; its faults have no place.
-pub const CASE_SCHEMA_VERSION: u32 = 2;
+/// The schema version of case files this build writes: 3 records every fault section of the
+/// settings whole. Versions 1 and 2 are still read (their settings hold the flat fault ranges;
+/// version 1's faults have no place).
+pub const CASE_SCHEMA_VERSION: u32 = 3;
 /// The case schema versions this build reads.
-pub const CASE_READABLE: &[u32] = &[1, 2];
+pub const CASE_READABLE: &[u32] = &[1, 2, 3];
+/// The first case schema version whose faults have a place on the route.
+pub const CASE_FAULT_PLACES_SINCE: u32 = 2;
+/// The first case schema version whose settings hold the fault sections whole.
+pub const CASE_FAULT_SECTIONS_SINCE: u32 = 3;
 
 /// The `format` of a campaign record (`campaign.json`).
 pub const CAMPAIGN_FORMAT: &str = "drivecheck-campaign";
-/// The schema version of campaign records this build writes.
-pub const CAMPAIGN_SCHEMA_VERSION: u32 = 1;
+/// The schema version of campaign records this build writes: 2 records every fault section of
+/// the settings whole. Version 1 (the flat fault ranges) is still read.
+pub const CAMPAIGN_SCHEMA_VERSION: u32 = 2;
 /// The campaign record schema versions this build reads.
-pub const CAMPAIGN_READABLE: &[u32] = &[1];
+pub const CAMPAIGN_READABLE: &[u32] = &[1, 2];
+/// The first campaign record schema version whose settings hold the fault sections whole.
+pub const CAMPAIGN_FAULT_SECTIONS_SINCE: u32 = 2;
 
 /// The `format` of a replay comparison (`replay.json`).
 pub const REPLAY_FORMAT: &str = "drivecheck-replay";

@@ -1,10 +1,12 @@
 //! The settings a case and a campaign record hold, and the records of the runtime constants.
 
+use std::collections::BTreeMap;
 use std::time::Duration;
 
-use scenarios::{CampaignSettings, Interval, Scenario};
+use scenarios::{CampaignSettings, Interval, ProbeFaults, Scenario};
 use serde::{Deserialize, Serialize};
 
+use super::{CaseError, invalid};
 use crate::model::FaultKind;
 use crate::oracle::FailurePolicy;
 use crate::safety::SafetyConfig;
@@ -36,8 +38,9 @@ pub struct Settings {
     pub failure_policy: FailurePolicy,
     /// Command weights.
     pub weights: Weights,
-    /// Fault parameter ranges.
-    pub faults: FaultRanges,
+    /// Fault parameter ranges: every section whole (case schema 3, campaign schema 2), or the
+    /// flat ranges of older files.
+    pub faults: FaultRangesForm,
     /// The safety monitor's limits.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub safety: Option<SafetyConfigRecord>,
@@ -61,10 +64,90 @@ pub struct Weights {
     pub yaw_fault: u32,
 }
 
-/// Fault parameter ranges in a record.
+/// Fault parameter ranges in a record: the scenario's three fault sections, each whole (what this
+/// build writes: case schema 3, campaign record schema 2).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FaultRanges {
+    /// `add_fault` on an anchor's range.
+    pub anchor_range: ProbeFaultsRecord,
+    /// `add_fault` wheel slip (the odometry step).
+    pub wheel_slip: ProbeFaultsRecord,
+    /// `add_fault` yaw.
+    pub yaw: ProbeFaultsRecord,
+}
+
+/// One fault section in a record: the scenario's [`ProbeFaults`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProbeFaultsRecord {
+    /// Fault kinds drawn.
+    pub kinds: Vec<FaultKind>,
+    /// The parameter range of every kind with a parameter, by the kind's name (a bitflip's range
+    /// holds bit numbers).
+    pub ranges: BTreeMap<FaultKind, Interval<f64>>,
+    /// Start, probe iterations.
+    pub start: Interval<u32>,
+    /// Duration, probe iterations.
+    pub duration: Interval<u32>,
+}
+
+impl From<&ProbeFaults> for ProbeFaultsRecord {
+    fn from(f: &ProbeFaults) -> Self {
+        Self {
+            kinds: f.kinds.clone(),
+            ranges: f.ranges.clone(),
+            start: f.start,
+            duration: f.duration,
+        }
+    }
+}
+
+/// The fault ranges as a record holds them: whole sections, or the flat form of case schema 1–2
+/// and campaign schema 1, which kept only the offset range of anchor faults, the amplification
+/// of wheel slip and the offset of yaw.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(
+    untagged,
+    expecting = "fault ranges: the sections `anchor_range`, `wheel_slip` and `yaw`, each with \
+                 `kinds`, `ranges`, `start` and `duration` (or, in older files, the flat \
+                 `anchor_range_kinds`, `anchor_range_param`, … `yaw_duration`)"
+)]
+pub enum FaultRangesForm {
+    /// Every section whole.
+    Sections(FaultRanges),
+    /// The flat form of older files.
+    Flat(FlatFaultRanges),
+}
+
+impl FaultRangesForm {
+    /// Checks that the form is the one of the file's version: the sections when `sections`,
+    /// the flat form otherwise.
+    pub(crate) fn check_form(&self, sections: bool, version: u32) -> Result<(), CaseError> {
+        match (self, sections) {
+            (Self::Sections(_), true) | (Self::Flat(_), false) => Ok(()),
+            (Self::Flat(_), true) => Err(invalid(
+                "settings.faults",
+                format!(
+                    "the flat fault ranges of older files in a schema version {version} file, \
+                     which gives every section whole (`anchor_range`, `wheel_slip`, `yaw`)"
+                ),
+            )),
+            (Self::Sections(_), false) => Err(invalid(
+                "settings.faults",
+                format!(
+                    "fault sections in a schema version {version} file, which gives the flat \
+                     ranges (`anchor_range_kinds`, …)"
+                ),
+            )),
+        }
+    }
+}
+
+/// Fault parameter ranges in the flat form of case schema 1–2 and campaign record schema 1.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FlatFaultRanges {
     /// Fault kinds of anchor range faults.
     pub anchor_range_kinds: Vec<FaultKind>,
     /// Anchor range fault parameter.
@@ -106,18 +189,11 @@ impl Settings {
                 wheel_slip_fault: c.weights.wheel_slip_fault,
                 yaw_fault: c.weights.yaw_fault,
             },
-            faults: FaultRanges {
-                anchor_range_kinds: f.anchor_range.kinds.clone(),
-                anchor_range_param: f.anchor_range.range(FaultKind::Offset),
-                anchor_range_start: f.anchor_range.start,
-                anchor_range_duration: f.anchor_range.duration,
-                wheel_slip_amplification: f.wheel_slip.range(FaultKind::Amplification),
-                wheel_slip_start: f.wheel_slip.start,
-                wheel_slip_duration: f.wheel_slip.duration,
-                yaw_offset_deg: f.yaw.range(FaultKind::Offset),
-                yaw_start: f.yaw.start,
-                yaw_duration: f.yaw.duration,
-            },
+            faults: FaultRangesForm::Sections(FaultRanges {
+                anchor_range: (&f.anchor_range).into(),
+                wheel_slip: (&f.wheel_slip).into(),
+                yaw: (&f.yaw).into(),
+            }),
             safety: None,
             streaming: None,
         }

@@ -606,7 +606,12 @@ fn prepared(
     case.abort = None;
     case.streaming = None;
     case.fault_places.clear();
-    case.header.schema_version = crate::files::CASE_SCHEMA_VERSION;
+    // The minimal case has places for its faults (version 2 on) and keeps the case's settings,
+    // whose form its version names.
+    case.header.schema_version = case
+        .header
+        .schema_version
+        .max(crate::files::CASE_FAULT_PLACES_SINCE);
     case.check()?;
     case.check_route(scenario)?;
     case.check_faults_act(scenario)?;

@@ -29,7 +29,7 @@ use crate::runner::{
 use crate::seed::choose_seed;
 use crate::vehicle::{ConnectError, Vehicle, connect};
 use campaign::drive::EARLIER_TOOL_POINTS_LEFT;
-use campaign::files::{CASE_SCHEMA_VERSION, CommandRecord};
+use campaign::files::{CASE_FAULT_PLACES_SINCE, CommandRecord};
 use campaign::files::{Case, ReplayOf, ScenarioRef};
 use campaign::model::{Campaign, TestPlan};
 use campaign::oracle::Verdict;
@@ -47,7 +47,7 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
         .filter(|c| matches!(c, CommandRecord::AddFault { at: None, .. }))
         .count();
     if unplaced > 0 && !args.no_faults {
-        let why = if case.header.schema_version < CASE_SCHEMA_VERSION {
+        let why = if case.header.schema_version < CASE_FAULT_PLACES_SINCE {
             format!(
                 "a version-{} case: the places of its faults are unknown",
                 case.header.schema_version

@@ -19,8 +19,8 @@ use serde::{Deserialize, Serialize};
 use trajgen::{Point, Waypoint};
 
 use super::{
-    CASE_FORMAT, CASE_READABLE, CASE_SCHEMA_VERSION, CaseError, Header, ScenarioRef, Settings,
-    check_header, parse, settings::millis,
+    CASE_FAULT_SECTIONS_SINCE, CASE_FORMAT, CASE_READABLE, CASE_SCHEMA_VERSION, CaseError, Header,
+    ScenarioRef, Settings, check_header, parse, settings::millis,
 };
 use crate::model::{
     Command, Fault, FaultKind, FaultPlace, Probe, Segment, SegmentIntent, TestPlan,
@@ -376,6 +376,12 @@ impl Case {
     pub fn from_json(text: &str) -> Result<Self, CaseError> {
         let case: Self = parse(text)?;
         check_header(&case.header, CASE_FORMAT, CASE_READABLE)?;
+        if let Some(settings) = &case.settings {
+            let version = case.header.schema_version;
+            settings
+                .faults
+                .check_form(version >= CASE_FAULT_SECTIONS_SINCE, version)?;
+        }
         Ok(case)
     }
 

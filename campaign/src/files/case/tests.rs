@@ -151,12 +151,18 @@ fn another_format_or_a_newer_version_is_refused() {
     let error = Case::from_json(&other.to_json().unwrap()).unwrap_err();
     assert!(matches!(error, CaseError::WrongFormat { .. }));
     let mut newer = case;
-    newer.header.schema_version = 3;
+    newer.header.schema_version = CASE_SCHEMA_VERSION + 1;
     let error = Case::from_json(&newer.to_json().unwrap()).unwrap_err();
-    assert!(matches!(
-        error,
-        CaseError::UnsupportedVersion { found: 3, .. }
-    ));
+    assert!(
+        matches!(error, CaseError::UnsupportedVersion { found, .. } if found == CASE_SCHEMA_VERSION + 1),
+        "{error}"
+    );
+    assert!(
+        error
+            .to_string()
+            .ends_with("(this drivecheck reads 1, 2 and 3)"),
+        "{error}"
+    );
 }
 
 #[test]
@@ -358,7 +364,7 @@ fn the_runtime_constants_are_written_in_milliseconds() {
         r#"{"margin":1000,"initial_round_trip":500,"initial_generation":100,"window":200,"min_speed_mps":0.1}"#
     );
     assert_eq!(StreamingConfig::from(streaming), StreamingConfig::default());
-    let append = crate::streaming::Append {
+    let append = Append {
         decided_at: std::time::Duration::from_millis(1000),
         time_to_end: std::time::Duration::from_millis(2400),
         lead: std::time::Duration::from_millis(1700),
@@ -370,4 +376,83 @@ fn the_runtime_constants_are_written_in_milliseconds() {
         r#"{"decided_at":1000,"time_to_end":2400,"lead":1700,"confirmed_after":180}"#
     );
     assert_eq!(record.margin_left_s(), append.margin_left_s());
+}
+
+#[test]
+fn the_fault_sections_are_recorded_whole_and_the_flat_form_still_loads() {
+    let examples = doc_examples();
+    let current = CampaignRecord::from_json(examples[2]).unwrap();
+    assert_eq!(current.header.schema_version, CAMPAIGN_SCHEMA_VERSION);
+    let s = scenario("parking-lot-2anchors");
+    let written = Settings::new(&s, 10, FailurePolicy::default());
+    let crate::files::FaultRangesForm::Sections(sections) = &current.settings.faults else {
+        panic!(
+            "the current example holds the sections: {:?}",
+            current.settings.faults
+        );
+    };
+    assert_eq!(current.settings.faults, written.faults);
+    for section in [&sections.anchor_range, &sections.wheel_slip, &sections.yaw] {
+        for kind in [
+            FaultKind::Offset,
+            FaultKind::Amplification,
+            FaultKind::SetTo,
+            FaultKind::Bitflip,
+        ] {
+            assert!(section.ranges.contains_key(&kind), "{kind:?}");
+        }
+    }
+    assert_eq!(
+        sections.wheel_slip.kinds,
+        s.campaign.faults.wheel_slip.kinds
+    );
+    assert_eq!(
+        sections.yaw.ranges[&FaultKind::SetTo],
+        s.campaign.faults.yaw.range(FaultKind::SetTo)
+    );
+
+    let old = CampaignRecord::from_json(examples[3]).unwrap();
+    assert_eq!(old.header.schema_version, 1);
+    let crate::files::FaultRangesForm::Flat(flat) = &old.settings.faults else {
+        panic!("the version-1 example holds the flat form");
+    };
+    assert_eq!(flat.anchor_range_param, scenarios::Interval::new(0.0, 5.0));
+}
+
+#[test]
+fn a_file_must_hold_the_fault_ranges_of_its_version() {
+    let examples = doc_examples();
+    let flat_as_new = examples[3].replacen("\"schema_version\": 1", "\"schema_version\": 2", 1);
+    let error = CampaignRecord::from_json(&flat_as_new)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        error.starts_with("settings.faults: the flat fault ranges"),
+        "{error}"
+    );
+    let sections_as_old = examples[2].replacen("\"schema_version\": 2", "\"schema_version\": 1", 1);
+    let error = CampaignRecord::from_json(&sections_as_old)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        error.starts_with("settings.faults: fault sections"),
+        "{error}"
+    );
+
+    let (_, case) = run_case();
+    let json = case.to_json().unwrap();
+    assert!(json.contains("\"wheel_slip\": {"), "{json}");
+    let as_v2 = json.replacen("\"schema_version\": 3", "\"schema_version\": 2", 1);
+    let error = Case::from_json(&as_v2).unwrap_err().to_string();
+    assert!(
+        error.starts_with("settings.faults: fault sections"),
+        "{error}"
+    );
+
+    let neither = examples[2].replacen("\"wheel_slip\": {", "\"wheel_slip_x\": {", 1);
+    let error = CampaignRecord::from_json(&neither).unwrap_err().to_string();
+    assert!(
+        error.starts_with("settings.faults:") && error.contains("`anchor_range`, `wheel_slip`"),
+        "{error}"
+    );
 }
