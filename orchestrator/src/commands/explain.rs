@@ -13,11 +13,11 @@ use super::simdrive::{SimDriver, SimSettings};
 use crate::cli::ExplainArgs;
 use crate::exit::Exit;
 use crate::report::explain::{
-    CaseExplanation, ExplainOptions, Explanations, FaultEffect, Scored, calibrate, explain_run,
-    score_run, settle_by_counterfactual,
+    CaseExplanation, ExplainOptions, Explanations, FaultEffect, Scored, calibrate, describe,
+    explain_run, score_run, settle_by_counterfactual,
 };
 use crate::scenario_arg::optional_scenario;
-use campaign::case::{Case, CommandRecord};
+use campaign::case::Case;
 use campaign::explain::{Cause, Source};
 use campaign::sweep::with_fault_silenced;
 
@@ -300,33 +300,6 @@ fn text(explanations: &Explanations) -> String {
 fn read_case(case: &CaseExplanation) -> Option<Case> {
     let text = std::fs::read_to_string(&case.case).ok()?;
     Case::from_json(&text).ok()
-}
-
-/// A cause of test `test_index` in words (the campaign's `cases` give the fault's command).
-pub(super) fn describe_source(source: &Source, cases: &[Case], test_index: usize) -> String {
-    let case = cases.iter().find(|c| c.test_index == Some(test_index));
-    describe(source, case)
-}
-
-/// A cause in words: a fault with its command.
-fn describe(source: &Source, case: Option<&Case>) -> String {
-    match source {
-        Source::Fault { command_index } => {
-            let what = case
-                .and_then(|c| c.commands.get(*command_index))
-                .and_then(|c| match c {
-                    CommandRecord::AddFault {
-                        probe, kind, param, ..
-                    } => Some(format!(" ({probe} {kind} {param:.2})")),
-                    CommandRecord::RunSegments { .. } => None,
-                });
-            format!("fault: command {command_index}{}", what.unwrap_or_default())
-        }
-        Source::Anchor { anchor_id } => format!("anchor {anchor_id}'s range"),
-        Source::Odometry => "odometry (travelled distance)".to_owned(),
-        Source::Heading => "heading (yaw)".to_owned(),
-        Source::Unexplained => "unexplained".to_owned(),
-    }
 }
 
 fn ambiguity(cause: &Cause, case: Option<&Case>) -> String {

@@ -13,7 +13,7 @@ use super::route::boundaries;
 use campaign::case::{Case, CommandRecord};
 use campaign::explain::{
     ExplainAnchor, ExplainConfig, ExplainFault, ExplainSample, ExplainSegment, SegmentExplanation,
-    explain_segment,
+    Source, explain_segment,
 };
 use campaign::oracle::SegmentVerdict;
 
@@ -191,6 +191,33 @@ pub(crate) fn faults_of(case: &Case) -> Vec<ExplainFault> {
         .collect()
 }
 
+/// A cause of test `test_index` in words (the campaign's `cases` give the fault's command).
+pub(crate) fn describe_source(source: &Source, cases: &[Case], test_index: usize) -> String {
+    let case = cases.iter().find(|c| c.test_index == Some(test_index));
+    describe(source, case)
+}
+
+/// A cause in words: a fault with its command (what `drivecheck explain` and `run` print).
+pub(crate) fn describe(source: &Source, case: Option<&Case>) -> String {
+    match source {
+        Source::Fault { command_index } => {
+            let what = case
+                .and_then(|c| c.commands.get(*command_index))
+                .and_then(|c| match c {
+                    CommandRecord::AddFault {
+                        probe, kind, param, ..
+                    } => Some(format!(" ({probe} {kind} {param:.2})")),
+                    CommandRecord::RunSegments { .. } => None,
+                });
+            format!("fault: command {command_index}{}", what.unwrap_or_default())
+        }
+        Source::Anchor { anchor_id } => format!("anchor {anchor_id}'s range"),
+        Source::Odometry => "odometry (travelled distance)".to_owned(),
+        Source::Heading => "heading (yaw)".to_owned(),
+        Source::Unexplained => "unexplained".to_owned(),
+    }
+}
+
 /// What really made a failing segment's error grow, from a simulated run's hidden truth.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case", tag = "truth")]
@@ -217,7 +244,7 @@ pub struct Scored {
     /// The segment.
     pub segment_index: usize,
     /// The first cause named (`None`: only `unexplained`).
-    pub named: Option<campaign::explain::Source>,
+    pub named: Option<Source>,
     /// The truth.
     pub truth: TrueCause,
     /// The class of the truth, for the confusion matrix (`range offset`, `wheel slip`, …).
@@ -282,9 +309,10 @@ pub fn settle_by_counterfactual(scored: &mut Scored, case: &Case, mut drops: Vec
         scored.truth_class = truth_class(case, scored.truth);
         scored.right = is_right(scored.truth, scored.named)
             || scored.named.is_some_and(|named| {
-                scored.tied_with.iter().any(|&command_index| {
-                    named == campaign::explain::Source::Fault { command_index }
-                })
+                scored
+                    .tied_with
+                    .iter()
+                    .any(|&command_index| named == Source::Fault { command_index })
             });
     }
     scored.counterfactual = drops;
@@ -295,8 +323,8 @@ pub fn settle_by_counterfactual(scored: &mut Scored, case: &Case, mut drops: Vec
 pub const COUNTERFACTUAL_TIE_M: f64 = 0.02;
 
 /// Whether `named` is `truth` (see [`Scored::right`]).
-fn is_right(truth: TrueCause, named: Option<campaign::explain::Source>) -> bool {
-    use campaign::explain::Source;
+fn is_right(truth: TrueCause, named: Option<Source>) -> bool {
+    use Source;
     match (truth, named) {
         (TrueCause::Fault { command_index }, Some(Source::Fault { command_index: n })) => {
             command_index == n
@@ -584,7 +612,7 @@ pub fn calibrate(
         .map(|s| {
             s.causes
                 .iter()
-                .filter(|c| c.source != campaign::explain::Source::Unexplained)
+                .filter(|c| c.source != Source::Unexplained)
                 .map(|c| c.growth_m)
                 .fold(0.0, f64::max)
         })
@@ -670,7 +698,7 @@ mod tests {
         Scored {
             case: PathBuf::from("case-000.json"),
             segment_index: 1,
-            named: Some(campaign::explain::Source::Fault {
+            named: Some(Source::Fault {
                 command_index: named,
             }),
             truth: TrueCause::Fault {
