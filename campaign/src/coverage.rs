@@ -1,7 +1,8 @@
 //! What a campaign covered — what QuickCheck's `classify` and `cover` report and proptest does
 //! not: the share of the drivable area its tests drove (with the grid for a heat map), the
 //! headings and speeds driven, the fault kinds on each probe injected, confirmed and acting, and
-//! the segments per test.
+//! the segments per test. As text (what `runs show --coverage` prints and the report shows), the
+//! statistics' `Display`.
 //!
 //! Everything comes from the case files: the segments a test drove (those the oracle judged) as
 //! planned, from the end of the start route, and its fault commands with their places and
@@ -225,6 +226,85 @@ pub fn coverage(area: &Area, start_end: Point, cases: &[Case]) -> Coverage {
     }
 }
 
+/// The statistics as text, as `runs show --coverage` prints them and the report shows them: the
+/// area driven, the metres driven per heading and per speed bin (with bars), the fault table and
+/// the tests per number of segments driven.
+impl std::fmt::Display for CoverageStats {
+    fn fmt(&self, out: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let c = self;
+        writeln!(
+            out,
+            "coverage of {} tests: {:.1} % of the drivable area driven ({} of {} cells of {} m)",
+            c.tests,
+            c.area_share * 100.0,
+            c.driven_cells,
+            c.drivable_cells,
+            c.cell_m
+        )?;
+        let total: f64 = c.heading_m.iter().sum();
+        writeln!(
+            out,
+            "metres driven by heading (counter-clockwise from east), {total:.0} m in all:"
+        )?;
+        let width = 360.0 / c.heading_m.len().max(1) as f64;
+        for (k, m) in c.heading_m.iter().enumerate() {
+            writeln!(
+                out,
+                "  {:>3.0}°–{:>3.0}° {:>7.1} m {}",
+                k as f64 * width,
+                (k + 1) as f64 * width,
+                m,
+                bar(*m, total)
+            )?;
+        }
+        writeln!(out, "metres driven by speed:")?;
+        let last = c.speed_m.iter().rposition(|&m| m > 0.0).unwrap_or(0);
+        for (k, m) in c.speed_m.iter().enumerate().take(last + 1) {
+            writeln!(
+                out,
+                "  {:>2.0}–{:>2.0} km/h {:>7.1} m {}",
+                k as f64 * SPEED_BIN_KMH,
+                (k + 1) as f64 * SPEED_BIN_KMH,
+                m,
+                bar(*m, total)
+            )?;
+        }
+        if c.faults.is_empty() {
+            out.write_str("faults: none planned\n")?;
+        } else {
+            out.write_str(
+                "| probe | fault type | planned | confirmed | began acting in its test |\n\
+                 |---|---|---|---|---|\n",
+            )?;
+            for f in &c.faults {
+                writeln!(
+                    out,
+                    "| {} | {} | {} | {} | {} |",
+                    f.probe, f.kind, f.planned, f.confirmed, f.acted
+                )?;
+            }
+        }
+        let counts: Vec<String> = c
+            .segments_per_test
+            .iter()
+            .enumerate()
+            .filter(|(_, n)| **n > 0)
+            .map(|(segments, n)| format!("{segments} segments: {n}"))
+            .collect();
+        writeln!(out, "tests by segments driven: {}", counts.join(", "))
+    }
+}
+
+/// A bar of up to 30 characters for `part` of `total`.
+fn bar(part: f64, total: f64) -> String {
+    let n = if total > 0.0 {
+        (30.0 * part / total).round() as usize
+    } else {
+        0
+    };
+    "#".repeat(n)
+}
+
 /// Adds `metres` to bin `⌊position⌋` (the last bin takes what lies beyond it).
 fn add(bins: &mut [f64], position: f64, metres: f64) {
     if let Some(last) = bins.len().checked_sub(1) {
@@ -296,5 +376,38 @@ mod tests {
         let none = coverage(&square(), Point::new(1.0, 1.25), &[undriven]);
         assert_eq!(none.stats.driven_cells, 0);
         assert_eq!(none.stats.segments_per_test, [1]);
+    }
+
+    #[test]
+    fn the_text_names_the_area_the_bins_driven_and_the_faults() {
+        let case = case_driving(&[(5.0, 1.25, 1.0), (9.0, 1.25, 1.0)], 1);
+        let text = coverage(&square(), Point::new(1.0, 1.25), &[case])
+            .stats
+            .to_string();
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(
+            lines[0],
+            "coverage of 1 tests: 4.2 % of the drivable area driven (17 of 400 cells of 0.5 m)"
+        );
+        assert_eq!(
+            lines[1],
+            "metres driven by heading (counter-clockwise from east), 8 m in all:"
+        );
+        // Twelve heading bins of 30°, the first full: a bar of 30 characters.
+        assert_eq!(
+            lines[2],
+            format!("    0°– 30°     8.0 m {}", "#".repeat(30))
+        );
+        assert_eq!(lines[14], "metres driven by speed:");
+        // Speed bins up to the last one driven (2–4 km/h).
+        assert_eq!(lines[15], "   0– 2 km/h     0.0 m ");
+        assert_eq!(
+            lines[16],
+            format!("   2– 4 km/h     8.0 m {}", "#".repeat(30))
+        );
+        assert_eq!(lines[17], "faults: none planned");
+        assert_eq!(lines[18], "tests by segments driven: 1 segments: 1");
+        assert_eq!(lines.len(), 19);
+        assert!(text.ends_with('\n'));
     }
 }

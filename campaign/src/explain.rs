@@ -44,6 +44,15 @@
 //! side of it together (less than one ranging period), the drift's otherwise. The cause still
 //! records the other in `ambiguous_with`.
 //! Growth that happened before the growth interval (a standing offset) is not explained.
+//!
+//! **How well it does, and its thresholds.** [`score`] scores an explanation against a simulated
+//! run's hidden truth, [`counterfactual`] settles which of several faults was the truth by
+//! driving the case again without each (the driving is the caller's), and [`calibrate`] sets the
+//! thresholds from a fault-free run (the explaining is the caller's).
+
+pub mod calibrate;
+pub mod counterfactual;
+pub mod score;
 
 use serde::{Deserialize, Serialize};
 use trajgen::Point;

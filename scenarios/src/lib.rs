@@ -39,8 +39,8 @@ use std::path::Path;
 pub use error::{Location, Place, Problem, ScenarioError, Warning, WarningKind};
 pub use model::{Anchor, EnuOrigin, Environment, Obstacle, Route, Scenario, Wall};
 pub use settings::{
-    CampaignSettings, CommandWeights, FaultKind, FaultSettings, FaultTarget, GeneratorSettings,
-    Interval, ProbeFaults, SHARED_PARAM_KEY, Vehicle,
+    CampaignSettings, CommandWeights, FaultKeyError, FaultKind, FaultSettings, FaultTarget,
+    GeneratorSettings, Interval, ProbeFaults, SHARED_PARAM_KEY, Vehicle,
 };
 /// The area geometry of [`trajgen`], re-exported for crates that see scenarios but not the generator.
 pub use trajgen::geometry;

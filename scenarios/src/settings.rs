@@ -391,8 +391,35 @@ impl<'de> Deserialize<'de> for RawProbeFaults {
     }
 }
 
+/// A `[campaign.faults.<section>]` key that names no range of the section, or two keys for one.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum FaultKeyError {
+    /// A key the section does not have.
+    #[error("unknown field `{key}` in {section}, expected one of {expected}")]
+    Unknown {
+        /// The section (`yaw`).
+        section: &'static str,
+        /// The key as written.
+        key: String,
+        /// The section's keys, quoted and comma-separated.
+        expected: String,
+    },
+    /// Two keys giving one kind's range (`param` and `offset_m`).
+    #[error("{section}.{first} and {section}.{second} both give the range of {kind}")]
+    Twice {
+        /// The section.
+        section: &'static str,
+        /// The key read first.
+        first: String,
+        /// The key read second.
+        second: String,
+        /// The kind's name.
+        kind: &'static str,
+    },
+}
+
 impl TryFrom<RawFaultSettings> for FaultSettings {
-    type Error = String;
+    type Error = FaultKeyError;
 
     fn try_from(raw: RawFaultSettings) -> Result<Self, Self::Error> {
         Ok(Self {
@@ -406,7 +433,7 @@ impl TryFrom<RawFaultSettings> for FaultSettings {
 impl RawProbeFaults {
     /// The section's ranges over the defaults of `target`; an error names a key the section
     /// does not have.
-    fn build(self, target: FaultTarget) -> Result<ProbeFaults, String> {
+    fn build(self, target: FaultTarget) -> Result<ProbeFaults, FaultKeyError> {
         let mut out = ProbeFaults::defaults(target);
         out.kinds = self.kinds.unwrap_or(out.kinds);
         out.start = self.start.unwrap_or(out.start);
@@ -429,17 +456,20 @@ impl RawProbeFaults {
                     .chain(FaultKind::drawable().filter_map(|k| target.key(k)))
                     .map(|k| format!("`{k}`"))
                     .collect();
-                return Err(format!(
-                    "unknown field `{key}` in {section}, expected one of {}",
-                    expected.join(", ")
-                ));
+                return Err(FaultKeyError::Unknown {
+                    section,
+                    key,
+                    expected: expected.join(", "),
+                });
             };
             for kind in kinds {
-                if let Some(earlier) = given.insert(kind, key.clone()) {
-                    return Err(format!(
-                        "{section}.{earlier} and {section}.{key} both give the range of {}",
-                        kind.name()
-                    ));
+                if let Some(first) = given.insert(kind, key.clone()) {
+                    return Err(FaultKeyError::Twice {
+                        section,
+                        first,
+                        second: key,
+                        kind: kind.name(),
+                    });
                 }
                 out.ranges.insert(kind, range);
             }

@@ -13,13 +13,14 @@ use super::simdrive::{SimDriver, SimSettings};
 use crate::cli::ExplainArgs;
 use crate::exit::Exit;
 use crate::report::explain::{
-    CaseExplanation, ExplainOptions, Explanations, FaultEffect, Scored, calibrate, explain_run,
-    score_run, settle_by_counterfactual,
+    CaseExplanation, ExplainOptions, Explanations, Scored, calibrate, describe, explain_run,
+    score_run,
 };
 use crate::scenario_arg::optional_scenario;
-use campaign::case::{Case, CommandRecord};
+use campaign::case::Case;
+use campaign::explain::counterfactual::settle;
+use campaign::explain::score::SegmentScore;
 use campaign::explain::{Cause, Source};
-use campaign::sweep::with_fault_silenced;
 
 /// Explains the target's failing segments (see the module doc). Exit status 0, or 2 on an error.
 pub fn explain(args: &ExplainArgs) -> Result<Exit> {
@@ -131,11 +132,10 @@ pub fn explain(args: &ExplainArgs) -> Result<Exit> {
 }
 
 /// Settles the truth of every scored segment in which several faults moved the estimate by a
-/// counterfactual ([`settle_by_counterfactual`]): its case driven `runs` times as it was and as
-/// often without each of those faults (a `NONE` fault in its place and slot), on fresh embedded
-/// simulated cars in `scenario` (the run's own) in virtual time, seeds from the case's campaign
-/// seed; each fault's effect is the median over the runs of how much lower the segment's largest
-/// deviation came out without it, run by run (the same seed).
+/// counterfactual (the policy is `campaign::explain::counterfactual::settle`; this drives): its
+/// case driven `runs` times as it was and as often without each of those faults, on fresh
+/// embedded simulated cars in `scenario` (the run's own) in virtual time, seeds from the case's
+/// campaign seed.
 fn counterfactual(
     scenario: Option<&scenarios::Scenario>,
     scored: &mut [Scored],
@@ -143,7 +143,7 @@ fn counterfactual(
 ) -> Result<()> {
     let pending: BTreeSet<std::path::PathBuf> = scored
         .iter()
-        .filter(|s| s.needs_counterfactual())
+        .filter(|s| s.score.needs_counterfactual())
         .map(|s| s.case.clone())
         .collect();
     if pending.is_empty() {
@@ -156,74 +156,32 @@ fn counterfactual(
     );
     let scratch =
         std::env::temp_dir().join(format!("drivecheck-counterfactual-{}", std::process::id()));
-    let result = runtime(true)?.block_on(async {
-        let cancel = cancel_on_ctrl_c();
-        for path in &pending {
-            let case = read_case_file(path)?;
-            let seed = case.campaign_seed.unwrap_or_default();
-            let driver = SimDriver::new(
-                scenario,
-                path,
-                &case,
-                scratch.clone(),
-                (runs, seed),
-                &cancel,
-            );
-            let settings = SimSettings::default();
-            let base = driver.drive_all(&case, &settings).await?;
-            let faults: BTreeSet<usize> = scored
-                .iter()
-                .filter(|s| &s.case == path && s.needs_counterfactual())
-                .flat_map(|s| s.moved.iter().map(|m| m.command_index))
-                .collect();
-            let mut without = BTreeMap::new();
-            for &k in &faults {
-                let driven = driver
-                    .drive_all(&with_fault_silenced(&case, k), &settings)
-                    .await?;
-                without.insert(k, driven);
-            }
-            for s in scored
-                .iter_mut()
-                .filter(|s| &s.case == path && s.needs_counterfactual())
-            {
-                let drops = s
-                    .moved
-                    .iter()
-                    .filter_map(|m| {
-                        let driven = without.get(&m.command_index)?;
-                        Some(FaultEffect {
-                            command_index: m.command_index,
-                            metres: median_drop(&base, driven, s.segment_index)?,
-                        })
-                    })
-                    .collect();
-                settle_by_counterfactual(s, &case, drops);
-            }
-        }
-        anyhow::Ok(())
+    let runtime = runtime(true)?;
+    let cancel = runtime.block_on(async { cancel_on_ctrl_c() });
+    let result = pending.iter().try_for_each(|path| {
+        let case = read_case_file(path)?;
+        let seed = case.campaign_seed.unwrap_or_default();
+        let driver = SimDriver::new(
+            scenario,
+            path,
+            &case,
+            scratch.clone(),
+            (runs, seed),
+            &cancel,
+        );
+        let settings = SimSettings::default();
+        let mut of_case: Vec<&mut SegmentScore> = scored
+            .iter_mut()
+            .filter(|s| &s.case == path)
+            .map(|s| &mut s.score)
+            .collect();
+        settle(&case, &mut of_case, |variant| {
+            let driven = runtime.block_on(driver.drive_all(variant, &settings))?;
+            anyhow::Ok(driven.into_iter().map(|(_, case)| case).collect())
+        })
     });
     let _ = std::fs::remove_dir_all(&scratch);
     result
-}
-
-/// The median over the runs of how much lower segment `segment`'s largest deviation is in
-/// `without` than in `base`, run by run (`None` when no run judged it in both).
-fn median_drop(base: &[(u64, Case)], without: &[(u64, Case)], segment: usize) -> Option<f64> {
-    let max = |case: &Case| {
-        case.segments
-            .iter()
-            .find(|s| s.segment_index == segment)
-            .and_then(|s| s.oracle.stats.as_ref())
-            .map(|stats| stats.max_m)
-    };
-    let mut drops: Vec<f64> = base
-        .iter()
-        .zip(without)
-        .filter_map(|((_, a), (_, b))| Some(max(a)? - max(b)?))
-        .collect();
-    drops.sort_by(f64::total_cmp);
-    drops.get(drops.len() / 2).copied()
 }
 
 /// The run directories of `dir`: a replay directory's runs (`run-1/`, `run-2/`, … beside its
@@ -302,33 +260,6 @@ fn read_case(case: &CaseExplanation) -> Option<Case> {
     Case::from_json(&text).ok()
 }
 
-/// A cause of test `test_index` in words (the campaign's `cases` give the fault's command).
-pub(super) fn describe_source(source: &Source, cases: &[Case], test_index: usize) -> String {
-    let case = cases.iter().find(|c| c.test_index == Some(test_index));
-    describe(source, case)
-}
-
-/// A cause in words: a fault with its command.
-fn describe(source: &Source, case: Option<&Case>) -> String {
-    match source {
-        Source::Fault { command_index } => {
-            let what = case
-                .and_then(|c| c.commands.get(*command_index))
-                .and_then(|c| match c {
-                    CommandRecord::AddFault {
-                        probe, kind, param, ..
-                    } => Some(format!(" ({probe} {kind} {param:.2})")),
-                    CommandRecord::RunSegments { .. } => None,
-                });
-            format!("fault: command {command_index}{}", what.unwrap_or_default())
-        }
-        Source::Anchor { anchor_id } => format!("anchor {anchor_id}'s range"),
-        Source::Odometry => "odometry (travelled distance)".to_owned(),
-        Source::Heading => "heading (yaw)".to_owned(),
-        Source::Unexplained => "unexplained".to_owned(),
-    }
-}
-
 fn ambiguity(cause: &Cause, case: Option<&Case>) -> String {
     cause
         .ambiguous_with
@@ -343,7 +274,8 @@ fn ambiguity(cause: &Cause, case: Option<&Case>) -> String {
 
 /// The scores as text: per class of truth, what was named first; then the share right.
 fn score_table(scored: &[Scored]) -> String {
-    let named_class = |s: &Scored| match s.named {
+    let scored: Vec<&SegmentScore> = scored.iter().map(|s| &s.score).collect();
+    let named_class = |s: &SegmentScore| match s.named {
         Some(Source::Fault { .. }) if s.right => "that fault".to_owned(),
         Some(Source::Fault { .. }) => "another fault".to_owned(),
         Some(Source::Anchor { anchor_id }) => format!("anchor {anchor_id}"),
@@ -353,7 +285,7 @@ fn score_table(scored: &[Scored]) -> String {
     };
     let mut matrix: BTreeMap<String, BTreeMap<String, usize>> = BTreeMap::new();
     let mut columns: Vec<String> = Vec::new();
-    for s in scored {
+    for &s in &scored {
         let column = named_class(s);
         if !columns.contains(&column) {
             columns.push(column.clone());

@@ -20,8 +20,6 @@ mod sim;
 mod simdrive;
 mod sweep;
 
-pub use runs::coverage_text;
-
 use anyhow::Result;
 
 use crate::cli::{AreaCommand, BenchCommand, Cli, Command, RouteCommand, ScenarioCommand};

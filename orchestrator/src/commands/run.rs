@@ -9,13 +9,13 @@ use car_link::firmware::{MAX_STALE_LIMIT, WATCHDOG};
 use scenarios::Scenario;
 
 use super::shared::{CampaignFailed, Interrupt, Progress, print_report, runtime, sim_view};
-use super::{explain, shrink};
+use super::shrink;
 use crate::cli::{OnFailure, RecordArg, RunArgs};
 use crate::exit::Exit;
 use crate::junit;
 use crate::recording::live::LiveView;
 use crate::report::REPORT_FILE;
-use crate::report::explain::{ExplainOptions, explain_run};
+use crate::report::explain::{ExplainOptions, describe_source, explain_run};
 use crate::runner::{
     CampaignReport, RecordMode, RunConfig, run_campaign, run_campaign_fresh, run_dir_name,
 };
@@ -187,7 +187,7 @@ fn explain_failed(report: &CampaignReport, scenario: &Scenario) {
                 "why test {:03} segment {} failed: {} ({:.0} % of the growth{})",
                 case.test_index,
                 segment.segment_index,
-                explain::describe_source(&top.source, &report.cases, case.test_index),
+                describe_source(&top.source, &report.cases, case.test_index),
                 top.share * 100.0,
                 if segment.causes.len() > 1 {
                     "; drivecheck explain for the rest"

@@ -300,85 +300,11 @@ fn show_campaign(dir: &Path, record: CampaignRecord, coverage: bool) -> Result<(
         None,
     );
     match stats {
-        Some(Ok(stats)) => print!("\n{}", coverage_text(&stats)),
+        Some(Ok(stats)) => print!("\n{stats}"),
         Some(Err(why)) => println!("\nno coverage: {why}"),
         None => {}
     }
     Ok(())
-}
-
-/// The coverage statistics as text.
-pub fn coverage_text(c: &campaign::coverage::CoverageStats) -> String {
-    use std::fmt::Write as _;
-    let mut out = String::new();
-    let _ = writeln!(
-        out,
-        "coverage of {} tests: {:.1} % of the drivable area driven ({} of {} cells of {} m)",
-        c.tests,
-        c.area_share * 100.0,
-        c.driven_cells,
-        c.drivable_cells,
-        c.cell_m
-    );
-    let total: f64 = c.heading_m.iter().sum();
-    let _ = writeln!(
-        out,
-        "metres driven by heading (counter-clockwise from east), {total:.0} m in all:"
-    );
-    let width = 360.0 / c.heading_m.len().max(1) as f64;
-    for (k, m) in c.heading_m.iter().enumerate() {
-        let _ = writeln!(
-            out,
-            "  {:>3.0}°–{:>3.0}° {:>7.1} m {}",
-            k as f64 * width,
-            (k + 1) as f64 * width,
-            m,
-            bar(*m, total)
-        );
-    }
-    let _ = writeln!(out, "metres driven by speed:");
-    let last = c.speed_m.iter().rposition(|&m| m > 0.0).unwrap_or(0);
-    for (k, m) in c.speed_m.iter().enumerate().take(last + 1) {
-        let _ = writeln!(
-            out,
-            "  {:>2.0}–{:>2.0} km/h {:>7.1} m {}",
-            k as f64 * campaign::coverage::SPEED_BIN_KMH,
-            (k + 1) as f64 * campaign::coverage::SPEED_BIN_KMH,
-            m,
-            bar(*m, total)
-        );
-    }
-    if c.faults.is_empty() {
-        out.push_str("faults: none planned\n");
-    } else {
-        out.push_str("| probe | fault type | planned | confirmed | began acting in its test |\n|---|---|---|---|---|\n");
-        for f in &c.faults {
-            let _ = writeln!(
-                out,
-                "| {} | {} | {} | {} | {} |",
-                f.probe, f.kind, f.planned, f.confirmed, f.acted
-            );
-        }
-    }
-    let counts: Vec<String> = c
-        .segments_per_test
-        .iter()
-        .enumerate()
-        .filter(|(_, n)| **n > 0)
-        .map(|(segments, n)| format!("{segments} segments: {n}"))
-        .collect();
-    let _ = writeln!(out, "tests by segments driven: {}", counts.join(", "));
-    out
-}
-
-/// A bar of up to 30 characters for `part` of `total`.
-fn bar(part: f64, total: f64) -> String {
-    let n = if total > 0.0 {
-        (30.0 * part / total).round() as usize
-    } else {
-        0
-    };
-    "#".repeat(n)
 }
 
 /// Says whether the run's recording is complete and, when the process was killed before it was

@@ -729,7 +729,7 @@ fn coverage_section(
     let _ = writeln!(
         out,
         "<pre style=\"white-space:pre-wrap\">{}</pre>\n</section>",
-        escape(&crate::commands::coverage_text(&coverage.stats))
+        escape(&coverage.stats.to_string())
     );
     Ok(())
 }
