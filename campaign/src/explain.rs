@@ -59,6 +59,8 @@ use trajgen::Point;
 
 use car_link::{FaultKind, Probe};
 
+use crate::files::{CauseRecord, SegmentExplanationRecord, SourceRecord};
+
 /// One state sample on the test's clock.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ExplainSample {
@@ -216,6 +218,47 @@ impl SegmentExplanation {
         self.causes
             .first()
             .filter(|c| c.source != Source::Unexplained)
+    }
+}
+
+impl From<Source> for SourceRecord {
+    fn from(source: Source) -> Self {
+        match source {
+            Source::Fault { command_index } => SourceRecord::Fault { command_index },
+            Source::Anchor { anchor_id } => SourceRecord::Anchor { anchor_id },
+            Source::Odometry => SourceRecord::Odometry,
+            Source::Heading => SourceRecord::Heading,
+            Source::Unexplained => SourceRecord::Unexplained,
+        }
+    }
+}
+
+impl From<&Cause> for CauseRecord {
+    fn from(cause: &Cause) -> Self {
+        Self {
+            source: cause.source.into(),
+            share: cause.share,
+            growth_m: cause.growth_m,
+            steps: cause.steps,
+            kind: cause.kind.clone(),
+            ambiguous_with: cause.ambiguous_with.map(Into::into),
+        }
+    }
+}
+
+/// The record a case file keeps (`explanation`).
+impl From<&SegmentExplanation> for SegmentExplanationRecord {
+    fn from(segment: &SegmentExplanation) -> Self {
+        Self {
+            segment_index: segment.segment_index,
+            verdict: segment.verdict.clone(),
+            from_s: segment.from_s,
+            to_s: segment.to_s,
+            error_from_m: segment.error_from_m,
+            error_to_m: segment.error_to_m,
+            carried_over: segment.carried_over,
+            causes: segment.causes.iter().map(Into::into).collect(),
+        }
     }
 }
 

@@ -17,8 +17,8 @@
 //! the core: the safety monitor's and the streaming rule's constants, a fault's placement, a
 //! streaming append and the coverage statistics are converted at this edge
 //! ([`SafetyConfigRecord`], [`StreamingConfigRecord`], [`FaultPlacementRecord`],
-//! [`AppendRecord`], [`CoverageRecord`]), so changing an internal type does not change a file.
-//! The modules that compute from cases (`drive`, `coverage`, `replay`, `shrink`, `sweep`) use
+//! [`AppendRecord`], [`CoverageRecord`], [`SegmentExplanationRecord`]), so changing an internal type does not change a file.
+//! The modules that compute from cases (`drive`, `coverage`, `explain`, `replay`, `shrink`, `sweep`) use
 //! this module; it uses none of them (the conversions from their types are beside them).
 //!
 //! Every record begins with the [`Header`], flattened: `format`, `schema_version`,
@@ -44,6 +44,7 @@ use crate::model::ModelError;
 
 mod campaign;
 mod case;
+mod explanation;
 mod replay;
 mod settings;
 
@@ -54,6 +55,7 @@ pub use case::{
     AppendRecord, Case, CommandRecord, FaultPlacementRecord, IntentRecord, PlaceRecord,
     PlaceRuleRecord, PointRecord, RoutePointRecord, SegmentResult, StreamingRecord, TestTiming,
 };
+pub use explanation::{CauseRecord, SegmentExplanationRecord, SourceRecord};
 pub use replay::{Comparison, ReplayRun, SegmentComparison};
 pub use settings::{
     FaultRanges, FaultRangesForm, FlatFaultRanges, ProbeFaultsRecord, SafetyConfigRecord, Settings,

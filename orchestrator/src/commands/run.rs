@@ -169,7 +169,7 @@ fn explain_failed(report: &CampaignReport, scenario: &Scenario) {
             .map_err(anyhow::Error::from)
             .and_then(|text| Ok(Case::from_json(&text)?))
             .and_then(|mut on_disk| {
-                on_disk.explanation = case.segments.clone();
+                on_disk.explanation = case.segments.iter().map(Into::into).collect();
                 crate::atomic::write(&case.case, format!("{}\n", on_disk.to_json()?))?;
                 Ok(())
             });

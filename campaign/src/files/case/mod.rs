@@ -315,7 +315,7 @@ pub struct Case {
     /// Why each failing segment failed (`drivecheck explain`, `docs/explain.md`): written by
     /// `drivecheck run` after the campaign, from the recording.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub explanation: Vec<crate::explain::SegmentExplanation>,
+    pub explanation: Vec<super::SegmentExplanationRecord>,
 }
 
 /// How long a test took, seconds on the runner's clock.
