@@ -285,6 +285,13 @@ impl ProbeFaults {
             .copied()
             .unwrap_or(Interval::new(0.0, 0.0))
     }
+
+    /// Whether `target`'s section writes its offset and amplification ranges as one
+    /// [`SHARED_PARAM_KEY`]: anchor_range's, while the two are equal (the format's first form).
+    pub fn shares_param(&self, target: FaultTarget) -> bool {
+        target == FaultTarget::AnchorRange
+            && self.range(FaultKind::Offset) == self.range(FaultKind::Amplification)
+    }
 }
 
 /// Parameter ranges of the three fault commands.

@@ -231,8 +231,7 @@ fn check_faults(c: &CampaignSettings) -> Check {
         let f = c.faults.get(target);
         let field = format!("campaign.faults.{}", target.section());
         fault_kinds(&f.kinds, &field)?;
-        let shared = target == FaultTarget::AnchorRange
-            && f.range(FaultKind::Offset) == f.range(FaultKind::Amplification);
+        let shared = f.shares_param(target);
         for kind in FaultKind::drawable() {
             let key = match (shared, kind) {
                 (true, FaultKind::Offset | FaultKind::Amplification) => SHARED_PARAM_KEY.into(),

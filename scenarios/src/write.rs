@@ -207,8 +207,7 @@ fn probe_faults(out: &mut String, target: FaultTarget, f: &ProbeFaults) {
         let names: Vec<String> = f.kinds.iter().map(|k| string(k.name())).collect();
         line(out, "kinds", &format!("[{}]", names.join(", ")));
     }
-    let shared = target == FaultTarget::AnchorRange
-        && f.range(FaultKind::Offset) == f.range(FaultKind::Amplification);
+    let shared = f.shares_param(target);
     if shared {
         line(out, SHARED_PARAM_KEY, &floats(f.range(FaultKind::Offset)));
     }
