@@ -53,6 +53,10 @@ pub struct GnssModel {
     pub latency_ms: u64,
     /// Standard deviation of the RTK position noise per axis, m.
     pub sigma_m: f64,
+    /// The noise's correlation time, s: a first-order Gauss–Markov process per axis,
+    /// `e ← a·e + σ·√(1 − a²)·w` with `a = exp(−period/correlation_s)` at every fix, stationary
+    /// with standard deviation `sigma_m`. 0 draws every fix's noise afresh (white).
+    pub correlation_s: f64,
     /// UTC time of day at boot, ms (the firmware learns it from the first fix).
     pub utc_at_boot_ms: i64,
 }
@@ -64,6 +68,7 @@ impl Default for GnssModel {
             period_ms: 200,
             latency_ms: 100,
             sigma_m: 0.015,
+            correlation_s: 0.0,
             utc_at_boot_ms: 12 * 3_600_000,
         }
     }
@@ -250,6 +255,8 @@ pub struct SimCar {
     autopilot: Autopilot,
     fi: FaultInjection,
     gnss_noise: Noise,
+    /// The GNSS noise of the last fix, m (east, north): the Gauss–Markov state.
+    gnss_error: Option<(f64, f64)>,
     uwb_noise: Noise,
     gnss_in_flight: VecDeque<(u64, GnssFix)>,
     range_in_flight: Option<(u64, RangeMeasurement)>,
@@ -299,6 +306,7 @@ impl SimCar {
             autopilot: Autopilot::new(fw),
             fi: FaultInjection::default(),
             gnss_noise: Noise::stream(options.seed, STREAM_GNSS),
+            gnss_error: None,
             uwb_noise: Noise::stream(options.seed, STREAM_UWB),
             gnss_in_flight: VecDeque::new(),
             range_in_flight: None,
@@ -478,15 +486,39 @@ impl SimCar {
             f64::from(self.config.gps_ant_x),
             f64::from(self.config.gps_ant_y),
         );
-        let sigma = self.options.gnss.sigma_m;
-        let x = t.x + ax * c - ay * s + self.gnss_noise.gaussian(sigma);
-        let y = t.y + ax * s + ay * c + self.gnss_noise.gaussian(sigma);
+        let (ex, ey) = self.gnss_noise_step();
+        let x = t.x + ax * c - ay * s + ex;
+        let y = t.y + ax * s + ay * c + ey;
         GnssFix {
             x: x as f32,
             y: y as f32,
             measured_ms: self.now_ms,
             rtk: true,
         }
+    }
+
+    /// The next fix's noise (see [`GnssModel::correlation_s`]). White noise draws exactly what
+    /// it always drew, so a model without correlation reproduces earlier runs.
+    fn gnss_noise_step(&mut self) -> (f64, f64) {
+        let model = self.options.gnss;
+        let sigma = model.sigma_m;
+        let white = (
+            self.gnss_noise.gaussian(sigma),
+            self.gnss_noise.gaussian(sigma),
+        );
+        if model.correlation_s <= 0.0 {
+            return white;
+        }
+        let next = match self.gnss_error {
+            None => white,
+            Some((ex, ey)) => {
+                let a = (-(model.period_ms as f64 / 1000.0) / model.correlation_s).exp();
+                let b = (1.0 - a * a).sqrt();
+                (a * ex + b * white.0, a * ey + b * white.1)
+            }
+        };
+        self.gnss_error = Some(next);
+        next
     }
 
     fn antenna_position(&self) -> Point {
@@ -1006,6 +1038,39 @@ ap_set_look_ahead\nap_dynamic_rad\nap_ang_dist_comp\nap_state\n";
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The fixes' noise: its spread and its lag-one correlation, per axis east.
+    fn gnss_noise_statistics(correlation_s: f64) -> (f64, f64) {
+        let mut c = SimCar::new(CarOptions {
+            gnss: GnssModel {
+                sigma_m: 0.02,
+                correlation_s,
+                ..GnssModel::default()
+            },
+            ..CarOptions::default()
+        });
+        let xs: Vec<f64> = (0..40_000).map(|_| c.gnss_noise_step().0).collect();
+        let n = xs.len() as f64;
+        let mean = xs.iter().sum::<f64>() / n;
+        let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n;
+        let lag = xs
+            .windows(2)
+            .map(|w| (w[0] - mean) * (w[1] - mean))
+            .sum::<f64>()
+            / (n - 1.0);
+        (var.sqrt(), lag / var)
+    }
+
+    #[test]
+    fn gnss_noise_is_gauss_markov_with_its_correlation_time() {
+        // 0.6 s at 5 Hz: a = exp(-0.2/0.6) = 0.717.
+        let (sd, rho) = gnss_noise_statistics(0.6);
+        assert!((sd - 0.02).abs() < 0.001, "sd {sd}");
+        assert!((rho - (-0.2f64 / 0.6).exp()).abs() < 0.02, "rho {rho}");
+        let (sd, rho) = gnss_noise_statistics(0.0);
+        assert!((sd - 0.02).abs() < 0.001, "sd {sd}");
+        assert!(rho.abs() < 0.02, "white noise, rho {rho}");
+    }
 
     fn car(firmware: FirmwareVersion) -> SimCar {
         SimCar::new(CarOptions {
