@@ -17,11 +17,13 @@ fn world() -> World {
                 id: 50,
                 position: Point::new(-10.0, -10.0),
                 height: 1.0,
+                range_bias_m: None,
             },
             WorldAnchor {
                 id: 234,
                 position: Point::new(10.0, 10.0),
                 height: 1.0,
+                range_bias_m: None,
             },
         ],
         ..World::default()

@@ -64,6 +64,7 @@ fn lot_world() -> World {
                 id,
                 position: Point::new(x, y),
                 height,
+                range_bias_m: None,
             })
             .collect(),
         ..World::default()
@@ -697,11 +698,13 @@ fn nlos_events(walls: Vec<crate::Wall>) -> Vec<crate::DebugEvent> {
                 id: 1,
                 position: Point::new(0.0, 0.0),
                 height: 1.0,
+                range_bias_m: None,
             },
             WorldAnchor {
                 id: 2,
                 position: Point::new(20.0, 0.0),
                 height: 1.0,
+                range_bias_m: None,
             },
         ],
         obstacles: vec![square],

@@ -74,6 +74,30 @@ impl Default for GnssModel {
     }
 }
 
+/// How the car's own sensors are wrong (a car profile's `[odometry]` and `[imu]`): the errors
+/// a real car has that its firmware does not know of.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SensorErrors {
+    /// Distance really driven per distance the car counts (1: the odometry is right). The car
+    /// counts its wheel turns as before; the true motion is this much longer.
+    pub odometry_scale: f64,
+    /// Constant error of the IMU yaw the firmware reads (its yaw minus the true one), degrees in
+    /// the firmware's sense (clockwise).
+    pub yaw_bias_deg: f64,
+    /// How fast that error grows, degrees per minute since boot.
+    pub yaw_drift_deg_per_min: f64,
+}
+
+impl Default for SensorErrors {
+    fn default() -> Self {
+        Self {
+            odometry_scale: 1.0,
+            yaw_bias_deg: 0.0,
+            yaw_drift_deg_per_min: 0.0,
+        }
+    }
+}
+
 /// A true pose to place the car at.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Placement {
@@ -115,6 +139,8 @@ pub struct CarOptions {
     pub radio: RadioModel,
     /// The GNSS receiver.
     pub gnss: GnssModel,
+    /// The errors of the car's odometry and IMU.
+    pub sensors: SensorErrors,
     /// Where the car stands at boot (the fused estimate starts there too; UWB starts at (0, 0)).
     pub placement: Placement,
     /// Load the world's anchors into the firmware's list at boot (the real firmware boots with
@@ -143,6 +169,7 @@ impl Default for CarOptions {
             world: World::default(),
             radio: RadioModel::default(),
             gnss: GnssModel::default(),
+            sensors: SensorErrors::default(),
             placement: Placement {
                 x: 0.0,
                 y: 0.0,
@@ -389,13 +416,18 @@ impl SimCar {
         } else {
             self.truth.heading
         };
-        wrap180((-heading.to_degrees()) as f32)
+        let sensors = self.options.sensors;
+        let error =
+            sensors.yaw_bias_deg + sensors.yaw_drift_deg_per_min * self.now_ms as f64 / 60_000.0;
+        wrap180((-heading.to_degrees() + error) as f32)
     }
 
     fn move_truth(&mut self) {
         let v = &self.config.vehicle;
         let dt = TICK_MS as f64 / 1000.0;
-        let speed = f64::from(self.motor.rpm()) * f64::from(v.speed_per_erpm());
+        let speed = f64::from(self.motor.rpm())
+            * f64::from(v.speed_per_erpm())
+            * self.options.sensors.odometry_scale;
         let max = f64::from(v.steering_max_angle_rad);
         let delta = f64::from(v.angle_for_servo(self.servo.position())).clamp(-max, max);
         let d = speed * dt;
@@ -1059,6 +1091,61 @@ mod tests {
             .sum::<f64>()
             / (n - 1.0);
         (var.sqrt(), lag / var)
+    }
+
+    /// Drives straight east at a steady duty cycle for 5 s without GNSS (the fused position is
+    /// dead reckoning): the true distance, the distance the car counted, the fused yaw and the
+    /// true heading (degrees clockwise).
+    fn drive_blind(sensors: SensorErrors) -> (f64, f64, f32, f64) {
+        let mut c = SimCar::new(CarOptions {
+            gnss: GnssModel {
+                enabled: false,
+                ..GnssModel::default()
+            },
+            sensors,
+            ..CarOptions::default()
+        });
+        for _ in 0..500 {
+            c.rc_control(RcMode::Duty, 0.1, 0.0);
+            c.step();
+        }
+        let t = c.truth();
+        let counted = f64::from(t.fused.x).hypot(f64::from(t.fused.y));
+        (
+            t.x.hypot(t.y),
+            counted,
+            t.fused.yaw,
+            -t.heading.to_degrees(),
+        )
+    }
+
+    #[test]
+    fn odometry_scale_and_yaw_bias_make_the_car_count_and_steer_wrongly() {
+        let (truth, counted, yaw, heading) = drive_blind(SensorErrors::default());
+        assert!(truth > 2.0, "the car drove {truth} m");
+        assert!(
+            (truth / counted - 1.0).abs() < 0.005,
+            "{truth} vs {counted}"
+        );
+        assert!((f64::from(yaw) - heading).abs() < 0.01);
+        let (truth, counted, _, _) = drive_blind(SensorErrors {
+            odometry_scale: 1.03,
+            ..SensorErrors::default()
+        });
+        assert!(
+            (truth / counted - 1.03).abs() < 0.005,
+            "{truth} vs {counted}"
+        );
+        let (_, _, yaw, heading) = drive_blind(SensorErrors {
+            yaw_bias_deg: 1.5,
+            yaw_drift_deg_per_min: 6.0,
+            ..SensorErrors::default()
+        });
+        // 1.5° of bias and 6°/min for 5 s: 2.0°.
+        assert!(
+            (f64::from(yaw) - heading - 2.0).abs() < 0.05,
+            "{yaw} vs {heading}"
+        );
     }
 
     #[test]

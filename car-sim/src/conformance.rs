@@ -453,11 +453,13 @@ async fn the_handle_shows_the_truth_and_the_debug_events() {
                     id: 1,
                     position: Point::new(5.0, 0.0),
                     height: 1.0,
+                    range_bias_m: None,
                 },
                 WorldAnchor {
                     id: 2,
                     position: Point::new(0.0, 5.0),
                     height: 1.0,
+                    range_bias_m: None,
                 },
             ],
             ..World::default()

@@ -21,7 +21,7 @@ use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tokio::time::{Instant, sleep_until, timeout};
 
-use crate::car::{CarOptions, GnssModel, Placement, SimCar, TICK_MS};
+use crate::car::{CarOptions, GnssModel, Placement, SensorErrors, SimCar, TICK_MS};
 use crate::debug::{DebugEvent, Truth};
 use crate::noise::Noise;
 use crate::protocol::Board;
@@ -101,6 +101,8 @@ pub struct SimConfig {
     pub radio: RadioModel,
     /// The GNSS receiver.
     pub gnss: GnssModel,
+    /// The errors of the car's odometry and IMU.
+    pub sensors: SensorErrors,
     /// Load the world's anchors into the firmware at boot (the real car boots with none).
     pub preload_anchors: bool,
     /// Record debug events (read them with [`SimHandle::take_events`]).
@@ -137,6 +139,7 @@ impl SimConfig {
             world: self.world.clone(),
             radio: self.radio,
             gnss: self.gnss,
+            sensors: self.sensors,
             placement: self.placement.unwrap_or(defaults.placement),
             preload_anchors: self.preload_anchors,
             record_events: self.record_events,

@@ -161,7 +161,7 @@ fn responder(
         return Some(Responder {
             position: a.position,
             height: a.height,
-            bias,
+            bias: a.range_bias_m.unwrap_or(bias),
         });
     }
     // No physical anchor with that id in the world: the uploaded entry is taken as the truth.
@@ -751,6 +751,7 @@ mod tests {
                 id: 50,
                 position: Point::new(10.0, 0.0),
                 height: 3.0,
+                range_bias_m: None,
             }],
             ..World::default()
         };
@@ -787,6 +788,7 @@ mod tests {
                 id: 50,
                 position: Point::new(10.0, 0.0),
                 height: radio.antenna_height_m,
+                range_bias_m: None,
             }],
             ..World::default()
         };

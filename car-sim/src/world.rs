@@ -12,6 +12,9 @@ pub struct WorldAnchor {
     pub position: Point,
     /// Height of the antenna above ground, m.
     pub height: f64,
+    /// Its range bias (antenna-delay calibration error), m, when known (a car profile's
+    /// `range_bias_m`); `None` draws it from the radio model ([`crate::RadioModel::anchor_bias_m`]).
+    pub range_bias_m: Option<f64>,
 }
 
 /// A straight reflecting surface seen from above.
@@ -77,6 +80,7 @@ impl World {
                     id: a.id,
                     position: a.position(),
                     height: a.height,
+                    range_bias_m: None,
                 })
                 .collect(),
             obstacles: scenario

@@ -135,6 +135,10 @@ pub struct RunArgs {
     /// (case files are always written).
     #[arg(long, value_enum, value_name = "WHAT", default_value_t = RecordArg::All)]
     pub record: RecordArg,
+    /// The car profile of the embedded simulated car: `default` (the bundled car) or a TOML
+    /// file (`drivecheck calibrate` writes one; docs/twin.md). Only with `--car sim`.
+    #[arg(long, value_name = "FILE")]
+    pub profile: Option<PathBuf>,
 }
 
 /// What the recording keeps (`run --record`).
@@ -201,6 +205,10 @@ pub struct ReplayArgs {
     /// At the end, also write `report.html` into the replay directory (as `drivecheck report`).
     #[arg(long)]
     pub report: bool,
+    /// The car profile of the embedded simulated car: `default` or a TOML file (docs/twin.md).
+    /// Only with `--car sim`; a warning when the case was driven on another profile.
+    #[arg(long, value_name = "FILE")]
+    pub profile: Option<PathBuf>,
 }
 
 /// Options of `drivecheck shrink`.
@@ -236,6 +244,10 @@ pub struct ShrinkArgs {
     /// Seed of every candidate's first run (default: the case's campaign seed).
     #[arg(long)]
     pub seed: Option<u64>,
+    /// The car profile of the embedded simulated car the case is driven on: `default` or a TOML
+    /// file (docs/twin.md).
+    #[arg(long, value_name = "FILE")]
+    pub profile: Option<PathBuf>,
 }
 
 /// Options of `drivecheck sweep`.
@@ -268,6 +280,10 @@ pub struct SweepArgs {
     /// Sweep even when the scenario's hash differs from the case's (or the case has none).
     #[arg(long)]
     pub ignore_scenario_hash: bool,
+    /// The car profile of the embedded simulated car the case is driven on: `default` or a TOML
+    /// file (docs/twin.md).
+    #[arg(long, value_name = "FILE")]
+    pub profile: Option<PathBuf>,
 }
 
 /// Options of `drivecheck report`.
@@ -330,6 +346,10 @@ pub struct ExplainArgs {
     /// A cause that explains less growth than this, metres, is left to `unexplained`.
     #[arg(long, value_name = "M")]
     pub min_growth: Option<f64>,
+    /// With `--score`: the car profile of the simulated cars the counterfactual drives: `default`
+    /// or a TOML file (docs/twin.md).
+    #[arg(long, value_name = "FILE")]
+    pub profile: Option<PathBuf>,
 }
 
 /// Options of `drivecheck runs`.
@@ -394,9 +414,9 @@ pub struct SimArgs {
     /// Serve UDP instead of TCP (replies go to the sender's address at the port + 1).
     #[arg(long)]
     pub udp: bool,
-    /// Firmware generation: 10.1 or 12.3.
-    #[arg(long, default_value = "10.1")]
-    pub firmware: String,
+    /// Firmware generation: 10.1 or 12.3 (default: the profile's, 10.1 for the default car).
+    #[arg(long)]
+    pub firmware: Option<String>,
     /// Seed of the simulation's random draws (physics and link).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -413,6 +433,10 @@ pub struct SimArgs {
     /// hold the car's only connection forever (`0s`: never).
     #[arg(long, value_name = "DURATION", default_value = "30s", value_parser = humantime::parse_duration)]
     pub idle_timeout: std::time::Duration,
+    /// The car profile: `default` or a TOML file (docs/twin.md); `--firmware` overrides its
+    /// firmware.
+    #[arg(long, value_name = "FILE")]
+    pub profile: Option<PathBuf>,
 }
 
 /// Parses `2%` or `0.02` into a probability in 0..=1.

@@ -26,6 +26,9 @@ pub struct CampaignRecord {
     pub settings: Settings,
     /// The car it drove (`sim`, `tcp://…`, `udp://…`, `serial://…`).
     pub car: String,
+    /// The car profile of the embedded simulated car (absent on a real car).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub car_profile: Option<super::CarProfileRef>,
     /// The car's firmware version as it reported it (absent if unknown).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub car_firmware_version: Option<String>,

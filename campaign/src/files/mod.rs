@@ -246,6 +246,18 @@ impl ScenarioRef {
     }
 }
 
+/// The car profile a simulated car was (`--profile`, `docs/twin.md`): what a campaign, and
+/// each of its cases, was driven on when the car was the embedded simulator.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CarProfileRef {
+    /// `default` (the bundled car) or the profile file as given.
+    pub name: String,
+    /// Its content hash (`car_sim::CarProfile::hash`: lowercase hex SHA-256 of the canonical
+    /// TOML).
+    pub hash: String,
+}
+
 /// The version of drivecheck recorded in every file it writes.
 pub fn tool_version() -> &'static str {
     env!("CARGO_PKG_VERSION")

@@ -167,6 +167,7 @@ mod tests {
                 hash: None,
             },
             settings: None,
+            car_profile: None,
             no_faults: false,
             commands: vec![CommandRecord::RunSegments {
                 intent: None,

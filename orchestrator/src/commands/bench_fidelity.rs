@@ -148,7 +148,7 @@ fn drive(scenario: &Scenario, plan: &TestPlan, seed: u64, no_faults: bool) -> Re
     });
     config.policy = campaign::oracle::FailurePolicy::ContinueAndRecord;
     config.record = RecordMode::None;
-    let cars = EmbeddedSims::new(scenario, seed, true);
+    let cars = EmbeddedSims::new(&car_sim::SimConfig::from_scenario(scenario), seed, true);
     let report = run_campaign_fresh(
         &cars,
         scenario,
@@ -289,7 +289,7 @@ fn rock_lot(args: &BenchFidelityArgs) -> Result<()> {
     } else {
         RecordMode::None
     };
-    let cars = EmbeddedSims::new(&rock, args.seed, true);
+    let cars = EmbeddedSims::new(&car_sim::SimConfig::from_scenario(&rock), args.seed, true);
     let jobs = std::thread::available_parallelism().map_or(1, usize::from);
     let report = run_campaign_fresh(
         &cars,

@@ -12,6 +12,7 @@ use super::shared::{cancel_on_ctrl_c, read_case as read_case_file, runtime};
 use super::simdrive::{SimDriver, SimSettings};
 use crate::cli::ExplainArgs;
 use crate::exit::Exit;
+use crate::profile_arg::LoadedProfile;
 use crate::report::explain::{
     CaseExplanation, ExplainOptions, Explanations, Scored, calibrate, describe, explain_run,
     score_run,
@@ -91,15 +92,19 @@ pub fn explain(args: &ExplainArgs) -> Result<Exit> {
             cases: Vec::new(),
             notes: Vec::new(),
         };
+        let profile = LoadedProfile::load(args.profile.as_deref())?;
         let mut scored = Vec::new();
         for run in run_dirs(&dir) {
             let (e, mut s, recorded_in) = score_run(&run, scenario.as_ref(), &options)
                 .with_context(|| format!("cannot score {}", run.display()))?;
             if args.counterfactual_runs > 0 {
-                counterfactual(recorded_in.as_ref(), &mut s, args.counterfactual_runs)
-                    .with_context(|| {
-                        format!("cannot drive the cases of {} again", run.display())
-                    })?;
+                counterfactual(
+                    recorded_in.as_ref(),
+                    &mut s,
+                    args.counterfactual_runs,
+                    &profile,
+                )
+                .with_context(|| format!("cannot drive the cases of {} again", run.display()))?;
             }
             explanations.cases.extend(e.cases);
             explanations.notes.extend(e.notes);
@@ -140,6 +145,7 @@ fn counterfactual(
     scenario: Option<&scenarios::Scenario>,
     scored: &mut [Scored],
     runs: u32,
+    profile: &LoadedProfile,
 ) -> Result<()> {
     let pending: BTreeSet<std::path::PathBuf> = scored
         .iter()
@@ -154,6 +160,7 @@ fn counterfactual(
         "driving {} case(s) again without each fault that moved a failing segment's estimate ({runs} runs each)",
         pending.len()
     );
+    let sim = profile.sim_config(scenario)?;
     let scratch =
         std::env::temp_dir().join(format!("drivecheck-counterfactual-{}", std::process::id()));
     let runtime = runtime(true)?;
@@ -162,7 +169,7 @@ fn counterfactual(
         let case = read_case_file(path)?;
         let seed = case.campaign_seed.unwrap_or_default();
         let driver = SimDriver::new(
-            scenario,
+            (scenario, sim.clone()),
             path,
             &case,
             scratch.clone(),

@@ -14,7 +14,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 
 use crate::exit::Exit;
-use crate::recording::{Recorder, RecordingStart, Span, Spans};
+use crate::profile_arg::LoadedProfile;
+use crate::recording::{Recorder, RecordingStart, SIM_PROFILE_METADATA, Span, Spans};
 use crate::runner::{CAMPAIGN_FILE, RECORDING_FILE, RunDirectory, SPAN_GAP_NS, is_used};
 use campaign::files::{CampaignRecord, Case, Settings};
 use campaign::shard::Shard;
@@ -308,6 +309,15 @@ fn merge_recordings(
         summary: None,
         ..record.clone()
     };
+    // The simulated car's profile, as the first shard recorded it (the shards agree on its
+    // hash: it is in their campaign records).
+    let profile = match files.first() {
+        Some(bytes) => Spans::new(bytes)?
+            .metadata(SIM_PROFILE_METADATA)
+            .map(LoadedProfile::from_metadata)
+            .transpose()?,
+        None => None,
+    };
     let start = RecordingStart {
         campaign: &at_start,
         scenario,
@@ -317,6 +327,7 @@ fn merge_recordings(
         live: None,
         // Shards on the embedded simulator ran a fresh car per test: every test has a span.
         test_spans: simulated,
+        sim_profile: profile.as_ref(),
     };
     let mut recorder = Recorder::create(out, &start)?;
     let mut readers: Vec<(usize, std::iter::Peekable<Spans<'_>>)> = files

@@ -22,6 +22,7 @@ use super::shared::{
 };
 use crate::cli::ReplayArgs;
 use crate::exit::Exit;
+use crate::profile_arg::LoadedProfile;
 use crate::report::REPORT_FILE;
 use crate::runner::{
     ReplaySource, RunConfig, Silent, TestSummary, rfc3339_now, run_campaign, run_dir_name,
@@ -77,6 +78,18 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
         .car
         .parse()
         .with_context(|| format!("--car {}", args.car))?;
+    let embedded = address == CarAddress::Sim;
+    if args.profile.is_some() && !embedded {
+        bail!(
+            "--profile describes the embedded simulated car (--car sim), not the car at {}",
+            args.car
+        );
+    }
+    let profile = LoadedProfile::load(args.profile.as_deref())?;
+    let sim = profile.sim_config(&scenario)?;
+    if embedded {
+        warn_other_profile(&case, path, &profile);
+    }
     let out = match &args.out {
         Some(out) => out.clone(),
         None => crate::runner::claim_default_run_dir(&run_dir_name(
@@ -117,6 +130,8 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
         args,
         address: &address,
         scenario: &scenario,
+        sim: &sim,
+        profile: embedded.then(|| profile.clone()),
         plan: &plan,
         of: &of,
         seed,
@@ -155,11 +170,35 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
     })
 }
 
+/// Warns when `case` was driven on a simulated car of another profile than `profile`: its
+/// results then need not be reproduced.
+fn warn_other_profile(case: &Case, path: &Path, profile: &LoadedProfile) {
+    let Some(recorded) = &case.car_profile else {
+        return;
+    };
+    let hash = profile.profile.hash();
+    if recorded.hash != hash {
+        eprintln!(
+            "warning: {} was driven on car profile {} ({}…), this replay on {} ({}…): another \
+             simulated car, its results need not reproduce",
+            path.display(),
+            recorded.name,
+            &recorded.hash[..recorded.hash.len().min(12)],
+            profile.name,
+            &hash[..12]
+        );
+    }
+}
+
 /// Everything the runs share.
 struct Job<'a> {
     args: &'a ReplayArgs,
     address: &'a CarAddress,
     scenario: &'a Scenario,
+    /// The embedded simulated car (the scenario's, with the profile applied).
+    sim: &'a car_sim::SimConfig,
+    /// What the runs record of the profile (on the embedded simulated car).
+    profile: Option<LoadedProfile>,
     plan: &'a TestPlan,
     of: &'a ReplayOf,
     seed: u64,
@@ -181,7 +220,7 @@ impl Job<'_> {
                 self.seed
             };
             let dir = format!("run-{}", k + 1);
-            let connecting = connect(self.address, self.scenario, seed);
+            let connecting = connect(self.address, self.sim, seed);
             let (case, result) = match car_for_run(&mut shared, connecting).await {
                 Ok((car, sim)) => self.run_one(&car, sim, seed, &dir, &interrupt).await,
                 Err(error) => (None, Err(error.into())),
@@ -229,6 +268,7 @@ impl Job<'_> {
             self.out.join(dir),
             self.args.car.clone(),
         );
+        config.car_profile = self.profile.clone();
         config.replay = Some(ReplaySource {
             plan: self.plan.clone(),
             of: self.of.clone(),

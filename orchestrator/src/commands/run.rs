@@ -13,6 +13,7 @@ use super::shrink;
 use crate::cli::{OnFailure, RecordArg, RunArgs};
 use crate::exit::Exit;
 use crate::junit;
+use crate::profile_arg::LoadedProfile;
 use crate::recording::live::LiveView;
 use crate::report::REPORT_FILE;
 use crate::report::explain::{ExplainOptions, describe_source, explain_run};
@@ -46,6 +47,15 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         .car
         .parse()
         .with_context(|| format!("--car {}", args.car))?;
+    let embedded = address == CarAddress::Sim;
+    if args.profile.is_some() && !embedded {
+        anyhow::bail!(
+            "--profile describes the embedded simulated car (--car sim), not the car at {}",
+            args.car
+        );
+    }
+    let profile = LoadedProfile::load(args.profile.as_deref())?;
+    let sim = profile.sim_config(&scenario)?;
     let seed = choose_seed(args.seed);
     let campaign = Campaign {
         seed,
@@ -86,7 +96,9 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         RecordArg::Failing => RecordMode::Failing,
         RecordArg::None => RecordMode::None,
     };
-    let embedded = address == CarAddress::Sim;
+    if embedded {
+        config.car_profile = Some(profile.clone());
+    }
     let jobs = jobs(args, embedded)?;
     // A live view is for watching: a virtual-time campaign would be over before anyone looks.
     let virtual_time = embedded && !args.realtime && args.live.is_none();
@@ -108,7 +120,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     );
     let started = Instant::now();
     let result = if embedded {
-        campaign_on_fresh_cars(&scenario, &mut config, jobs, virtual_time, args.live)
+        campaign_on_fresh_cars(&scenario, &sim, &mut config, jobs, virtual_time, args.live)
     } else {
         let runtime = runtime(false)?;
         runtime.block_on(async {
@@ -125,7 +137,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         write_junit(&report, file)?;
     }
     if args.shrink {
-        shrink_failed(&report, &scenario, args.shrink_budget)?;
+        shrink_failed(&report, &scenario, &sim, args.shrink_budget)?;
     }
     if args.report {
         super::report::write(&report.dir, &report.dir.join(REPORT_FILE), Some(&scenario))?;
@@ -242,7 +254,12 @@ pub(super) fn write_junit(report: &CampaignReport, file: &std::path::Path) -> Re
 /// Shrinks every failed test's case file into `shrink-NNN/` of the run directory and prints a
 /// line per case; a case that cannot be shrunk (it does not fail the same way every time in
 /// the simulator, say) gets a warning and the next one is shrunk.
-fn shrink_failed(report: &CampaignReport, scenario: &Scenario, budget: Duration) -> Result<()> {
+fn shrink_failed(
+    report: &CampaignReport,
+    scenario: &Scenario,
+    sim: &car_sim::SimConfig,
+    budget: Duration,
+) -> Result<()> {
     let failed: Vec<usize> = report
         .cases
         .iter()
@@ -271,6 +288,7 @@ fn shrink_failed(report: &CampaignReport, scenario: &Scenario, budget: Duration)
             budget,
             seed: case.campaign_seed.unwrap_or(report.record.seed),
             margin: shrink::DEFAULT_MARGIN_M,
+            sim: sim.clone(),
         };
         let result = shrink::shrink_case(&runtime, &path, &case, scenario, &options, &out, true);
         match result {
@@ -337,6 +355,7 @@ async fn start_live(
 /// interrupted by Ctrl-C.
 fn campaign_on_fresh_cars(
     scenario: &Scenario,
+    sim: &car_sim::SimConfig,
     config: &mut RunConfig,
     jobs: usize,
     virtual_time: bool,
@@ -348,7 +367,7 @@ fn campaign_on_fresh_cars(
     let _server = runtime.block_on(start_live(live, config))?;
     let _context = runtime.enter();
     let interrupt = Interrupt::listen();
-    let cars = EmbeddedSims::new(scenario, config.campaign.seed, virtual_time);
+    let cars = EmbeddedSims::new(sim, config.campaign.seed, virtual_time);
     let progress = Progress::new(config.test_indices().len());
     let result = run_campaign_fresh(&cars, scenario, config, jobs, interrupt.token(), &progress);
     progress.finish();
@@ -362,7 +381,12 @@ async fn campaign_on(
     scenario: &Scenario,
     config: &RunConfig,
 ) -> Result<CampaignReport, anyhow::Error> {
-    let (car, sim) = connect(address, scenario, config.campaign.seed).await?;
+    let (car, sim) = connect(
+        address,
+        &car_sim::SimConfig::from_scenario(scenario),
+        config.campaign.seed,
+    )
+    .await?;
     let interrupt = Interrupt::listen();
     let _brake = interrupt.brake_on_second(&car);
     let progress = Progress::new(config.campaign.tests);

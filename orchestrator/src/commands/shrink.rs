@@ -21,6 +21,7 @@ use super::shared::{cancel_on_ctrl_c, check_hash, read_case, runtime, scenario_o
 use super::simdrive::{SimDriver, SimSettings};
 use crate::cli::ShrinkArgs;
 use crate::exit::Exit;
+use crate::profile_arg::LoadedProfile;
 use crate::runner::run_dir_name;
 use crate::seed::choose_seed;
 use campaign::files::{Case, Header, SHRINK_FORMAT, SHRINK_SCHEMA_VERSION, ScenarioRef};
@@ -43,6 +44,8 @@ pub(super) struct Options {
     /// How far above the threshold every run must fail (at most the case's own smallest
     /// excess), m.
     pub margin: f64,
+    /// The simulated car: the scenario's, with the car profile applied.
+    pub sim: car_sim::SimConfig,
 }
 
 /// The case does not fail at one segment (or two neighbouring ones) in every run: nothing to
@@ -73,6 +76,8 @@ pub fn shrink(args: &ShrinkArgs) -> Result<Exit> {
         .seed
         .or(case.campaign_seed)
         .unwrap_or_else(|| choose_seed(None));
+    let profile = LoadedProfile::load(args.profile.as_deref())?;
+    let sim = profile.sim_config(&scenario)?;
     let out = match &args.out {
         Some(out) => out.clone(),
         None => crate::runner::claim_default_run_dir(&run_dir_name(
@@ -85,6 +90,7 @@ pub fn shrink(args: &ShrinkArgs) -> Result<Exit> {
         budget: args.budget,
         seed,
         margin: args.margin,
+        sim,
     };
     let runtime = runtime(true)?;
     let report = match shrink_case(&runtime, path, &case, &scenario, &options, &out, true) {
@@ -177,7 +183,7 @@ pub(super) fn shrink_case(
     }
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     let sim = SimDriver::new(
-        scenario,
+        (scenario, options.sim.clone()),
         path,
         case,
         out.join(".scratch"),

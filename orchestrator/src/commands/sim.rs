@@ -7,6 +7,7 @@ use car_sim::{LinkImpairment, SimConfig};
 
 use crate::cli::SimArgs;
 use crate::exit::Exit;
+use crate::profile_arg::LoadedProfile;
 use crate::scenario_arg::{load_scenario, print_warnings};
 
 /// Serves the simulated car until Ctrl-C.
@@ -24,8 +25,14 @@ pub fn serve(args: &SimArgs) -> Result<Exit> {
 }
 
 fn sim_config(args: &SimArgs, scenario: &scenarios::Scenario) -> Result<SimConfig> {
-    let firmware: FirmwareVersion = car_sim::simulated_firmware(&args.firmware)
-        .with_context(|| format!("--firmware {}", args.firmware))?;
+    let profile = LoadedProfile::load(args.profile.as_deref())?;
+    let car = profile.sim_config(scenario)?;
+    let firmware: FirmwareVersion = match &args.firmware {
+        Some(text) => {
+            car_sim::simulated_firmware(text).with_context(|| format!("--firmware {text}"))?
+        }
+        None => car.firmware,
+    };
     Ok(SimConfig {
         firmware,
         seed: args.seed,
@@ -36,7 +43,7 @@ fn sim_config(args: &SimArgs, scenario: &scenarios::Scenario) -> Result<SimConfi
             ..LinkImpairment::default()
         },
         idle_timeout: (!args.idle_timeout.is_zero()).then_some(args.idle_timeout),
-        ..SimConfig::from_scenario(scenario)
+        ..car
     })
 }
 

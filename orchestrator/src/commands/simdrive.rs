@@ -30,13 +30,13 @@ pub(super) struct SimSettings {
 }
 
 impl SimSettings {
-    /// The simulator's configuration for `scenario` and `seed` with these settings. Anchor `id`
-    /// is moved by `anchor_error_m` in the direction `id` × the golden angle (a direction of its
-    /// own, the same for every run and value).
-    fn config(&self, scenario: &Scenario, seed: u64) -> SimConfig {
+    /// The simulator's configuration: the simulated car `sim` (a scenario's, with its profile)
+    /// with `seed` and these settings. Anchor `id` is moved by `anchor_error_m` in the direction
+    /// `id` × the golden angle (a direction of its own, the same for every run and value).
+    fn config(&self, sim: &SimConfig, seed: u64) -> SimConfig {
         let mut config = SimConfig {
             seed,
-            ..SimConfig::from_scenario(scenario)
+            ..sim.clone()
         };
         config.uwb_step_clamp_m = self.uwb_clamp_m.map(|m| m as f32);
         if let Some(error) = self.anchor_error_m {
@@ -57,6 +57,8 @@ impl SimSettings {
 /// Drives cases on fresh embedded simulators (see the module doc).
 pub(super) struct SimDriver<'a> {
     pub scenario: &'a Scenario,
+    /// The simulated car: the scenario's, with the car profile applied.
+    pub sim: SimConfig,
     /// The failure policy of the case's campaign.
     pub policy: FailurePolicy,
     /// The case driven, for the scratch `campaign.json`.
@@ -71,10 +73,10 @@ pub(super) struct SimDriver<'a> {
 }
 
 impl<'a> SimDriver<'a> {
-    /// A driver of `case` (read from `path`) in `scenario`: its failure policy, `runs` runs from
-    /// `seed`, scratch run directories in `scratch`.
+    /// A driver of `case` (read from `path`) in `scenario` on the simulated car `sim`: its
+    /// failure policy, `runs` runs from `seed`, scratch run directories in `scratch`.
     pub fn new(
-        scenario: &'a Scenario,
+        (scenario, sim): (&'a Scenario, SimConfig),
         path: &std::path::Path,
         case: &Case,
         scratch: PathBuf,
@@ -83,6 +85,7 @@ impl<'a> SimDriver<'a> {
     ) -> Self {
         Self {
             scenario,
+            sim,
             policy: case
                 .settings
                 .as_ref()
@@ -146,7 +149,7 @@ impl<'a> SimDriver<'a> {
         });
         config.policy = self.policy;
         config.record = crate::runner::RecordMode::None;
-        let (car, sim) = connect_sim(&settings.config(self.scenario, seed)).await?;
+        let (car, sim) = connect_sim(&settings.config(&self.sim, seed)).await?;
         let sim = Some(sim);
         let result = run_campaign(
             &car,

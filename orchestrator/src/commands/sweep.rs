@@ -9,6 +9,7 @@ use super::shared::{cancel_on_ctrl_c, check_hash, read_case, runtime, scenario_o
 use super::simdrive::{SimDriver, SimSettings};
 use crate::cli::SweepArgs;
 use crate::exit::Exit;
+use crate::profile_arg::LoadedProfile;
 use crate::seed::choose_seed;
 use campaign::files::{Header, SWEEP_FORMAT, SWEEP_SCHEMA_VERSION, ScenarioRef};
 use campaign::sweep::{Axis, Parameter, Point, SimSetting, SweepReport, grid, with_fault_values};
@@ -28,6 +29,8 @@ pub fn sweep(args: &SweepArgs) -> Result<Exit> {
         .seed
         .or(case.campaign_seed)
         .unwrap_or_else(|| choose_seed(None));
+    let profile = LoadedProfile::load(args.profile.as_deref())?;
+    let sim = profile.sim_config(&scenario)?;
     let points = grid(&axes);
     eprintln!(
         "sweeping {} over {} point(s), {} run(s) each, seed {seed}",
@@ -40,7 +43,7 @@ pub fn sweep(args: &SweepArgs) -> Result<Exit> {
     let report = runtime(true)?.block_on(async {
         let cancel = cancel_on_ctrl_c();
         let driver = SimDriver::new(
-            &scenario,
+            (&scenario, sim.clone()),
             path,
             &case,
             scratch.clone(),

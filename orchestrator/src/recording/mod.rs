@@ -45,7 +45,8 @@ pub use records::{
 };
 pub use topic::{Record, Topic};
 pub use writer::{
-    DEFAULT_CHUNK_INTERVAL, FinishedRecording, Held, Recorder, RecordingStart, TEST_SPAN_PREFIX,
+    DEFAULT_CHUNK_INTERVAL, FinishedRecording, Held, Recorder, RecordingStart,
+    SIM_PROFILE_METADATA, TEST_SPAN_PREFIX,
 };
 
 /// The `format` in a recording's `drivecheck.recording` metadata record.

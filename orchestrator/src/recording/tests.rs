@@ -33,6 +33,7 @@ fn campaign(s: &Scenario) -> CampaignRecord {
         scenario: ScenarioRef::of(s),
         settings: Settings::new(s, 3, FailurePolicy::default()),
         car: "sim".to_owned(),
+        car_profile: None,
         car_firmware_version: Some("12.3".to_owned()),
         started_at: "2026-11-22T10:55:21Z".to_owned(),
         ended_at: None,
@@ -52,6 +53,7 @@ fn create(path: &Path, s: &Scenario, simulated: bool, origin: Instant) -> Record
         chunk_interval: DEFAULT_CHUNK_INTERVAL,
         live: None,
         test_spans: false,
+        sim_profile: None,
     };
     Recorder::create(path, &start).unwrap()
 }

@@ -40,6 +40,10 @@ const CHUNK_BYTES: u64 = 256 * 1024;
 
 type Sink = NoSeek<BufWriter<File>>;
 
+/// The name of the metadata record that holds a simulated car's profile (the simulator's truth,
+/// like the `/sim/*` channels: `drivecheck calibrate` never reads it).
+pub const SIM_PROFILE_METADATA: &str = "drivecheck.sim.profile";
+
 /// What a recording starts with.
 #[derive(Debug, Clone)]
 pub struct RecordingStart<'a> {
@@ -58,6 +62,9 @@ pub struct RecordingStart<'a> {
     /// Every test's messages are followed by a `drivecheck.test.<index>` record of their span
     /// (a campaign on fresh simulated cars; see [`Recorder::test_span`]).
     pub test_spans: bool,
+    /// The simulated car's profile, the simulator's truth: a `drivecheck.sim.profile` metadata
+    /// record (its name, hash and canonical TOML).
+    pub sim_profile: Option<&'a crate::profile_arg::LoadedProfile>,
 }
 
 /// What [`Recorder::finish`] wrote.
@@ -364,6 +371,14 @@ impl Recorder {
             ("toml", s.to_toml()),
         ];
         self.metadata("drivecheck.scenario", &scenario)?;
+        if let Some(profile) = start.sim_profile {
+            let entries = [
+                ("name", profile.name.clone()),
+                ("hash", profile.profile.hash()),
+                ("toml", profile.profile.to_toml()),
+            ];
+            self.metadata(SIM_PROFILE_METADATA, &entries)?;
+        }
         self.campaign_metadata("drivecheck.campaign", start.campaign)
     }
 

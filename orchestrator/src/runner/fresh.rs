@@ -161,6 +161,7 @@ pub fn run_campaign_fresh<C: FreshCars + ?Sized>(
                 chunk_interval: DEFAULT_CHUNK_INTERVAL,
                 live: None,
                 test_spans: true,
+                sim_profile: config.car_profile.as_ref(),
             };
             match Recorder::create(&dir.path().join(RECORDING_FILE), &start) {
                 Ok(recorder) => Some(recorder),

@@ -106,6 +106,9 @@ pub struct RunConfig {
     pub out_dir: PathBuf,
     /// The car as the user named it (`sim`, `tcp://…`), for `campaign.json`.
     pub car_label: String,
+    /// The profile of the embedded simulated car, for `campaign.json` and every case (`None` on
+    /// a real car).
+    pub car_profile: Option<crate::profile_arg::LoadedProfile>,
     /// A recorded case to drive in every test instead of generated tests (`drivecheck replay`).
     pub replay: Option<ReplaySource>,
     /// What `campaign.mcap` keeps (every test by default; a shrink's candidate runs write none).
@@ -138,6 +141,7 @@ impl RunConfig {
             state_period: Duration::from_millis(50),
             out_dir,
             car_label: car_label.into(),
+            car_profile: None,
             replay: None,
             record: RecordMode::All,
             shard: None,
@@ -359,6 +363,7 @@ pub async fn run_campaign<V: Vehicle>(
         chunk_interval: DEFAULT_CHUNK_INTERVAL,
         live: config.live.as_ref(),
         test_spans: false,
+        sim_profile: config.car_profile.as_ref().filter(|_| sim.is_some()),
     };
     let journal = if config.record == RecordMode::None {
         Journal::without_recording(sim)

@@ -87,6 +87,10 @@ impl RunDirectory {
             scenario: ScenarioRef::of(scenario),
             settings,
             car: config.car_label.clone(),
+            car_profile: config
+                .car_profile
+                .as_ref()
+                .map(crate::profile_arg::LoadedProfile::reference),
             car_firmware_version: None,
             started_at: rfc3339_now(),
             ended_at: None,
@@ -160,9 +164,13 @@ impl RunDirectory {
     pub(crate) fn write_case(&mut self, case: &Case) -> Result<(), RunError> {
         let test_index = case.test_index.unwrap_or(self.tests.len());
         let file = format!("case-{test_index:03}.json");
+        let mut case = case.clone();
+        if case.car_profile.is_none() {
+            case.car_profile = self.record.car_profile.clone();
+        }
         write(&self.path.join(&file), &case.to_json()?)?;
-        self.tests.push(summarise(test_index, file, case));
-        self.cases.push(case.clone());
+        self.tests.push(summarise(test_index, file, &case));
+        self.cases.push(case);
         Ok(())
     }
 

@@ -9,7 +9,6 @@ use std::time::Duration;
 
 use car_link::{Car, CarAddress, CarError, LinkConfig};
 use car_sim::SimHandle;
-use scenarios::Scenario;
 use thiserror::Error;
 
 use super::Vehicle;
@@ -44,13 +43,13 @@ fn car_config() -> LinkConfig {
     }
 }
 
-/// The car at `address`; for `sim` a fresh embedded simulated car seeded with `seed`, with its
-/// handle (its debug view and its shutdown).
+/// The car at `address`; for `sim` a fresh embedded simulated car, `sim` (a scenario's car, with
+/// its profile applied) seeded with `seed`, with its handle (its debug view and its shutdown).
 ///
 /// Timeout: the link's connection timeout and the version handshake's tries.
 pub async fn connect(
     address: &CarAddress,
-    scenario: &Scenario,
+    sim: &car_sim::SimConfig,
     seed: u64,
 ) -> Result<(impl Vehicle + use<>, Option<SimHandle>), ConnectError> {
     if *address != CarAddress::Sim {
@@ -62,7 +61,7 @@ pub async fn connect(
             })?;
         return Ok((car, None));
     }
-    let (car, sim) = sim_car(&recorded_sim(scenario, seed)).await?;
+    let (car, sim) = sim_car(&recorded_sim(sim, seed)).await?;
     Ok((car, Some(sim)))
 }
 
@@ -82,13 +81,13 @@ async fn sim_car(config: &car_sim::SimConfig) -> Result<(Car, SimHandle), Connec
     Ok((car, sim))
 }
 
-/// The embedded simulator of `scenario` seeded with `seed`, its debug events on: they are recorded
-/// on the `/sim/…` channels of the campaign's MCAP (ranges, fault applications, watchdog).
-fn recorded_sim(scenario: &Scenario, seed: u64) -> car_sim::SimConfig {
+/// The simulated car `sim` seeded with `seed`, its debug events on: they are recorded on the
+/// `/sim/…` channels of the campaign's MCAP (ranges, fault applications, watchdog).
+fn recorded_sim(sim: &car_sim::SimConfig, seed: u64) -> car_sim::SimConfig {
     car_sim::SimConfig {
         seed,
         record_events: true,
-        ..car_sim::SimConfig::from_scenario(scenario)
+        ..sim.clone()
     }
 }
 
@@ -102,9 +101,10 @@ pub struct EmbeddedSims {
 }
 
 impl EmbeddedSims {
-    /// The cars of a campaign with `seed` in `scenario`.
-    pub fn new(scenario: &Scenario, seed: u64, virtual_time: bool) -> Self {
-        Self::with_config(recorded_sim(scenario, seed), virtual_time)
+    /// The cars of a campaign with `seed`, each the simulated car `sim` (a scenario's car with
+    /// its profile applied).
+    pub fn new(sim: &car_sim::SimConfig, seed: u64, virtual_time: bool) -> Self {
+        Self::with_config(recorded_sim(sim, seed), virtual_time)
     }
 
     /// The cars of a campaign on simulators configured as `config` (its seed the campaign's).

@@ -278,6 +278,10 @@ pub struct Case {
     /// The settings it was generated and judged with.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub settings: Option<Settings>,
+    /// The car profile of the simulated car it was driven on (absent on a real car and in a
+    /// case not yet run).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub car_profile: Option<super::CarProfileRef>,
     /// True when it ran without fault commands.
     #[serde(default)]
     pub no_faults: bool,
@@ -357,6 +361,7 @@ impl Case {
             test_index: Some(plan.test_index),
             scenario: ScenarioRef::of(scenario),
             settings: Some(settings),
+            car_profile: None,
             no_faults,
             commands: plan.commands.iter().map(CommandRecord::from).collect(),
             return_route: Vec::new(),

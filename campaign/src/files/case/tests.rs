@@ -95,6 +95,10 @@ fn a_campaign_record_survives_a_round_trip_through_json() {
         scenario: ScenarioRef::of(&s),
         settings: Settings::new(&s, 10, FailurePolicy::ContinueAndRecord),
         car: "sim".to_owned(),
+        car_profile: Some(crate::files::CarProfileRef {
+            name: "car.toml".to_owned(),
+            hash: "ab".repeat(32),
+        }),
         car_firmware_version: Some("12.3".to_owned()),
         started_at: "2026-11-22T10:55:21Z".to_owned(),
         ended_at: Some("2026-11-22T10:56:02Z".to_owned()),
@@ -190,6 +194,7 @@ fn check_refuses_unusable_values() {
             hash: None,
         },
         settings: None,
+        car_profile: None,
         no_faults: false,
         commands: vec![command],
         return_route: vec![],

@@ -1,0 +1,160 @@
+//! `--profile` end to end: a campaign on the embedded simulated car with a car profile records
+//! the profile (its hash in `campaign.json` and every case, the profile itself in the recording),
+//! drives another car than the default, refuses a profile with a real car or one that names an
+//! anchor the scenario lacks (naming the field), and a replay on another profile warns.
+
+mod common;
+
+use common::{campaign, drivecheck, path, text};
+
+use campaign::files::{CampaignRecord, Case};
+use car_sim::CarProfile;
+use orchestrator::recording::{Recording, SIM_PROFILE_METADATA};
+
+/// A car whose anchor 50 stands 0.4 m from its surveyed place with a range bias, which loses
+/// 15 % of its exchanges and whose odometry over-reads by 3 %.
+const PROFILE: &str = r#"
+format = "drivecheck-car-profile"
+version = 1
+[radio]
+exchange_drop_rate = 0.15
+[anchors."50"]
+offset_m = [0.4, 0.0]
+range_bias_m = -0.1
+[odometry]
+scale = 0.97
+[imu]
+yaw_bias_deg = 1.5
+"#;
+
+fn worst(dir: &std::path::Path, tests: usize) -> Vec<f64> {
+    (0..tests)
+        .map(|i| {
+            let case = Case::from_json(
+                &std::fs::read_to_string(dir.join(format!("case-{i:03}.json"))).unwrap(),
+            )
+            .unwrap();
+            case.segments
+                .iter()
+                .filter_map(|s| s.oracle.stats.map(|st| st.max_m))
+                .fold(0.0, f64::max)
+        })
+        .collect()
+}
+
+#[test]
+fn a_campaign_on_a_profile_records_it_and_drives_another_car() {
+    let tmp = tempfile::tempdir().unwrap();
+    let file = tmp.path().join("car.toml");
+    std::fs::write(&file, PROFILE).unwrap();
+    let profiled = tmp.path().join("profiled");
+    std::fs::create_dir(&profiled).unwrap();
+    let run = campaign(&profiled, 3, 3, &["--profile", path(&file)], 1);
+    let default = tmp.path().join("default");
+    std::fs::create_dir(&default).unwrap();
+    let base = campaign(&default, 3, 3, &[], 1);
+
+    let expected = CarProfile::from_toml(PROFILE, "car.toml").unwrap().hash();
+    let record =
+        CampaignRecord::from_json(&std::fs::read_to_string(run.join("campaign.json")).unwrap())
+            .unwrap();
+    let recorded = record.car_profile.expect("the profile is recorded");
+    assert_eq!(recorded.hash, expected);
+    assert_eq!(recorded.name, path(&file));
+    let case =
+        Case::from_json(&std::fs::read_to_string(run.join("case-000.json")).unwrap()).unwrap();
+    assert_eq!(case.car_profile.unwrap().hash, expected);
+    let recording = Recording::read(&run.join("campaign.mcap")).unwrap();
+    let meta = recording
+        .metadata(SIM_PROFILE_METADATA)
+        .expect("the simulator's profile is in the recording");
+    assert_eq!(
+        CarProfile::from_toml(&meta["toml"], "recorded")
+            .unwrap()
+            .hash(),
+        expected
+    );
+    let default_record =
+        CampaignRecord::from_json(&std::fs::read_to_string(base.join("campaign.json")).unwrap())
+            .unwrap();
+    assert_eq!(
+        default_record.car_profile.unwrap().hash,
+        CarProfile::default().hash(),
+        "a campaign without --profile records the default car"
+    );
+    assert_ne!(
+        worst(&run, 3),
+        worst(&base, 3),
+        "the profile changes the car"
+    );
+
+    // A replay of the profiled case on the default car warns; on its own profile it does not.
+    let other = drivecheck(&[
+        "replay",
+        path(&run.join("case-000.json")),
+        "--out",
+        path(&tmp.path().join("replay-default")),
+    ]);
+    assert!(
+        String::from_utf8_lossy(&other.stderr).contains("was driven on car profile"),
+        "{}",
+        text(&other)
+    );
+    let same = drivecheck(&[
+        "replay",
+        path(&run.join("case-000.json")),
+        "--profile",
+        path(&file),
+        "--out",
+        path(&tmp.path().join("replay-same")),
+    ]);
+    assert!(
+        !String::from_utf8_lossy(&same.stderr).contains("was driven on car profile"),
+        "{}",
+        text(&same)
+    );
+}
+
+#[test]
+fn a_bad_profile_is_refused_naming_its_field_and_nothing_is_written() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cases = [
+        (
+            "[anchors.\"57\"]\noffset_m = [0.1, 0.0]\n",
+            vec![],
+            "anchors.\"57\": the scenario has no anchor 57 (its anchors: 234, 50)",
+        ),
+        (
+            "[radio]\nexchange_drop_rate = 1.5\n",
+            vec![],
+            "radio.exchange_drop_rate: 1.5 is not a share",
+        ),
+        (
+            "[gnss]\nsigma = 0.1\n",
+            vec![],
+            "car.toml:4:1: gnss.sigma: unknown field `sigma`",
+        ),
+        (
+            "",
+            vec!["--car", "tcp://127.0.0.1:9"],
+            "--profile describes the embedded simulated car (--car sim)",
+        ),
+    ];
+    for (body, extra, expected) in cases {
+        let file = tmp.path().join("car.toml");
+        std::fs::write(
+            &file,
+            format!("format = \"drivecheck-car-profile\"\nversion = 1\n{body}"),
+        )
+        .unwrap();
+        let out_dir = tmp.path().join("never");
+        let mut args = vec!["run", "--tests", "1", "--profile", path(&file)];
+        args.extend(extra.iter().copied());
+        args.extend(["--out", path(&out_dir)]);
+        let out = drivecheck(&args);
+        assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(stderr.contains(expected), "{stderr}\nexpected: {expected}");
+        assert!(!out_dir.exists(), "an error leaves no run directory");
+    }
+}
