@@ -74,6 +74,19 @@ impl Default for GnssModel {
     }
 }
 
+/// A GNSS fix that corrected the fused position (`docs/firmware.md#fused-position`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GnssCorrection {
+    /// When the fix arrived, ms since boot.
+    pub at_ms: u64,
+    /// When it was measured, ms since boot.
+    pub measured_ms: u64,
+    /// The distance between the pose history's entry closest to `measured_ms` and the fix (minus
+    /// the antenna offset), before the correction, m: the firmware's "Diff (cm)" of
+    /// `pos_gnss_corr_info 1` (`pos.c`, `correct_pos_gps`).
+    pub diff_m: f32,
+}
+
 /// A true pose to place the car at.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Placement {
@@ -259,6 +272,7 @@ pub struct SimCar {
     gnss_error: Option<(f64, f64)>,
     uwb_noise: Noise,
     gnss_in_flight: VecDeque<(u64, GnssFix)>,
+    last_gnss_correction: Option<GnssCorrection>,
     range_in_flight: Option<(u64, RangeMeasurement)>,
     watchdog_reset_ms: u64,
     watchdog_expired: bool,
@@ -309,6 +323,7 @@ impl SimCar {
             gnss_error: None,
             uwb_noise: Noise::stream(options.seed, STREAM_UWB),
             gnss_in_flight: VecDeque::new(),
+            last_gnss_correction: None,
             range_in_flight: None,
             watchdog_reset_ms: 0,
             watchdog_expired: false,
@@ -475,7 +490,13 @@ impl SimCar {
             if self.ms_today_base.is_none() {
                 self.ms_today_base = Some((model.utc_at_boot_ms, 0));
             }
-            self.fused.gnss_fix(&self.config, fix);
+            if let Some(diff_m) = self.fused.gnss_fix(&self.config, fix) {
+                self.last_gnss_correction = Some(GnssCorrection {
+                    at_ms: self.now_ms,
+                    measured_ms: fix.measured_ms,
+                    diff_m,
+                });
+            }
         }
     }
 
@@ -690,6 +711,11 @@ impl SimCar {
     /// Takes the recorded debug events.
     pub fn drain_events(&mut self) -> Vec<DebugEvent> {
         std::mem::take(&mut self.events)
+    }
+
+    /// The last GNSS fix that corrected the fused position (`None` before the first).
+    pub fn last_gnss_correction(&self) -> Option<GnssCorrection> {
+        self.last_gnss_correction
     }
 
     /// The autopilot (read-only).

@@ -64,7 +64,7 @@ pub mod uwb;
 pub mod world;
 
 pub use autopilot::{FwPose, RoutePart, RoutePoint};
-pub use car::{CarOptions, GnssModel, Placement, RcMode, SimCar, StateReport};
+pub use car::{CarOptions, GnssCorrection, GnssModel, Placement, RcMode, SimCar, StateReport};
 pub use config::{ApTimeMode, FirmwareConfig, VehicleParams};
 pub use debug::{DebugEvent, Truth};
 pub use fault::{FaultInjection, FaultKind};
