@@ -57,6 +57,7 @@ pub mod motor;
 pub mod noise;
 pub mod positioning;
 pub mod protocol;
+pub mod route_following;
 pub mod server;
 pub mod servo;
 pub mod terminal;
