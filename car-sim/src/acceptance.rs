@@ -274,10 +274,14 @@ fn drive_and_measure(
         seed,
         world: World::from_scenario(scenario),
         placement: Placement::at_start_of(scenario).expect("a start route"),
-        gnss: crate::GnssModel {
-            sigma_m: if ideal { 0.0 } else { 0.015 },
-            latency_ms: if ideal { 0 } else { 100 },
-            ..crate::GnssModel::default()
+        gnss: if ideal {
+            crate::GnssModel {
+                sigma_m: 0.0,
+                latency_ms: 0,
+                ..crate::GnssModel::default()
+            }
+        } else {
+            crate::GnssModel::default()
         },
         ..CarOptions::default()
     });

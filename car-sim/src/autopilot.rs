@@ -123,6 +123,7 @@ pub struct Autopilot {
     look_ahead: usize,
     dynamic_rad: bool,
     ang_dist_comp: bool,
+    closest_distance: Option<f32>,
 }
 
 /// One segment of the window, by ring indices.
@@ -137,6 +138,7 @@ struct Scan {
     goal: RoutePoint,
     speed_segment: Segment,
     closest_start: usize,
+    closest_distance: f32,
     zero_length: bool,
 }
 
@@ -161,6 +163,7 @@ impl Autopilot {
             look_ahead: LOOK_AHEAD_STRETCHES,
             dynamic_rad: true,
             ang_dist_comp: true,
+            closest_distance: None,
         }
     }
 
@@ -191,6 +194,14 @@ impl Autopilot {
     /// `point_now`: start index of the closest segment.
     pub fn point_now(&self) -> usize {
         self.point_now
+    }
+
+    /// The distance from the car to the closest point of the route's window at the last cycle,
+    /// m: what the firmware prints and plots as "Diff (cm)" with `ap_print_closest n` (every n-th
+    /// cycle). `None` when the last cycle looked for no closest point (inactive, fewer than two
+    /// points, driving to the start).
+    pub fn closest_distance(&self) -> Option<f32> {
+        self.closest_distance
     }
 
     /// `point_last`: the ring write index.
@@ -455,6 +466,7 @@ impl Autopilot {
 
     /// One 10 ms cycle.
     pub fn cycle(&mut self, cfg: &FirmwareConfig, input: &ApInputs) -> ApOutput {
+        self.closest_distance = None;
         if !self.active {
             self.rad_now = -1.0;
             return ApOutput::default();
@@ -483,6 +495,7 @@ impl Autopilot {
             && self.route_left < 3
             && self.route[last].dist_to(car.x, car.y) < radius;
         self.point_now = scan.closest_start;
+        self.closest_distance = Some(scan.closest_distance);
         self.goal = scan.goal;
         let mut out = if at_end {
             self.route_end_actions(cfg, input.ms_today)
@@ -589,6 +602,7 @@ impl Autopilot {
             }
         }
         let (closest, closest_seg) = self.closest(len, car, repeat, last);
+        let closest_distance = closest.dist_to(car.x, car.y);
         let goal_point = if last_point_reached {
             self.route[last]
         } else {
@@ -598,6 +612,7 @@ impl Autopilot {
             goal: goal_point,
             speed_segment: hit_segment.unwrap_or(closest_seg),
             closest_start: closest_seg.start,
+            closest_distance,
             zero_length,
         }
     }
@@ -915,6 +930,22 @@ mod tests {
         assert_eq!(ap.point_now(), 5);
         ap.cycle(&c, &inputs(5.5, 0.0, 0.0, 0.0));
         assert_eq!(ap.route_left(), 5);
+    }
+
+    #[test]
+    fn the_closest_distance_is_the_car_s_distance_to_the_route_while_active() {
+        let c = cfg(FirmwareVersion::V10_1, false);
+        let mut ap = Autopilot::new(FirmwareVersion::V10_1);
+        ap.add_points(&straight(10, 1.0), &c);
+        ap.cycle(&c, &inputs(2.5, 0.3, 0.0, 0.0));
+        assert_eq!(ap.closest_distance(), None);
+        ap.set_active(true, false, 0);
+        ap.cycle(&c, &inputs(2.5, 0.3, 0.0, 0.0));
+        let d = ap.closest_distance().unwrap();
+        assert!((d - 0.3).abs() < 1e-6, "{d}");
+        ap.deactivate();
+        ap.cycle(&c, &inputs(2.5, 0.3, 0.0, 0.0));
+        assert_eq!(ap.closest_distance(), None);
     }
 
     #[test]

@@ -58,6 +58,7 @@ pub mod noise;
 pub mod positioning;
 pub mod profile;
 pub mod protocol;
+pub mod route_following;
 pub mod server;
 pub mod servo;
 pub mod terminal;
@@ -65,7 +66,9 @@ pub mod uwb;
 pub mod world;
 
 pub use autopilot::{FwPose, RoutePart, RoutePoint};
-pub use car::{CarOptions, GnssModel, Placement, RcMode, SensorErrors, SimCar, StateReport};
+pub use car::{
+    CarOptions, GnssCorrection, GnssModel, Placement, RcMode, SensorErrors, SimCar, StateReport,
+};
 pub use config::{ApTimeMode, FirmwareConfig, VehicleParams};
 pub use debug::{DebugEvent, Truth};
 pub use fault::{FaultInjection, FaultKind};

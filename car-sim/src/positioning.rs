@@ -262,19 +262,23 @@ impl FusedPosition {
     }
 
     /// A GNSS fix arrives: store `px_gps/py_gps`, then correct heading and position if the gate
-    /// allows.
-    pub fn gnss_fix(&mut self, cfg: &FirmwareConfig, fix: GnssFix) {
+    /// allows. Returns, when the fix corrected the position, the distance between the history
+    /// entry closest to the fix time and the fix (minus the antenna offset) before the correction,
+    /// m: what the firmware prints and plots as "Diff (cm)" with `pos_gnss_corr_info 1`
+    /// (`pos.c`, `correct_pos_gps`).
+    pub fn gnss_fix(&mut self, cfg: &FirmwareConfig, fix: GnssFix) -> Option<f32> {
         let (gx, gy) = self.minus_antenna_offset(cfg, fix.x, fix.y);
         self.px_gps = gx;
         self.py_gps = gy;
         let gate = cfg.gps_comp && (!cfg.gps_req_rtk || fix.rtk);
         if !gate {
-            return;
+            return None;
         }
         self.correct_heading(cfg, gx, gy, fix.measured_ms);
-        self.correct_position(cfg, gx, gy, fix.measured_ms);
+        let diff = self.correct_position(cfg, gx, gy, fix.measured_ms);
         self.prev_corr = Some((gx, gy, fix.measured_ms));
         self.driven_since_fix = 0.0;
+        diff
     }
 
     fn minus_antenna_offset(&self, cfg: &FirmwareConfig, x: f32, y: f32) -> (f32, f32) {
@@ -309,15 +313,23 @@ impl FusedPosition {
         ));
     }
 
-    fn correct_position(&mut self, cfg: &FirmwareConfig, gx: f32, gy: f32, t_fix: u64) {
-        let Some(h) = self.history_at(t_fix) else {
-            return;
-        };
+    /// Steps the history entry closest to the fix time towards the fix and moves the position by
+    /// as much; the entry's distance to the fix before the step, m.
+    fn correct_position(
+        &mut self,
+        cfg: &FirmwareConfig,
+        gx: f32,
+        gy: f32,
+        t_fix: u64,
+    ) -> Option<f32> {
+        let h = self.history_at(t_fix)?;
+        let diff = (h.px - gx).hypot(h.py - gy);
         let g = cfg.gps_corr_gain_stat + cfg.gps_corr_gain_dyn * self.driven_since_fix;
         let hx = crate::motor::step_towards(h.px, gx, g);
         let hy = crate::motor::step_towards(h.py, gy, g);
         self.px += hx - h.px;
         self.py += hy - h.py;
+        Some(diff)
     }
 }
 
@@ -461,7 +473,7 @@ mod tests {
         }
         let at_200 = f.history_at(200).unwrap();
         let before = f.pose();
-        f.gnss_fix(
+        let diff = f.gnss_fix(
             &c,
             GnssFix {
                 x: at_200.px,
@@ -472,6 +484,19 @@ mod tests {
         );
         let after = f.pose();
         assert!((after.x - before.x).abs() < 1e-6 && (after.y - before.y).abs() < 1e-6);
+        // The printed difference is against the pose at fix time, not the newest: 0 here, and
+        // 0.3 m for a fix 0.3 m east of it.
+        assert_eq!(diff, Some(0.0));
+        let shifted = f.gnss_fix(
+            &c,
+            GnssFix {
+                x: at_200.px + 0.3,
+                y: at_200.py,
+                measured_ms: 200,
+                rtk: true,
+            },
+        );
+        assert!((shifted.unwrap() - 0.3).abs() < 1e-5, "{shifted:?}");
     }
 
     #[test]

@@ -530,6 +530,13 @@ pub struct BenchFidelityArgs {
     /// samples above 1 m, the rock and the wall.
     #[arg(long, value_name = "FILE")]
     pub svg: Option<PathBuf>,
+    /// Simulated runs of the published circle route (route following, other simulator seeds).
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub route_runs: u32,
+    /// Only fit the simulated GNSS noise to the real car's circle route: every σ and correlation
+    /// time of a grid, with `--route-runs` runs each (how `GnssModel::default()` was chosen).
+    #[arg(long, hide = true)]
+    pub fit_gnss: bool,
     /// The first seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,

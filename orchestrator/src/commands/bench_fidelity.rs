@@ -15,6 +15,8 @@
 //! 2. **The rock lot without faults.** A campaign on `parking-lot-rock` with `--no-faults`: the
 //!    share of tests and of the driven route (state samples) above the oracle's 1 m, next to the
 //!    published "a section of the trajectory".
+//! 3. **Route following** (`bench_fidelity_route`): the published circle route driven by the
+//!    simulated car (`--route-runs` seeds), its printouts next to the real car's recordings.
 //!
 //! Every run is a fresh embedded simulated car in virtual time, unrecorded.
 
@@ -183,6 +185,13 @@ fn spread(values: &[f64]) -> String {
 
 /// Runs the benchmark and prints its tables.
 pub fn run(args: &BenchFidelityArgs) -> Result<Exit> {
+    let route_seeds: Vec<u64> = (0..u64::from(args.route_runs))
+        .map(|rerun| campaign::seed::derive(args.seed, Purpose::FidelityRerun { rerun }))
+        .collect();
+    if args.fit_gnss {
+        super::bench_fidelity_route::fit(&route_seeds)?;
+        return Ok(Exit::Success);
+    }
     let august = crate::scenario_arg::load_scenario(&args.scenario)?.scenario;
     let runtime_guard = runtime(false)?;
     let _context = runtime_guard.enter();
@@ -267,6 +276,8 @@ pub fn run(args: &BenchFidelityArgs) -> Result<Exit> {
     }
     println!("\npublished without faults: 0.42–0.56 m per segment\n");
     rock_lot(args)?;
+    println!();
+    super::bench_fidelity_route::print(&route_seeds)?;
     Ok(Exit::Success)
 }
 

@@ -3,6 +3,7 @@
 mod area;
 mod bench;
 mod bench_fidelity;
+mod bench_fidelity_route;
 mod bench_placement;
 mod bench_recovery;
 mod explain;
