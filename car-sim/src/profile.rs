@@ -543,6 +543,12 @@ correlation_s = 0.6
     }
 
     #[test]
+    fn the_documented_default_profile_is_the_default_car_in_canonical_form() {
+        let text = include_str!("../../docs/car-profile-default.toml");
+        assert_eq!(text, CarProfile::default().to_toml());
+    }
+
+    #[test]
     fn what_a_file_leaves_out_is_the_default_car() {
         let text = "format = \"drivecheck-car-profile\"\nversion = 1\n";
         let profile = CarProfile::from_toml(text, "min.toml").unwrap();
