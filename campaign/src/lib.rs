@@ -33,6 +33,7 @@ pub mod shard;
 pub mod shrink;
 pub mod streaming;
 pub mod sweep;
+pub mod twin;
 
 /// The old path of [`files`], kept for the code that still names it.
 pub use files as case;

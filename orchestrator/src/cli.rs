@@ -50,6 +50,10 @@ pub enum Command {
     /// Serve a simulated car over TCP (like the reference bridge) or UDP, until Ctrl-C. Exit
     /// status: 0 stopped by Ctrl-C, 2 error.
     Sim(SimArgs),
+    /// How far the simulated car of a car profile can be trusted: drive a recorded run's cases
+    /// again on it and compare (docs/twin.md).
+    #[command(subcommand)]
+    Twin(TwinCommand),
     /// Check a test area before any car drives in it.
     #[command(subcommand)]
     Area(AreaCommand),
@@ -456,6 +460,43 @@ pub fn parse_probability(text: &str) -> Result<f64, String> {
         ));
     }
     Ok(value)
+}
+
+/// `drivecheck twin …`
+#[derive(Debug, Subcommand)]
+pub enum TwinCommand {
+    /// Drive every recorded case of a run again on simulated cars of a profile (and of the
+    /// default car, for comparison), N runs each with other seeds, and compare per segment with
+    /// the recording: the share of verdicts agreed, the median and p90 of |recorded − simulated
+    /// median| largest deviation. Writes `twin.json` into the run directory. Exit status: 0
+    /// checked, 2 error.
+    Check(TwinCheckArgs),
+}
+
+/// Options of `drivecheck twin check`.
+#[derive(Debug, Args)]
+pub struct TwinCheckArgs {
+    /// The run directory of a campaign on the car (its case files and `campaign.json`).
+    pub run: PathBuf,
+    /// The car profile to check: a TOML file (`default`: the bundled car alone).
+    #[arg(long, value_name = "FILE")]
+    pub profile: Option<PathBuf>,
+    /// Simulated runs per case.
+    #[arg(long, value_name = "N", default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub runs: u32,
+    /// The same cases driven again on the car (`drivecheck run` with the same `--seed` and
+    /// `--tests` on the same car): the car's own repeatability, the best a twin can reach.
+    #[arg(long, value_name = "RUN_DIR")]
+    pub repeat: Option<PathBuf>,
+    /// Print `twin.json` instead of the table.
+    #[arg(long)]
+    pub json: bool,
+    /// The scenario file, when the run's is not bundled.
+    #[arg(long)]
+    pub scenario: Option<String>,
+    /// Drive the cases although the scenario's hash is not the one they were recorded in.
+    #[arg(long)]
+    pub ignore_scenario_hash: bool,
 }
 
 /// `drivecheck bench …`

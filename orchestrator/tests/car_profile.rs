@@ -158,3 +158,79 @@ fn a_bad_profile_is_refused_naming_its_field_and_nothing_is_written() {
         assert!(!out_dir.exists(), "an error leaves no run directory");
     }
 }
+
+/// A car whose two anchors stand 0.3–0.4 m from their surveyed places with range biases, as
+/// real anchors do.
+const SURVEY_ERRORS: &str = r#"
+format = "drivecheck-car-profile"
+version = 1
+[radio]
+exchange_drop_rate = 0.10
+[anchors."50"]
+offset_m = [0.35, -0.2]
+range_bias_m = 0.12
+[anchors."234"]
+offset_m = [-0.25, 0.3]
+range_bias_m = -0.08
+[odometry]
+scale = 1.025
+[imu]
+yaw_bias_deg = 1.2
+"#;
+
+#[test]
+fn twin_check_tells_the_right_profile_from_the_default_car_and_the_report_shows_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let file = tmp.path().join("car.toml");
+    std::fs::write(&file, SURVEY_ERRORS).unwrap();
+    // The "car": the embedded simulator with the profile.
+    let run = campaign(tmp.path(), 11, 8, &["--profile", path(&file)], 1);
+    let out = drivecheck(&[
+        "twin",
+        "check",
+        path(&run),
+        "--profile",
+        path(&file),
+        "--runs",
+        "2",
+        "--repeat",
+        path(&run),
+        "--json",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let printed: campaign::files::TwinCheck =
+        campaign::files::TwinCheck::from_json(&String::from_utf8_lossy(&out.stdout)).unwrap();
+    let written = campaign::files::TwinCheck::from_json(
+        &std::fs::read_to_string(run.join("twin.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(printed, written);
+    assert_eq!(written.cases, 8);
+    let [own, default] = &written.profiles[..] else {
+        panic!("the profile and the default car: {:?}", written.profiles);
+    };
+    assert_eq!(default.profile.name, "default");
+    let (own, default) = (own.summary, default.summary);
+    assert!(own.segments > 10, "{own:?}");
+    assert!(
+        own.median_abs_delta_m.unwrap() < default.median_abs_delta_m.unwrap() / 2.0,
+        "the right profile reproduces the car far better: {own:?} vs {default:?}"
+    );
+    assert!(own.verdicts_agreed.unwrap() >= default.verdicts_agreed.unwrap());
+    let repeat = written.repeatability.expect("--repeat").summary;
+    assert_eq!(
+        repeat.verdicts_agreed,
+        Some(1.0),
+        "a run agrees with itself"
+    );
+    assert_eq!(repeat.median_abs_delta_m, Some(0.0));
+
+    let report = drivecheck(&["report", path(&run)]);
+    assert_eq!(report.status.code(), Some(0), "{}", text(&report));
+    let html = std::fs::read_to_string(run.join("report.html")).unwrap();
+    assert!(
+        html.contains("<section id=\"twin\">"),
+        "the report shows the twin check"
+    );
+    assert!(html.contains("car profile default"));
+}

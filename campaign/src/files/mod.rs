@@ -7,6 +7,7 @@
 //! | `campaign.json` | `drivecheck-campaign` | [`CampaignRecord`] | [`CAMPAIGN_SCHEMA_VERSION`] 2 | 1, 2 | a field of the record, its settings or its summary is removed, renamed or changes meaning |
 //! | `replay.json` | `drivecheck-replay` | [`Comparison`] | [`REPLAY_SCHEMA_VERSION`] 1 | 1 | a field of the comparison changes |
 //! | `shrink.json` | `drivecheck-shrink` | [`crate::shrink::ShrinkReport`] | [`SHRINK_SCHEMA_VERSION`] 1 | 1 | a field of the report changes |
+//! | `twin.json` | `drivecheck-twin` | [`TwinCheck`] | [`TWIN_SCHEMA_VERSION`] 1 | 1 | a field of the check changes |
 //! | `sweep.json` | `drivecheck-sweep` | [`crate::sweep::SweepReport`] | [`SWEEP_SCHEMA_VERSION`] 1 | not read back | a field of the report changes |
 //!
 //! (The recording, `campaign.mcap`, is the orchestrator's: `orchestrator::recording`.)
@@ -47,6 +48,7 @@ mod case;
 mod explanation;
 mod replay;
 mod settings;
+mod twin;
 
 pub use campaign::{
     CampaignRecord, CampaignSummary, CoverageRecord, FaultCoverageRecord, ReplayOf,
@@ -61,6 +63,7 @@ pub use settings::{
     FaultRanges, FaultRangesForm, FlatFaultRanges, ProbeFaultsRecord, SafetyConfigRecord, Settings,
     StreamingConfigRecord, Weights,
 };
+pub use twin::{TwinCheck, TwinProfileResult, TwinRepeat, TwinSegment, TwinSummary};
 
 #[cfg(test)]
 pub(crate) use case::tests;
@@ -94,6 +97,13 @@ pub const REPLAY_FORMAT: &str = "drivecheck-replay";
 pub const REPLAY_SCHEMA_VERSION: u32 = 1;
 /// The replay comparison schema versions this build reads.
 pub const REPLAY_READABLE: &[u32] = &[1];
+
+/// The `format` of a twin check (`twin.json`).
+pub const TWIN_FORMAT: &str = "drivecheck-twin";
+/// The schema version of twin checks this build writes.
+pub const TWIN_SCHEMA_VERSION: u32 = 1;
+/// The twin check schema versions this build reads.
+pub const TWIN_READABLE: &[u32] = &[1];
 
 /// The `format` of a shrink report (`shrink.json`).
 pub const SHRINK_FORMAT: &str = "drivecheck-shrink";

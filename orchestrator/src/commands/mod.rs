@@ -20,10 +20,13 @@ mod shrink;
 mod sim;
 mod simdrive;
 mod sweep;
+mod twin;
 
 use anyhow::Result;
 
-use crate::cli::{AreaCommand, BenchCommand, Cli, Command, RouteCommand, ScenarioCommand};
+use crate::cli::{
+    AreaCommand, BenchCommand, Cli, Command, RouteCommand, ScenarioCommand, TwinCommand,
+};
 use crate::exit::Exit;
 
 /// Runs a parsed command line and returns the process's exit status.
@@ -37,6 +40,7 @@ pub fn run(cli: Cli) -> Result<Exit> {
         Command::Report(args) => report::report(&args),
         Command::Explain(args) => explain::explain(&args),
         Command::Sim(args) => sim::serve(&args),
+        Command::Twin(TwinCommand::Check(args)) => twin::check(&args),
         Command::Area(AreaCommand::Validate(args)) => area::validate(&args),
         Command::Route(RouteCommand::Generate(args)) => route::generate(&args),
         Command::Route(RouteCommand::Return(args)) => route_return::plan(&args),

@@ -98,6 +98,11 @@ pub fn shrink(args: &ShrinkArgs) -> Result<Exit> {
         Err(error) => {
             let not_reproduced = error.downcast::<NotReproduced>()?;
             eprintln!("{not_reproduced}");
+            eprintln!(
+                "on the simulated car of car profile {}: {}",
+                profile.name,
+                super::twin::agreement_note(path, &profile)
+            );
             return Ok(Exit::Found);
         }
     };

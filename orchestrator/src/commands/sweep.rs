@@ -85,6 +85,17 @@ pub fn sweep(args: &SweepArgs) -> Result<Exit> {
         print!("{}", report.table());
         println!("median of each segment's largest deviation over the runs; * a run failed it");
     }
+    if case.verdict == Some(campaign::oracle::Verdict::Failed)
+        && report.points.iter().all(|p| p.failed_runs() == 0)
+    {
+        eprintln!(
+            "warning: {} failed where it was recorded but fails at no point on the simulated car \
+             of car profile {}: {}",
+            path.display(),
+            profile.name,
+            super::twin::agreement_note(path, &profile)
+        );
+    }
     Ok(Exit::Success)
 }
 

@@ -76,6 +76,8 @@ pub(crate) struct CampaignData {
     pub tests: Vec<TestData>,
     /// The scenario's canonical TOML from the recording (`drivecheck.scenario`), if any.
     pub recorded_scenario: Option<String>,
+    /// `twin.json`, when a twin check of the run wrote one.
+    pub twin: Option<campaign::files::TwinCheck>,
     /// What the page should say about missing or unreadable parts.
     pub notes: Vec<String>,
 }
@@ -195,11 +197,23 @@ pub(crate) fn read_campaign(dir: &Path) -> Result<CampaignData, ReportError> {
             recording_path.display()
         ));
     }
+    let twin_path = dir.join(campaign::twin::TWIN_FILE);
+    let twin = match std::fs::read_to_string(&twin_path) {
+        Err(_) => None,
+        Ok(text) => match campaign::files::TwinCheck::from_json(&text) {
+            Ok(twin) => Some(twin),
+            Err(e) => {
+                notes.push(format!("{}: {e}", twin_path.display()));
+                None
+            }
+        },
+    };
     Ok(CampaignData {
         dir: dir.to_owned(),
         record,
         tests,
         recorded_scenario,
+        twin,
         notes,
     })
 }

@@ -653,7 +653,17 @@ pub(crate) fn campaign_page(
             ),
         );
     }
+    if let Some(profile) = &record.car_profile {
+        fact(
+            &mut out,
+            "car profile",
+            &format!("{} (hash {})", escape(&profile.name), short(&profile.hash)),
+        );
+    }
     out.push_str("</table>\n</section>\n");
+    if let Some(twin) = &data.twin {
+        twin_section(&mut out, twin);
+    }
     out.push_str(
         "<section id=\"tests\">\n<h2>Tests</h2>\n<table><tr><th>test</th><th>verdict</th>\
          <th>worst deviation</th><th>segments driven</th><th>faults</th><th>drive</th>\
@@ -699,6 +709,50 @@ pub(crate) fn campaign_page(
 
 /// What the campaign covered: a heat map of the cells its tests drove, then the numbers
 /// (`drivecheck runs show --coverage`).
+/// `twin.json`: how far each simulated car reproduces this run (`drivecheck twin check`).
+fn twin_section(out: &mut String, twin: &campaign::files::TwinCheck) {
+    let _ = writeln!(
+        out,
+        "<section id=\"twin\">\n<h2>Twin check</h2>\n<p>The run's {} case(s) driven {} time(s) \
+         again on simulated cars: how often their segment verdicts agree with the recording's, \
+         and Δ, a segment's recorded largest deviation minus its simulated runs' median \
+         (absolute). A twin is as trustworthy as its figures are near the car's own \
+         repeatability.</p>\n<table><tr><th>simulated car</th><th>segments</th>\
+         <th>verdicts agreed</th><th>median Δ</th><th>p90 Δ</th></tr>",
+        twin.cases, twin.runs
+    );
+    let row = |out: &mut String, name: String, s: &campaign::files::TwinSummary| {
+        let _ = writeln!(
+            out,
+            "<tr><td>{name}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            s.segments,
+            s.verdicts_agreed
+                .map_or_else(|| "–".to_owned(), |a| format!("{:.0} %", a * 100.0)),
+            metres(s.median_abs_delta_m),
+            metres(s.p90_abs_delta_m)
+        );
+    };
+    for result in &twin.profiles {
+        row(
+            out,
+            format!(
+                "car profile {} (hash {})",
+                escape(&result.profile.name),
+                short(&result.profile.hash)
+            ),
+            &result.summary,
+        );
+    }
+    if let Some(repeat) = &twin.repeatability {
+        row(
+            out,
+            format!("the car again ({})", escape(&repeat.run)),
+            &repeat.summary,
+        );
+    }
+    out.push_str("</table>\n</section>\n");
+}
+
 fn coverage_section(
     out: &mut String,
     data: &CampaignData,

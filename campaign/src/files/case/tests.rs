@@ -12,6 +12,28 @@ pub(crate) fn scenario(name: &str) -> Scenario {
     scenarios::bundled::load(name).unwrap().scenario
 }
 
+/// A hand-made case whose segment *i* was driven with a largest deviation of `maxima[i]`,
+/// judged against 1 m.
+pub(crate) fn case_with_segments(maxima: &[f64]) -> Case {
+    let mut case: Case = parse(
+        r#"{"format": "drivecheck-case", "schema_version": 3,
+            "scenario": {"name": "x"}, "commands": []}"#,
+    )
+    .unwrap();
+    for (segment_index, &max) in maxima.iter().enumerate() {
+        let mut oracle = SegmentOracle::new();
+        oracle.push(Point::new(max, 0.0), Point::new(0.0, 0.0));
+        case.segments.push(SegmentResult {
+            segment_index,
+            command_index: segment_index,
+            faults_preceding: vec![],
+            faults_active: vec![],
+            oracle: oracle.result(1.0),
+        });
+    }
+    case
+}
+
 fn run_case() -> (Scenario, Case) {
     let s = scenario("parking-lot-2anchors");
     let campaign = Campaign {
