@@ -578,6 +578,10 @@ pub struct BenchFidelityArgs {
     /// time of a grid, with `--route-runs` runs each (how `GnssModel::default()` was chosen).
     #[arg(long, hide = true)]
     pub fit_gnss: bool,
+    /// The car profile of every simulated car: `default` or a TOML file (docs/twin.md); its
+    /// anchors must be the lots' (the route following leaves them out).
+    #[arg(long, value_name = "FILE")]
+    pub profile: Option<PathBuf>,
     /// The first seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,

@@ -61,6 +61,16 @@ impl LoadedProfile {
         }
     }
 
+    /// The car of this profile outside any area (its anchors left out): for a drive that ranges
+    /// to no anchor, as the route-following benchmark's.
+    pub fn car_without_area(&self) -> Result<car_sim::CarOptions> {
+        let mut profile = self.profile.clone();
+        profile.anchors.clear();
+        let mut config = SimConfig::default();
+        profile.apply(&mut config, &self.name)?;
+        Ok(config.car_options())
+    }
+
     /// The simulated car of `scenario` that this profile describes.
     pub fn sim_config(&self, scenario: &Scenario) -> Result<SimConfig> {
         let mut config = SimConfig::from_scenario(scenario);

@@ -28,6 +28,7 @@ use tokio_util::sync::CancellationToken;
 use super::shared::{Scratch, runtime};
 use crate::cli::BenchFidelityArgs;
 use crate::exit::Exit;
+use crate::profile_arg::LoadedProfile;
 use crate::runner::{RecordMode, ReplaySource, RunConfig, Silent, run_campaign_fresh};
 use crate::vehicle::EmbeddedSims;
 use campaign::files::{Case, ReplayOf};
@@ -122,7 +123,12 @@ fn plan_for(scenario: &Scenario, seed: u64) -> Result<Option<TestPlan>> {
 
 /// Drives `plan` once on a fresh simulated car seeded `seed` (its faults left out with
 /// `no_faults`); the case.
-fn drive(scenario: &Scenario, plan: &TestPlan, seed: u64, no_faults: bool) -> Result<Case> {
+fn drive(
+    (scenario, sim): (&Scenario, &car_sim::SimConfig),
+    plan: &TestPlan,
+    seed: u64,
+    no_faults: bool,
+) -> Result<Case> {
     let scratch = Scratch::new("fidelity", "published")?;
     let mut plan = plan.clone();
     if no_faults {
@@ -150,7 +156,7 @@ fn drive(scenario: &Scenario, plan: &TestPlan, seed: u64, no_faults: bool) -> Re
     });
     config.policy = campaign::oracle::FailurePolicy::ContinueAndRecord;
     config.record = RecordMode::None;
-    let cars = EmbeddedSims::new(&car_sim::SimConfig::from_scenario(scenario), seed, true);
+    let cars = EmbeddedSims::new(sim, seed, true);
     let report = run_campaign_fresh(
         &cars,
         scenario,
@@ -193,6 +199,8 @@ pub fn run(args: &BenchFidelityArgs) -> Result<Exit> {
         return Ok(Exit::Success);
     }
     let august = crate::scenario_arg::load_scenario(&args.scenario)?.scenario;
+    let profile = LoadedProfile::load(args.profile.as_deref())?;
+    let august_sim = profile.sim_config(&august)?;
     let runtime_guard = runtime(false)?;
     let _context = runtime_guard.enter();
     let mut with: Vec<Vec<f64>> = vec![Vec::new(); SEGMENTS];
@@ -208,8 +216,8 @@ pub fn run(args: &BenchFidelityArgs) -> Result<Exit> {
             continue;
         };
         tests += 1;
-        let faulted = maxima(&drive(&august, &plan, seed, false)?);
-        let clean = maxima(&drive(&august, &plan, seed, true)?);
+        let faulted = maxima(&drive((&august, &august_sim), &plan, seed, false)?);
+        let clean = maxima(&drive((&august, &august_sim), &plan, seed, true)?);
         let mut reruns = vec![faulted.clone()];
         for k in 1..args.reruns {
             let rerun_seed = campaign::seed::derive(
@@ -218,7 +226,12 @@ pub fn run(args: &BenchFidelityArgs) -> Result<Exit> {
                     rerun: u64::from(k),
                 },
             );
-            reruns.push(maxima(&drive(&august, &plan, rerun_seed, false)?));
+            reruns.push(maxima(&drive(
+                (&august, &august_sim),
+                &plan,
+                rerun_seed,
+                false,
+            )?));
         }
         for segment in 0..SEGMENTS {
             if let Some(Some(m)) = faulted.get(segment) {
@@ -275,15 +288,16 @@ pub fn run(args: &BenchFidelityArgs) -> Result<Exit> {
         );
     }
     println!("\npublished without faults: 0.42–0.56 m per segment\n");
-    rock_lot(args)?;
+    rock_lot(args, &profile)?;
     println!();
-    super::bench_fidelity_route::print(&route_seeds)?;
+    super::bench_fidelity_route::print(&profile.car_without_area()?, &route_seeds)?;
     Ok(Exit::Success)
 }
 
 /// The rock lot without faults: the share of tests and of the route above 1 m.
-fn rock_lot(args: &BenchFidelityArgs) -> Result<()> {
+fn rock_lot(args: &BenchFidelityArgs, profile: &LoadedProfile) -> Result<()> {
     let rock = scenarios::bundled::load("parking-lot-rock")?.scenario;
+    let rock_sim = profile.sim_config(&rock)?;
     let scratch = Scratch::new("fidelity", "rock")?;
     let mut config = RunConfig::new(
         Campaign {
@@ -300,7 +314,7 @@ fn rock_lot(args: &BenchFidelityArgs) -> Result<()> {
     } else {
         RecordMode::None
     };
-    let cars = EmbeddedSims::new(&car_sim::SimConfig::from_scenario(&rock), args.seed, true);
+    let cars = EmbeddedSims::new(&rock_sim, args.seed, true);
     let jobs = std::thread::available_parallelism().map_or(1, usize::from);
     let report = run_campaign_fresh(
         &cars,

@@ -173,13 +173,13 @@ fn circle_route() -> Result<Vec<RoutePoint>> {
 
 /// The simulated car (the default car with `gnss`, seeded `seed`) driving the circle route for as
 /// many fixes and prints as the real recordings hold: its figures.
-pub fn simulated(gnss: GnssModel, seed: u64) -> Result<Figures> {
+pub fn simulated(base: &CarOptions, gnss: GnssModel, seed: u64) -> Result<Figures> {
     let (diff, route) = real_series()?;
     let printouts = route_following::drive(&RouteDrive {
         options: CarOptions {
             seed,
             gnss,
-            ..CarOptions::default()
+            ..base.clone()
         },
         route: circle_route()?,
         warm_up_ms: WARM_UP_MS,
@@ -200,8 +200,11 @@ pub fn simulated(gnss: GnssModel, seed: u64) -> Result<Figures> {
 }
 
 /// The simulated figures for each seed.
-pub fn simulated_runs(gnss: GnssModel, seeds: &[u64]) -> Result<Vec<Figures>> {
-    seeds.iter().map(|&seed| simulated(gnss, seed)).collect()
+pub fn simulated_runs(base: &CarOptions, gnss: GnssModel, seeds: &[u64]) -> Result<Vec<Figures>> {
+    seeds
+        .iter()
+        .map(|&seed| simulated(base, gnss, seed))
+        .collect()
 }
 
 /// The median of the runs' figure `row` and their range.
@@ -217,10 +220,10 @@ fn summary(runs: &[Figures], row: usize, decimals: usize) -> String {
 }
 
 /// Prints the comparison: the real car and the simulated runs (seeded `seeds`).
-pub fn print(seeds: &[u64]) -> Result<()> {
-    let gnss = GnssModel::default();
+pub fn print(base: &CarOptions, seeds: &[u64]) -> Result<()> {
+    let gnss = base.gnss;
     let real = real()?;
-    let runs = simulated_runs(gnss, seeds)?;
+    let runs = simulated_runs(base, gnss, seeds)?;
     println!(
         "## Route following on the published circle route: the real car and {} simulated runs\n",
         runs.len()
@@ -261,7 +264,7 @@ pub fn fit(seeds: &[u64]) -> Result<()> {
                 correlation_s,
                 ..GnssModel::default()
             };
-            let runs = simulated_runs(gnss, seeds)?;
+            let runs = simulated_runs(&CarOptions::default(), gnss, seeds)?;
             let medians: Vec<f64> = (0..ROWS.len())
                 .map(|row| percentile(&runs.iter().map(|f| f.rows()[row]).collect::<Vec<_>>(), 0.5))
                 .collect();
