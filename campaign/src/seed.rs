@@ -17,7 +17,7 @@
 //! | [`Purpose::Margins`] | `s` | `s` | ahead margins added to a case that has none (replay, shrink candidates) |
 //! | [`Purpose::ShrinkJoin`] | `s` | `s` | the routes a shrink joins segments with (`shrink::Edit::DropSegments`) |
 //! | [`Purpose::Run`] | `s`, run `k` (from 0) | `s + k` | the campaign seed of run `k` of a replay (`--vary-seed`), a shrink's candidate (its confirmation continues at `k = runs`), a sweep's point, an explanation's counterfactual |
-//! | [`Purpose::FidelityRerun`] | `s`, rerun `k` | `s + k·1_000_003` | `bench fidelity`'s reruns of a test on other simulators |
+//! | [`Purpose::FidelityRerun`] | `s`, rerun `k` | `s + k·1_000_003` | `bench fidelity`'s reruns of a test on other simulators and its route-following runs |
 //! | [`Purpose::PlacementSim`] | `s`, link seed `l` | `s·1_000_003 + l` | `bench placement`'s simulators (the link's draws differ per link seed) |
 //! | [`Purpose::RecoveryPose`] | `s`, pose `i` | `s + i` | `bench recovery`'s return route from pose `i` |
 //!

@@ -249,16 +249,7 @@ fn show_campaign(dir: &Path, record: CampaignRecord, coverage: bool) -> Result<(
         record.ended_at.as_deref().unwrap_or("- (did not end)")
     );
     describe_recording(dir);
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .with_context(|| format!("cannot read {}", dir.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            p.file_name()
-                .and_then(|n| n.to_str())
-                .is_some_and(|n| n.starts_with("case-") && n.ends_with(".json"))
-        })
-        .collect();
-    files.sort();
+    let files = super::shared::case_files(dir)?;
     let mut tests = Vec::new();
     let mut cases = Vec::new();
     for (i, path) in files.iter().enumerate() {

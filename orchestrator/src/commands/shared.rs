@@ -362,6 +362,21 @@ pub(super) fn metres(value: Option<f64>) -> String {
     value.map_or_else(|| "-".to_owned(), |m| format!("{m:.2} m"))
 }
 
+/// The case files (`case-NNN.json`) of run directory `dir`, in test order.
+pub(super) fn case_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("cannot read {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with("case-") && n.ends_with(".json"))
+        })
+        .collect();
+    files.sort();
+    Ok(files)
+}
+
 /// The case file at `path`, read and parsed; errors name the file (and the field).
 pub(super) fn read_case(path: &Path) -> Result<Case> {
     let text =

@@ -21,16 +21,7 @@ use campaign::twin::{TWIN_FILE, compare_case, summarise};
 
 /// The recorded case files of a run directory, in test order, with their cases (those that ran).
 fn recorded_cases(dir: &Path) -> Result<Vec<(PathBuf, Case)>> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .with_context(|| format!("cannot read {}", dir.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            p.file_name()
-                .and_then(|n| n.to_str())
-                .is_some_and(|n| n.starts_with("case-") && n.ends_with(".json"))
-        })
-        .collect();
-    files.sort();
+    let files = super::shared::case_files(dir)?;
     let mut cases = Vec::new();
     for file in files {
         let case = read_case(&file)?;
