@@ -20,6 +20,7 @@
 //! Not here: the wire protocol and the client (`car-link`; only its protocol layer and firmware
 //! facts are used here), the run directory, the recording and the command line (`orchestrator`).
 
+pub mod calibrate;
 pub mod coverage;
 pub mod drive;
 pub mod explain;

@@ -17,6 +17,7 @@
 //! | [`Purpose::Margins`] | `s` | `s` | ahead margins added to a case that has none (replay, shrink candidates) |
 //! | [`Purpose::ShrinkJoin`] | `s` | `s` | the routes a shrink joins segments with (`shrink::Edit::DropSegments`) |
 //! | [`Purpose::Run`] | `s`, run `k` (from 0) | `s + k` | the campaign seed of run `k` of a replay (`--vary-seed`), a shrink's candidate (its confirmation continues at `k = runs`), a sweep's point, an explanation's counterfactual |
+//! | [`Purpose::Calibration`] | `s` | `mix(s ^ 0xCA1B)` | the campaign seed of a case's runs in `calibrate` (its runs `k` then as [`Purpose::Run`]): the same for every candidate profile, other than a replay's or a twin check's |
 //! | [`Purpose::FidelityRerun`] | `s`, rerun `k` | `s + k·1_000_003` | `bench fidelity`'s reruns of a test on other simulators and its route-following runs |
 //! | [`Purpose::PlacementSim`] | `s`, link seed `l` | `s·1_000_003 + l` | `bench placement`'s simulators (the link's draws differ per link seed) |
 //! | [`Purpose::RecoveryPose`] | `s`, pose `i` | `s + i` | `bench recovery`'s return route from pose `i` |
@@ -74,6 +75,8 @@ pub enum Purpose {
         /// The run, from 0.
         run: u64,
     },
+    /// The runs of a case in `calibrate`.
+    Calibration,
     /// A rerun of `bench fidelity`.
     FidelityRerun {
         /// The rerun, from 0 (rerun 0 is the seed itself).
@@ -101,6 +104,7 @@ pub fn derive(seed: u64, purpose: Purpose) -> u64 {
         }
         Purpose::StartJoin | Purpose::Margins | Purpose::ShrinkJoin => seed,
         Purpose::Run { run } => seed.wrapping_add(run),
+        Purpose::Calibration => splitmix64_mix(seed ^ 0xCA1B),
         Purpose::FidelityRerun { rerun } => seed.wrapping_add(rerun.wrapping_mul(1_000_003)),
         Purpose::PlacementSim { link_seed } => seed.wrapping_mul(1_000_003).wrapping_add(link_seed),
         Purpose::RecoveryPose { pose } => seed.wrapping_add(pose as u64),
@@ -204,6 +208,10 @@ mod tests {
         assert_eq!(derive(s, Purpose::Run { run: 0 }), s);
         assert_eq!(derive(s, Purpose::Run { run: 3 }), 1); // wraps
         assert_eq!(derive(10, Purpose::FidelityRerun { rerun: 2 }), 2_000_016);
+        assert_eq!(
+            derive(10, Purpose::Calibration),
+            splitmix64_mix(10 ^ 0xCA1B)
+        );
         assert_eq!(
             derive(10, Purpose::PlacementSim { link_seed: 4 }),
             10_000_034

@@ -451,15 +451,28 @@ impl CarProfile {
             .collect()
     }
 
+    /// The radio of this car (the default radio with the profile's `[radio]`).
+    pub fn radio_model(&self) -> RadioModel {
+        RadioModel {
+            exchange_sigma_m: self.radio.range_sigma_m,
+            exchange_drop_probability: self.radio.exchange_drop_rate,
+            nlos_extra_sigma_m: self.radio.nlos_extra_sigma_m,
+            anchor_bias_m: (self.radio.anchor_bias_m[0], self.radio.anchor_bias_m[1]),
+            ..RadioModel::default()
+        }
+    }
+
     /// Makes `config` (a scenario's simulated car) this car: its firmware, radio, GNSS and
     /// sensors, and its anchors moved and biased as listed. An anchor the scenario does not have
     /// is an error (a profile of another area, or a typo).
     pub fn apply(&self, config: &mut SimConfig, source_name: &str) -> Result<(), ProfileError> {
         config.firmware = self.firmware;
-        config.radio.exchange_sigma_m = self.radio.range_sigma_m;
-        config.radio.exchange_drop_probability = self.radio.exchange_drop_rate;
-        config.radio.nlos_extra_sigma_m = self.radio.nlos_extra_sigma_m;
-        config.radio.anchor_bias_m = (self.radio.anchor_bias_m[0], self.radio.anchor_bias_m[1]);
+        config.radio = RadioModel {
+            antenna_height_m: config.radio.antenna_height_m,
+            max_range_m: config.radio.max_range_m,
+            anchor_bias_seed: config.radio.anchor_bias_seed,
+            ..self.radio_model()
+        };
         config.gnss.sigma_m = self.gnss.sigma_m;
         config.gnss.correlation_s = self.gnss.correlation_s;
         config.sensors = SensorErrors {

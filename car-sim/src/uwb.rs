@@ -83,6 +83,15 @@ impl Default for RadioModel {
     }
 }
 
+impl RadioModel {
+    /// The range bias of the anchor at `address` when nothing says otherwise: drawn uniformly
+    /// from [`RadioModel::anchor_bias_m`] by the address and [`RadioModel::anchor_bias_seed`].
+    pub fn drawn_bias(&self, address: u8) -> f64 {
+        Noise::stream(self.anchor_bias_seed, 0x0A0C_0000 + u64::from(address))
+            .uniform_in(self.anchor_bias_m.0, self.anchor_bias_m.1)
+    }
+}
+
 /// How one range request went.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum RangeResult {
@@ -155,8 +164,7 @@ fn responder(
     address: u8,
     radio: &RadioModel,
 ) -> Option<Responder> {
-    let bias = Noise::stream(radio.anchor_bias_seed, 0x0A0C_0000 + u64::from(address))
-        .uniform_in(radio.anchor_bias_m.0, radio.anchor_bias_m.1);
+    let bias = radio.drawn_bias(address);
     if let Some(a) = world.anchor(address) {
         return Some(Responder {
             position: a.position,

@@ -50,6 +50,10 @@ pub enum Command {
     /// Serve a simulated car over TCP (like the reference bridge) or UDP, until Ctrl-C. Exit
     /// status: 0 stopped by Ctrl-C, 2 error.
     Sim(SimArgs),
+    /// Fit a car profile to recordings of a car: its cases driven again on simulated cars of
+    /// candidate profiles until their UWB − RTK error matches the recorded one (docs/twin.md).
+    /// Exit status: 0 fitted, 2 error.
+    Calibrate(CalibrateArgs),
     /// How far the simulated car of a car profile can be trusted: drive a recorded run's cases
     /// again on it and compare (docs/twin.md).
     #[command(subcommand)]
@@ -460,6 +464,37 @@ pub fn parse_probability(text: &str) -> Result<f64, String> {
         ));
     }
     Ok(value)
+}
+
+/// Options of `drivecheck calibrate`.
+#[derive(Debug, Args)]
+pub struct CalibrateArgs {
+    /// Run directories of campaigns on the car (their case files and `campaign.mcap`, recorded
+    /// with `--record all`), in one scenario.
+    #[arg(required = true, value_name = "RUN_DIR")]
+    pub runs: Vec<PathBuf>,
+    /// Where to write the fitted profile (TOML).
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
+    /// The wall-time budget of the fit; the best profile so far is written when it is spent.
+    #[arg(long, value_name = "DURATION", default_value = "10min", value_parser = humantime::parse_duration)]
+    pub budget: std::time::Duration,
+    /// At most this many candidate profiles (a bound that, unlike `--budget`, gives the same fit
+    /// on any machine).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(2..))]
+    pub max_evaluations: Option<u32>,
+    /// Simulated runs of every case per candidate profile (more: a smoother misfit, slower).
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=20))]
+    pub sim_runs: u32,
+    /// The profile to start from (and to keep what is not fitted from): `default` or a file.
+    #[arg(long, value_name = "FILE")]
+    pub from: Option<PathBuf>,
+    /// The scenario file, when the runs' is not bundled.
+    #[arg(long)]
+    pub scenario: Option<String>,
+    /// Use the runs although the scenario's hash is not the one they were recorded in.
+    #[arg(long)]
+    pub ignore_scenario_hash: bool,
 }
 
 /// `drivecheck twin …`

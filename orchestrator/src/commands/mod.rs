@@ -6,6 +6,7 @@ mod bench_fidelity;
 mod bench_fidelity_route;
 mod bench_placement;
 mod bench_recovery;
+mod calibrate;
 mod explain;
 mod merge;
 mod replay;
@@ -40,6 +41,7 @@ pub fn run(cli: Cli) -> Result<Exit> {
         Command::Report(args) => report::report(&args),
         Command::Explain(args) => explain::explain(&args),
         Command::Sim(args) => sim::serve(&args),
+        Command::Calibrate(args) => calibrate::calibrate(&args),
         Command::Twin(TwinCommand::Check(args)) => twin::check(&args),
         Command::Area(AreaCommand::Validate(args)) => area::validate(&args),
         Command::Route(RouteCommand::Generate(args)) => route::generate(&args),

@@ -67,6 +67,9 @@ pub(super) struct SimDriver<'a> {
     pub scratch: PathBuf,
     /// Runs per case.
     pub runs: u32,
+    /// Keep each run's recording (`scratch/run/campaign.mcap`, until the next run): what a
+    /// car reports, for `calibrate`.
+    pub record: bool,
     /// Seed of run 1.
     pub seed: u64,
     pub cancel: &'a CancellationToken,
@@ -99,6 +102,7 @@ impl<'a> SimDriver<'a> {
             },
             scratch,
             runs,
+            record: false,
             seed,
             cancel,
         }
@@ -125,14 +129,20 @@ impl<'a> SimDriver<'a> {
         Ok(cases)
     }
 
-    /// One run of `plan` with `seed` on a fresh simulator, unrecorded: the case it wrote.
+    /// The run directory of the last run.
+    pub fn run_dir(&self) -> PathBuf {
+        self.scratch.join("run")
+    }
+
+    /// One run of `plan` with `seed` on a fresh simulator, unrecorded unless [`SimDriver::record`]:
+    /// the case it wrote (in [`SimDriver::run_dir`]).
     pub async fn drive_once(
         &self,
         plan: &TestPlan,
         seed: u64,
         settings: &SimSettings,
     ) -> Result<Case> {
-        let dir = self.scratch.join("run");
+        let dir = self.run_dir();
         let _ = std::fs::remove_dir_all(&dir);
         let mut config = RunConfig::new(
             Campaign {
@@ -148,7 +158,11 @@ impl<'a> SimDriver<'a> {
             of: self.of.clone(),
         });
         config.policy = self.policy;
-        config.record = crate::runner::RecordMode::None;
+        config.record = if self.record {
+            crate::runner::RecordMode::All
+        } else {
+            crate::runner::RecordMode::None
+        };
         let (car, sim) = connect_sim(&settings.config(&self.sim, seed)).await?;
         let sim = Some(sim);
         let result = run_campaign(

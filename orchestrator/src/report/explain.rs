@@ -176,6 +176,78 @@ pub(crate) fn explain_segments(
     Ok(segments)
 }
 
+/// One test of a run as `calibrate` compares it: its case, its UWB − RTK error samples (from the
+/// recording's state samples: what a car reports) and its judged segments' time spans.
+#[derive(Debug, Clone)]
+pub(crate) struct TestErrors {
+    /// The case.
+    pub case: Case,
+    /// The case file's name.
+    pub file: String,
+    /// The error samples.
+    pub samples: Vec<campaign::calibrate::ErrorSample>,
+    /// The judged segments' spans.
+    pub spans: Vec<campaign::calibrate::SegmentSpan>,
+}
+
+/// The tests of run directory `dir` in `scenario` with their error samples and segment spans
+/// (tests the recording has no samples of are left out). Reads the case files and the
+/// recording's `/tests`, `/commands`, `/acks` and `/car/state`, never the simulator's truth.
+pub(crate) fn error_series(
+    dir: &Path,
+    scenario: &Scenario,
+) -> Result<Vec<TestErrors>, ReportError> {
+    let data = read_campaign(dir)?;
+    let mut tests = Vec::new();
+    for test in data.tests {
+        let Some(track) = &test.track else {
+            continue;
+        };
+        let bounds = boundaries(scenario, &test.case, &track.samples);
+        let at = |label: &str| bounds.iter().find(|b| b.label == label).map(|b| b.t_s);
+        let spans = test
+            .case
+            .segments
+            .iter()
+            .filter(|s| s.oracle.verdict != SegmentVerdict::NoSamples)
+            .filter_map(|s| {
+                let k = s.segment_index;
+                let from_s = at(&format!("s{k}"))?;
+                let to_s = at(&format!("s{}", k + 1)).or_else(|| at("end"))?;
+                Some(campaign::calibrate::SegmentSpan {
+                    segment_index: k,
+                    from_s,
+                    to_s,
+                })
+            })
+            .collect();
+        // Where no fault acts yet: the car's own errors, undisturbed.
+        let first_fault_s = test
+            .case
+            .fault_places
+            .iter()
+            .map(|p| p.acts_from_s)
+            .fold(f64::INFINITY, f64::min);
+        let samples = track
+            .samples
+            .iter()
+            .filter(|s| s.t_s < first_fault_s)
+            .map(|s| campaign::calibrate::ErrorSample {
+                t_s: s.t_s,
+                east_m: s.uwb.x - s.rtk.x,
+                north_m: s.uwb.y - s.rtk.y,
+            })
+            .collect();
+        tests.push(TestErrors {
+            case: test.case,
+            file: test.file,
+            samples,
+            spans,
+        });
+    }
+    Ok(tests)
+}
+
 /// The case's faults with their estimated windows (faults the car confirmed).
 pub(crate) fn faults_of(case: &Case) -> Vec<ExplainFault> {
     case.fault_places
