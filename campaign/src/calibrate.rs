@@ -1,42 +1,51 @@
 //! Fitting a car profile to recordings of a car (`drivecheck calibrate`, `docs/twin.md`): the
 //! policy, pure. The driving (a candidate profile's simulated runs of the recorded cases) is the
-//! caller's, behind a function it hands to [`fit`].
+//! caller's, behind a function it hands to [`fit`], which may drive a batch of candidates at once.
 //!
 //! **What is compared.** Only what a car reports: the UWB − RTK error of its state samples. Each
 //! judged segment of each test is cut into [`BINS`] equal stretches of time and the error vector
 //! averaged in each: a [`Signature`]. A biased or displaced anchor, a wrong odometry scale or yaw
 //! bias each move the error in their own direction at their own places along the route, so the
 //! binned vectors (not only their size) tell them apart; averaging inside a bin removes most of
-//! the noise. The misfit of a candidate is the mean over the bins both have of |recorded −
-//! simulated|², the simulated bin the mean over the candidate's runs.
+//! the noise. The residuals of a candidate are recorded − simulated, east and north, for every
+//! bin both have; its misfit is the mean over those bins of |recorded − simulated|².
 //!
-//! **How it is fitted.** A pattern search (Hooke–Jeeves, with halving steps): each parameter in
-//! turn is tried a step up and down, moved to the better side when the misfit falls and on in
-//! that direction while it keeps falling; after a sweep that moved, the sweep's whole change is
-//! tried once more (the pattern move, which follows a valley no single parameter runs along);
-//! after a sweep that did not, the steps halve, until they are below their resolution or the
-//! budget is spent.
-//! It needs no gradient, tolerates the misfit's small roughness (the simulated runs use the same
-//! seeds for every candidate, so the noise is common and the misfit changes smoothly with the
-//! parameters), and its cost is known: at most two evaluations per parameter and sweep.
+//! **How it is fitted.** Levenberg–Marquardt on those residuals: the effect of each parameter is
+//! measured by moving it one [`Parameter::step`] (a batch of one candidate per parameter, which
+//! the caller may drive in parallel), the Gauss–Newton step of that Jacobian is tried with two
+//! dampings at once (a second batch), the better is kept when it lowers the misfit, and the
+//! damping grows when neither does. The simulated runs use the same seeds for every candidate, so
+//! their noise is common and the residuals change smoothly with the parameters; the step is wide
+//! enough to see past what roughness is left. It needs a handful of iterations of `parameters +
+//! 2` candidates, where a search one parameter at a time needs hundreds, and its Jacobian is what
+//! says how sure the fit is.
 //!
-//! **How sure.** At the optimum, each parameter's curvature `c` of the misfit (from the misfit a
-//! step each side) gives its standard error `√(J / (n·c))` for `n` compared bins and misfit `J`,
-//! the Gauss–Newton approximation for independent residuals (the residuals of one test are not
-//! quite independent: read it as a scale, not a confidence interval). A parameter whose step
-//! changes the misfit by less than [`IDENTIFIED_RELATIVE`] of it is *not identified*: the
-//! recordings cannot tell its values apart (an anchor the car never ranged, say) and it keeps its
-//! starting value.
+//! **How sure.** At the optimum, with the Jacobian `J` and `A = JᵀJ`, the covariance of the
+//! parameters is the sandwich `A⁻¹ (Σₜ gₜ gₜᵀ) A⁻¹` over the tests t, `gₜ = Jₜᵀ rₜ` of test t's
+//! residuals: the bins of one test share its errors (the same anchors in the same places, the
+//! same GNSS drift), so they count as one cluster, not as independent residuals. Each
+//! parameter's standard error is the larger of that and `s² A⁻¹`'s (independent residuals: too
+//! small alone, but it sees a direction the recordings say nothing of, where the sandwich is
+//! blind); read it as a scale, not a confidence interval. The correlations are `A⁻¹`'s, the
+//! design's: two parameters whose correlation is beyond [`TRADE_OFF`] *trade off* (moving an
+//! anchor away from where the car drives looks like a longer range), and the recordings fix only
+//! their combination. A parameter whose standard error is larger than its
+//! [`Parameter::tolerance`] is *not identified*: the recordings cannot tell its values apart
+//! (an anchor the car never ranged, or one half of a trade-off).
 
 use std::collections::BTreeMap;
 
 /// Stretches of time each segment is cut into.
 pub const BINS: usize = 4;
 
-/// The least relative change of the misfit a parameter's step must make for the parameter to
-/// count as identified.
-pub const IDENTIFIED_RELATIVE: f64 = 0.01;
+/// The correlation beyond which two fitted parameters are said to trade off.
+pub const TRADE_OFF: f64 = 0.9;
 
+/// Iterations of the fit at most (each `parameters + 2` candidates).
+pub const MAX_ITERATIONS: usize = 20;
+
+/// The relative fall of the misfit below which an iteration counts as converged.
+const CONVERGED_RELATIVE: f64 = 1e-3;
 /// One state sample: seconds since the test began, the UWB − RTK error (east, north), metres.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ErrorSample {
@@ -143,10 +152,11 @@ pub struct Parameter {
     pub name: String,
     /// The starting value.
     pub start: f64,
-    /// The first step.
+    /// How far it is moved to measure its effect: wide enough to see past the misfit's roughness,
+    /// small against the values it may take.
     pub step: f64,
-    /// The smallest step worth taking (its resolution).
-    pub resolution: f64,
+    /// The precision worth knowing it to: a larger standard error is *not identified*.
+    pub tolerance: f64,
     /// The values it may take.
     pub bounds: (f64, f64),
 }
@@ -156,12 +166,16 @@ pub struct Parameter {
 pub struct Fitted {
     /// Its name.
     pub name: String,
-    /// Its fitted value (its starting value when not identified).
+    /// Its fitted value.
     pub value: f64,
-    /// Its standard error (see the module doc), when identified.
+    /// Its standard error (see the module doc); `None` when the recordings say nothing of it.
     pub standard_error: Option<f64>,
-    /// Whether the recordings tell its values apart.
+    /// The parameter's tolerance ([`Parameter::tolerance`]).
+    pub tolerance: f64,
+    /// Whether the standard error is within the parameter's tolerance.
     pub identified: bool,
+    /// The parameter it trades off with most and their correlation, beyond [`TRADE_OFF`].
+    pub trades_off_with: Option<(String, f64)>,
 }
 
 /// What a fit found.
@@ -175,9 +189,11 @@ pub struct Fit {
     pub misfit: f64,
     /// Bins compared.
     pub bins: usize,
-    /// Evaluations made.
+    /// Candidates evaluated.
     pub evaluations: usize,
-    /// Whether the budget ended the search before the steps reached their resolution.
+    /// Iterations made.
+    pub iterations: usize,
+    /// Whether the budget ended the search before it converged.
     pub out_of_budget: bool,
 }
 
@@ -190,154 +206,401 @@ pub enum FitError {
     /// Driving a candidate failed.
     #[error("{0}")]
     Driving(String),
+    /// The caller's batch did not hold one signature per candidate.
+    #[error("{given} signatures for {asked} candidates")]
+    Batch {
+        /// Candidates asked for.
+        asked: usize,
+        /// Signatures given.
+        given: usize,
+    },
 }
 
-/// Fits `parameters` so that `evaluate` (the misfit and bins compared of a candidate's values, or
-/// an error) is least, while `in_budget` says there is time; then measures each parameter's
-/// curvature. `progress` hears every evaluation's number and the best misfit so far.
+/// The residuals of candidates against the recording, over the bins the starting values' runs
+/// share with it (a bin a later candidate lacks keeps the starting values' simulated mean: the
+/// residual vector keeps its length and meaning).
+struct Residuals<'a> {
+    recorded: &'a Signature,
+    keys: Vec<(usize, usize, usize)>,
+    fallback: Vec<(f64, f64)>,
+}
+
+impl<'a> Residuals<'a> {
+    fn new(recorded: &'a Signature, start: &Signature) -> Self {
+        let (keys, fallback) = recorded
+            .bins
+            .keys()
+            .filter_map(|key| start.bins.get(key).map(|&bin| (*key, bin)))
+            .unzip();
+        Self {
+            recorded,
+            keys,
+            fallback,
+        }
+    }
+
+    /// recorded − simulated, east and north of every bin.
+    fn of(&self, simulated: &Signature) -> Vec<f64> {
+        let mut r = Vec::with_capacity(2 * self.keys.len());
+        for (key, fallback) in self.keys.iter().zip(&self.fallback) {
+            let (re, rn) = self.recorded.bins[key];
+            let (se, sn) = simulated.bins.get(key).copied().unwrap_or(*fallback);
+            r.push(re - se);
+            r.push(rn - sn);
+        }
+        r
+    }
+
+    /// The misfit of residuals `r`: the mean of |Δ|² over the bins, m².
+    fn misfit(&self, r: &[f64]) -> f64 {
+        r.iter().map(|x| x * x).sum::<f64>() / self.keys.len() as f64
+    }
+}
+
+/// Fits `parameters` so that the residuals of the signatures `evaluate` gives (one per candidate
+/// of a batch, the candidates' values in `parameters`' order) against `recorded` are least, while
+/// `in_budget` says there is time (see the module doc); then measures how sure each parameter is.
+/// `progress` hears the number of candidates evaluated and the best misfit so far.
 pub fn fit(
     parameters: &[Parameter],
-    mut evaluate: impl FnMut(&[f64]) -> Result<Option<(f64, usize)>, String>,
+    recorded: &Signature,
+    mut evaluate: impl FnMut(&[Vec<f64>]) -> Result<Vec<Signature>, String>,
     mut in_budget: impl FnMut() -> bool,
     mut progress: impl FnMut(usize, f64),
 ) -> Result<Fit, FitError> {
     let mut evaluations = 0;
-    let bins = std::cell::Cell::new(0usize);
-    let mut eval = |values: &[f64], evaluations: &mut usize| -> Result<f64, FitError> {
-        *evaluations += 1;
-        match evaluate(values).map_err(FitError::Driving)? {
-            Some((j, n)) => {
-                bins.set(bins.get().max(n));
-                Ok(j)
-            }
-            None => Ok(f64::INFINITY),
+    let mut batch = |candidates: &[Vec<f64>], evaluations: &mut usize| {
+        let signatures = evaluate(candidates).map_err(FitError::Driving)?;
+        if signatures.len() != candidates.len() {
+            return Err(FitError::Batch {
+                asked: candidates.len(),
+                given: signatures.len(),
+            });
         }
+        *evaluations += candidates.len();
+        Ok(signatures)
     };
-    let mut values: Vec<f64> = parameters.iter().map(|p| p.start).collect();
-    let start_misfit = eval(&values, &mut evaluations)?;
-    if !start_misfit.is_finite() {
+    let mut x: Vec<f64> = parameters.iter().map(|p| p.start).collect();
+    let start = batch(std::slice::from_ref(&x), &mut evaluations)?;
+    let residuals = Residuals::new(recorded, &start[0]);
+    if residuals.keys.is_empty() {
         return Err(FitError::NothingToCompare);
     }
-    let mut best = start_misfit;
-    let mut steps: Vec<f64> = parameters.iter().map(|p| p.step).collect();
+    let mut r = residuals.of(&start[0]);
+    let start_misfit = residuals.misfit(&r);
+    let mut misfit = start_misfit;
+    progress(evaluations, misfit);
+    let mut lambda = 1e-2;
+    let mut jacobian: Option<(Vec<f64>, Vec<Vec<f64>>)> = None;
     let mut out_of_budget = false;
-    'search: loop {
-        let before = values.clone();
-        let mut moved = false;
-        for (i, p) in parameters.iter().enumerate() {
-            if steps[i] < p.resolution {
-                continue;
-            }
-            // Both directions; the better one, followed while it keeps improving.
-            let mut best_direction = None;
-            for direction in [1.0, -1.0] {
-                if !in_budget() {
-                    out_of_budget = true;
-                    break 'search;
-                }
-                let candidate = (values[i] + direction * steps[i]).clamp(p.bounds.0, p.bounds.1);
-                if candidate == values[i] {
-                    continue;
-                }
-                let mut trial = values.clone();
-                trial[i] = candidate;
-                let j = eval(&trial, &mut evaluations)?;
-                progress(evaluations, best.min(j));
-                if j < best {
-                    best = j;
-                    best_direction = Some((direction, trial));
-                }
-            }
-            let Some((direction, trial)) = best_direction else {
-                continue;
-            };
-            values = trial;
-            moved = true;
-            loop {
-                if !in_budget() {
-                    out_of_budget = true;
-                    break 'search;
-                }
-                let candidate = (values[i] + direction * steps[i]).clamp(p.bounds.0, p.bounds.1);
-                if candidate == values[i] {
-                    break;
-                }
-                let mut trial = values.clone();
-                trial[i] = candidate;
-                let j = eval(&trial, &mut evaluations)?;
-                progress(evaluations, best.min(j));
-                if j >= best {
-                    break;
-                }
-                best = j;
-                values = trial;
-            }
-        }
-        if moved {
-            // The pattern move: the sweep's whole change once more.
-            if !in_budget() {
-                out_of_budget = true;
-                break;
-            }
-            let trial: Vec<f64> = parameters
-                .iter()
-                .enumerate()
-                .map(|(i, p)| (2.0 * values[i] - before[i]).clamp(p.bounds.0, p.bounds.1))
-                .collect();
-            let j = eval(&trial, &mut evaluations)?;
-            progress(evaluations, best.min(j));
-            if j < best {
-                best = j;
-                values = trial;
-            }
-            continue;
-        }
-        let mut any = false;
-        for (i, p) in parameters.iter().enumerate() {
-            if steps[i] >= p.resolution {
-                steps[i] /= 2.0;
-                any |= steps[i] >= p.resolution;
-            }
-        }
-        if !any {
+    let mut iterations = 0;
+    'iterate: while iterations < MAX_ITERATIONS {
+        if !in_budget() {
+            out_of_budget = true;
             break;
         }
+        iterations += 1;
+        let columns = jacobian_at(parameters, &x, &r, &residuals, |c| {
+            batch(c, &mut evaluations)
+        })?;
+        let (a, g) = normal_equations(&columns, &r);
+        jacobian = Some((x.clone(), columns));
+        loop {
+            if !in_budget() {
+                out_of_budget = true;
+                break 'iterate;
+            }
+            let trials: Vec<Vec<f64>> = [lambda, 10.0 * lambda]
+                .iter()
+                .map(|&l| damped_step(parameters, &x, &a, &g, l))
+                .collect();
+            let signatures = batch(&trials, &mut evaluations)?;
+            let (k, new_r, new_misfit) = signatures
+                .iter()
+                .enumerate()
+                .map(|(k, s)| {
+                    let r = residuals.of(s);
+                    let m = residuals.misfit(&r);
+                    (k, r, m)
+                })
+                .min_by(|a, b| a.2.total_cmp(&b.2))
+                .expect("two trials");
+            progress(evaluations, misfit.min(new_misfit));
+            if new_misfit < misfit {
+                let fall = (misfit - new_misfit) / misfit.max(f64::MIN_POSITIVE);
+                let moved = trials[k]
+                    .iter()
+                    .zip(&x)
+                    .zip(parameters)
+                    .any(|((new, old), p)| (new - old).abs() > p.step / 20.0);
+                lambda = if k == 0 {
+                    (lambda / 3.0).max(1e-7)
+                } else {
+                    10.0 * lambda
+                };
+                x = trials[k].clone();
+                r = new_r;
+                misfit = new_misfit;
+                if fall < CONVERGED_RELATIVE || !moved {
+                    break 'iterate;
+                }
+                break;
+            }
+            lambda *= 100.0;
+            if lambda > 1e6 {
+                // No damping lowers the misfit: a minimum, as far as the steps can see.
+                break 'iterate;
+            }
+        }
     }
-    // Curvature at the optimum, a resolution-sized step each side (within bounds).
-    let mut fitted = Vec::new();
-    for (i, p) in parameters.iter().enumerate() {
-        // A quarter of the first step: wide enough to see past the misfit's roughness.
-        let h = p.resolution.max(p.step / 4.0);
-        let mut up = values.clone();
-        up[i] = (values[i] + h).min(p.bounds.1);
-        let mut down = values.clone();
-        down[i] = (values[i] - h).max(p.bounds.0);
-        let (ju, jd) = (eval(&up, &mut evaluations)?, eval(&down, &mut evaluations)?);
-        let (hu, hd) = (up[i] - values[i], values[i] - down[i]);
-        let change = (ju - best).abs().max((jd - best).abs());
-        let identified = change > IDENTIFIED_RELATIVE * best.max(1e-12);
-        let curvature = if hu > 0.0 && hd > 0.0 {
-            2.0 * (hu * (jd - best) + hd * (ju - best)) / (hu * hd * (hu + hd))
-        } else {
-            0.0
-        };
-        let standard_error = (identified && curvature > 0.0)
-            .then(|| (best / (bins.get() as f64 * curvature)).sqrt());
-        fitted.push(Fitted {
-            name: p.name.clone(),
-            value: if identified { values[i] } else { p.start },
-            standard_error,
-            identified,
-        });
-    }
+    // How sure: the Jacobian at the fitted values (measured again if they moved since).
+    // Out of budget, the last one measured (near enough for a scale).
+    let columns = match jacobian {
+        Some((at, columns)) if at == x || out_of_budget => columns,
+        _ => jacobian_at(parameters, &x, &r, &residuals, |c| {
+            batch(c, &mut evaluations)
+        })?,
+    };
+    let (a, _) = normal_equations(&columns, &r);
+    let covariances = covariances(&a, &columns, &r, &residuals.keys);
+    let fitted = parameters
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let says_something = a[i][i] > 0.0;
+            // The larger of the two: the clustered one is the honest scale, the independent
+            // one still sees a direction the recordings say nothing of.
+            let standard_error = covariances
+                .as_ref()
+                .filter(|_| says_something)
+                .map(|(independent, clustered)| {
+                    let clustered = clustered.as_ref().map_or(0.0, |c| c[i][i]);
+                    independent[i][i].max(clustered).max(0.0).sqrt()
+                })
+                .filter(|se| se.is_finite());
+            let trades_off_with = covariances.as_ref().and_then(|(c, _)| {
+                (0..parameters.len())
+                    .filter(|&j| j != i && a[j][j] > 0.0 && says_something)
+                    .map(|j| (j, c[i][j] / (c[i][i] * c[j][j]).sqrt()))
+                    .filter(|(_, rho)| rho.abs() >= TRADE_OFF)
+                    .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+                    .map(|(j, rho)| (parameters[j].name.clone(), rho))
+            });
+            Fitted {
+                name: p.name.clone(),
+                value: x[i],
+                standard_error,
+                tolerance: p.tolerance,
+                identified: standard_error.is_some_and(|se| se <= p.tolerance),
+                trades_off_with,
+            }
+        })
+        .collect();
     Ok(Fit {
         parameters: fitted,
         start_misfit,
-        misfit: best,
-        bins: bins.get(),
+        misfit,
+        bins: residuals.keys.len(),
         evaluations,
+        iterations,
         out_of_budget,
     })
+}
+
+/// A small dense matrix, by rows.
+type Matrix = Vec<Vec<f64>>;
+
+/// The covariance of the fitted parameters from `a = JᵀJ`, the Jacobian's `columns` and the
+/// residuals `r` of the bins `keys`, two ways: as if every residual were independent, `s² A⁻¹`
+/// (whose shape, the correlations, is the design's: what trades off with what), and clustered by
+/// test, the sandwich `A⁻¹ (Σ gₜ gₜᵀ) A⁻¹ · T/(T − 1)` with `gₜ = Jₜᵀ rₜ` over test t's residuals,
+/// because the bins of one test share its errors (`None` with no more tests than parameters,
+/// where it is unsteady).
+fn covariances(
+    a: &[Vec<f64>],
+    columns: &[Vec<f64>],
+    r: &[f64],
+    keys: &[(usize, usize, usize)],
+) -> Option<(Matrix, Option<Matrix>)> {
+    let inverse = inverse_spd(a)?;
+    let n = a.len();
+    let dof = (r.len() as f64 - n as f64).max(1.0);
+    let s2 = r.iter().map(|v| v * v).sum::<f64>() / dof;
+    let independent = inverse
+        .iter()
+        .map(|row| row.iter().map(|v| v * s2).collect())
+        .collect();
+    let mut by_test: BTreeMap<usize, Vec<f64>> = BTreeMap::new();
+    for (k, (test, _, _)) in keys.iter().enumerate() {
+        let g = by_test.entry(*test).or_insert_with(|| vec![0.0; n]);
+        for (i, column) in columns.iter().enumerate() {
+            // Two residuals per bin: east and north.
+            g[i] += column[2 * k] * r[2 * k] + column[2 * k + 1] * r[2 * k + 1];
+        }
+    }
+    let tests = by_test.len();
+    let clustered = (tests > n).then(|| {
+        let correction = tests as f64 / (tests - 1) as f64;
+        let meat: Vec<Vec<f64>> = (0..n)
+            .map(|i| {
+                (0..n)
+                    .map(|j| correction * by_test.values().map(|g| g[i] * g[j]).sum::<f64>())
+                    .collect()
+            })
+            .collect();
+        let product = |x: &[Vec<f64>], y: &[Vec<f64>]| -> Vec<Vec<f64>> {
+            (0..n)
+                .map(|i| {
+                    (0..n)
+                        .map(|j| (0..n).map(|k| x[i][k] * y[k][j]).sum())
+                        .collect()
+                })
+                .collect()
+        };
+        product(&product(&inverse, &meat), &inverse)
+    });
+    Some((independent, clustered))
+}
+
+/// The Jacobian's columns at `x` (residuals `r`): each parameter moved one step (back, where a
+/// step up leaves its bounds), in one batch.
+fn jacobian_at(
+    parameters: &[Parameter],
+    x: &[f64],
+    r: &[f64],
+    residuals: &Residuals,
+    batch: impl FnOnce(&[Vec<f64>]) -> Result<Vec<Signature>, FitError>,
+) -> Result<Vec<Vec<f64>>, FitError> {
+    let steps: Vec<f64> = parameters
+        .iter()
+        .zip(x)
+        .map(|(p, &v)| {
+            if v + p.step <= p.bounds.1 {
+                p.step
+            } else {
+                -p.step
+            }
+        })
+        .collect();
+    let candidates: Vec<Vec<f64>> = steps
+        .iter()
+        .enumerate()
+        .map(|(i, h)| {
+            let mut c = x.to_vec();
+            c[i] += h;
+            c
+        })
+        .collect();
+    let signatures = batch(&candidates)?;
+    Ok(signatures
+        .iter()
+        .zip(&steps)
+        .map(|(s, h)| {
+            residuals
+                .of(s)
+                .iter()
+                .zip(r)
+                .map(|(moved, now)| (moved - now) / h)
+                .collect()
+        })
+        .collect())
+}
+
+/// `JᵀJ` and `Jᵀr` of the Jacobian's `columns`.
+fn normal_equations(columns: &[Vec<f64>], r: &[f64]) -> (Vec<Vec<f64>>, Vec<f64>) {
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let a = columns
+        .iter()
+        .map(|ci| columns.iter().map(|cj| dot(ci, cj)).collect())
+        .collect();
+    let g = columns.iter().map(|c| dot(c, r)).collect();
+    (a, g)
+}
+
+/// `x` plus the Levenberg–Marquardt step of damping `lambda` (`(A + λ·D) δ = −g`, `D` the
+/// diagonal of `A` with a floor so that a parameter the recordings say nothing of stays), within
+/// the bounds.
+fn damped_step(
+    parameters: &[Parameter],
+    x: &[f64],
+    a: &[Vec<f64>],
+    g: &[f64],
+    lambda: f64,
+) -> Vec<f64> {
+    let largest = (0..a.len()).map(|i| a[i][i]).fold(0.0, f64::max);
+    let mut damped = a.to_vec();
+    for (i, row) in damped.iter_mut().enumerate() {
+        row[i] += lambda * a[i][i].max(1e-6 * largest) + 1e-12 * largest;
+    }
+    let minus_g: Vec<f64> = g.iter().map(|v| -v).collect();
+    let delta = solve_spd(&damped, &minus_g).unwrap_or_else(|| vec![0.0; x.len()]);
+    x.iter()
+        .zip(&delta)
+        .zip(parameters)
+        .map(|((v, d), p)| {
+            let d = if d.is_finite() { *d } else { 0.0 };
+            (v + d).clamp(p.bounds.0, p.bounds.1)
+        })
+        .collect()
+}
+
+/// The Cholesky factor `L` of a symmetric positive-definite `a` (`a = L Lᵀ`); `None` when `a` is
+/// not positive definite.
+fn cholesky(a: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
+    let n = a.len();
+    let mut l = vec![vec![0.0; n]; n];
+    for i in 0..n {
+        for j in 0..=i {
+            let sum: f64 = (0..j).map(|k| l[i][k] * l[j][k]).sum();
+            if i == j {
+                let d = a[i][i] - sum;
+                if d.is_nan() || d <= 0.0 {
+                    return None;
+                }
+                l[i][i] = d.sqrt();
+            } else {
+                l[i][j] = (a[i][j] - sum) / l[j][j];
+            }
+        }
+    }
+    Some(l)
+}
+
+/// The solution of `a x = b` for a symmetric positive-definite `a`.
+fn solve_spd(a: &[Vec<f64>], b: &[f64]) -> Option<Vec<f64>> {
+    let l = cholesky(a)?;
+    let n = b.len();
+    let mut y = vec![0.0; n];
+    for i in 0..n {
+        y[i] = (b[i] - (0..i).map(|k| l[i][k] * y[k]).sum::<f64>()) / l[i][i];
+    }
+    let mut x = vec![0.0; n];
+    for i in (0..n).rev() {
+        x[i] = (y[i] - (i + 1..n).map(|k| l[k][i] * x[k]).sum::<f64>()) / l[i][i];
+    }
+    Some(x)
+}
+
+/// The inverse of a symmetric positive-semidefinite `a`: its rows and columns the recordings say
+/// nothing of (a zero diagonal) left out, the rest regularised by a millionth of the largest
+/// diagonal; `None` when it cannot be inverted.
+fn inverse_spd(a: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
+    let n = a.len();
+    let largest = (0..n).map(|i| a[i][i]).fold(0.0, f64::max);
+    let mut regular = a.to_vec();
+    for (i, row) in regular.iter_mut().enumerate() {
+        row[i] += if a[i][i] > 0.0 { 1e-9 * largest } else { 1.0 };
+    }
+    let mut inverse = vec![vec![0.0; n]; n];
+    for j in 0..n {
+        let mut e = vec![0.0; n];
+        e[j] = 1.0;
+        let column = solve_spd(&regular, &e)?;
+        for (i, v) in column.into_iter().enumerate() {
+            inverse[i][j] = v;
+        }
+    }
+    Some(inverse)
 }
 
 #[cfg(test)]
@@ -382,65 +645,162 @@ mod tests {
         assert!((j - 0.01).abs() < 1e-9, "{j}");
     }
 
-    #[test]
-    fn the_search_finds_a_quadratic_minimum_and_names_an_unidentified_parameter() {
-        // Misfit (a − 0.3)² + 4 (b + 0.1)² + 0.01; c does nothing.
-        let parameters = [("a", 0.0), ("b", 0.0), ("c", 0.5)].map(|(name, start)| Parameter {
+    /// A signature of 40 bins, 10 tests of one segment, from a model of `x`: `f(k, x)` is bin
+    /// k's (east, north).
+    fn model(x: &[f64], f: impl Fn(usize, &[f64]) -> (f64, f64)) -> Signature {
+        Signature {
+            bins: (0..40)
+                .map(|k| ((k / BINS, 0, k % BINS), f(k, x)))
+                .collect(),
+        }
+    }
+
+    fn parameter(name: &str, start: f64) -> Parameter {
+        Parameter {
             name: name.to_owned(),
             start,
-            step: 0.4,
-            resolution: 0.005,
+            step: 0.05,
+            tolerance: 0.05,
             bounds: (-2.0, 2.0),
-        });
+        }
+    }
+
+    /// East a·cos k + b·sin k + d + e, north a − b; c does nothing; d and e only as their sum.
+    fn linear(k: usize, x: &[f64]) -> (f64, f64) {
+        let k = k as f64;
+        (x[0] * k.cos() + x[1] * k.sin() + x[3] + x[4], x[0] - x[1])
+    }
+
+    #[test]
+    fn the_fit_finds_a_linear_models_values_and_names_what_it_cannot_tell_apart() {
+        let truth = [0.3, -0.1, 0.0, 0.15, 0.05];
+        let mut recorded = model(&truth, linear);
+        // A little noise, so that the residuals have a variance.
+        for (k, bin) in recorded.bins.values_mut().enumerate() {
+            bin.0 += 0.01 * (7.0 * k as f64).sin();
+        }
+        let parameters = ["a", "b", "c", "d", "e"].map(|n| parameter(n, 0.0));
         let fit = fit(
             &parameters,
-            |v| {
-                Ok(Some((
-                    (v[0] - 0.3).powi(2) + 4.0 * (v[1] + 0.1).powi(2) + 0.01,
-                    100,
-                )))
-            },
+            &recorded,
+            |batch| Ok(batch.iter().map(|x| model(x, linear)).collect()),
             || true,
             |_, _| {},
         )
         .unwrap();
-        let [a, b, c] = &fit.parameters[..] else {
+        let [a, b, c, d, e] = &fit.parameters[..] else {
             panic!()
         };
         assert!((a.value - 0.3).abs() < 0.01, "{a:?}");
         assert!((b.value + 0.1).abs() < 0.01, "{b:?}");
-        assert!(a.identified && b.identified && !c.identified);
-        assert_eq!(c.value, 0.5, "an unidentified parameter keeps its start");
-        // J ≈ 0.01, n = 100, curvature 2 and 8: standard errors 0.007 and 0.0035.
-        assert!(
-            (a.standard_error.unwrap() - (0.01f64 / 200.0).sqrt()).abs() < 0.002,
-            "{a:?}"
-        );
-        assert!(b.standard_error.unwrap() < a.standard_error.unwrap());
-        assert!(fit.misfit < fit.start_misfit && !fit.out_of_budget);
+        assert!(a.identified && b.identified, "{a:?} {b:?}");
+        assert!(a.standard_error.unwrap() < 0.01, "{a:?}");
+        assert!(a.trades_off_with.is_none() && b.trades_off_with.is_none());
+        assert_eq!(c.value, 0.0, "a parameter nothing depends on stays");
+        assert!(!c.identified && c.standard_error.is_none(), "{c:?}");
+        assert!((d.value + e.value - 0.2).abs() < 0.01, "{d:?} {e:?}");
+        assert!(!d.identified && !e.identified, "{d:?} {e:?}");
+        let (with, rho) = d.trades_off_with.clone().unwrap();
+        assert!(with == "e" && rho < -0.99, "{with} {rho}");
+        assert!(fit.misfit < 1e-3 * fit.start_misfit, "{fit:?}");
+        assert!(!fit.out_of_budget && fit.iterations < 10, "{fit:?}");
+        assert_eq!(fit.bins, 40);
     }
 
     #[test]
-    fn the_budget_ends_the_search_with_the_best_so_far() {
-        let parameters = [Parameter {
-            name: "a".to_owned(),
-            start: 0.0,
-            step: 0.1,
-            resolution: 1e-6,
+    fn the_fit_finds_a_displaced_and_biased_anchor_from_ranges() {
+        // Bins along a circle of radius 5 around the origin; the range error to an anchor at
+        // (x0, x1) with bias x2 against one at (2, 1) without bias, split along the line of sight.
+        let range = |k: usize, x: &[f64]| {
+            let angle = k as f64 * 0.157;
+            let (px, py) = (5.0 * angle.cos(), 5.0 * angle.sin());
+            let to = |ax: f64, ay: f64| ((px - ax).powi(2) + (py - ay).powi(2)).sqrt();
+            let error = to(x[0], x[1]) + x[2] - to(2.0, 1.0);
+            let d = to(2.0, 1.0);
+            (error * (px - 2.0) / d, error * (py - 1.0) / d)
+        };
+        let recorded = model(&[2.35, 0.8, 0.1], range);
+        let parameters = [
+            parameter("x", 2.0),
+            parameter("y", 1.0),
+            parameter("bias", 0.0),
+        ]
+        .map(|p| Parameter {
             bounds: (-5.0, 5.0),
-        }];
+            ..p
+        });
+        let fit = fit(
+            &parameters,
+            &recorded,
+            |batch| Ok(batch.iter().map(|x| model(x, range)).collect()),
+            || true,
+            |_, _| {},
+        )
+        .unwrap();
+        let values: Vec<f64> = fit.parameters.iter().map(|p| p.value).collect();
+        for (v, truth) in values.iter().zip([2.35, 0.8, 0.1]) {
+            assert!((v - truth).abs() < 0.005, "{values:?} {fit:?}");
+        }
+        assert!(fit.parameters.iter().all(|p| p.identified), "{fit:?}");
+    }
+
+    #[test]
+    fn the_standard_error_counts_a_tests_bins_as_one() {
+        // a moves every east error; each of 10 tests has an error of its own, ±0.1 m, in all
+        // its bins: a is known to 0.1/√10, not to 0.1/√40 (bins) or less.
+        let parameters = [parameter("a", 0.0)];
+        let recorded = model(&[0.3], |k, x| {
+            let test = k / BINS;
+            (x[0] + 0.1 * if test.is_multiple_of(2) { 1.0 } else { -1.0 }, 0.0)
+        });
+        let fit = fit(
+            &parameters,
+            &recorded,
+            |batch| Ok(batch.iter().map(|x| model(x, |_, x| (x[0], 0.0))).collect()),
+            || true,
+            |_, _| {},
+        )
+        .unwrap();
+        let a = &fit.parameters[0];
+        assert!((a.value - 0.3).abs() < 1e-3, "{a:?}");
+        let expected = 0.1 / 10f64.sqrt() * (10.0f64 / 9.0).sqrt();
+        let se = a.standard_error.unwrap();
+        assert!((se - expected).abs() < 1e-3, "{se} against {expected}");
+    }
+
+    #[test]
+    fn the_budget_ends_the_fit_with_the_best_so_far() {
+        let recorded = model(&[0.3, -0.1, 0.0, 0.2, 0.0], linear);
+        let parameters = ["a", "b", "c", "d", "e"].map(|n| parameter(n, 0.0));
         let mut calls = 0;
         let fit = fit(
             &parameters,
-            |v| Ok(Some(((v[0] - 3.0).powi(2), 10))),
+            &recorded,
+            |batch| Ok(batch.iter().map(|x| model(x, linear)).collect()),
             || {
                 calls += 1;
-                calls < 5
+                calls < 3
             },
             |_, _| {},
         )
         .unwrap();
-        assert!(fit.out_of_budget);
+        assert!(fit.out_of_budget && fit.iterations == 1, "{fit:?}");
         assert!(fit.misfit < fit.start_misfit);
+    }
+
+    #[test]
+    fn a_batch_of_the_wrong_size_and_nothing_to_compare_are_errors() {
+        let recorded = model(&[0.0; 5], linear);
+        let parameters = ["a", "b", "c", "d", "e"].map(|n| parameter(n, 0.0));
+        let wrong = fit(&parameters, &recorded, |_| Ok(vec![]), || true, |_, _| {});
+        assert_eq!(wrong, Err(FitError::Batch { asked: 1, given: 0 }));
+        let nothing = fit(
+            &parameters,
+            &recorded,
+            |batch| Ok(vec![Signature::default(); batch.len()]),
+            || true,
+            |_, _| {},
+        );
+        assert_eq!(nothing, Err(FitError::NothingToCompare));
     }
 }

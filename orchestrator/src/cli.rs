@@ -479,8 +479,8 @@ pub struct CalibrateArgs {
     /// The wall-time budget of the fit; the best profile so far is written when it is spent.
     #[arg(long, value_name = "DURATION", default_value = "10min", value_parser = humantime::parse_duration)]
     pub budget: std::time::Duration,
-    /// At most this many candidate profiles (a bound that, unlike `--budget`, gives the same fit
-    /// on any machine).
+    /// No new batch of candidate profiles after this many (a bound that, unlike `--budget`, gives
+    /// the same fit on any machine; a batch is one candidate per parameter, or two).
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(2..))]
     pub max_evaluations: Option<u32>,
     /// Simulated runs of every case per candidate profile (more: a smoother misfit, slower).
@@ -489,6 +489,10 @@ pub struct CalibrateArgs {
     /// The profile to start from (and to keep what is not fitted from): `default` or a file.
     #[arg(long, value_name = "FILE")]
     pub from: Option<PathBuf>,
+    /// Candidate profiles driven at once, each on a thread of its own (default: the number of
+    /// cores). The fit does not depend on it.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub jobs: Option<u32>,
     /// The scenario file, when the runs' is not bundled.
     #[arg(long)]
     pub scenario: Option<String>,

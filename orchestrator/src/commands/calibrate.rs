@@ -5,11 +5,12 @@
 //! car reports is read: case files, state samples, commands and acks; never `/sim/*` or a
 //! recorded profile.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
+use tokio_util::sync::CancellationToken;
 
 use super::shared::{cancel_on_ctrl_c, check_hash, runtime, scenario_of};
 use super::simdrive::{SimDriver, SimSettings};
@@ -17,22 +18,40 @@ use crate::cli::CalibrateArgs;
 use crate::exit::Exit;
 use crate::profile_arg::LoadedProfile;
 use crate::report::explain::{TestErrors, error_series};
-use campaign::calibrate::{Fit, Parameter, Signature, fit, misfit};
-use campaign::files::Case;
+use campaign::calibrate::{Fit, Fitted, Parameter, Signature, fit};
+use campaign::model::TestPlan;
 use campaign::seed::{Purpose, derive};
 use car_sim::CarProfile;
 use car_sim::profile::AnchorProfile;
 
-/// A recorded test to compare: where it came from and its recorded signature's key.
-struct Recorded {
-    path: PathBuf,
-    errors: TestErrors,
+/// What a fitted parameter is: where its value goes in a profile.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Target {
+    /// Anchor `id`'s offset, east (0) or north (1).
+    Offset(u8, usize),
+    /// Anchor `id`'s range bias.
+    Bias(u8),
+    /// The odometry scale.
+    OdometryScale,
+    /// The IMU's yaw bias.
+    YawBias,
 }
 
-/// The fitted parameters of `scenario`'s anchors, the odometry and the IMU, starting at `start`.
-fn parameters(start: &CarProfile, scenario: &scenarios::Scenario) -> Vec<Parameter> {
+/// The fitted parameters: `scenario`'s anchors, the odometry and the IMU, starting at `start`;
+/// each with where its value goes (the one place that orders them).
+fn parameters(start: &CarProfile, scenario: &scenarios::Scenario) -> Vec<(Parameter, Target)> {
     let mut parameters = Vec::new();
     let radio = start.radio_model();
+    // Steps wide enough to see past the simulated misfit's roughness; tolerances those a twin
+    // needs (docs/twin.md: anchors within 0.1 m, biases within 0.05 m).
+    let parameter =
+        |name: String, start: f64, step: f64, tolerance: f64, bounds: (f64, f64)| Parameter {
+            name,
+            start,
+            step,
+            tolerance,
+            bounds,
+        };
     for anchor in &scenario.anchors {
         let known = start.anchors.get(&anchor.id);
         let offset = known.map_or([0.0, 0.0], |a| a.offset_m);
@@ -40,101 +59,185 @@ fn parameters(start: &CarProfile, scenario: &scenarios::Scenario) -> Vec<Paramet
             .and_then(|a| a.range_bias_m)
             .unwrap_or_else(|| radio.drawn_bias(anchor.id));
         for (axis, value) in offset.into_iter().enumerate() {
-            parameters.push(Parameter {
-                name: format!("anchors.\"{}\".offset_m[{axis}]", anchor.id),
-                start: value,
-                step: 0.2,
-                resolution: 0.02,
-                bounds: (-1.5, 1.5),
-            });
+            parameters.push((
+                parameter(
+                    format!("anchors.\"{}\".offset_m[{axis}]", anchor.id),
+                    value,
+                    0.1,
+                    0.1,
+                    (-2.0, 2.0),
+                ),
+                Target::Offset(anchor.id, axis),
+            ));
         }
-        parameters.push(Parameter {
-            name: format!("anchors.\"{}\".range_bias_m", anchor.id),
-            start: bias,
-            step: 0.1,
-            resolution: 0.01,
-            bounds: (-1.0, 1.0),
-        });
+        parameters.push((
+            parameter(
+                format!("anchors.\"{}\".range_bias_m", anchor.id),
+                bias,
+                0.05,
+                0.05,
+                (-1.0, 1.0),
+            ),
+            Target::Bias(anchor.id),
+        ));
     }
-    parameters.push(Parameter {
-        name: "odometry.scale".to_owned(),
-        start: start.odometry.scale,
-        step: 0.02,
-        resolution: 0.002,
-        bounds: (0.9, 1.1),
-    });
-    parameters.push(Parameter {
-        name: "imu.yaw_bias_deg".to_owned(),
-        start: start.imu.yaw_bias_deg,
-        step: 1.0,
-        resolution: 0.1,
-        bounds: (-5.0, 5.0),
-    });
+    parameters.push((
+        parameter(
+            "odometry.scale".to_owned(),
+            start.odometry.scale,
+            0.01,
+            0.01,
+            (0.9, 1.1),
+        ),
+        Target::OdometryScale,
+    ));
+    parameters.push((
+        parameter(
+            "imu.yaw_bias_deg".to_owned(),
+            start.imu.yaw_bias_deg,
+            0.5,
+            0.5,
+            (-5.0, 5.0),
+        ),
+        Target::YawBias,
+    ));
     parameters
 }
 
-/// `start` with the fitted `values` (in [`parameters`]' order).
-fn candidate(start: &CarProfile, scenario: &scenarios::Scenario, values: &[f64]) -> CarProfile {
+/// `start` with the fitted `values` put where their `targets` say.
+fn candidate(start: &CarProfile, targets: &[Target], values: &[f64]) -> CarProfile {
+    let radio = start.radio_model();
     let mut profile = start.clone();
-    for (k, anchor) in scenario.anchors.iter().enumerate() {
-        let v = &values[3 * k..3 * k + 3];
-        profile.anchors.insert(
-            anchor.id,
-            AnchorProfile {
-                offset_m: [v[0], v[1]],
-                range_bias_m: Some(v[2]),
-            },
-        );
+    for (target, &value) in targets.iter().zip(values) {
+        match *target {
+            Target::Offset(id, axis) => anchor_of(&mut profile, id, &radio).offset_m[axis] = value,
+            Target::Bias(id) => anchor_of(&mut profile, id, &radio).range_bias_m = Some(value),
+            Target::OdometryScale => profile.odometry.scale = value,
+            Target::YawBias => profile.imu.yaw_bias_deg = value,
+        }
     }
-    let n = 3 * scenario.anchors.len();
-    profile.odometry.scale = values[n];
-    profile.imu.yaw_bias_deg = values[n + 1];
     profile
 }
 
-/// Drives every recorded test on `profile` (`runs` runs each, the same seeds for every
-/// candidate) and returns the simulated signature.
-fn simulate(
-    profile: &CarProfile,
-    scenario: &scenarios::Scenario,
-    recorded: &[Recorded],
+/// Anchor `id` of `profile`, added (where it stands, with the bias `radio` draws for it) when the
+/// profile has none.
+fn anchor_of<'p>(
+    profile: &'p mut CarProfile,
+    id: u8,
+    radio: &car_sim::RadioModel,
+) -> &'p mut AnchorProfile {
+    profile.anchors.entry(id).or_insert_with(|| AnchorProfile {
+        offset_m: [0.0, 0.0],
+        range_bias_m: Some(radio.drawn_bias(id)),
+    })
+}
+
+/// A recorded test, ready to drive again: its case file, case, plan (cut where the recording
+/// stops saying anything, see [`cut`]) and the seed of its runs.
+struct Prepared {
+    path: PathBuf,
+    errors: TestErrors,
+    plan: TestPlan,
+    seed: u64,
+}
+
+/// `plan` without the segments after `last_compared + 2`: the compared segments end where the
+/// car enters the next one, and one more keeps the car from braking for the route's end before
+/// that (the ahead margin is shorter than two segments). What comes after is never compared
+/// (only stretches before the first fault are), so driving it is time lost.
+fn cut(mut plan: TestPlan, last_compared: usize) -> TestPlan {
+    let keep = plan
+        .segments()
+        .nth(last_compared + 2)
+        .map(|(index, _)| index + 1);
+    if let Some(keep) = keep {
+        plan.commands.truncate(keep);
+    }
+    plan
+}
+
+/// Drives the recorded tests on candidate profiles: `jobs` candidates at once, each on threads
+/// of its own with a runtime in virtual time and a scratch directory.
+struct Simulator<'a> {
+    scenario: &'a scenarios::Scenario,
+    start: &'a CarProfile,
+    targets: Vec<Target>,
+    tests: Vec<Prepared>,
     runs: u32,
-    scratch: &std::path::Path,
-) -> Result<Signature> {
-    let loaded = LoadedProfile {
-        profile: profile.clone(),
-        name: "candidate".to_owned(),
-    };
-    let sim = loaded.sim_config(scenario)?;
-    let runtime = runtime(true)?;
-    let cancel = runtime.block_on(async { cancel_on_ctrl_c() });
-    let mut runs_of: Vec<Signature> = vec![Signature::default(); runs as usize];
-    for test in recorded {
-        let case: &Case = &test.errors.case;
-        let test_index = case.test_index.unwrap_or_default();
-        let seed = derive(case.campaign_seed.unwrap_or_default(), Purpose::Calibration);
-        let mut driver = SimDriver::new(
-            (scenario, sim.clone()),
-            &test.path,
-            case,
-            scratch.to_owned(),
-            (runs, seed),
-            &cancel,
-        );
-        driver.record = true;
-        // Every segment driven, whatever fails: a candidate must not compare fewer bins by
-        // failing early.
-        driver.policy = campaign::oracle::FailurePolicy::ContinueAndRecord;
-        let plan = driver.plan(case)?;
-        for (k, signature) in runs_of.iter_mut().enumerate() {
-            let seed = derive(seed, Purpose::Run { run: k as u64 });
-            runtime.block_on(driver.drive_once(&plan, seed, &SimSettings::default()))?;
-            for run in error_series(&driver.run_dir(), scenario)? {
-                signature.add_test(test_index, &run.samples, &run.spans);
+    jobs: usize,
+    scratch: PathBuf,
+    cancel: &'a CancellationToken,
+}
+
+impl Simulator<'_> {
+    /// The signature of each candidate (its values in the targets' order), in order.
+    fn signatures(&self, candidates: &[Vec<f64>]) -> Result<Vec<Signature>> {
+        let next = std::sync::atomic::AtomicUsize::new(0);
+        let mut results: Vec<Option<Result<Signature>>> = Vec::new();
+        results.resize_with(candidates.len(), || None);
+        let results = std::sync::Mutex::new(results);
+        std::thread::scope(|scope| {
+            for job in 0..self.jobs.min(candidates.len()) {
+                let (next, results) = (&next, &results);
+                scope.spawn(move || {
+                    let scratch = self.scratch.join(format!("job-{job}"));
+                    loop {
+                        let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(values) = candidates.get(k) else {
+                            break;
+                        };
+                        let profile = candidate(self.start, &self.targets, values);
+                        let signature = self.simulate(&profile, &scratch);
+                        if let Ok(mut results) = results.lock() {
+                            results[k] = Some(signature);
+                        }
+                    }
+                });
+            }
+        });
+        results
+            .into_inner()
+            .map_err(|_| anyhow::anyhow!("a driving thread failed"))?
+            .into_iter()
+            .map(|r| r.unwrap_or_else(|| Err(anyhow::anyhow!("a candidate was not driven"))))
+            .collect()
+    }
+
+    /// The signature of `profile`: every recorded test driven `runs` times (the same seeds for
+    /// every candidate), the runs' mean.
+    fn simulate(&self, profile: &CarProfile, scratch: &Path) -> Result<Signature> {
+        let loaded = LoadedProfile {
+            profile: profile.clone(),
+            name: "candidate".to_owned(),
+        };
+        let sim = loaded.sim_config(self.scenario)?;
+        let runtime = runtime(true)?;
+        let mut runs_of: Vec<Signature> = vec![Signature::default(); self.runs as usize];
+        for test in &self.tests {
+            let case = &test.errors.case;
+            let test_index = case.test_index.unwrap_or_default();
+            let mut driver = SimDriver::new(
+                (self.scenario, sim.clone()),
+                &test.path,
+                case,
+                scratch.to_owned(),
+                (self.runs, test.seed),
+                self.cancel,
+            );
+            driver.record = true;
+            // Every segment driven, whatever fails: a candidate must not compare fewer bins by
+            // failing early.
+            driver.policy = campaign::oracle::FailurePolicy::ContinueAndRecord;
+            for (k, signature) in runs_of.iter_mut().enumerate() {
+                let seed = derive(test.seed, Purpose::Run { run: k as u64 });
+                runtime.block_on(driver.drive_once(&test.plan, seed, &SimSettings::default()))?;
+                for run in error_series(&driver.run_dir(), self.scenario)? {
+                    signature.add_test(test_index, &run.samples, &run.spans);
+                }
             }
         }
+        Ok(Signature::mean(&runs_of))
     }
-    Ok(Signature::mean(&runs_of))
 }
 
 /// `drivecheck calibrate`. Exit status: 0 fitted, 2 error.
@@ -161,45 +264,88 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Exit> {
                 dir.display()
             );
         }
-        for errors in tests {
-            recorded.push(Recorded {
-                path: dir.join(&errors.file),
-                errors,
-            });
-        }
+        recorded.extend(
+            tests
+                .into_iter()
+                .map(|errors| (dir.join(&errors.file), errors)),
+        );
     }
     let Some(scenario) = scenario else {
         bail!("give at least one run directory");
     };
-    let mut signature = Signature::default();
-    for test in &recorded {
-        let index = test.errors.case.test_index.unwrap_or_default();
-        signature.add_test(index, &test.errors.samples, &test.errors.spans);
-    }
     let start = LoadedProfile::load(args.from.as_deref())?;
-    let parameters = parameters(&start.profile, &scenario);
+    let start_sim = start.sim_config(&scenario)?;
+    let interrupt_runtime = runtime(false)?;
+    let cancel = interrupt_runtime.block_on(async { cancel_on_ctrl_c() });
     let scratch = std::env::temp_dir().join(format!("drivecheck-calibrate-{}", std::process::id()));
+    let mut signature = Signature::default();
+    let mut tests = Vec::new();
+    for (path, errors) in recorded {
+        let test_index = errors.case.test_index.unwrap_or_default();
+        let mut own = Signature::default();
+        own.add_test(test_index, &errors.samples, &errors.spans);
+        let Some(last_compared) = own.bins.keys().map(|&(_, segment, _)| segment).max() else {
+            continue; // nothing of it to compare (a fault from the start)
+        };
+        signature.bins.extend(own.bins);
+        let seed = derive(
+            errors.case.campaign_seed.unwrap_or_default(),
+            Purpose::Calibration,
+        );
+        let driver = SimDriver::new(
+            (&scenario, start_sim.clone()),
+            &path,
+            &errors.case,
+            scratch.clone(),
+            (args.sim_runs, seed),
+            &cancel,
+        );
+        let plan = cut(driver.plan(&errors.case)?, last_compared);
+        tests.push(Prepared {
+            path,
+            errors,
+            plan,
+            seed,
+        });
+    }
+    if tests.is_empty() {
+        bail!("no recorded test has a stretch before its first fault to compare");
+    }
+    let (parameters, targets): (Vec<Parameter>, Vec<Target>) =
+        parameters(&start.profile, &scenario).into_iter().unzip();
+    let jobs = args.jobs.map_or_else(
+        || std::thread::available_parallelism().map_or(1, usize::from),
+        |j| j as usize,
+    );
+    let simulator = Simulator {
+        scenario: &scenario,
+        start: &start.profile,
+        targets: targets.clone(),
+        tests,
+        runs: args.sim_runs,
+        jobs,
+        scratch: scratch.clone(),
+        cancel: &cancel,
+    };
     let bar = ProgressBar::new_spinner();
     if let Ok(style) = ProgressStyle::with_template("{elapsed_precise} {spinner} {msg}") {
         bar.set_style(style);
     }
     bar.enable_steady_tick(std::time::Duration::from_millis(120));
     eprintln!(
-        "calibrating {} parameters on {} recorded test(s), {} simulated run(s) each, budget {}",
+        "calibrating {} parameters on {} recorded test(s) ({} stretches before any fault), {} simulated run(s) each, {} at once, budget {}",
         parameters.len(),
-        recorded.len(),
+        simulator.tests.len(),
+        signature.bins.len(),
         args.sim_runs,
+        jobs,
         humantime::format_duration(args.budget)
     );
     let evaluations = std::cell::Cell::new(0usize);
     let result = fit(
         &parameters,
-        |values| {
-            let profile = candidate(&start.profile, &scenario, values);
-            let simulated = simulate(&profile, &scenario, &recorded, args.sim_runs, &scratch)
-                .map_err(|e| format!("{e:#}"))?;
-            Ok(misfit(&signature, &simulated))
-        },
+        &signature,
+        |batch| simulator.signatures(batch).map_err(|e| format!("{e:#}")),
         || {
             started.elapsed() < args.budget
                 && args
@@ -209,7 +355,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Exit> {
         |count, best| {
             evaluations.set(count);
             bar.set_message(format!(
-                "evaluation {count}: misfit {:.4} m² (rms {:.3} m)",
+                "{count} candidates: misfit {:.4} m² (rms {:.3} m)",
                 best,
                 best.sqrt()
             ));
@@ -219,7 +365,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Exit> {
     let _ = std::fs::remove_dir_all(&scratch);
     let fit = result?;
     let values: Vec<f64> = fit.parameters.iter().map(|p| p.value).collect();
-    let profile = candidate(&start.profile, &scenario, &values);
+    let profile = candidate(&start.profile, &targets, &values);
     profile.check(&args.out.display().to_string())?;
     let text = format!(
         "{}{}",
@@ -229,17 +375,33 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Exit> {
     crate::atomic::write(&args.out, text)?;
     print!("{}", table(&fit));
     println!(
-        "written: {} ({} evaluations, {:.0} s{})",
+        "written: {} ({} candidates in {} iterations, {:.0} s{})",
         args.out.display(),
         fit.evaluations,
+        fit.iterations,
         started.elapsed().as_secs_f64(),
         if fit.out_of_budget {
-            "; the budget (--budget, --max-evaluations) ended the search: give more for a finer fit"
+            "; the budget (--budget, --max-evaluations) ended the fit before it converged: give more for a finer fit"
         } else {
             ""
         }
     );
     Ok(Exit::Success)
+}
+
+/// Whether the recordings identify `p`, in words.
+fn identification(p: &Fitted) -> String {
+    match (&p.trades_off_with, p.standard_error) {
+        _ if p.identified => "yes".to_owned(),
+        (_, None) => "no: the recordings say nothing of it (kept)".to_owned(),
+        (Some((with, rho)), Some(_)) => format!(
+            "no: trades off with {with} (correlation {rho:+.2}): only their combination is fitted"
+        ),
+        (None, Some(_)) => format!(
+            "no: the recordings cannot tell its values apart to ±{}",
+            p.tolerance
+        ),
+    }
 }
 
 /// The comment the profile file begins with: where it came from and how well it fits.
@@ -259,14 +421,12 @@ fn header(fit: &Fit, args: &CalibrateArgs, wall: std::time::Duration) -> String 
     );
     for p in &fit.parameters {
         out.push_str(&format!(
-            "# {} = {:.4}{}\n",
+            "# {} = {:.4}{}; identified: {}\n",
             p.name,
             p.value,
-            match (p.identified, p.standard_error) {
-                (false, _) => " (not identified by the recordings: kept)".to_owned(),
-                (true, Some(se)) => format!(" ± {se:.4}"),
-                (true, None) => String::new(),
-            }
+            p.standard_error
+                .map_or_else(String::new, |se| format!(" ± {se:.4}")),
+            identification(p)
         ));
     }
     out.push_str(
@@ -286,11 +446,7 @@ fn table(fit: &Fit) -> String {
             p.value,
             p.standard_error
                 .map_or_else(|| "-".to_owned(), |se| format!("{se:.3}")),
-            if p.identified {
-                "yes"
-            } else {
-                "no: the recordings cannot tell its values apart (kept)"
-            }
+            identification(p)
         ));
     }
     out.push_str(&format!(
