@@ -18,7 +18,10 @@
 //! their noise is common and the residuals change smoothly with the parameters; the step is wide
 //! enough to see past what roughness is left. It needs a handful of iterations of `parameters +
 //! 2` candidates, where a search one parameter at a time needs hundreds, and its Jacobian is what
-//! says how sure the fit is.
+//! says how sure the fit is. A descent finds the valley it starts in; the misfit of a car can
+//! have more than one (an odometry scale too large and anchors moved to match fit as well as
+//! the truth), so the fit descends again from restarts, [`RESTART_TOLERANCES`] tolerances away
+//! in patterns of directions, while the budget lasts, and keeps the best.
 //!
 //! **How sure.** At the optimum, with the Jacobian `J` and `A = JᵀJ`, the covariance of the
 //! parameters is the sandwich `A⁻¹ (Σₜ gₜ gₜᵀ) A⁻¹` over the tests t, `gₜ = Jₜᵀ rₜ` of test t's
@@ -31,7 +34,9 @@
 //! anchor away from where the car drives looks like a longer range), and the recordings fix only
 //! their combination. A parameter whose standard error is larger than its
 //! [`Parameter::tolerance`] is *not identified*: the recordings cannot tell its values apart
-//! (an anchor the car never ranged, or one half of a trade-off).
+//! (an anchor the car never ranged, or one half of a trade-off); so is one that another descent
+//! put more than its tolerance away with a misfit as good (within [`AS_GOOD`]): the curvature of
+//! one valley cannot see another.
 
 use std::collections::BTreeMap;
 
@@ -43,6 +48,15 @@ pub const TRADE_OFF: f64 = 0.9;
 
 /// Iterations of the fit at most (each `parameters + 2` candidates).
 pub const MAX_ITERATIONS: usize = 20;
+
+/// How far a restart starts from the starting values, in tolerances of each parameter.
+pub const RESTART_TOLERANCES: f64 = 3.0;
+
+/// How much larger than the best a restart's misfit (an rms, m) may be and still count as a fit
+/// as good, relative: on the three cars of `docs/twin.md` the true profile's own misfit was up
+/// to 7 % above the best fit's (a fit also fits the simulated runs' noise), so a smaller gap says
+/// nothing of which is the car.
+pub const AS_GOOD: f64 = 0.10;
 
 /// The relative fall of the misfit below which an iteration counts as converged.
 const CONVERGED_RELATIVE: f64 = 1e-3;
@@ -172,10 +186,14 @@ pub struct Fitted {
     pub standard_error: Option<f64>,
     /// The parameter's tolerance ([`Parameter::tolerance`]).
     pub tolerance: f64,
-    /// Whether the standard error is within the parameter's tolerance.
+    /// Whether the standard error is within the parameter's tolerance and no other fit as good
+    /// put it elsewhere.
     pub identified: bool,
     /// The parameter it trades off with most and their correlation, beyond [`TRADE_OFF`].
     pub trades_off_with: Option<(String, f64)>,
+    /// Where another fit as good (a restart's, within [`AS_GOOD`] of the best rms misfit) put it,
+    /// when that is more than its tolerance away.
+    pub also: Option<f64>,
 }
 
 /// What a fit found.
@@ -191,8 +209,10 @@ pub struct Fit {
     pub bins: usize,
     /// Candidates evaluated.
     pub evaluations: usize,
-    /// Iterations made.
+    /// Iterations made, over every descent.
     pub iterations: usize,
+    /// Descents made: from the starting values and from restarts.
+    pub fits: usize,
     /// Whether the budget ended the search before it converged.
     pub out_of_budget: bool,
 }
@@ -259,17 +279,20 @@ impl<'a> Residuals<'a> {
 
 /// Fits `parameters` so that the residuals of the signatures `evaluate` gives (one per candidate
 /// of a batch, the candidates' values in `parameters`' order) against `recorded` are least, while
-/// `in_budget` says there is time (see the module doc); then measures how sure each parameter is.
+/// `in_budget` says there is time (see the module doc): from the starting values, then from
+/// `restarts` other places while the budget lasts; then measures how sure each parameter is.
 /// `progress` hears the number of candidates evaluated and the best misfit so far.
 pub fn fit(
     parameters: &[Parameter],
     recorded: &Signature,
+    restarts: usize,
     mut evaluate: impl FnMut(&[Vec<f64>]) -> Result<Vec<Signature>, String>,
     mut in_budget: impl FnMut() -> bool,
     mut progress: impl FnMut(usize, f64),
 ) -> Result<Fit, FitError> {
     let mut evaluations = 0;
-    let mut batch = |candidates: &[Vec<f64>], evaluations: &mut usize| {
+    let best_so_far = std::cell::Cell::new(f64::INFINITY);
+    let mut batch = |candidates: &[Vec<f64>]| {
         let signatures = evaluate(candidates).map_err(FitError::Driving)?;
         if signatures.len() != candidates.len() {
             return Err(FitError::Batch {
@@ -277,90 +300,64 @@ pub fn fit(
                 given: signatures.len(),
             });
         }
-        *evaluations += candidates.len();
+        evaluations += candidates.len();
+        progress(evaluations, best_so_far.get());
         Ok(signatures)
     };
-    let mut x: Vec<f64> = parameters.iter().map(|p| p.start).collect();
-    let start = batch(std::slice::from_ref(&x), &mut evaluations)?;
-    let residuals = Residuals::new(recorded, &start[0]);
+    let start: Vec<f64> = parameters.iter().map(|p| p.start).collect();
+    let signature = batch(std::slice::from_ref(&start))?;
+    let residuals = Residuals::new(recorded, &signature[0]);
     if residuals.keys.is_empty() {
         return Err(FitError::NothingToCompare);
     }
-    let mut r = residuals.of(&start[0]);
+    let r = residuals.of(&signature[0]);
     let start_misfit = residuals.misfit(&r);
-    let mut misfit = start_misfit;
-    progress(evaluations, misfit);
-    let mut lambda = 1e-2;
-    let mut jacobian: Option<(Vec<f64>, Vec<Vec<f64>>)> = None;
-    let mut out_of_budget = false;
-    let mut iterations = 0;
-    'iterate: while iterations < MAX_ITERATIONS {
+    best_so_far.set(start_misfit);
+    let mut descents = vec![descend(
+        parameters,
+        (&residuals, &best_so_far),
+        (start, r),
+        &mut batch,
+        &mut in_budget,
+    )?];
+    for restart in 1..=restarts {
         if !in_budget() {
-            out_of_budget = true;
             break;
         }
-        iterations += 1;
-        let columns = jacobian_at(parameters, &x, &r, &residuals, |c| {
-            batch(c, &mut evaluations)
-        })?;
-        let (a, g) = normal_equations(&columns, &r);
-        jacobian = Some((x.clone(), columns));
-        loop {
-            if !in_budget() {
-                out_of_budget = true;
-                break 'iterate;
-            }
-            let trials: Vec<Vec<f64>> = [lambda, 10.0 * lambda]
-                .iter()
-                .map(|&l| damped_step(parameters, &x, &a, &g, l))
-                .collect();
-            let signatures = batch(&trials, &mut evaluations)?;
-            let (k, new_r, new_misfit) = signatures
-                .iter()
-                .enumerate()
-                .map(|(k, s)| {
-                    let r = residuals.of(s);
-                    let m = residuals.misfit(&r);
-                    (k, r, m)
-                })
-                .min_by(|a, b| a.2.total_cmp(&b.2))
-                .expect("two trials");
-            progress(evaluations, misfit.min(new_misfit));
-            if new_misfit < misfit {
-                let fall = (misfit - new_misfit) / misfit.max(f64::MIN_POSITIVE);
-                let moved = trials[k]
-                    .iter()
-                    .zip(&x)
-                    .zip(parameters)
-                    .any(|((new, old), p)| (new - old).abs() > p.step / 20.0);
-                lambda = if k == 0 {
-                    (lambda / 3.0).max(1e-7)
-                } else {
-                    10.0 * lambda
-                };
-                x = trials[k].clone();
-                r = new_r;
-                misfit = new_misfit;
-                if fall < CONVERGED_RELATIVE || !moved {
-                    break 'iterate;
-                }
-                break;
-            }
-            lambda *= 100.0;
-            if lambda > 1e6 {
-                // No damping lowers the misfit: a minimum, as far as the steps can see.
-                break 'iterate;
-            }
-        }
+        let x = restart_point(parameters, restart);
+        let signature = batch(std::slice::from_ref(&x))?;
+        let r = residuals.of(&signature[0]);
+        descents.push(descend(
+            parameters,
+            (&residuals, &best_so_far),
+            (x, r),
+            &mut batch,
+            &mut in_budget,
+        )?);
     }
+    let best = descents
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.misfit.total_cmp(&b.1.misfit))
+        .map_or(0, |(k, _)| k);
+    let out_of_budget = descents.iter().any(|d| d.out_of_budget);
+    let iterations = descents.iter().map(|d| d.iterations).sum();
+    let fits = descents.len();
+    // The other fits as good as the best: where they put each parameter.
+    let as_good: Vec<Vec<f64>> = descents
+        .iter()
+        .enumerate()
+        .filter(|&(k, d)| k != best && d.misfit <= descents[best].misfit * (1.0 + AS_GOOD).powi(2))
+        .map(|(_, d)| d.x.clone())
+        .collect();
+    let Descent { x, r, jacobian, .. } = descents.swap_remove(best);
     // How sure: the Jacobian at the fitted values (measured again if they moved since).
     // Out of budget, the last one measured (near enough for a scale).
     let columns = match jacobian {
         Some((at, columns)) if at == x || out_of_budget => columns,
-        _ => jacobian_at(parameters, &x, &r, &residuals, |c| {
-            batch(c, &mut evaluations)
-        })?,
+        _ => jacobian_at(parameters, &x, &r, &residuals, &mut batch)?,
     };
+    let misfit = residuals.misfit(&r);
     let (a, _) = normal_equations(&columns, &r);
     let covariances = covariances(&a, &columns, &r, &residuals.keys);
     let fitted = parameters
@@ -386,13 +383,19 @@ pub fn fit(
                     .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
                     .map(|(j, rho)| (parameters[j].name.clone(), rho))
             });
+            let also = as_good
+                .iter()
+                .map(|other| other[i])
+                .max_by(|a, b| (a - x[i]).abs().total_cmp(&(b - x[i]).abs()))
+                .filter(|other| (other - x[i]).abs() > p.tolerance);
             Fitted {
                 name: p.name.clone(),
                 value: x[i],
                 standard_error,
                 tolerance: p.tolerance,
-                identified: standard_error.is_some_and(|se| se <= p.tolerance),
+                identified: also.is_none() && standard_error.is_some_and(|se| se <= p.tolerance),
                 trades_off_with,
+                also,
             }
         })
         .collect();
@@ -402,6 +405,119 @@ pub fn fit(
         misfit,
         bins: residuals.keys.len(),
         evaluations,
+        iterations,
+        fits,
+        out_of_budget,
+    })
+}
+
+/// Restart `k` (from 1): every parameter [`RESTART_TOLERANCES`] tolerances from its start, up or
+/// down by a pattern of its own (restart 1 down, up, down, …; 2 the opposite; 3 and 4 in pairs;
+/// and so on), within its bounds: far enough to fall into another valley if there is one.
+fn restart_point(parameters: &[Parameter], k: usize) -> Vec<f64> {
+    let period = 1usize << ((k - 1) / 2).min(16);
+    parameters
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let up = (i / period + k).is_multiple_of(2);
+            let sign = if up { 1.0 } else { -1.0 };
+            (p.start + sign * RESTART_TOLERANCES * p.tolerance).clamp(p.bounds.0, p.bounds.1)
+        })
+        .collect()
+}
+
+/// One Levenberg–Marquardt descent: where it ended, its residuals and the last Jacobian measured.
+struct Descent {
+    x: Vec<f64>,
+    r: Vec<f64>,
+    misfit: f64,
+    jacobian: Option<(Vec<f64>, Matrix)>,
+    iterations: usize,
+    out_of_budget: bool,
+}
+
+/// A batch of candidates' signatures, or why not.
+type Batch<'b> = dyn FnMut(&[Vec<f64>]) -> Result<Vec<Signature>, FitError> + 'b;
+
+/// Levenberg–Marquardt from `x` (residuals `r`), see the module doc; `best` is lowered to every
+/// better misfit it finds.
+fn descend(
+    parameters: &[Parameter],
+    (residuals, best): (&Residuals, &std::cell::Cell<f64>),
+    (mut x, mut r): (Vec<f64>, Vec<f64>),
+    batch: &mut Batch,
+    in_budget: &mut dyn FnMut() -> bool,
+) -> Result<Descent, FitError> {
+    let mut misfit = residuals.misfit(&r);
+    let mut lambda = 1e-2;
+    let mut jacobian = None;
+    let mut out_of_budget = false;
+    let mut iterations = 0;
+    'iterate: while iterations < MAX_ITERATIONS {
+        if !in_budget() {
+            out_of_budget = true;
+            break;
+        }
+        iterations += 1;
+        let columns = jacobian_at(parameters, &x, &r, residuals, batch)?;
+        let (a, g) = normal_equations(&columns, &r);
+        jacobian = Some((x.clone(), columns));
+        loop {
+            if !in_budget() {
+                out_of_budget = true;
+                break 'iterate;
+            }
+            let trials: Vec<Vec<f64>> = [lambda, 10.0 * lambda]
+                .iter()
+                .map(|&l| damped_step(parameters, &x, &a, &g, l))
+                .collect();
+            let signatures = batch(&trials)?;
+            let Some((k, new_r, new_misfit)) = signatures
+                .iter()
+                .enumerate()
+                .map(|(k, s)| {
+                    let r = residuals.of(s);
+                    let m = residuals.misfit(&r);
+                    (k, r, m)
+                })
+                .min_by(|a, b| a.2.total_cmp(&b.2))
+            else {
+                break 'iterate;
+            };
+            if new_misfit < misfit {
+                let fall = (misfit - new_misfit) / misfit.max(f64::MIN_POSITIVE);
+                let moved = trials[k]
+                    .iter()
+                    .zip(&x)
+                    .zip(parameters)
+                    .any(|((new, old), p)| (new - old).abs() > p.step / 20.0);
+                lambda = if k == 0 {
+                    (lambda / 3.0).max(1e-7)
+                } else {
+                    10.0 * lambda
+                };
+                x = trials[k].clone();
+                r = new_r;
+                misfit = new_misfit;
+                best.set(best.get().min(misfit));
+                if fall < CONVERGED_RELATIVE || !moved {
+                    break 'iterate;
+                }
+                break;
+            }
+            lambda *= 100.0;
+            if lambda > 1e6 {
+                // No damping lowers the misfit: a minimum, as far as the steps can see.
+                break 'iterate;
+            }
+        }
+    }
+    Ok(Descent {
+        x,
+        r,
+        misfit,
+        jacobian,
         iterations,
         out_of_budget,
     })
@@ -469,8 +585,8 @@ fn jacobian_at(
     x: &[f64],
     r: &[f64],
     residuals: &Residuals,
-    batch: impl FnOnce(&[Vec<f64>]) -> Result<Vec<Signature>, FitError>,
-) -> Result<Vec<Vec<f64>>, FitError> {
+    batch: &mut Batch,
+) -> Result<Matrix, FitError> {
     let steps: Vec<f64> = parameters
         .iter()
         .zip(x)
@@ -683,6 +799,7 @@ mod tests {
         let fit = fit(
             &parameters,
             &recorded,
+            0,
             |batch| Ok(batch.iter().map(|x| model(x, linear)).collect()),
             || true,
             |_, _| {},
@@ -732,6 +849,7 @@ mod tests {
         let fit = fit(
             &parameters,
             &recorded,
+            0,
             |batch| Ok(batch.iter().map(|x| model(x, range)).collect()),
             || true,
             |_, _| {},
@@ -751,11 +869,15 @@ mod tests {
         let parameters = [parameter("a", 0.0)];
         let recorded = model(&[0.3], |k, x| {
             let test = k / BINS;
-            (x[0] + 0.1 * if test.is_multiple_of(2) { 1.0 } else { -1.0 }, 0.0)
+            (
+                x[0] + 0.1 * if test.is_multiple_of(2) { 1.0 } else { -1.0 },
+                0.0,
+            )
         });
         let fit = fit(
             &parameters,
             &recorded,
+            0,
             |batch| Ok(batch.iter().map(|x| model(x, |_, x| (x[0], 0.0))).collect()),
             || true,
             |_, _| {},
@@ -769,6 +891,48 @@ mod tests {
     }
 
     #[test]
+    fn a_restart_finds_a_second_valley_and_the_parameter_is_not_identified() {
+        // East x² at every bin: x = 0.3 and x = −0.3 fit alike; y is linear and known.
+        let f = |_: usize, x: &[f64]| (x[0] * x[0], x[1]);
+        let recorded = model(&[0.3, 0.2], |k, x| {
+            let (e, n) = f(k, x);
+            (e + 0.01 * (k as f64).sin(), n)
+        });
+        let parameters = [parameter("x", 0.1), parameter("y", 0.0)];
+        let run = |restarts| {
+            fit(
+                &parameters,
+                &recorded,
+                restarts,
+                |batch| Ok(batch.iter().map(|x| model(x, f)).collect()),
+                || true,
+                |_, _| {},
+            )
+            .unwrap()
+        };
+        let alone = run(0);
+        assert!((alone.parameters[0].value - 0.3).abs() < 0.01, "{alone:?}");
+        assert!(
+            alone.parameters[0].identified && alone.fits == 1,
+            "{alone:?}"
+        );
+        let restarted = run(2);
+        let x = &restarted.parameters[0];
+        assert_eq!(restarted.fits, 3);
+        assert!(!x.identified, "{restarted:?}");
+        let also = x.also.unwrap();
+        assert!(
+            (also.abs() - 0.3).abs() < 0.01 && also * x.value < 0.0,
+            "{x:?}"
+        );
+        let y = &restarted.parameters[1];
+        assert!(
+            y.identified && y.also.is_none() && (y.value - 0.2).abs() < 0.01,
+            "{y:?}"
+        );
+    }
+
+    #[test]
     fn the_budget_ends_the_fit_with_the_best_so_far() {
         let recorded = model(&[0.3, -0.1, 0.0, 0.2, 0.0], linear);
         let parameters = ["a", "b", "c", "d", "e"].map(|n| parameter(n, 0.0));
@@ -776,6 +940,7 @@ mod tests {
         let fit = fit(
             &parameters,
             &recorded,
+            0,
             |batch| Ok(batch.iter().map(|x| model(x, linear)).collect()),
             || {
                 calls += 1;
@@ -792,11 +957,19 @@ mod tests {
     fn a_batch_of_the_wrong_size_and_nothing_to_compare_are_errors() {
         let recorded = model(&[0.0; 5], linear);
         let parameters = ["a", "b", "c", "d", "e"].map(|n| parameter(n, 0.0));
-        let wrong = fit(&parameters, &recorded, |_| Ok(vec![]), || true, |_, _| {});
+        let wrong = fit(
+            &parameters,
+            &recorded,
+            0,
+            |_| Ok(vec![]),
+            || true,
+            |_, _| {},
+        );
         assert_eq!(wrong, Err(FitError::Batch { asked: 1, given: 0 }));
         let nothing = fit(
             &parameters,
             &recorded,
+            0,
             |batch| Ok(vec![Signature::default(); batch.len()]),
             || true,
             |_, _| {},

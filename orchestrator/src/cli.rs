@@ -489,6 +489,11 @@ pub struct CalibrateArgs {
     /// The profile to start from (and to keep what is not fitted from): `default` or a file.
     #[arg(long, value_name = "FILE")]
     pub from: Option<PathBuf>,
+    /// Descents from other starting points after the first, while the budget lasts (each about
+    /// as long as the first): a parameter another descent puts elsewhere with as good a fit is
+    /// named not identified, and the best fit is kept.
+    #[arg(long, value_name = "N", default_value_t = 2, value_parser = clap::value_parser!(u32).range(0..=16))]
+    pub restarts: u32,
     /// Candidate profiles driven at once, each on a thread of its own (default: the number of
     /// cores). The fit does not depend on it.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=1024))]

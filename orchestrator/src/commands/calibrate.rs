@@ -345,6 +345,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Exit> {
     let result = fit(
         &parameters,
         &signature,
+        args.restarts as usize,
         |batch| simulator.signatures(batch).map_err(|e| format!("{e:#}")),
         || {
             started.elapsed() < args.budget
@@ -375,13 +376,14 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Exit> {
     crate::atomic::write(&args.out, text)?;
     print!("{}", table(&fit));
     println!(
-        "written: {} ({} candidates in {} iterations, {:.0} s{})",
+        "written: {} ({} candidates, {} descent(s) of {} iterations in all, {:.0} s{})",
         args.out.display(),
         fit.evaluations,
+        fit.fits,
         fit.iterations,
         started.elapsed().as_secs_f64(),
         if fit.out_of_budget {
-            "; the budget (--budget, --max-evaluations) ended the fit before it converged: give more for a finer fit"
+            "; the budget (--budget, --max-evaluations) ended a descent before it converged: give more for a finer fit and more restarts"
         } else {
             ""
         }
@@ -391,8 +393,13 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Exit> {
 
 /// Whether the recordings identify `p`, in words.
 fn identification(p: &Fitted) -> String {
+    if p.identified {
+        return "yes".to_owned();
+    }
+    if let Some(also) = p.also {
+        return format!("no: another fit as good puts it at {also:.3}");
+    }
     match (&p.trades_off_with, p.standard_error) {
-        _ if p.identified => "yes".to_owned(),
         (_, None) => "no: the recordings say nothing of it (kept)".to_owned(),
         (Some((with, rho)), Some(_)) => format!(
             "no: trades off with {with} (correlation {rho:+.2}): only their combination is fitted"
