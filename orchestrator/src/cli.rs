@@ -18,6 +18,13 @@ pub struct Cli {
     /// What to do.
     #[command(subcommand)]
     pub command: Command,
+    /// Print only the result (a campaign's summary) and errors: no progress, notes or warnings.
+    #[arg(short, long, global = true, conflicts_with = "verbose")]
+    pub quiet: bool,
+    /// Print more: a line for every test of a large campaign, every test in its table, the
+    /// bundled scenarios' drawing warnings.
+    #[arg(short, long, global = true)]
+    pub verbose: bool,
 }
 
 /// The subcommands.

@@ -16,6 +16,7 @@ pub mod cli;
 pub mod commands;
 pub mod exit;
 pub mod junit;
+pub mod output;
 pub mod profile_arg;
 pub mod recording;
 pub mod report;

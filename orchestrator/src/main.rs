@@ -24,6 +24,13 @@ fn main() -> ExitCode {
             .into();
         }
     };
+    orchestrator::output::set(if cli.quiet {
+        orchestrator::output::Verbosity::Quiet
+    } else if cli.verbose {
+        orchestrator::output::Verbosity::Verbose
+    } else {
+        orchestrator::output::Verbosity::Normal
+    });
     match orchestrator::commands::run(cli) {
         Ok(exit) => exit.into(),
         Err(error) => {

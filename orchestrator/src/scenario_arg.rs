@@ -21,18 +21,36 @@ pub fn load_scenario(arg: &str) -> Result<Loaded> {
     )
 }
 
-/// Prints a loaded scenario's warnings on standard error, one a line.
+/// Prints a loaded scenario's warnings on standard error, one a line: always (what `scenario
+/// check` and `area validate` are for).
 pub fn print_warnings(loaded: &Loaded) {
     for warning in &loaded.warnings {
         eprintln!("warning: {warning}");
     }
 }
 
-/// The scenario of an optional `--scenario` argument, loaded with its warnings printed.
+/// Prints the warnings of the scenario `arg` named when a command uses it: a file's (unless
+/// `-q`), but a bundled scenario's only with `-v` — they are the same on every run, and `scenario
+/// check NAME` shows them.
+pub fn print_warnings_of_use(arg: &str, loaded: &Loaded) {
+    use crate::output::{Verbosity, verbosity};
+    let bundled = !Path::new(arg).exists() && scenarios::bundled::text(arg).is_some();
+    let shown = match verbosity() {
+        Verbosity::Quiet => false,
+        Verbosity::Normal => !bundled,
+        Verbosity::Verbose => true,
+    };
+    if shown {
+        print_warnings(loaded);
+    }
+}
+
+/// The scenario of an optional `--scenario` argument, loaded with its warnings printed (see
+/// [`print_warnings_of_use`]).
 pub fn optional_scenario(arg: Option<&str>) -> Result<Option<scenarios::Scenario>> {
     arg.map(|arg| {
         let loaded = load_scenario(arg)?;
-        print_warnings(&loaded);
+        print_warnings_of_use(arg, &loaded);
         Ok(loaded.scenario)
     })
     .transpose()

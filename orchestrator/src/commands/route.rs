@@ -8,7 +8,7 @@ use trajgen::{ExtensionStats, Generator, Point, RouteTail};
 
 use crate::cli::GenerateArgs;
 use crate::exit::Exit;
-use crate::scenario_arg::{load_scenario, print_warnings};
+use crate::scenario_arg::{load_scenario, print_warnings_of_use};
 use crate::seed::{choose_seed, rng};
 
 /// What `route generate --json` prints.
@@ -49,7 +49,7 @@ impl RouteStats {
 /// Generates `--points` points after the start route, in extensions of the scenario's size.
 pub fn generate(args: &GenerateArgs) -> Result<Exit> {
     let loaded = load_scenario(&args.scenario)?;
-    print_warnings(&loaded);
+    print_warnings_of_use(&args.scenario, &loaded);
     let scenario = &loaded.scenario;
     let seed = choose_seed(args.seed);
     eprintln!("seed {seed}");

@@ -9,7 +9,7 @@ use trajgen::{Point, Pose};
 
 use crate::cli::ReturnArgs;
 use crate::exit::Exit;
-use crate::scenario_arg::{load_scenario, print_warnings};
+use crate::scenario_arg::{load_scenario, print_warnings_of_use};
 use crate::seed::{choose_seed, rng};
 
 /// What `route return --json` prints.
@@ -60,7 +60,7 @@ pub fn parse_pose(text: &str) -> Result<Pose> {
 /// Plans and prints the return route.
 pub fn plan(args: &ReturnArgs) -> Result<Exit> {
     let loaded = load_scenario(&args.scenario)?;
-    print_warnings(&loaded);
+    print_warnings_of_use(&args.scenario, &loaded);
     let scenario = &loaded.scenario;
     let from = parse_pose(&args.from)?;
     let seed = choose_seed(args.seed);

@@ -20,7 +20,7 @@ use crate::report::explain::{ExplainOptions, describe_source, explain_run};
 use crate::runner::{
     CampaignReport, RecordMode, RunConfig, run_campaign, run_campaign_fresh, run_dir_name,
 };
-use crate::scenario_arg::{load_scenario, print_warnings};
+use crate::scenario_arg::{load_scenario, print_warnings_of_use};
 use crate::seed::choose_seed;
 use crate::vehicle::{EmbeddedSims, connect};
 use campaign::files::Case;
@@ -33,7 +33,7 @@ use campaign::shrink::MINIMAL_FILE;
 /// failed or was aborted, 2 an error (preflight refused, link lost, interrupted, …).
 pub fn run(args: &RunArgs) -> Result<Exit> {
     let loaded = load_scenario(&args.scenario)?;
-    print_warnings(&loaded);
+    print_warnings_of_use(&args.scenario, &loaded);
     let scenario = loaded.scenario;
     if scenario.anchors.is_empty() && !args.allow_no_anchors {
         anyhow::bail!(
@@ -102,22 +102,24 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     let jobs = jobs(args, embedded)?;
     // A live view is for watching: a virtual-time campaign would be over before anyone looks.
     let virtual_time = embedded && !args.realtime && args.live.is_none();
-    eprintln!(
-        "seed {seed}: {}{} tests on {} with car {}{}{}, writing {}",
-        config.test_indices().len(),
-        args.shard
-            .map(|s| format!(" of {} (shard {s})", campaign.tests))
-            .unwrap_or_default(),
-        scenario.name,
-        args.car,
-        if virtual_time { " (virtual time)" } else { "" },
-        if jobs > 1 {
-            format!(", {jobs} at once")
-        } else {
-            String::new()
-        },
-        config.out_dir.display()
-    );
+    if crate::output::chatty() {
+        eprintln!(
+            "seed {seed}: {}{} tests on {} with car {}{}{}, writing {}",
+            config.test_indices().len(),
+            args.shard
+                .map(|s| format!(" of {} (shard {s})", campaign.tests))
+                .unwrap_or_default(),
+            scenario.name,
+            args.car,
+            if virtual_time { " (virtual time)" } else { "" },
+            if jobs > 1 {
+                format!(", {jobs} at once")
+            } else {
+                String::new()
+            },
+            config.out_dir.display()
+        );
+    }
     let started = Instant::now();
     let result = if embedded {
         campaign_on_fresh_cars(&scenario, &sim, &mut config, jobs, virtual_time, args.live)
@@ -176,6 +178,13 @@ fn explain_failed(report: &CampaignReport, scenario: &Scenario) {
             return;
         }
     };
+    // Every explanation is written into its case file; at most LISTED_AT_MOST are printed.
+    let shown = match crate::output::verbosity() {
+        crate::output::Verbosity::Quiet => 0,
+        crate::output::Verbosity::Normal => super::shared::LISTED_AT_MOST,
+        crate::output::Verbosity::Verbose => usize::MAX,
+    };
+    let mut printed = 0;
     for case in explained.cases.iter().filter(|c| !c.segments.is_empty()) {
         let written = std::fs::read_to_string(&case.case)
             .map_err(anyhow::Error::from)
@@ -195,6 +204,10 @@ fn explain_failed(report: &CampaignReport, scenario: &Scenario) {
             let Some(top) = segment.causes.first() else {
                 continue;
             };
+            printed += 1;
+            if printed > shown {
+                continue;
+            }
             println!(
                 "why test {:03} segment {} failed: {} ({:.0} % of the growth{})",
                 case.test_index,
@@ -208,6 +221,12 @@ fn explain_failed(report: &CampaignReport, scenario: &Scenario) {
                 }
             );
         }
+    }
+    if printed > shown && shown > 0 {
+        println!(
+            "… and {} more failing segments explained in their case files (drivecheck explain DIR; -v prints them all)",
+            printed - shown
+        );
     }
 }
 

@@ -5,6 +5,7 @@
 //! [`Vehicle`](crate::vehicle::Vehicle) it returns.
 
 use std::future::Future;
+use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::pin::Pin;
 use std::sync::{Arc, Mutex};
@@ -17,7 +18,7 @@ use scenarios::Scenario;
 use tokio_util::sync::CancellationToken;
 
 use crate::runner::{CampaignObserver, CampaignReport, RunError, SimulatorView};
-use crate::scenario_arg::{load_scenario, print_warnings};
+use crate::scenario_arg::{load_scenario, print_warnings_of_use};
 use crate::vehicle::Vehicle;
 use anyhow::bail;
 use campaign::files::Case;
@@ -238,30 +239,77 @@ async fn ctrl_c() {
     }
 }
 
-/// A campaign's progress on the terminal: a bar of the tests run, the test running, each
-/// verdict printed above the bar (the bar and the verdicts only on a terminal; notes always).
+/// A campaign's progress where it is read (`docs/scaling.md`):
+/// - on a terminal, a bar of the tests run and the test running, with a line above it for each
+///   test (above [`EVERY_TEST_UP_TO`] tests only for those that did not pass, unless `-v`);
+/// - elsewhere (a CI log, a pipe, `nohup`), plain lines: one per test up to [`EVERY_TEST_UP_TO`]
+///   tests, and above that a line for every test that did not pass as it ends and a status line
+///   every [`STATUS_EVERY`] or 1 % of the tests (done, failed, rate, time left);
+/// - with `-q`, nothing (errors and the summary still are).
+///
+/// Notes (what preflight switched off) are printed unless `-q`.
 #[derive(Debug)]
 pub(super) struct Progress {
     bar: ProgressBar,
-    /// A large campaign prints a line for the tests that did not pass only.
-    quiet_passes: bool,
+    /// Plain lines instead of the bar (standard error is not a terminal).
+    lines: bool,
+    /// Lines for every test (not only those that did not pass).
+    every_test: bool,
+    /// Nothing but notes… and with `-q` not those either.
+    quiet: bool,
+    state: Mutex<Tally>,
 }
 
-/// Above this many tests the progress prints no line for a test that passed.
-const QUIET_PASSES_ABOVE: usize = 100;
+/// What the plain lines count.
+#[derive(Debug)]
+struct Tally {
+    tests: usize,
+    done: usize,
+    not_passed: usize,
+    started: std::time::Instant,
+    last_status: std::time::Instant,
+    last_percent: usize,
+}
+
+/// Up to this many tests, every test gets a line.
+pub(super) const EVERY_TEST_UP_TO: usize = 100;
+
+/// Failing cases (and explanations) a summary lists at most, unless `-v`.
+pub(super) const LISTED_AT_MOST: usize = 20;
+
+/// Above [`EVERY_TEST_UP_TO`] tests, a status line at least this often (when a test ends).
+const STATUS_EVERY: Duration = Duration::from_secs(10);
 
 impl Progress {
-    /// A bar for `tests` tests.
+    /// Progress of `tests` tests, as the process's verbosity and standard error say.
     pub(super) fn new(tests: usize) -> Self {
-        let bar = ProgressBar::new(tests as u64);
+        use crate::output::{Verbosity, verbosity};
+        let quiet = verbosity() == Verbosity::Quiet;
+        let lines = !std::io::stderr().is_terminal();
+        let bar = if quiet || lines {
+            ProgressBar::hidden()
+        } else {
+            ProgressBar::new(tests as u64)
+        };
         if let Ok(style) =
             ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} tests  {msg}")
         {
             bar.set_style(style.progress_chars("=> "));
         }
+        let now = std::time::Instant::now();
         Self {
             bar,
-            quiet_passes: tests > QUIET_PASSES_ABOVE,
+            lines,
+            every_test: tests <= EVERY_TEST_UP_TO || verbosity() == Verbosity::Verbose,
+            quiet,
+            state: Mutex::new(Tally {
+                tests,
+                done: 0,
+                not_passed: 0,
+                started: now,
+                last_status: now,
+                last_percent: 0,
+            }),
         }
     }
 
@@ -269,21 +317,47 @@ impl Progress {
     pub(super) fn finish(&self) {
         self.bar.finish_and_clear();
     }
-}
 
-impl CampaignObserver for Progress {
-    fn note(&self, text: &str) {
-        // A hidden bar (standard error is not a terminal: a CI log, a pipe) prints nothing, but
-        // a note (what preflight switched off, a planned join) must reach the log.
+    /// A line above the bar, or on standard error.
+    fn line(&self, text: &str) {
         if self.bar.is_hidden() {
             eprintln!("{text}");
         } else {
             self.bar.println(text);
         }
     }
+}
+
+impl Tally {
+    /// `412/10000 tests (4 %), 180 did not pass, 52.1 tests/s, about 3m 4s left`.
+    fn status(&self) -> String {
+        let elapsed = self.started.elapsed().as_secs_f64();
+        let rate = self.done as f64 / elapsed.max(1e-9);
+        let left = (self.tests.saturating_sub(self.done)) as f64 / rate.max(1e-9);
+        format!(
+            "{}/{} tests ({} %), {} did not pass, {:.1} tests/s, about {} left",
+            self.done,
+            self.tests,
+            100 * self.done / self.tests.max(1),
+            self.not_passed,
+            rate,
+            humantime::format_duration(Duration::from_secs(left.round().min(1e9) as u64))
+        )
+    }
+}
+
+impl CampaignObserver for Progress {
+    fn note(&self, text: &str) {
+        if !self.quiet {
+            self.line(text);
+        }
+    }
 
     fn tests_planned(&self, tests: usize) {
         self.bar.set_length(tests as u64);
+        if let Ok(mut tally) = self.state.lock() {
+            tally.tests = tests;
+        }
     }
 
     fn test_started(&self, test_index: usize) {
@@ -291,11 +365,35 @@ impl CampaignObserver for Progress {
     }
 
     fn test_finished(&self, test_index: usize, verdict: Option<Verdict>) {
-        if !(self.quiet_passes && verdict == Some(Verdict::Passed)) {
-            let verdict = verdict.map_or("not run", Verdict::as_str);
-            self.bar.println(format!("test {test_index}: {verdict}"));
-        }
         self.bar.inc(1);
+        if self.quiet {
+            return;
+        }
+        let passed = verdict == Some(Verdict::Passed);
+        let Ok(mut tally) = self.state.lock() else {
+            return;
+        };
+        tally.done += 1;
+        tally.not_passed += usize::from(!passed);
+        let word = verdict.map_or("not run", Verdict::as_str);
+        if self.every_test || !passed {
+            if self.lines && self.every_test {
+                self.line(&format!(
+                    "test {test_index}: {word} ({}/{} done, {} did not pass)",
+                    tally.done, tally.tests, tally.not_passed
+                ));
+            } else {
+                self.line(&format!("test {test_index}: {word}"));
+            }
+        }
+        if self.lines && !self.every_test {
+            let percent = 100 * tally.done / tally.tests.max(1);
+            if percent > tally.last_percent || tally.last_status.elapsed() >= STATUS_EVERY {
+                tally.last_percent = percent;
+                tally.last_status = std::time::Instant::now();
+                self.line(&tally.status());
+            }
+        }
     }
 }
 
@@ -316,11 +414,34 @@ impl CampaignFailed {
     }
 }
 
-/// Prints a campaign's table of tests and its summary (with the wall time when known).
+/// Prints a campaign's table of tests and its summary (with the wall time when known). Above
+/// [`EVERY_TEST_UP_TO`] tests the table lists the tests that did not pass (every test with `-v`);
+/// with `-q` only the summary is printed.
 pub(super) fn print_report(report: &CampaignReport, wall: Option<Duration>) {
+    use crate::output::{Verbosity, verbosity};
+    let every = report.tests.len() <= EVERY_TEST_UP_TO || verbosity() == Verbosity::Verbose;
+    let listed: Vec<_> = report
+        .tests
+        .iter()
+        .filter(|t| every || t.verdict != Some(Verdict::Passed))
+        .collect();
+    if verbosity() > Verbosity::Quiet {
+        print_table(&listed);
+        if listed.len() < report.tests.len() {
+            println!(
+                "({} passing tests not listed: -v lists every test)",
+                report.tests.len() - listed.len()
+            );
+        }
+    }
+    print_summary(report, wall);
+}
+
+/// The table of `tests`.
+fn print_table(tests: &[&crate::runner::TestSummary]) {
     println!("| test | verdict | worst deviation | starvations | smallest margin | reason |");
     println!("|---|---|---|---|---|---|");
-    for t in &report.tests {
+    for t in tests {
         println!(
             "| {} | {} | {} | {} | {} | {} |",
             t.test_index,
@@ -332,10 +453,16 @@ pub(super) fn print_report(report: &CampaignReport, wall: Option<Duration>) {
             t.reason.as_deref().unwrap_or("")
         );
     }
+}
+
+/// A campaign's summary: its counts, the failing cases and the run directory.
+fn print_summary(report: &CampaignReport, wall: Option<Duration>) {
     let Some(s) = &report.record.summary else {
         return;
     };
-    println!();
+    if crate::output::chatty() {
+        println!();
+    }
     println!(
         "tests {}, passed {}, failed {}, aborted {}, worst deviation {}{}",
         s.tests,
@@ -351,8 +478,19 @@ pub(super) fn print_report(report: &CampaignReport, wall: Option<Duration>) {
     if let Some(why) = &s.uwb_not_tested {
         println!("UWB NOT TESTED: {why}");
     }
-    for file in &s.failing_cases {
+    let shown = if crate::output::verbosity() == crate::output::Verbosity::Verbose {
+        usize::MAX
+    } else {
+        LISTED_AT_MOST
+    };
+    for file in s.failing_cases.iter().take(shown) {
         println!("  {}", report.dir.join(file).display());
+    }
+    if s.failing_cases.len() > shown {
+        println!(
+            "  … and {} more failing cases in the run directory (-v lists them all)",
+            s.failing_cases.len() - shown
+        );
     }
     println!("run directory: {}", report.dir.display());
 }
@@ -390,6 +528,7 @@ pub(super) fn scenario_of(
     case_path: &Path,
     case: &Case,
 ) -> Result<Scenario> {
+    let arg = scenario.unwrap_or(&case.scenario.name);
     let loaded = match scenario {
         Some(arg) => load_scenario(arg)?,
         None => {
@@ -404,7 +543,7 @@ pub(super) fn scenario_of(
             load_scenario(name)?
         }
     };
-    print_warnings(&loaded);
+    print_warnings_of_use(arg, &loaded);
     Ok(loaded.scenario)
 }
 

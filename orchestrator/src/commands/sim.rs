@@ -8,12 +8,12 @@ use car_sim::{LinkImpairment, SimConfig};
 use crate::cli::SimArgs;
 use crate::exit::Exit;
 use crate::profile_arg::LoadedProfile;
-use crate::scenario_arg::{load_scenario, print_warnings};
+use crate::scenario_arg::{load_scenario, print_warnings_of_use};
 
 /// Serves the simulated car until Ctrl-C.
 pub fn serve(args: &SimArgs) -> Result<Exit> {
     let loaded = load_scenario(&args.scenario)?;
-    print_warnings(&loaded);
+    print_warnings_of_use(&args.scenario, &loaded);
     let config = sim_config(args, &loaded.scenario)?;
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(1)
