@@ -114,7 +114,7 @@ pub enum LinkEvent {
 #[derive(Debug, Error)]
 pub enum CarError {
     /// The link could not be opened.
-    #[error("cannot open {address}: {source}")]
+    #[error("cannot open {address}")]
     Connect {
         /// The address.
         address: String,

@@ -253,3 +253,40 @@ fn a_campaign_records_and_shows_what_it_covered() {
     let page = std::fs::read_to_string(dir.path().join("report.html")).unwrap();
     assert!(page.contains("<section id=\"coverage\">"));
 }
+
+/// An error before the first test (a car that cannot be reached, a bad setting) leaves no run
+/// directory behind — neither `run`'s nor `replay`'s — and an existing empty `--out` stays.
+#[test]
+fn an_error_before_the_first_test_leaves_no_run_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    // A port nothing listens on: bound, then released.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let car = format!("tcp://127.0.0.1:{port}");
+    let out = dir.path().join("run");
+    let refused = drivecheck(&["run", "--car", &car, "--tests", "1", "--out", path(&out)]);
+    assert_eq!(refused.status.code(), Some(2), "{}", text(&refused));
+    assert!(!out.exists(), "{}", text(&refused));
+    let stale = drivecheck(&["run", "--stale-after", "0s", "--out", path(&out)]);
+    assert_eq!(stale.status.code(), Some(2), "{}", text(&stale));
+    assert!(!out.exists());
+    let case = campaign(dir.path(), 3, 1, &[], 0).join("case-000.json");
+    let replay = dir.path().join("replay");
+    let refused = drivecheck(&["replay", path(&case), "--car", &car, "--out", path(&replay)]);
+    assert_eq!(refused.status.code(), Some(2), "{}", text(&refused));
+    assert!(!replay.exists(), "{}", text(&refused));
+    let mine = dir.path().join("mine");
+    std::fs::create_dir(&mine).unwrap();
+    let refused = drivecheck(&["run", "--car", &car, "--out", path(&mine)]);
+    assert_eq!(refused.status.code(), Some(2), "{}", text(&refused));
+    assert!(mine.is_dir(), "a directory the user made stays");
+    let once = text(&refused);
+    assert_eq!(
+        once.matches("Connection refused").count(),
+        1,
+        "the cause once: {once}"
+    );
+}

@@ -90,6 +90,7 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
     if embedded {
         warn_other_profile(&case, path, &profile);
     }
+    let made = args.out.as_ref().is_none_or(|out| !out.exists());
     let out = match &args.out {
         Some(out) => out.clone(),
         None => crate::runner::claim_default_run_dir(&run_dir_name(
@@ -123,6 +124,7 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
     if crate::runner::is_used(&out) {
         bail!(crate::runner::RunError::OutDirUsed { path: out });
     }
+    let _empty = crate::runner::RemoveIfEmpty::new(&out, made);
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
     let started = Instant::now();
     let started_at = rfc3339_now();
@@ -139,6 +141,14 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
         policy: case.settings.as_ref().map(|s| s.failure_policy),
     };
     let (runs, error) = runtime(virtual_time)?.block_on(job.run_all());
+    // Nothing driven (the car could not be reached): nothing to compare or keep.
+    let nothing_driven = runs.iter().all(|(r, case)| {
+        case.is_none() && r.verdict.is_none() && !crate::runner::is_used(&out.join(&r.dir))
+    });
+    let error = match error {
+        Some(error) if nothing_driven => return Err(error),
+        other => other,
+    };
     let comparison = Comparison::new(&case, of.clone(), ScenarioRef::of(&scenario), &runs);
     let file = out.join(REPLAY_FILE);
     crate::atomic::write(&file, format!("{}\n", comparison.to_json()?))

@@ -62,6 +62,16 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         tests: args.tests.unwrap_or(scenario.campaign.tests),
         no_faults: args.no_faults,
     };
+    if args.stale_after.is_zero() || args.stale_after > MAX_STALE_LIMIT {
+        anyhow::bail!(
+            "--stale-after {}: must be above 0 and at most {} (the car's watchdog brakes after {} \
+             without commands)",
+            humantime::format_duration(args.stale_after),
+            humantime::format_duration(MAX_STALE_LIMIT),
+            humantime::format_duration(WATCHDOG),
+        );
+    }
+    let made = args.out.as_ref().is_none_or(|out| !out.exists());
     let out = match &args.out {
         Some(out) => out.clone(),
         None => {
@@ -75,16 +85,8 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     if crate::runner::is_used(&out) {
         anyhow::bail!(crate::runner::RunError::OutDirUsed { path: out });
     }
+    let _empty = crate::runner::RemoveIfEmpty::new(&out, made);
     let mut config = RunConfig::new(campaign, out, args.car.clone());
-    if args.stale_after.is_zero() || args.stale_after > MAX_STALE_LIMIT {
-        anyhow::bail!(
-            "--stale-after {}: must be above 0 and at most {} (the car's watchdog brakes after {} \
-             without commands)",
-            humantime::format_duration(args.stale_after),
-            humantime::format_duration(MAX_STALE_LIMIT),
-            humantime::format_duration(WATCHDOG),
-        );
-    }
     config.safety.stale_after = args.stale_after;
     config.policy = match args.on_failure {
         OnFailure::Stop => FailurePolicy::StopAtFailingSegment,

@@ -77,7 +77,9 @@ pub use events::{CampaignObserver, Silent, SimulatorView};
 pub(crate) use fresh::SPAN_GAP_NS;
 pub use fresh::{Connecting, FreshCar, FreshCars, StartPose, run_campaign_fresh};
 pub use run_dir::{CAMPAIGN_FILE, CampaignReport, RECORDING_FILE, TestSummary};
-pub(crate) use run_dir::{RunDirectory, claim_default_run_dir, is_used, rfc3339_now, run_dir_name};
+pub(crate) use run_dir::{
+    RemoveIfEmpty, RunDirectory, claim_default_run_dir, is_used, rfc3339_now, run_dir_name,
+};
 
 use journal::Journal;
 use preflight::Preflight;

@@ -329,6 +329,27 @@ fn civil_from_days(days: i64) -> (i64, u32, u32) {
     (y, m, d)
 }
 
+/// Removes, when dropped, a run directory the command made, if it is still empty: an error before
+/// the first test leaves no empty run directory behind (a directory with anything in it stays).
+#[derive(Debug)]
+pub(crate) struct RemoveIfEmpty(Option<PathBuf>);
+
+impl RemoveIfEmpty {
+    /// Guards `dir` when `made` (the command made it, or will), else nothing.
+    pub(crate) fn new(dir: &Path, made: bool) -> Self {
+        Self(made.then(|| dir.to_owned()))
+    }
+}
+
+impl Drop for RemoveIfEmpty {
+    fn drop(&mut self) {
+        if let Some(dir) = &self.0 {
+            // Fails, as it should, on a directory with anything in it.
+            let _ = std::fs::remove_dir(dir);
+        }
+    }
+}
+
 /// Whether `path` holds something already: a file, or a directory that is not empty. A run
 /// directory is always created fresh, so that no earlier run's files are overwritten or mixed in.
 pub(crate) fn is_used(path: &Path) -> bool {
