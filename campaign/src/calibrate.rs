@@ -21,7 +21,10 @@
 //! says how sure the fit is. A descent finds the valley it starts in; the misfit of a car can
 //! have more than one (an odometry scale too large and anchors moved to match fit as well as
 //! the truth), so the fit descends again from restarts, [`RESTART_TOLERANCES`] tolerances away
-//! in patterns of directions, while the budget lasts, and keeps the best.
+//! in patterns of directions, while the budget lasts. Of the descents whose misfit is within
+//! [`AS_GOOD`] of the lowest, it keeps the one that changes the starting profile least (in
+//! tolerances): the recordings cannot choose between them, and the lowest of them mostly fits
+//! the simulated runs' noise.
 //!
 //! **How sure.** At the optimum, with the Jacobian `J` and `A = JᵀJ`, the covariance of the
 //! parameters is the sandwich `A⁻¹ (Σₜ gₜ gₜᵀ) A⁻¹` over the tests t, `gₜ = Jₜᵀ rₜ` of test t's
@@ -335,19 +338,33 @@ pub fn fit(
             &mut in_budget,
         )?);
     }
+    let lowest = descents
+        .iter()
+        .map(|d| d.misfit)
+        .fold(f64::INFINITY, f64::min);
+    let good = |d: &Descent| d.misfit <= lowest * (1.0 + AS_GOOD).powi(2);
+    // Of the fits as good as the best, the one that changes the starting profile least (in
+    // tolerances): the recordings do not choose between them, so the start does.
+    let change = |d: &Descent| {
+        d.x.iter()
+            .zip(parameters)
+            .map(|(v, p)| ((v - p.start) / p.tolerance).powi(2))
+            .sum::<f64>()
+    };
     let best = descents
         .iter()
         .enumerate()
-        .min_by(|a, b| a.1.misfit.total_cmp(&b.1.misfit))
+        .filter(|(_, d)| good(d))
+        .min_by(|a, b| change(a.1).total_cmp(&change(b.1)))
         .map_or(0, |(k, _)| k);
     let out_of_budget = descents.iter().any(|d| d.out_of_budget);
     let iterations = descents.iter().map(|d| d.iterations).sum();
     let fits = descents.len();
-    // The other fits as good as the best: where they put each parameter.
+    // The other fits as good: where they put each parameter.
     let as_good: Vec<Vec<f64>> = descents
         .iter()
         .enumerate()
-        .filter(|&(k, d)| k != best && d.misfit <= descents[best].misfit * (1.0 + AS_GOOD).powi(2))
+        .filter(|&(k, d)| k != best && good(d))
         .map(|(_, d)| d.x.clone())
         .collect();
     let Descent { x, r, jacobian, .. } = descents.swap_remove(best);
