@@ -787,6 +787,9 @@ pub struct ImportArgs {
     /// Where to write the scenario TOML (standard output when not given).
     #[arg(short, long, value_name = "FILE")]
     pub output: Option<PathBuf>,
+    /// Replace the `-o` file if it exists.
+    #[arg(long)]
+    pub force: bool,
 }
 
 /// Options of `drivecheck scenario check`.

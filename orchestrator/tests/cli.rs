@@ -207,6 +207,55 @@ fn scenario_import_converts_reference_xml_to_a_loadable_toml() {
     assert_eq!(from_xml, from_toml);
     let check = drivecheck(&["scenario", "check", toml.to_str().unwrap()]);
     assert_eq!(check.status.code(), Some(0));
+    // An existing -o file is replaced only with --force.
+    std::fs::write(&toml, "mine").unwrap();
+    let again = [
+        "scenario",
+        "import",
+        xml.to_str().unwrap(),
+        "-o",
+        toml.to_str().unwrap(),
+    ];
+    let refused = drivecheck(&again);
+    assert_eq!(refused.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("--force"));
+    assert_eq!(std::fs::read_to_string(&toml).unwrap(), "mine");
+    let forced = drivecheck(&[&again[..], &["--force"]].concat());
+    assert_eq!(forced.status.code(), Some(0));
+    assert_eq!(scenarios::load(&toml).unwrap().scenario, from_xml);
+}
+
+/// `drivecheck report --out` replaces a report, never a recorded file.
+#[test]
+fn a_report_does_not_overwrite_a_case_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().join("run");
+    let run = drivecheck(&[
+        "run",
+        "-q",
+        "--tests",
+        "1",
+        "--seed",
+        "1",
+        "--out",
+        out_dir.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        run.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let case = out_dir.join("case-000.json");
+    let before = std::fs::read(&case).unwrap();
+    let refused = drivecheck(&[
+        "report",
+        out_dir.to_str().unwrap(),
+        "--out",
+        case.to_str().unwrap(),
+    ]);
+    assert_eq!(refused.status.code(), Some(2));
+    assert_eq!(std::fs::read(&case).unwrap(), before);
 }
 
 /// A small area in the reference XML: a 20 m square fence, a start and a recovery route.

@@ -290,3 +290,41 @@ fn an_error_before_the_first_test_leaves_no_run_directory() {
         "the cause once: {once}"
     );
 }
+
+/// `--junit` is checked before anything is driven: a missing directory, or a path inside the run
+/// directory (where it would replace `campaign.json`), is an error that names the flag.
+#[test]
+fn a_junit_path_is_checked_before_the_campaign() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let missing = dir.path().join("no/such/dir/junit.xml");
+    let refused = drivecheck(&[
+        "run",
+        "--tests",
+        "1",
+        "--out",
+        path(&out),
+        "--junit",
+        path(&missing),
+    ]);
+    assert_eq!(refused.status.code(), Some(2), "{}", text(&refused));
+    assert!(text(&refused).contains("--junit"), "{}", text(&refused));
+    assert!(!out.exists(), "nothing was driven: {}", text(&refused));
+    let inside = out.join("campaign.json");
+    let refused = drivecheck(&[
+        "run",
+        "--tests",
+        "1",
+        "--out",
+        path(&out),
+        "--junit",
+        path(&inside),
+    ]);
+    assert_eq!(refused.status.code(), Some(2), "{}", text(&refused));
+    assert!(
+        text(&refused).contains("inside the run directory"),
+        "{}",
+        text(&refused)
+    );
+    assert!(!out.exists());
+}

@@ -39,6 +39,9 @@ pub fn merge(
             path: out.to_owned()
         });
     }
+    if let Some(file) = junit {
+        super::shared::check_output_file("--junit", file, out)?;
+    }
     let shards = read_shards(dirs)?;
     let first = &shards[0];
     let tests = first.record.settings.tests;

@@ -125,6 +125,9 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
         bail!(crate::runner::RunError::OutDirUsed { path: out });
     }
     let _empty = crate::runner::RemoveIfEmpty::new(&out, made);
+    if let Some(file) = &args.junit {
+        super::shared::check_output_file("--junit", file, &out)?;
+    }
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
     let started = Instant::now();
     let started_at = rfc3339_now();

@@ -18,6 +18,16 @@ pub fn report(args: &ReportArgs) -> Result<Exit> {
         .out
         .clone()
         .unwrap_or_else(|| args.dir.join(REPORT_FILE));
+    // A report replaces a report, never a recorded file (`--out RUN/case-001.json`).
+    let is_html = out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("html") || e.eq_ignore_ascii_case("htm"));
+    if out.exists() && !is_html {
+        anyhow::bail!(
+            "--out {}: the file exists and is not an HTML report; give another path",
+            out.display()
+        );
+    }
     write(&args.dir, &out, scenario.as_ref())?;
     Ok(Exit::Success)
 }

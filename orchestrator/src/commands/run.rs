@@ -86,6 +86,9 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         anyhow::bail!(crate::runner::RunError::OutDirUsed { path: out });
     }
     let _empty = crate::runner::RemoveIfEmpty::new(&out, made);
+    if let Some(file) = &args.junit {
+        super::shared::check_output_file("--junit", file, &out)?;
+    }
     let mut config = RunConfig::new(campaign, out, args.car.clone());
     config.safety.stale_after = args.stale_after;
     config.policy = match args.on_failure {

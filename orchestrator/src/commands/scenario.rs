@@ -31,6 +31,12 @@ pub fn import(args: &ImportArgs) -> Result<Exit> {
     print_warnings(&loaded);
     let toml = loaded.scenario.to_toml();
     match &args.output {
+        Some(path) if path.exists() && !args.force => {
+            anyhow::bail!(
+                "-o {}: the file exists; give --force to replace it",
+                path.display()
+            );
+        }
         Some(path) => {
             crate::atomic::write(path, &toml)
                 .with_context(|| format!("cannot write {}", path.display()))?;

@@ -515,6 +515,31 @@ pub(super) fn case_files(dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
+/// Refuses, before anything is driven, an output file a command writes only at its end
+/// (`--junit`): its directory must exist, and it must not lie in the run directory `run_dir`,
+/// where it could replace a recorded file.
+pub(super) fn check_output_file(flag: &str, file: &Path, run_dir: &Path) -> Result<()> {
+    let absolute = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_owned());
+    let (file_abs, dir_abs) = (absolute(file), absolute(run_dir));
+    if file_abs.starts_with(&dir_abs) {
+        bail!(
+            "{flag} {}: inside the run directory {}, where it could replace a recorded file; \
+             write it elsewhere",
+            file.display(),
+            run_dir.display()
+        );
+    }
+    let parent = file_abs.parent().unwrap_or(Path::new("/"));
+    if !parent.is_dir() {
+        bail!(
+            "{flag} {}: the directory {} does not exist",
+            file.display(),
+            parent.display()
+        );
+    }
+    Ok(())
+}
+
 /// The case file at `path`, read and parsed; errors name the file (and the field).
 pub(super) fn read_case(path: &Path) -> Result<Case> {
     let text =
