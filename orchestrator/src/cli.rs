@@ -9,7 +9,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 #[derive(Debug, Parser)]
 #[command(
     name = "drivecheck",
-    version,
+    version = concat!(env!("CARGO_PKG_VERSION"), " (", env!("DRIVECHECK_REVISION"), ")"),
     about,
     max_term_width = 100,
     after_help = crate::exit::Exit::help()

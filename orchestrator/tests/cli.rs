@@ -374,3 +374,22 @@ fn a_reader_that_goes_away_ends_the_command_quietly_like_a_unix_tool() {
     assert_eq!(out.status.code(), Some(141), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
 }
+
+/// `--version` names the commit the binary was built from (or says it is unknown).
+#[test]
+fn the_version_names_the_revision() {
+    let out = drivecheck(&["--version"]);
+    assert_eq!(out.status.code(), Some(0));
+    let text = String::from_utf8_lossy(&out.stdout);
+    let revision = text
+        .trim()
+        .strip_prefix(&format!("drivecheck {} (", env!("CARGO_PKG_VERSION")))
+        .and_then(|rest| rest.strip_suffix(')'))
+        .unwrap_or_else(|| panic!("{text}"));
+    let hash = revision.strip_prefix("revision ");
+    assert!(
+        revision == "unknown revision"
+            || hash.is_some_and(|h| h.len() == 12 && h.chars().all(|c| c.is_ascii_hexdigit())),
+        "{text}"
+    );
+}

@@ -1,0 +1,31 @@
+//! Records the git revision the binary is built from, for `drivecheck --version` (a bug report
+//! names the commit): `DRIVECHECK_REVISION`, the short hash, or `unknown revision` outside a git
+//! checkout (a source tarball, a vendored copy).
+
+use std::process::Command;
+
+fn git(args: &[&str]) -> Option<String> {
+    let output = Command::new("git").args(args).output().ok()?;
+    output
+        .status
+        .success()
+        .then(|| String::from_utf8(output.stdout).ok())
+        .flatten()
+        .map(|s| s.trim().to_owned())
+        .filter(|s| !s.is_empty())
+}
+
+fn main() {
+    let revision = git(&["rev-parse", "--short=12", "HEAD"]).map_or_else(
+        || "unknown revision".to_owned(),
+        |r| format!("revision {r}"),
+    );
+    println!("cargo:rustc-env=DRIVECHECK_REVISION={revision}");
+    // Built again when HEAD moves (a commit, a checkout), not on every build.
+    if let Some(dir) = git(&["rev-parse", "--absolute-git-dir"]) {
+        for path in ["HEAD", "refs/heads", "packed-refs"] {
+            println!("cargo:rerun-if-changed={dir}/{path}");
+        }
+    }
+    println!("cargo:rerun-if-changed=build.rs");
+}
