@@ -148,20 +148,6 @@ impl Signature {
     }
 }
 
-/// The misfit of `simulated` against `recorded`: the mean of |recorded − simulated|² over the bins
-/// both have (m²) and their number; `None` when they share no bin.
-pub fn misfit(recorded: &Signature, simulated: &Signature) -> Option<(f64, usize)> {
-    let mut sum = 0.0;
-    let mut n = 0;
-    for (key, &(re, rn)) in &recorded.bins {
-        if let Some(&(se, sn)) = simulated.bins.get(key) {
-            sum += (re - se).powi(2) + (rn - sn).powi(2);
-            n += 1;
-        }
-    }
-    (n > 0).then(|| (sum / n as f64, n))
-}
-
 /// A parameter of the fit.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Parameter {
@@ -773,7 +759,11 @@ mod tests {
         let recorded = s.clone();
         let mut shifted = Signature::default();
         shifted.add_test(5, &samples(|t| (t + 0.1, -1.0)), &[span]);
-        let (j, bins) = misfit(&recorded, &shifted).unwrap();
+        let residuals = Residuals::new(&recorded, &shifted);
+        let (j, bins) = (
+            residuals.misfit(&residuals.of(&shifted)),
+            residuals.keys.len(),
+        );
         assert_eq!(bins, 4);
         assert!((j - 0.01).abs() < 1e-9, "{j}");
     }

@@ -173,34 +173,35 @@ impl Simulator<'_> {
     /// The signature of each candidate (its values in the targets' order), in order.
     fn signatures(&self, candidates: &[Vec<f64>]) -> Result<Vec<Signature>> {
         let next = std::sync::atomic::AtomicUsize::new(0);
-        let mut results: Vec<Option<Result<Signature>>> = Vec::new();
-        results.resize_with(candidates.len(), || None);
-        let results = std::sync::Mutex::new(results);
-        std::thread::scope(|scope| {
-            for job in 0..self.jobs.min(candidates.len()) {
-                let (next, results) = (&next, &results);
-                scope.spawn(move || {
-                    let scratch = self.scratch.join(format!("job-{job}"));
-                    loop {
-                        let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                        let Some(values) = candidates.get(k) else {
-                            break;
-                        };
-                        let profile = candidate(self.start, &self.targets, values);
-                        let signature = self.simulate(&profile, &scratch);
-                        if let Ok(mut results) = results.lock() {
-                            results[k] = Some(signature);
+        let mut results: Vec<(usize, Result<Signature>)> = std::thread::scope(|scope| {
+            let workers: Vec<_> = (0..self.jobs.min(candidates.len()))
+                .map(|job| {
+                    let next = &next;
+                    scope.spawn(move || {
+                        let scratch = self.scratch.join(format!("job-{job}"));
+                        let mut mine = Vec::new();
+                        loop {
+                            let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                            let Some(values) = candidates.get(k) else {
+                                return mine;
+                            };
+                            let profile = candidate(self.start, &self.targets, values);
+                            mine.push((k, self.simulate(&profile, &scratch)));
                         }
-                    }
-                });
-            }
+                    })
+                })
+                .collect();
+            workers
+                .into_iter()
+                .flat_map(|w| {
+                    w.join().unwrap_or_else(|_| {
+                        vec![(usize::MAX, Err(anyhow::anyhow!("a driving thread failed")))]
+                    })
+                })
+                .collect()
         });
-        results
-            .into_inner()
-            .map_err(|_| anyhow::anyhow!("a driving thread failed"))?
-            .into_iter()
-            .map(|r| r.unwrap_or_else(|| Err(anyhow::anyhow!("a candidate was not driven"))))
-            .collect()
+        results.sort_by_key(|(k, _)| *k);
+        results.into_iter().map(|(_, r)| r).collect()
     }
 
     /// The signature of `profile`: every recorded test driven `runs` times (the same seeds for

@@ -183,11 +183,11 @@ fn explain_failed(report: &CampaignReport, scenario: &Scenario) {
             return;
         }
     };
-    // Every explanation is written into its case file; at most LISTED_AT_MOST are printed.
-    let shown = match crate::output::verbosity() {
-        crate::output::Verbosity::Quiet => 0,
-        crate::output::Verbosity::Normal => super::shared::LISTED_AT_MOST,
-        crate::output::Verbosity::Verbose => usize::MAX,
+    // Every explanation is written into its case file; a summary's share is printed.
+    let shown = if crate::output::chatty() {
+        super::shared::listed_at_most()
+    } else {
+        0
     };
     let mut printed = 0;
     for case in explained.cases.iter().filter(|c| !c.segments.is_empty()) {

@@ -275,7 +275,21 @@ struct Tally {
 pub(super) const EVERY_TEST_UP_TO: usize = 100;
 
 /// Failing cases (and explanations) a summary lists at most, unless `-v`.
-pub(super) const LISTED_AT_MOST: usize = 20;
+const LISTED_AT_MOST: usize = 20;
+
+/// Whether a campaign of `tests` tests gets a line (and a table row) for every test.
+fn every_test(tests: usize) -> bool {
+    tests <= EVERY_TEST_UP_TO || crate::output::verbosity() == crate::output::Verbosity::Verbose
+}
+
+/// How many failing cases (and explanations) a summary lists: [`LISTED_AT_MOST`], all with `-v`.
+pub(super) fn listed_at_most() -> usize {
+    if crate::output::verbosity() == crate::output::Verbosity::Verbose {
+        usize::MAX
+    } else {
+        LISTED_AT_MOST
+    }
+}
 
 /// Above [`EVERY_TEST_UP_TO`] tests, a status line at least this often (when a test ends).
 const STATUS_EVERY: Duration = Duration::from_secs(10);
@@ -300,7 +314,7 @@ impl Progress {
         Self {
             bar,
             lines,
-            every_test: tests <= EVERY_TEST_UP_TO || verbosity() == Verbosity::Verbose,
+            every_test: every_test(tests),
             quiet,
             state: Mutex::new(Tally {
                 tests,
@@ -419,7 +433,7 @@ impl CampaignFailed {
 /// with `-q` only the summary is printed.
 pub(super) fn print_report(report: &CampaignReport, wall: Option<Duration>) {
     use crate::output::{Verbosity, verbosity};
-    let every = report.tests.len() <= EVERY_TEST_UP_TO || verbosity() == Verbosity::Verbose;
+    let every = every_test(report.tests.len());
     let listed: Vec<_> = report
         .tests
         .iter()
@@ -478,11 +492,7 @@ fn print_summary(report: &CampaignReport, wall: Option<Duration>) {
     if let Some(why) = &s.uwb_not_tested {
         println!("UWB NOT TESTED: {why}");
     }
-    let shown = if crate::output::verbosity() == crate::output::Verbosity::Verbose {
-        usize::MAX
-    } else {
-        LISTED_AT_MOST
-    };
+    let shown = listed_at_most();
     for file in s.failing_cases.iter().take(shown) {
         println!("  {}", report.dir.join(file).display());
     }
