@@ -1,7 +1,7 @@
 //! The pure-pursuit autopilot (`docs/firmware.md#autopilot`): route ring, window scan, steering
 //! law, speed, end of route, and the replace/clear/activate semantics of both firmware generations.
 
-use crate::config::{ApTimeMode, FirmwareConfig};
+use crate::config::{ApTimeMode, FirmwareConfig, truncate};
 use crate::motor::MotorCommand;
 use crate::terminal::scan_i32;
 use car_link::firmware::steering::{self, Compensation, LOOK_AHEAD_STRETCHES, PursuitPose};
@@ -438,7 +438,11 @@ impl Autopilot {
         if length < cfg.ap_base_rad {
             return;
         }
-        let speed = (length / (time_ms as f32 / 1000.0)).clamp(-cfg.ap_max_speed, cfg.ap_max_speed);
+        let speed = truncate(
+            length / (time_ms as f32 / 1000.0),
+            -cfg.ap_max_speed,
+            cfg.ap_max_speed,
+        );
         let mut i = self.point_now;
         for _ in 0..size {
             self.route[i].speed = speed;
@@ -696,8 +700,8 @@ impl Autopilot {
             compensation,
         );
         let max = steering::max_steering_angle(v.steering_max_angle_rad, odo_speed);
-        angle = angle.clamp(-max, max);
-        let speed = speed.clamp(-cfg.ap_max_speed, cfg.ap_max_speed);
+        angle = truncate(angle, -max, max);
+        let speed = truncate(speed, -cfg.ap_max_speed, cfg.ap_max_speed);
         let motor =
             (!v.disable_motor).then(|| MotorCommand::Rpm((speed / v.speed_per_erpm()).trunc()));
         ApOutput {

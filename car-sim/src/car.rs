@@ -7,7 +7,7 @@ use std::f64::consts::PI;
 use scenarios::geometry::Point;
 
 use crate::autopilot::{ApInputs, Autopilot, FwPose, RoutePart, RoutePoint, StoreOutcome};
-use crate::config::{FirmwareConfig, VehicleParams};
+use crate::config::{FirmwareConfig, VehicleParams, truncate};
 use crate::debug::{DebugEvent, Truth};
 use crate::fault::FaultInjection;
 use crate::motor::{HIL_TEMP_MOS, HIL_V_IN, Motor, MotorCommand};
@@ -454,7 +454,11 @@ impl SimCar {
             * f64::from(v.speed_per_erpm())
             * self.options.sensors.odometry_scale;
         let max = f64::from(v.steering_max_angle_rad);
-        let delta = f64::from(v.angle_for_servo(self.servo.position())).clamp(-max, max);
+        let delta = truncate(
+            f64::from(v.angle_for_servo(self.servo.position())),
+            -max,
+            max,
+        );
         let d = speed * dt;
         let curvature = delta.tan() / f64::from(v.axis_distance);
         let t = &mut self.truth;
@@ -1035,7 +1039,11 @@ impl SimCar {
                 RcMode::Current => Some(MotorCommand::Current(throttle)),
                 RcMode::Duty => Some(MotorCommand::Duty(throttle.clamp(-1.0, 1.0))),
                 RcMode::Speed => {
-                    let speed = throttle.clamp(-self.config.ap_max_speed, self.config.ap_max_speed);
+                    let speed = truncate(
+                        throttle,
+                        -self.config.ap_max_speed,
+                        self.config.ap_max_speed,
+                    );
                     Some(MotorCommand::Rpm((speed / v.speed_per_erpm()).trunc()))
                 }
                 RcMode::Brake => Some(MotorCommand::CurrentBrake(throttle)),

@@ -184,6 +184,19 @@ impl FirmwareConfig {
     }
 }
 
+/// The firmware's `utils_truncate_number`: `x` limited to `[lo, hi]` by two comparisons, as the C
+/// code does it. Unlike `f32::clamp` it never panics on what a host may configure: a NaN `x` or
+/// bound passes through, and inverted bounds (a negative maximum speed) give `hi`.
+pub(crate) fn truncate<T: PartialOrd>(x: T, lo: T, hi: T) -> T {
+    if x > hi {
+        hi
+    } else if x < lo {
+        lo
+    } else {
+        x
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -227,11 +227,47 @@ impl Board {
         if record.version() != self.version {
             return Vec::new();
         }
+        if let Some(why) = refused(&record) {
+            // Not written and not acked: the host's write times out, and the line says why.
+            return vec![(
+                Reply::Printf(format!("SET_MAIN_CONFIG refused: {why}\n")),
+                Duration::ZERO,
+            )];
+        }
         let config = firmware_config_from(&record, self.car.firmware());
         self.record = record;
         self.car.set_config(config);
         vec![(Reply::Ack(CommandId::SetMainConfig), FLASH_WRITE_DELAY)]
     }
+}
+
+/// Why the simulated board refuses a main-configuration record, if it does: a real field that is
+/// not finite (the wire's f32auto reaches ±∞), or a size the drive train divides by — gear
+/// ratio, wheel diameter, motor poles, axis distance — that is not positive, or a negative
+/// autopilot top speed. The firmware writes such a record to flash and then computes with it
+/// (NaN motor commands, a car that cannot be driven); the simulator refuses it instead, so that
+/// a hostile or mistaken host never stops the simulation (`docs/firmware.md#main-configuration`).
+/// Every other value is taken as the firmware takes it, and limited as the firmware limits it
+/// ([`crate::config::truncate`]).
+pub fn refused(record: &MainConfig) -> Option<String> {
+    let positive = [
+        ConfigField::GearRatio,
+        ConfigField::WheelDiam,
+        ConfigField::MotorPoles,
+        ConfigField::AxisDistance,
+    ];
+    record.fields().into_iter().find_map(|field| {
+        let value = record.get_f32(field).ok()?;
+        if !value.is_finite() {
+            Some(format!("{field:?} = {value}, not a finite number"))
+        } else if positive.contains(&field) && value <= 0.0 {
+            Some(format!("{field:?} = {value}, must be positive"))
+        } else if field == ConfigField::ApMaxSpeed && value < 0.0 {
+            Some(format!("{field:?} = {value}, must not be negative"))
+        } else {
+            None
+        }
+    })
 }
 
 /// The record a HIL board reports at boot: the factory defaults with `simulate_motor` on.
@@ -351,5 +387,64 @@ pub fn car_state(s: &StateReport, version: FirmwareVersion) -> CarState {
         ap_route_left: s.ap_route_left,
         px_uwb: f(s.px_uwb),
         py_uwb: f(s.py_uwb),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::car::CarOptions;
+    use car_link::message::Request;
+
+    /// The factory record of `version` with the wheel diameter's four bytes set to `bits`.
+    fn with_wheel_diameter_bits(version: FirmwareVersion, bits: u32) -> MainConfig {
+        let default = MainConfig::factory_default(version, 1);
+        let mut marked = default.clone();
+        marked
+            .set(ConfigField::WheelDiam, ConfigValue::F32(123.25))
+            .expect("the field exists");
+        let at = (0..default.record().len())
+            .find(|&i| default.record()[i] != marked.record()[i])
+            .expect("the field moved");
+        let mut bytes = default.record().to_vec();
+        bytes[at..at + 4].copy_from_slice(&bits.to_be_bytes());
+        MainConfig::from_record(version, bytes).expect("the layout is kept")
+    }
+
+    #[test]
+    fn a_record_with_an_infinite_or_zero_size_is_refused_and_the_old_one_kept() {
+        for version in FirmwareVersion::SIMULATED {
+            let mut board = Board::new(SimCar::new(CarOptions {
+                firmware: version,
+                ..CarOptions::default()
+            }));
+            let before = board.record.clone();
+            for (bits, why) in [
+                (0x7F80_0000, "WheelDiam = inf, not a finite number"),
+                (0, "WheelDiam = 0, must be positive"),
+            ] {
+                let record = with_wheel_diameter_bits(version, bits);
+                let replies = board.run(Request::SetMainConfig(record));
+                assert_eq!(
+                    replies,
+                    [(
+                        Reply::Printf(format!("SET_MAIN_CONFIG refused: {why}\n")),
+                        Duration::ZERO
+                    )]
+                );
+                assert_eq!(board.record, before);
+            }
+            // An ordinary record is written and acked.
+            let mut record = before.clone();
+            record
+                .set(ConfigField::WheelDiam, ConfigValue::F32(0.12))
+                .expect("the field exists");
+            let replies = board.run(Request::SetMainConfig(record.clone()));
+            assert_eq!(
+                replies,
+                [(Reply::Ack(CommandId::SetMainConfig), FLASH_WRITE_DELAY)]
+            );
+            assert_eq!(board.record, record);
+        }
     }
 }

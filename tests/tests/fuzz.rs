@@ -234,3 +234,242 @@ fn fuzz_the_parsers_long() {
         started.elapsed().as_secs_f64()
     );
 }
+
+/// A request of every command the simulated car handles, with ordinary values: the templates the
+/// structured fuzzer fills with hostile ones.
+fn command_templates(
+    version: car_link::firmware::FirmwareVersion,
+) -> Vec<car_link::message::Request> {
+    use car_link::config::MainConfig;
+    use car_link::message::{
+        Anchor, EnuRef, Pose, RcControl, RcMode, Request, RoutePoint, SyncPoint,
+    };
+    let route: Vec<RoutePoint> = (0..4)
+        .map(|k| RoutePoint {
+            time_ms: 1000 * k,
+            ..RoutePoint::at(f64::from(k), 0.5 * f64::from(k), 1.0)
+        })
+        .collect();
+    let pose = Pose {
+        x: 1.0,
+        y: 2.0,
+        yaw: 30.0,
+    };
+    let mut requests = vec![
+        Request::GetState,
+        Request::SetPos(pose),
+        Request::SetPosAck(pose),
+        Request::SetEnuRef(EnuRef {
+            lat: 57.7,
+            lon: 11.9,
+            height: 10.0,
+        }),
+        Request::GetEnuRef,
+        Request::AddPoints(route.clone()),
+        Request::ReplaceRoute(route),
+        Request::RemoveLastPoint,
+        Request::ClearPoints,
+        Request::GetRoutePart { first: 0, num: 4 },
+        Request::SetActive {
+            active: true,
+            reset: version >= car_link::firmware::FirmwareVersion::V12_3,
+        },
+        Request::SyncPoint(SyncPoint {
+            point: 1,
+            time_ms: 500,
+            min_diff_ms: 100,
+        }),
+        Request::SetServoDirect(0.5),
+        Request::SetYawOffset(10.0),
+        Request::SetYawOffsetAck(10.0),
+        Request::SetMsToday(1000),
+        Request::AddUwbAnchor(Anchor {
+            id: 50,
+            px: 3.0,
+            py: 4.0,
+            height: 1.0,
+        }),
+        Request::ClearUwbAnchors,
+        Request::SetMainConfig(MainConfig::factory_default(version, 1)),
+        Request::GetMainConfig,
+        Request::GetMainConfigDefault,
+    ];
+    for mode in [
+        RcMode::Current,
+        RcMode::Duty,
+        RcMode::Pid,
+        RcMode::CurrentBrake,
+    ] {
+        requests.push(Request::RcControl(RcControl {
+            mode,
+            throttle: 0.5,
+            steering: 0.1,
+        }));
+    }
+    for text in [
+        "fi_set_enabled 1",
+        "fi_add_fault uwb_range_50 OFFSET 4.0 0 8",
+        "fi_add_fault uwb_travel_dist AMPLIFICATION 3 50 10",
+        "fi_add_fault px OFFSET 10 0 0",
+        "fi_clear_faults",
+        "pos_uwb_reset_pos",
+    ] {
+        requests.push(Request::TerminalCmd(text.to_owned()));
+    }
+    requests
+}
+
+/// Values a field can hold that no sane host sends: NaN and infinities as IEEE floats, the
+/// extremes and signs of the wire's integers, zeros.
+const HOSTILE: [[u8; 4]; 12] = [
+    [0x7F, 0xC0, 0x00, 0x00], // f32 NaN
+    [0xFF, 0xC0, 0x00, 0x01], // f32 negative NaN with payload
+    [0x7F, 0x80, 0x00, 0x00], // f32 +inf
+    [0xFF, 0x80, 0x00, 0x00], // f32 −inf
+    [0x7F, 0x7F, 0xFF, 0xFF], // f32::MAX, i32 large
+    [0x00, 0x00, 0x00, 0x01], // subnormal, i32 1
+    [0x80, 0x00, 0x00, 0x00], // −0.0, i32::MIN
+    [0x7F, 0xFF, 0xFF, 0xFF], // NaN, i32::MAX
+    [0x00, 0x00, 0x00, 0x00],
+    [0xFF, 0xFF, 0xFF, 0xFF], // −1, NaN
+    [0xBF, 0x80, 0x00, 0x00], // −1.0
+    [0x4E, 0x6E, 0x6B, 0x28], // 1e9
+];
+
+/// Hostile words for terminal commands' arguments.
+const HOSTILE_WORDS: [&str; 12] = [
+    "nan",
+    "inf",
+    "-inf",
+    "1e39",
+    "-1e39",
+    "0",
+    "-0",
+    "1e-45",
+    "2147483648",
+    "-2147483649",
+    "99999999999999999999",
+    "",
+];
+
+/// One valid frame's payload of a command with hostile values: a template's encoding with windows
+/// of its data overwritten by [`HOSTILE`] patterns or random bytes, its length and command kept
+/// (a terminal command gets hostile arguments instead).
+fn hostile_payload(
+    rng: &mut Pcg64Mcg,
+    templates: &[car_link::message::Request],
+    dialect: car_link::message::Dialect,
+) -> Vec<u8> {
+    use car_link::message::Request;
+    let template = &templates[rng.random_range(0..templates.len())];
+    let request = match template {
+        Request::TerminalCmd(text) => {
+            let mut words: Vec<String> = text.split(' ').map(str::to_owned).collect();
+            for word in words.iter_mut().skip(2) {
+                if rng.random_bool(0.6) {
+                    *word = HOSTILE_WORDS[rng.random_range(0..HOSTILE_WORDS.len())].to_owned();
+                }
+            }
+            Request::TerminalCmd(words.join(" "))
+        }
+        other => other.clone(),
+    };
+    let mut payload = request
+        .encode(1, dialect)
+        .unwrap_or_else(|e| panic!("{request:?} does not encode: {e}"))
+        .to_vec();
+    if payload.len() > 2 {
+        for _ in 0..rng.random_range(1..4) {
+            let at = rng.random_range(2..payload.len());
+            let window = &mut payload[at..];
+            let n = window.len().min(4);
+            if rng.random_bool(0.8) {
+                let pattern = HOSTILE[rng.random_range(0..HOSTILE.len())];
+                window[..n].copy_from_slice(&pattern[..n]);
+            } else {
+                window[..n].iter_mut().for_each(|b| *b = rng.random());
+            }
+        }
+    }
+    payload
+}
+
+/// Feeds a simulated board `frames` hostile commands (every command, each firmware generation
+/// the simulator has), stepping its clock between them and asking its state every 50 frames: the
+/// board must never panic and always answer. Returns the frames sent, those that decode as their
+/// command (the rest test the decoder's refusal) and the states answered.
+fn fuzz_car_commands(frames: u64, seed: u64) -> (u64, u64, u64) {
+    use car_link::firmware::FirmwareVersion;
+    use car_link::message::{Dialect, Request};
+    use car_sim::{Board, CarOptions, SimCar};
+    let mut rng = Pcg64Mcg::seed_from_u64(seed);
+    let mut sent = 0;
+    let mut answered = 0;
+    let mut decoded = 0;
+    let boards = 1 + frames / 20_000;
+    for b in 0..boards {
+        let version = FirmwareVersion::SIMULATED[(b % 2) as usize];
+        let dialect = Dialect::host(version);
+        let templates = command_templates(version);
+        let get_state = Request::GetState
+            .encode(1, dialect)
+            .expect("GET_STATE encodes");
+        let mut board = Board::new(SimCar::new(CarOptions {
+            firmware: version,
+            seed: seed ^ b,
+            ..CarOptions::default()
+        }));
+        let share = frames / boards + u64::from(b < frames % boards);
+        for k in 0..share {
+            let payload = hostile_payload(&mut rng, &templates, dialect);
+            decoded += u64::from(Request::decode(&payload, version).is_ok());
+            let step = || board.handle(&payload);
+            if catch_unwind(AssertUnwindSafe(step)).is_err() {
+                panic!(
+                    "the simulated car ({version}) panicked on the payload {payload:02x?} (seed \
+                     {seed}, board {b}, frame {k})"
+                );
+            }
+            for _ in 0..rng.random_range(0..4) {
+                if catch_unwind(AssertUnwindSafe(|| board.car_mut().step())).is_err() {
+                    panic!(
+                        "the simulated car ({version}) panicked stepping after {payload:02x?} \
+                         (seed {seed}, board {b}, frame {k})"
+                    );
+                }
+            }
+            sent += 1;
+            if k % 50 == 49 {
+                let replies = board.handle(&get_state);
+                assert_eq!(
+                    replies.len(),
+                    1,
+                    "the simulated car ({version}) did not answer GET_STATE (seed {seed}, board \
+                     {b}, frame {k})"
+                );
+                answered += 1;
+            }
+        }
+    }
+    (sent, decoded, answered)
+}
+
+#[test]
+fn the_simulated_car_takes_hostile_values_in_every_command() {
+    let (sent, decoded, answered) = fuzz_car_commands(20_000, 3);
+    assert_eq!((sent, answered), (20_000, 400));
+    assert!(decoded > sent / 2, "{decoded} of {sent} decoded");
+}
+
+#[test]
+#[ignore = "long: DRIVECHECK_FUZZ_INPUTS frames (default 1 million)"]
+fn fuzz_the_simulated_car_long() {
+    let seed = 0xCA12;
+    let started = std::time::Instant::now();
+    let (sent, decoded, answered) = fuzz_car_commands(inputs(1_000_000), seed);
+    println!(
+        "simulated car: {sent} hostile frames ({decoded} decoded as their command), {answered} \
+         states answered, 0 panics, {:.0} s",
+        started.elapsed().as_secs_f64()
+    );
+}
