@@ -246,7 +246,7 @@ impl Board {
 /// ratio, wheel diameter, motor poles, axis distance — that is not positive, or a negative
 /// autopilot top speed. The firmware writes such a record to flash and then computes with it
 /// (NaN motor commands, a car that cannot be driven); the simulator refuses it instead, so that
-/// a hostile or mistaken host never stops the simulation (`docs/firmware.md#main-configuration`).
+/// a hostile or mistaken host never stops the simulation (`docs/firmware.md#hostile-configuration-values`).
 /// Every other value is taken as the firmware takes it, and limited as the firmware limits it
 /// ([`crate::config::truncate`]).
 pub fn refused(record: &MainConfig) -> Option<String> {
