@@ -34,7 +34,7 @@ fn main() -> ExitCode {
     match orchestrator::commands::run(cli) {
         Ok(exit) => exit.into(),
         Err(error) => {
-            eprintln!("error: {error:#}");
+            eprintln!("error: {}", orchestrator::output::describe(&error));
             Exit::Error.into()
         }
     }

@@ -35,3 +35,37 @@ pub fn verbosity() -> Verbosity {
 pub fn chatty() -> bool {
     verbosity() >= Verbosity::Normal
 }
+
+/// An error and its causes in one line, `outer: inner: …` like anyhow's `{:#}`, without a cause
+/// its outer message already ends with (errors that show their source in their own message).
+pub fn describe(error: &anyhow::Error) -> String {
+    let mut line = String::new();
+    for cause in error.chain() {
+        let text = cause.to_string();
+        if line.ends_with(&text) {
+            continue;
+        }
+        if !line.is_empty() {
+            line.push_str(": ");
+        }
+        line.push_str(&text);
+    }
+    line
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("not an MCAP file: {0}")]
+    struct Shows(#[source] std::io::Error);
+
+    #[test]
+    fn a_cause_the_message_already_shows_is_said_once() {
+        let error = anyhow::Error::new(Shows(std::io::Error::other("CRC failed"))).context("s2");
+        assert_eq!(describe(&error), "s2: not an MCAP file: CRC failed");
+        let error = anyhow::anyhow!("inner").context("outer");
+        assert_eq!(describe(&error), "outer: inner");
+    }
+}

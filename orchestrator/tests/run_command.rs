@@ -328,3 +328,45 @@ fn a_junit_path_is_checked_before_the_campaign() {
     );
     assert!(!out.exists());
 }
+
+#[test]
+fn of_two_campaigns_given_the_same_out_at_once_one_is_refused_and_nothing_is_mixed() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("R");
+    for attempt in 0..3 {
+        let _ = std::fs::remove_dir_all(&out);
+        let spawn = |seed: &str| {
+            Command::new(env!("CARGO_BIN_EXE_drivecheck"))
+                .args(["run", "-q", "--tests", "2", "--seed", seed, "--out"])
+                .arg(&out)
+                .stdout(std::process::Stdio::piped())
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .expect("the drivecheck binary runs")
+        };
+        let (a, b) = (spawn("11"), spawn("12"));
+        let outputs = [a.wait_with_output().unwrap(), b.wait_with_output().unwrap()];
+        let refused: Vec<&Output> = outputs
+            .iter()
+            .filter(|o| o.status.code() == Some(2))
+            .collect();
+        assert_eq!(refused.len(), 1, "attempt {attempt}: {outputs:?}");
+        let said = text(refused[0]);
+        assert!(
+            said.contains("another drivecheck process is writing it")
+                || said.contains("exists and is not empty"),
+            "{said}"
+        );
+        // The winner's campaign and every case in the directory are of one seed.
+        let record: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("campaign.json")).unwrap())
+                .unwrap();
+        let seed = &record["seed"];
+        for case in ["case-000.json", "case-001.json"] {
+            let case: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(out.join(case)).unwrap()).unwrap();
+            assert_eq!(&case["campaign_seed"], seed, "attempt {attempt}");
+        }
+        assert!(!out.join(".drivecheck-writing").exists());
+    }
+}

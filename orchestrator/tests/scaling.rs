@@ -256,6 +256,39 @@ fn merge_refuses_other_campaigns_and_names_the_missing_shards() {
     assert!(!dir.path().join("m1").exists() && !dir.path().join("m2").exists());
 }
 
+#[test]
+fn a_shard_with_a_damaged_recording_leaves_nothing_where_the_merge_was_to_go() {
+    let dir = tempfile::tempdir().unwrap();
+    let shards: Vec<_> = (1..=2)
+        .map(|k| {
+            let out = dir.path().join(format!("s{k}"));
+            run(5, 4, &["--shard", &format!("{k}/2")], &out);
+            out
+        })
+        .collect();
+    // The second shard's recording cut in half, as a copy interrupted would leave it.
+    let mcap = shards[1].join("campaign.mcap");
+    let bytes = std::fs::read(&mcap).unwrap();
+    std::fs::write(&mcap, &bytes[..bytes.len() / 2]).unwrap();
+    let out = dir.path().join("merged");
+    let merged = drivecheck(&[
+        "runs",
+        "merge",
+        path(&shards[0]),
+        path(&shards[1]),
+        "--out",
+        path(&out),
+    ]);
+    assert_eq!(merged.status.code(), Some(2), "{}", text(&merged));
+    assert!(!out.exists(), "{}", text(&merged));
+    // Nothing staged is left beside it either, and `runs` lists only the two shards.
+    let left: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(left.len(), 2, "{left:?}");
+}
+
 /// The shell block after `<!-- scaling-test: NAME -->` in `docs/scaling.md`.
 fn documented(name: &str) -> String {
     let doc = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/scaling.md"))
@@ -360,4 +393,130 @@ fn two_simulated_cars_on_one_machine_take_a_free_port_each_and_say_which() {
     assert!(addr_b.starts_with("tcp://127.0.0.1:"), "{addr_b}");
     assert_ne!(addr_a, addr_b);
     assert!(!addr_a.ends_with(":0"));
+}
+
+/// Copies the files of directory `from` into a new directory `to`.
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        std::fs::copy(entry.path(), to.join(entry.file_name())).unwrap();
+    }
+}
+
+#[test]
+fn a_hundred_damaged_shards_are_each_refused_and_leave_no_run_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    // Two campaigns of two shards each, recorded: seed 7 to merge, seed 8 to take files from.
+    let pristine = |seed: u64, k: usize| dir.path().join(format!("pristine-{seed}-{k}"));
+    for seed in [7, 8] {
+        for k in 1..=2 {
+            run(seed, 4, &["--shard", &format!("{k}/2")], &pristine(seed, k));
+        }
+    }
+    // A fixed sequence of damages (a small LCG: the test is the same every time).
+    let mut state: u64 = 0x5EED;
+    let mut next = |bound: usize| {
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        ((state >> 33) as usize) % bound
+    };
+    let mut kinds = [0usize; 7];
+    for trial in 0..100 {
+        let trial_dir = dir.path().join(format!("trial-{trial}"));
+        let shards: Vec<_> = (1..=2)
+            .map(|k| {
+                let to = trial_dir.join(format!("s{k}"));
+                copy_dir(&pristine(7, k), &to);
+                to
+            })
+            .collect();
+        let k = next(2);
+        let shard = &shards[k];
+        let kind = next(7);
+        kinds[kind] += 1;
+        let mut case_files: Vec<_> = std::fs::read_dir(shard)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.to_string_lossy().ends_with(".json") && !p.ends_with("campaign.json"))
+            .collect();
+        case_files.sort();
+        let case = case_files[next(case_files.len())].clone();
+        let mcap = shard.join("campaign.mcap");
+        match kind {
+            // Bytes flipped in the recording.
+            0 => {
+                let mut bytes = std::fs::read(&mcap).unwrap();
+                for _ in 0..1 + next(64) {
+                    let at = next(bytes.len());
+                    bytes[at] ^= 1 << next(8);
+                }
+                std::fs::write(&mcap, bytes).unwrap();
+            }
+            // The recording cut short (or emptied).
+            1 => {
+                let bytes = std::fs::read(&mcap).unwrap();
+                std::fs::write(&mcap, &bytes[..next(bytes.len())]).unwrap();
+            }
+            // The other campaign's recording of the same shard.
+            2 => {
+                std::fs::copy(pristine(8, k + 1).join("campaign.mcap"), &mcap).unwrap();
+            }
+            // The other campaign's case of the same test.
+            3 => {
+                let name = case.file_name().unwrap();
+                std::fs::copy(pristine(8, k + 1).join(name), &case).unwrap();
+            }
+            // A verdict edited to a pass (the test's and every segment's).
+            4 => {
+                let text = std::fs::read_to_string(&case).unwrap();
+                // Failed and aborted become passed, passed becomes failed.
+                let edited = text
+                    .replace("\"verdict\": \"passed\"", "\"verdict\": \"PASSED\"")
+                    .replace("\"verdict\": \"failed\"", "\"verdict\": \"passed\"")
+                    .replace("\"verdict\": \"aborted\"", "\"verdict\": \"passed\"")
+                    .replace("\"verdict\": \"PASSED\"", "\"verdict\": \"failed\"");
+                assert_ne!(edited, text);
+                std::fs::write(&case, edited).unwrap();
+            }
+            // A case file cut short.
+            5 => {
+                let bytes = std::fs::read(&case).unwrap();
+                std::fs::write(&case, &bytes[..next(bytes.len())]).unwrap();
+            }
+            // campaign.json cut short.
+            _ => {
+                let record = shard.join("campaign.json");
+                let bytes = std::fs::read(&record).unwrap();
+                std::fs::write(&record, &bytes[..next(bytes.len())]).unwrap();
+            }
+        }
+        let out = trial_dir.join("merged");
+        let merged = drivecheck(&[
+            "runs",
+            "merge",
+            path(&shards[0]),
+            path(&shards[1]),
+            "--out",
+            path(&out),
+        ]);
+        let said = String::from_utf8_lossy(&merged.stderr);
+        assert_eq!(
+            merged.status.code(),
+            Some(2),
+            "trial {trial} (damage {kind}): {}",
+            text(&merged)
+        );
+        assert!(said.starts_with("error: "), "trial {trial}: {said}");
+        assert!(!out.exists(), "trial {trial} (damage {kind}) left {out:?}");
+        assert_eq!(
+            std::fs::read_dir(&trial_dir).unwrap().count(),
+            2,
+            "trial {trial}: something beside the shards"
+        );
+        std::fs::remove_dir_all(&trial_dir).unwrap();
+    }
+    // Every kind of damage was tried.
+    assert!(kinds.iter().all(|&n| n >= 5), "{kinds:?}");
 }

@@ -16,8 +16,9 @@ use anyhow::{Context, Result, bail};
 use crate::exit::Exit;
 use crate::profile_arg::LoadedProfile;
 use crate::recording::{Recorder, RecordingStart, SIM_PROFILE_METADATA, Span, Spans};
-use crate::runner::{CAMPAIGN_FILE, RECORDING_FILE, RunDirectory, SPAN_GAP_NS, is_used};
+use crate::runner::{CAMPAIGN_FILE, RECORDING_FILE, RunDirectory, SPAN_GAP_NS, Staged, is_used};
 use campaign::files::{CampaignRecord, Case, Settings};
+use campaign::oracle::Verdict;
 use campaign::shard::Shard;
 
 /// One shard's run directory, read.
@@ -78,7 +79,10 @@ pub fn merge(
         started_at,
         ..first.record.clone()
     };
-    let mut dir = RunDirectory::merged(out.to_owned(), record, &scenario)?;
+    // Built aside and moved into place when complete: a shard that fails half way leaves nothing
+    // at `out` that `drivecheck runs` would take for a campaign.
+    let staged = Staged::beside(out)?;
+    let mut dir = RunDirectory::merged(staged.dir().to_owned(), record, &scenario)?;
     for case in &cases {
         dir.write_case(case)?;
     }
@@ -86,11 +90,13 @@ pub fn merge(
     if recorded[0] {
         merge_recordings(
             &shards,
+            &cases,
             &report.record,
             &scenario,
-            &out.join(RECORDING_FILE),
+            &staged.dir().join(RECORDING_FILE),
         )?;
     }
+    staged.commit()?;
     let summary = report.record.summary.as_ref();
     println!(
         "merged {} shards of campaign seed {} on {}: {} tests, {} passed, {} failed, {} aborted{}",
@@ -257,9 +263,106 @@ fn read_cases(shards: &[ShardDir], tests: usize) -> Result<Vec<Case>> {
                 case.test_index
             );
         }
+        // Nothing a shard says is taken on trust: the case's values and every verdict are
+        // checked against its own statistics, and it must be of the shard's campaign.
+        case.check().with_context(|| path.display().to_string())?;
+        if let Some(difference) = not_of(&case, &shard.record) {
+            bail!(
+                "{}: not a case of shard {}'s campaign: {difference}",
+                path.display(),
+                shard.shard
+            );
+        }
         cases.push(case);
     }
     Ok(cases)
+}
+
+/// What makes `case` a case of another campaign than `record`, if anything.
+fn not_of(case: &Case, record: &CampaignRecord) -> Option<String> {
+    let runtime_free = |s: &Settings| Settings {
+        safety: None,
+        streaming: None,
+        ..s.clone()
+    };
+    if case.campaign_seed != Some(record.seed) {
+        return Some(format!(
+            "campaign seed {}, the shard's is {}",
+            case.campaign_seed
+                .map_or_else(|| "none".to_owned(), |s| s.to_string()),
+            record.seed
+        ));
+    }
+    if case.scenario != record.scenario {
+        return Some(format!(
+            "scenario {} ({}), the shard's is {} ({})",
+            case.scenario.name,
+            case.scenario.hash.as_deref().unwrap_or("-"),
+            record.scenario.name,
+            record.scenario.hash.as_deref().unwrap_or("-")
+        ));
+    }
+    if case.no_faults != record.no_faults {
+        return Some(format!(
+            "--no-faults {}, the shard's {}",
+            case.no_faults, record.no_faults
+        ));
+    }
+    match &case.settings {
+        Some(settings) if runtime_free(settings) != runtime_free(&record.settings) => Some(
+            "its settings are not the shard's (tests, sizes, speeds, faults, threshold or policy)"
+                .to_owned(),
+        ),
+        _ => None,
+    }
+}
+
+/// Checks a shard's recording against its campaign before anything of it is merged: of the
+/// shard's campaign (its seed), a span for every test of the shard that did not pass (a
+/// recording of the embedded simulator has one per test it keeps) and none for another's. One
+/// test in memory at a time.
+fn check_recording(shard: &ShardDir, bytes: &[u8], cases: &[Case]) -> Result<()> {
+    let dir = shard.dir.display();
+    let mut spans = Spans::new(bytes).with_context(|| dir.to_string())?;
+    let mut seen = std::collections::BTreeSet::new();
+    for span in spans.by_ref() {
+        let span = span.with_context(|| format!("{dir}: {RECORDING_FILE}"))?;
+        let Some(test) = span.test_index else {
+            continue;
+        };
+        if test >= cases.len() || !shard.shard.contains(test) {
+            bail!(
+                "{dir}: {RECORDING_FILE} holds test {test}, which is not in shard {}",
+                shard.shard
+            );
+        }
+        if !seen.insert(test) {
+            bail!("{dir}: {RECORDING_FILE} holds test {test} twice");
+        }
+    }
+    let seed = spans
+        .metadata("drivecheck.campaign")
+        .and_then(|m| m.get("seed"))
+        .map(String::as_str);
+    if seed != Some(shard.record.seed.to_string().as_str()) {
+        bail!(
+            "{dir}: {RECORDING_FILE} is the recording of campaign seed {}, campaign.json's is {}",
+            seed.unwrap_or("(none recorded)"),
+            shard.record.seed
+        );
+    }
+    // Every recording keeps the tests that did not pass (`--record failing` drops the others).
+    if shard.record.car == "sim"
+        && let Some(missing) = (0..cases.len())
+            .filter(|&t| shard.shard.contains(t))
+            .find(|&t| cases[t].verdict != Some(Verdict::Passed) && !seen.contains(&t))
+    {
+        bail!(
+            "{dir}: {RECORDING_FILE} has no span of test {missing}, which did not pass: it is not \
+             this shard's recording, or it was cut"
+        );
+    }
+    Ok(())
 }
 
 /// The campaign's scenario: `--scenario`, else the bundled one of its name; its hash must be the
@@ -295,6 +398,7 @@ fn scenario_of(record: &CampaignRecord, arg: Option<&str>) -> Result<scenarios::
 /// at a time (besides the shards' compressed files).
 fn merge_recordings(
     shards: &[ShardDir],
+    cases: &[Case],
     record: &CampaignRecord,
     scenario: &scenarios::Scenario,
     out: &Path,
@@ -303,7 +407,10 @@ fn merge_recordings(
         .iter()
         .map(|s| {
             let path = s.dir.join(RECORDING_FILE);
-            std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))
+            let bytes =
+                std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))?;
+            check_recording(s, &bytes, cases)?;
+            Ok(bytes)
         })
         .collect::<Result<_>>()?;
     let simulated = shards.iter().all(|s| s.record.car == "sim");

@@ -90,7 +90,7 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
     if embedded {
         warn_other_profile(&case, path, &profile);
     }
-    let made = args.out.as_ref().is_none_or(|out| !out.exists());
+    let made = args.out.is_none();
     let out = match &args.out {
         Some(out) => out.clone(),
         None => crate::runner::claim_default_run_dir(&run_dir_name(
@@ -121,10 +121,7 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
         if args.vary_seed { " + run − 1" } else { "" },
         out.display()
     );
-    if crate::runner::is_used(&out) {
-        bail!(crate::runner::RunError::OutDirUsed { path: out });
-    }
-    let _empty = crate::runner::RemoveIfEmpty::new(&out, made);
+    let _claim = crate::runner::claim_out_dir(&out, made)?;
     if let Some(file) = &args.junit {
         super::shared::check_output_file("--junit", file, &out)?;
     }

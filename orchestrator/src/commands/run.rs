@@ -71,7 +71,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
             humantime::format_duration(WATCHDOG),
         );
     }
-    let made = args.out.as_ref().is_none_or(|out| !out.exists());
+    let made = args.out.is_none();
     let out = match &args.out {
         Some(out) => out.clone(),
         None => {
@@ -82,10 +82,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
             })?
         }
     };
-    if crate::runner::is_used(&out) {
-        anyhow::bail!(crate::runner::RunError::OutDirUsed { path: out });
-    }
-    let _empty = crate::runner::RemoveIfEmpty::new(&out, made);
+    let _claim = crate::runner::claim_out_dir(&out, made)?;
     if let Some(file) = &args.junit {
         super::shared::check_output_file("--junit", file, &out)?;
     }

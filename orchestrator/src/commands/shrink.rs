@@ -181,12 +181,8 @@ pub(super) fn shrink_case(
 ) -> Result<ShrinkReport> {
     let started = Instant::now();
     let cancel = runtime.block_on(async { cancel_on_ctrl_c() });
-    if crate::runner::is_used(out) {
-        bail!(crate::runner::RunError::OutDirUsed {
-            path: out.to_owned()
-        });
-    }
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    // Claimed for the whole shrink: another process given the same --out is refused.
+    let _claim = crate::runner::claim_out_dir(out, false)?;
     let sim = SimDriver::new(
         (scenario, options.sim.clone()),
         path,

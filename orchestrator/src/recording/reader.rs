@@ -5,7 +5,6 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use mcap::read::{ChunkFlattener, Options};
 use mcap::records::Record as McapRecord;
 
 use super::topic::{Record, Topic};
@@ -78,9 +77,7 @@ impl Recording {
         let mut recording = Recording::default();
         let mut schemas = BTreeMap::new();
         let mut started = false;
-        for record in ChunkFlattener::new_with_options(bytes, Options::ValidateChunkCrcs.into())
-            .map_err(RecordingError::NotMcap)?
-        {
+        for record in Records::new(bytes) {
             match record {
                 Ok(McapRecord::Header(_)) => started = true,
                 Ok(record) => recording.take(record, &mut schemas),
@@ -288,7 +285,7 @@ pub struct Span {
 /// `drivecheck.test.<index>` metadata record closes the span of the messages before it (those
 /// from its start on); messages after the last such record come as one span without a test.
 pub struct Spans<'a> {
-    records: ChunkFlattener<'a>,
+    records: Records<'a>,
     channels: BTreeMap<u16, Topic>,
     pending: Vec<super::Held>,
     done: bool,
@@ -305,8 +302,7 @@ impl<'a> Spans<'a> {
     /// The spans of the recording in `bytes`.
     pub fn new(bytes: &'a [u8]) -> Result<Self, RecordingError> {
         Ok(Self {
-            records: ChunkFlattener::new_with_options(bytes, Options::ValidateChunkCrcs.into())
-                .map_err(RecordingError::NotMcap)?,
+            records: Records::new(bytes),
             channels: BTreeMap::new(),
             pending: Vec::new(),
             done: false,
@@ -403,5 +399,53 @@ impl Iterator for Spans<'_> {
                 _ => {}
             }
         }
+    }
+}
+
+/// The largest record or chunk (uncompressed) a drivecheck recording holds: the writer closes
+/// chunks at 256 KiB, and no message comes near this. A larger length read from a file is damage.
+pub const RECORD_LIMIT: usize = 64 * 1024 * 1024;
+
+/// The records of the MCAP file in `bytes`, chunks unpacked (mcap's `ChunkFlattener`), every CRC
+/// the file has checked (each chunk's, the data section's, the summary's), with every length read from the file bounded by [`RECORD_LIMIT`]: a damaged
+/// length is an error, never an allocation of its size.
+struct Records<'a> {
+    buf: &'a [u8],
+    reader: mcap::sans_io::LinearReader,
+}
+
+impl<'a> Records<'a> {
+    fn new(buf: &'a [u8]) -> Self {
+        let options = mcap::sans_io::LinearReaderOptions::default()
+            .with_validate_chunk_crcs(true)
+            .with_validate_data_section_crc(true)
+            .with_validate_summary_section_crc(true)
+            .with_record_length_limit(RECORD_LIMIT);
+        Self {
+            buf,
+            reader: mcap::sans_io::LinearReader::new_with_options(options),
+        }
+    }
+}
+
+impl Iterator for Records<'_> {
+    type Item = Result<McapRecord<'static>, mcap::McapError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        while let Some(event) = self.reader.next_event() {
+            match event {
+                Ok(mcap::sans_io::LinearReadEvent::ReadRequest(need)) => {
+                    let n = need.min(self.buf.len());
+                    self.reader.insert(n).copy_from_slice(&self.buf[..n]);
+                    self.reader.notify_read(n);
+                    self.buf = &self.buf[n..];
+                }
+                Ok(mcap::sans_io::LinearReadEvent::Record { data, opcode }) => {
+                    return Some(mcap::parse_record(opcode, data).map(McapRecord::into_owned));
+                }
+                Err(e) => return Some(Err(e)),
+            }
+        }
+        None
     }
 }

@@ -78,7 +78,7 @@ pub(crate) use fresh::SPAN_GAP_NS;
 pub use fresh::{Connecting, FreshCar, FreshCars, StartPose, run_campaign_fresh};
 pub use run_dir::{CAMPAIGN_FILE, CampaignReport, RECORDING_FILE, TestSummary};
 pub(crate) use run_dir::{
-    RemoveIfEmpty, RunDirectory, claim_default_run_dir, is_used, rfc3339_now, run_dir_name,
+    RunDirectory, Staged, claim_default_run_dir, claim_out_dir, is_used, rfc3339_now, run_dir_name,
 };
 
 use journal::Journal;
@@ -240,6 +240,18 @@ pub enum RunError {
     OutDirUsed {
         /// The directory.
         path: PathBuf,
+    },
+    /// Another drivecheck process is writing the run directory (it holds its claim file).
+    #[error(
+        "{}: another drivecheck process is writing it ({}): give another --out",
+        path.display(),
+        holder
+    )]
+    OutDirClaimed {
+        /// The directory.
+        path: PathBuf,
+        /// What the claim file says of its holder.
+        holder: String,
     },
     /// Writing the run directory failed.
     #[error("{path}: {source}")]

@@ -329,24 +329,157 @@ fn civil_from_days(days: i64) -> (i64, u32, u32) {
     (y, m, d)
 }
 
-/// Removes, when dropped, a run directory the command made, if it is still empty: an error before
-/// the first test leaves no empty run directory behind (a directory with anything in it stays).
-#[derive(Debug)]
-pub(crate) struct RemoveIfEmpty(Option<PathBuf>);
+/// The file that marks a run directory as being written by a process: created with `O_EXCL`, so
+/// that of two processes given the same `--out` exactly one gets it; removed when the command ends.
+/// A directory left with it (a killed process) counts as used.
+pub(crate) const CLAIM_FILE: &str = ".drivecheck-writing";
 
-impl RemoveIfEmpty {
-    /// Guards `dir` when `made` (the command made it, or will), else nothing.
-    pub(crate) fn new(dir: &Path, made: bool) -> Self {
-        Self(made.then(|| dir.to_owned()))
+/// A command's claim of its output directory ([`claim_out_dir`]). When dropped it gives the claim
+/// back, and removes the directory if the command made it and nothing was written (an error
+/// before the first test leaves no empty run directory behind).
+#[derive(Debug)]
+pub(crate) struct OutClaim {
+    dir: PathBuf,
+    made: bool,
+}
+
+/// Claims the output directory `path` for this process, atomically: creates it (and its parents)
+/// when missing, then its [`CLAIM_FILE`] with `O_EXCL`, then checks that nothing else is in it.
+/// `made` says the caller just created it (the default run directories, claimed by name).
+/// Another process holding the claim, or anything already in the directory, is an error naming it.
+pub(crate) fn claim_out_dir(path: &Path, made: bool) -> Result<OutClaim, RunError> {
+    let io = |source| RunError::Io {
+        path: path.to_owned(),
+        source,
+    };
+    let made = made || !path.exists();
+    std::fs::create_dir_all(path).map_err(io)?;
+    // From here the guard removes the directory again if this process made it.
+    let mut claim = OutClaim {
+        dir: path.to_owned(),
+        made,
+    };
+    let marker = path.join(CLAIM_FILE);
+    match std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&marker)
+    {
+        Ok(mut file) => {
+            use std::io::Write;
+            // Who holds it, for the other process's error; the claim is the file itself.
+            let _ = writeln!(file, "pid {} since {}", std::process::id(), rfc3339_now());
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+            // Not ours: keep its claim file and the directory.
+            claim.made = false;
+            claim.dir = PathBuf::new();
+            let holder = std::fs::read_to_string(&marker)
+                .ok()
+                .map(|t| t.trim().to_owned())
+                .filter(|t| !t.is_empty())
+                .unwrap_or_else(|| "its claim file is empty".to_owned());
+            return Err(RunError::OutDirClaimed {
+                path: path.to_owned(),
+                holder,
+            });
+        }
+        Err(e) => return Err(io(e)),
+    }
+    let others = std::fs::read_dir(path)
+        .map_err(io)?
+        .filter_map(Result::ok)
+        .any(|entry| entry.file_name() != CLAIM_FILE);
+    if others {
+        return Err(RunError::OutDirUsed {
+            path: path.to_owned(),
+        });
+    }
+    Ok(claim)
+}
+
+impl Drop for OutClaim {
+    fn drop(&mut self) {
+        if self.dir.as_os_str().is_empty() {
+            return;
+        }
+        let _ = std::fs::remove_file(self.dir.join(CLAIM_FILE));
+        if self.made {
+            // Fails, as it should, on a directory with anything in it.
+            let _ = std::fs::remove_dir(&self.dir);
+        }
     }
 }
 
-impl Drop for RemoveIfEmpty {
-    fn drop(&mut self) {
-        if let Some(dir) = &self.0 {
-            // Fails, as it should, on a directory with anything in it.
-            let _ = std::fs::remove_dir(dir);
+/// A run directory built aside and moved into place only when complete (`runs merge`): a
+/// failure leaves nothing at the output path, and of two processes given the same output the
+/// second's move fails (a directory is renamed onto a path only while that is missing or empty).
+#[derive(Debug)]
+pub(crate) struct Staged {
+    staging: PathBuf,
+    out: PathBuf,
+}
+
+impl Staged {
+    /// A fresh staging directory beside `out` (`.NAME.staging-PID`), after checking that `out`
+    /// holds nothing.
+    pub(crate) fn beside(out: &Path) -> Result<Self, RunError> {
+        if is_used(out) {
+            return Err(RunError::OutDirUsed {
+                path: out.to_owned(),
+            });
         }
+        let parent = match out.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_owned(),
+            _ => PathBuf::from("."),
+        };
+        let name = out
+            .file_name()
+            .map_or_else(|| "run".to_owned(), |n| n.to_string_lossy().into_owned());
+        let staging = claim_run_dir(&parent, &format!(".{name}.staging-{}", std::process::id()))
+            .map_err(|source| RunError::Io {
+                path: parent.clone(),
+                source,
+            })?;
+        Ok(Self {
+            staging,
+            out: out.to_owned(),
+        })
+    }
+
+    /// Where to write.
+    pub(crate) fn dir(&self) -> &Path {
+        &self.staging
+    }
+
+    /// Moves the complete directory into place.
+    pub(crate) fn commit(self) -> Result<(), RunError> {
+        match std::fs::rename(&self.staging, &self.out) {
+            Ok(()) => {
+                std::mem::forget(self);
+                Ok(())
+            }
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::DirectoryNotEmpty | std::io::ErrorKind::AlreadyExists
+                ) || is_used(&self.out) =>
+            {
+                Err(RunError::OutDirUsed {
+                    path: self.out.clone(),
+                })
+            }
+            Err(source) => Err(RunError::Io {
+                path: self.out.clone(),
+                source,
+            }),
+        }
+    }
+}
+
+impl Drop for Staged {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.staging);
     }
 }
 
@@ -377,6 +510,66 @@ mod tests {
         assert!(claimed.iter().all(|p| p.is_dir()));
         assert!(claimed.contains(&root.path().join("same-name")));
         assert!(claimed.contains(&root.path().join("same-name-8")));
+    }
+
+    #[test]
+    fn of_processes_given_the_same_out_exactly_one_claims_it() {
+        let root = tempfile::tempdir().unwrap();
+        let out = root.path().join("nested").join("R");
+        let results: Vec<Result<OutClaim, RunError>> = std::thread::scope(|scope| {
+            let handles: Vec<_> = (0..8)
+                .map(|_| scope.spawn(|| claim_out_dir(&out, false)))
+                .collect();
+            handles.into_iter().map(|h| h.join().unwrap()).collect()
+        });
+        let (won, lost): (Vec<_>, Vec<_>) = results.into_iter().partition(Result::is_ok);
+        assert_eq!(won.len(), 1, "{lost:?}");
+        for error in &lost {
+            let text = error.as_ref().unwrap_err().to_string();
+            assert!(
+                text.contains("another drivecheck process is writing it (pid "),
+                "{text}"
+            );
+        }
+        assert!(out.join(CLAIM_FILE).is_file());
+        // Given back: the claim file goes, and so does the directory this process made empty.
+        drop(won);
+        assert!(!out.exists());
+        // A directory with anything in it is refused, and kept as it was.
+        std::fs::create_dir_all(&out).unwrap();
+        std::fs::write(out.join("campaign.json"), "{}").unwrap();
+        let error = claim_out_dir(&out, false).unwrap_err();
+        assert!(matches!(error, RunError::OutDirUsed { .. }), "{error}");
+        let left: Vec<_> = std::fs::read_dir(&out)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(left, ["campaign.json"]);
+    }
+
+    #[test]
+    fn a_staged_directory_appears_whole_or_not_at_all() {
+        let root = tempfile::tempdir().unwrap();
+        let out = root.path().join("merged");
+        // Dropped before the commit (an error half way): nothing at `out`, no staging left.
+        let staged = Staged::beside(&out).unwrap();
+        std::fs::write(staged.dir().join("campaign.json"), "{}").unwrap();
+        drop(staged);
+        assert!(!out.exists());
+        assert_eq!(std::fs::read_dir(root.path()).unwrap().count(), 0);
+        // Two built at once: the first commit wins, the second is refused and cleaned up.
+        let first = Staged::beside(&out).unwrap();
+        let second = Staged::beside(&out).unwrap();
+        std::fs::write(first.dir().join("campaign.json"), "first").unwrap();
+        std::fs::write(second.dir().join("campaign.json"), "second").unwrap();
+        first.commit().unwrap();
+        let error = second.commit().unwrap_err();
+        assert!(matches!(error, RunError::OutDirUsed { .. }), "{error}");
+        assert_eq!(
+            std::fs::read_to_string(out.join("campaign.json")).unwrap(),
+            "first"
+        );
+        assert_eq!(std::fs::read_dir(root.path()).unwrap().count(), 1);
     }
 
     #[test]

@@ -35,6 +35,44 @@ impl Case {
     }
 
     fn check_results(&self) -> Result<(), CaseError> {
+        let threshold = self.settings.as_ref().map(|s| s.oracle_threshold_m);
+        for (i, result) in self.segments.iter().enumerate() {
+            // Each segment's verdict is the oracle's on its own statistics and threshold, and
+            // the threshold is the campaign's: an edited verdict or threshold is refused.
+            let outcome = &result.oracle;
+            if threshold.is_some_and(|t| t.to_bits() != outcome.threshold_m.to_bits()) {
+                return Err(invalid(
+                    format!("segments[{i}].oracle.threshold_m"),
+                    format!(
+                        "{} m, but the case's settings judge against {} m",
+                        outcome.threshold_m,
+                        threshold.unwrap_or_default()
+                    ),
+                ));
+            }
+            let judged = crate::oracle::judge(
+                outcome.stats.as_ref(),
+                outcome.invalid_uwb_samples,
+                outcome.threshold_m,
+            );
+            if judged != outcome.verdict {
+                return Err(invalid(
+                    format!("segments[{i}].oracle.verdict"),
+                    format!(
+                        "`{}`, but its statistics (largest deviation {}, {} sample(s) without \
+                         UWB) against {} m say `{}`",
+                        verdict_name(outcome.verdict),
+                        outcome
+                            .stats
+                            .as_ref()
+                            .map_or_else(|| "none".to_owned(), |s| format!("{} m", s.max_m)),
+                        outcome.invalid_uwb_samples,
+                        outcome.threshold_m,
+                        verdict_name(judged)
+                    ),
+                ));
+            }
+        }
         // A recorded verdict must agree with the case's own segment results: replay compares
         // with it, and a `passed` written over a failed segment would read as a pass.
         let failed = self
@@ -200,4 +238,13 @@ fn check_route_points(path: &str, points: &[RoutePointRecord]) -> Result<(), Cas
         }
     }
     Ok(())
+}
+
+/// A segment verdict as case files write it.
+fn verdict_name(verdict: crate::oracle::SegmentVerdict) -> &'static str {
+    match verdict {
+        crate::oracle::SegmentVerdict::Passed => "passed",
+        crate::oracle::SegmentVerdict::Failed => "failed",
+        crate::oracle::SegmentVerdict::NoSamples => "no_samples",
+    }
 }

@@ -351,6 +351,39 @@ fn a_recorded_verdict_that_contradicts_the_segments_is_refused() {
 }
 
 #[test]
+fn every_segment_verdict_must_be_the_oracles_on_its_own_statistics() {
+    let (_, case) = run_case();
+    let failed = case
+        .segments
+        .iter()
+        .position(|s| s.oracle.verdict == SegmentVerdict::Failed)
+        .expect("run_case has a failed segment");
+    // A failed segment and the test edited to a pass, the statistics left as they were.
+    let mut edited = case.clone();
+    edited.verdict = Some(Verdict::Passed);
+    for segment in &mut edited.segments {
+        segment.oracle.verdict = SegmentVerdict::Passed;
+    }
+    let error = edited.check().unwrap_err().to_string();
+    assert!(
+        error.starts_with(&format!(
+            "segments[{failed}].oracle.verdict: `passed`, but its statistics (largest deviation"
+        )),
+        "{error}"
+    );
+    assert!(error.ends_with("say `failed`"), "{error}");
+    // A threshold raised in the segment (and not in the case's settings) is refused too.
+    let mut raised = case.clone();
+    raised.segments[failed].oracle.threshold_m = 100.0;
+    raised.segments[failed].oracle.verdict = SegmentVerdict::Passed;
+    let error = raised.check().unwrap_err().to_string();
+    assert!(
+        error.starts_with(&format!("segments[{failed}].oracle.threshold_m: 100 m")),
+        "{error}"
+    );
+}
+
+#[test]
 fn an_unknown_field_is_refused_beside_the_header() {
     let text = r#"{"format": "drivecheck-case", "schema_version": 2, "colour": "red",
         "scenario": {"name": "x"}, "commands": []}"#;
