@@ -186,9 +186,13 @@ pub fn coverage(area: &Area, start_end: Point, cases: &[Case]) -> Coverage {
             }
         }
         for place in &case.fault_places {
-            if let Some(CommandRecord::AddFault { probe, kind, .. }) =
-                case.commands.get(place.command_index)
+            if let Some(CommandRecord::AddFault {
+                probe, kind, param, ..
+            }) = case.commands.get(place.command_index)
             {
+                // A neutral parameter (an offset of 0, an amplification of 1) leaves the probe's
+                // value as it is: such a fault never acts.
+                let changes = kind.spec().neutral != Some(*param);
                 let (probe, kind) = (probe.to_string(), kind.to_string());
                 if let Some(f) = faults
                     .iter_mut()
@@ -196,7 +200,7 @@ pub fn coverage(area: &Area, start_end: Point, cases: &[Case]) -> Coverage {
                 {
                     f.confirmed += 1;
                     let ended = case.timing.map_or(f64::INFINITY, |t| t.drive_s);
-                    if place.acts_from_s < ended {
+                    if changes && place.acts_from_s < ended {
                         f.acted += 1;
                     }
                 }
@@ -376,6 +380,44 @@ mod tests {
         let none = coverage(&square(), Point::new(1.0, 1.25), &[undriven]);
         assert_eq!(none.stats.driven_cells, 0);
         assert_eq!(none.stats.segments_per_test, [1]);
+    }
+
+    #[test]
+    fn a_fault_with_a_neutral_parameter_is_confirmed_but_never_acted() {
+        use crate::files::{CommandRecord, FaultPlacementRecord, PlaceRuleRecord, TestTiming};
+        use crate::model::Probe;
+        let mut case = case_driving(&[(5.0, 1.25, 1.0), (9.0, 1.25, 1.0)], 1);
+        for param in [0.0, 2.0] {
+            case.commands.push(CommandRecord::AddFault {
+                probe: Probe::UwbYaw,
+                kind: crate::model::FaultKind::Offset,
+                param,
+                start: 0,
+                duration: 10,
+                at: None,
+            });
+            case.fault_places.push(FaultPlacementRecord {
+                command_index: case.commands.len() - 1,
+                rule: PlaceRuleRecord::EarlierTool,
+                segment_index: 0,
+                planned_along_m: 1.0,
+                sent_s: 1.0,
+                added_s: 1.0,
+                actual_along_m: None,
+                error_m: None,
+                acts_from_s: 1.0,
+                acts_to_s: 2.0,
+            });
+        }
+        case.timing = Some(TestTiming {
+            reset_s: 1.0,
+            drive_s: 10.0,
+        });
+        let c = coverage(&square(), Point::new(1.0, 1.25), &[case]);
+        let [fault] = &c.stats.faults[..] else {
+            panic!("{:?}", c.stats.faults);
+        };
+        assert_eq!((fault.confirmed, fault.acted), (2, 1), "{fault:?}");
     }
 
     #[test]

@@ -136,6 +136,12 @@ pub enum AbortReason {
     Starved,
     /// The operator interrupted the campaign.
     Interrupted,
+    /// The test ran past its time limit: three times its planned driving time and a minute
+    /// (the car does not keep up with its route; a simulated car never hangs a campaign).
+    TimeLimit {
+        /// The limit, seconds.
+        limit_s: f64,
+    },
     /// The car refused or did not answer a command of the test.
     CommandRefused {
         /// The command's index in the test.
@@ -147,7 +153,9 @@ impl AbortReason {
     /// How to stop the car for this reason.
     pub fn action(&self) -> StopAction {
         match self {
-            Self::RtkLost | Self::Starved | Self::Interrupted => StopAction::SafeStop,
+            Self::RtkLost | Self::Starved | Self::Interrupted | Self::TimeLimit { .. } => {
+                StopAction::SafeStop
+            }
             Self::OutsideFence { .. }
             | Self::InsideCutout { .. }
             | Self::OffRoute { .. }
@@ -183,6 +191,10 @@ impl fmt::Display for AbortReason {
             Self::LinkLost => f.write_str("link lost"),
             Self::Starved => f.write_str("the car reached the end of its route (starvation)"),
             Self::Interrupted => f.write_str("interrupted"),
+            Self::TimeLimit { limit_s } => write!(
+                f,
+                "ran past its time limit of {limit_s:.0} s (3 × its planned driving time + 60 s)"
+            ),
             Self::CommandRefused { command_index } => {
                 write!(f, "command {command_index} failed")
             }

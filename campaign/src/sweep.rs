@@ -12,6 +12,7 @@ use thiserror::Error;
 use crate::files::{Case, CaseError, CommandRecord, ScenarioRef};
 use crate::oracle::{SegmentVerdict, Verdict};
 use crate::shrink::{FaultField, RunResult};
+use scenarios::limits::{MAX_FAULT_FACTOR, MAX_FAULT_ITERATIONS, MAX_FAULT_OFFSET};
 
 pub use crate::files::SWEEP_FORMAT;
 
@@ -49,6 +50,9 @@ pub enum SetProblem {
     /// A value that is not a finite number.
     #[error("`{0}` is not a finite number")]
     NotANumber(String),
+    /// More values than [`MAX_AXIS_VALUES`].
+    #[error("{0} values: at most {MAX_AXIS_VALUES} per parameter")]
+    TooManyValues(usize),
     /// A value out of the parameter's range.
     #[error("{value} is not a value for {parameter} ({})", expected(*.parameter))]
     OutOfRange {
@@ -124,6 +128,37 @@ impl fmt::Display for Parameter {
     }
 }
 
+/// The most values one `--set` may give.
+pub const MAX_AXIS_VALUES: usize = 1_000;
+/// The most points a sweep's grid may have (each is driven `--runs` times).
+pub const MAX_GRID_POINTS: usize = 10_000;
+
+/// The number of points of the grid of `axes`, or an error naming the limit when it is above
+/// [`MAX_GRID_POINTS`] (checked before any point is made).
+pub fn grid_size(axes: &[Axis]) -> Result<usize, GridTooLarge> {
+    let mut points: usize = 1;
+    for axis in axes {
+        points = points
+            .checked_mul(axis.values.len())
+            .filter(|&p| p <= MAX_GRID_POINTS)
+            .ok_or_else(|| GridTooLarge {
+                sizes: axes.iter().map(|a| a.values.len()).collect(),
+            })?;
+    }
+    Ok(points)
+}
+
+/// A grid above [`MAX_GRID_POINTS`].
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error(
+    "the grid of {} value(s) has more than {MAX_GRID_POINTS} points (the limit): sweep fewer values",
+    .sizes.iter().map(ToString::to_string).collect::<Vec<_>>().join(" × ")
+)]
+pub struct GridTooLarge {
+    /// The values of each `--set`.
+    pub sizes: Vec<usize>,
+}
+
 /// One `--set NAME=V1,V2,…`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -155,6 +190,9 @@ impl Axis {
                     .ok_or_else(|| error(SetProblem::NotANumber(v.to_owned())))
             })
             .collect::<Result<Vec<f64>, _>>()?;
+        if values.len() > MAX_AXIS_VALUES {
+            return Err(error(SetProblem::TooManyValues(values.len())));
+        }
         for &v in &values {
             check_value(parameter, v).map_err(error)?;
         }
@@ -189,15 +227,15 @@ fn check_value(parameter: Parameter, v: f64) -> Result<(), SetProblem> {
         Parameter::Fault {
             field: FaultField::Param,
             ..
-        } => true,
+        } => v.abs() <= MAX_FAULT_OFFSET.max(MAX_FAULT_FACTOR),
         Parameter::Fault {
             field: FaultField::Start,
             ..
-        } => v >= 0.0 && v.fract() == 0.0 && v <= f64::from(u32::MAX),
+        } => v >= 0.0 && v.fract() == 0.0 && v <= f64::from(MAX_FAULT_ITERATIONS),
         Parameter::Fault {
             field: FaultField::Duration,
             ..
-        } => v >= 1.0 && v.fract() == 0.0 && v <= f64::from(u32::MAX),
+        } => v >= 1.0 && v.fract() == 0.0 && v <= f64::from(MAX_FAULT_ITERATIONS),
         Parameter::Sim {
             setting: SimSetting::UwbClampM,
         } => v > 0.0 && v <= 10.0,
@@ -217,10 +255,14 @@ fn check_value(parameter: Parameter, v: f64) -> Result<(), SetProblem> {
 fn expected(parameter: Parameter) -> &'static str {
     match parameter {
         Parameter::Fault {
+            field: FaultField::Param,
+            ..
+        } => "a fault parameter, at most 1000 either sign (drivecheck's limit)",
+        Parameter::Fault {
             field: FaultField::Start,
             ..
-        } => "a whole number of probe calls, 0 or more",
-        Parameter::Fault { .. } => "a whole number of probe calls, 1 or more",
+        } => "a whole number of probe calls, 0 to 1000000",
+        Parameter::Fault { .. } => "a whole number of probe calls, 1 to 1000000",
         Parameter::Sim {
             setting: SimSetting::UwbClampM,
         } => "metres, above 0 and at most 10",
@@ -354,6 +396,15 @@ impl Point {
             .filter(|r| r.verdict == Some(Verdict::Failed))
             .count()
     }
+
+    /// Runs that were aborted (a stop, a refused command, a lost link): neither passed nor
+    /// failed, counted apart.
+    pub fn aborted_runs(&self) -> usize {
+        self.runs
+            .iter()
+            .filter(|r| r.verdict == Some(Verdict::Aborted))
+            .count()
+    }
 }
 
 /// `sweep.json` (see `docs/case-format.md#sweeping-a-case`).
@@ -384,7 +435,7 @@ impl SweepReport {
     }
 
     /// The table: a row per point, the median of each segment's largest deviation over the runs
-    /// (`*` when it failed in a run), and how many runs failed.
+    /// (`*` when it failed in a run), and how many runs failed and how many were aborted.
     pub fn table(&self) -> String {
         let segments = self
             .points
@@ -394,6 +445,7 @@ impl SweepReport {
             .unwrap_or(0);
         let mut header: Vec<String> = self.axes.iter().map(|a| a.parameter.to_string()).collect();
         header.push("failed runs".to_owned());
+        header.push("aborted runs".to_owned());
         header.extend((0..segments).map(|k| format!("seg {k} (m)")));
         let mut out = format!(
             "| {} |\n|{}\n",
@@ -403,6 +455,7 @@ impl SweepReport {
         for point in &self.points {
             let mut row: Vec<String> = point.values.iter().map(|v| format!("{v}")).collect();
             row.push(format!("{}/{}", point.failed_runs(), point.runs.len()));
+            row.push(format!("{}/{}", point.aborted_runs(), point.runs.len()));
             for k in 0..segments {
                 row.push(match point.segments.get(k) {
                     Some(s) => match s.median_max_m {
@@ -451,7 +504,14 @@ mod tests {
         assert!(error("fault[9].param=1").contains("fault command(s)"));
         assert!(error("fault[0].speed=1").contains("expected fault[i].param"));
         assert!(error("sim.clamp=1").contains("sim.uwb_clamp_m"));
-        assert!(error("fault[0].duration=0").contains("1 or more"));
+        assert!(error("fault[0].duration=0").contains("1 to 1000000"));
+        assert!(
+            error("fault[0].param=1e39,2.0").contains("at most 1000 either sign"),
+            "{}",
+            error("fault[0].param=1e39")
+        );
+        let many = format!("fault[0].start={}", vec!["1"; 1001].join(","));
+        assert!(error(&many).contains("1001 values: at most 1000 per parameter"));
         assert!(error("fault[0].start=1.5").contains("whole number"));
         assert!(error("sim.uwb_clamp_m=0").contains("above 0"));
         assert!(error("fault[0].param=x").contains("`x` is not a finite number"));
@@ -464,6 +524,23 @@ mod tests {
                 problem: SetProblem::NoSuchFault { faults }
             }
         );
+    }
+
+    #[test]
+    fn a_grid_above_the_limit_is_refused_before_it_is_made() {
+        let case = case();
+        let values = |n: usize| (0..n).map(|k| k.to_string()).collect::<Vec<_>>().join(",");
+        let axes: Vec<Axis> = (0..3)
+            .map(|_| Axis::parse(&format!("fault[0].start={}", values(1000)), &case).unwrap())
+            .collect();
+        let error = grid_size(&axes).unwrap_err();
+        assert_eq!(
+            error.to_string(),
+            "the grid of 1000 × 1000 × 1000 value(s) has more than 10000 points (the limit): \
+             sweep fewer values"
+        );
+        assert_eq!(grid_size(&axes[..1]), Ok(1000));
+        assert_eq!(grid_size(&[]), Ok(1));
     }
 
     #[test]

@@ -211,6 +211,27 @@ async fn a_silent_tcp_client_is_disconnected_after_the_idle_timeout_and_frees_th
     let mut buf = [0u8; 16];
     let n = timeout(Duration::from_secs(3), silent.read(&mut buf)).await;
     assert!(matches!(n, Ok(Ok(0)) | Ok(Err(_))), "disconnected: {n:?}");
+    // A client that trickles a byte every 100 ms, never a whole frame, is disconnected too.
+    let mut trickling = TcpStream::connect(addr).await.expect("the slot is free");
+    let started = tokio::time::Instant::now();
+    let mut cut = false;
+    for byte in std::iter::repeat_n(0x41u8, 40) {
+        if trickling.write_all(&[byte]).await.is_err() {
+            cut = true;
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        if let Ok(Ok(0)) = timeout(Duration::from_millis(1), trickling.read(&mut buf)).await {
+            cut = true;
+            break;
+        }
+    }
+    assert!(cut, "still connected after {:?}", started.elapsed());
+    assert!(
+        started.elapsed() < Duration::from_secs(2),
+        "{:?}",
+        started.elapsed()
+    );
     // A client that speaks now and then keeps its connection past the timeout.
     let mut next = TcpStream::connect(addr).await.expect("the slot is free");
     for _ in 0..4 {

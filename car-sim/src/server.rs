@@ -111,9 +111,9 @@ pub struct SimConfig {
     pub imu_on_bench: bool,
     /// Simulation only: the UWB correction clamp (see [`CarOptions::uwb_step_clamp_m`]).
     pub uwb_step_clamp_m: Option<f32>,
-    /// Over TCP: close a client's connection after this long without a byte from it, so that a
-    /// client that went silent (or never spoke) does not hold the only slot forever (`None`:
-    /// never). A live client sends at least every 500 ms (the keepalive feeding the watchdog).
+    /// Over TCP: close a client's connection after this long without a complete frame from it,
+    /// so that a client that went silent, never spoke or trickles bytes that make no frame does
+    /// not hold the only slot (`None`: never). A live client sends at least every 500 ms (the keepalive feeding the watchdog).
     pub idle_timeout: Option<Duration>,
     /// Link impairment.
     pub link: LinkImpairment,
@@ -405,7 +405,9 @@ async fn serve_stream<S>(
     let mut decoder = FrameDecoder::firmware();
     let encoder = FrameEncoder::to_firmware();
     let mut buf = vec![0u8; 4096];
-    let mut last_byte = Instant::now();
+    // A complete frame, not a byte, keeps the connection: a client trickling bytes that never
+    // make a frame does not hold the car's only slot.
+    let mut last_frame = Instant::now();
     loop {
         let disconnect = async {
             match deadline {
@@ -415,7 +417,7 @@ async fn serve_stream<S>(
         };
         let idle = async {
             match idle_timeout {
-                Some(idle) => sleep_until(last_byte + idle).await,
+                Some(idle) => sleep_until(last_frame + idle).await,
                 None => std::future::pending().await,
             }
         };
@@ -437,17 +439,20 @@ async fn serve_stream<S>(
             read = timeout(hop.byte_timeout(), reader.read(&mut buf)) => match read {
                 Ok(Ok(0)) | Ok(Err(_)) => return,
                 Ok(Ok(n)) => {
-                    last_byte = Instant::now();
                     decoder.push(&buf[..n]);
-                    if !forward_frames(&mut decoder, &core).await {
-                        return;
+                    match forward_frames(&mut decoder, &core).await {
+                        None => return,
+                        Some(0) => {}
+                        Some(_) => last_frame = Instant::now(),
                     }
                 }
                 Err(_) => {
                     // The byte timeout: abandon a half-received frame.
                     while decoder.expire().is_some() {
-                        if !forward_frames(&mut decoder, &core).await {
-                            return;
+                        match forward_frames(&mut decoder, &core).await {
+                            None => return,
+                            Some(0) => {}
+                            Some(_) => last_frame = Instant::now(),
                         }
                     }
                 }
@@ -457,16 +462,16 @@ async fn serve_stream<S>(
 }
 
 /// Sends every complete valid frame to the simulation; dropped candidates are ignored as the
-/// firmware does. Returns false when the simulation is gone.
-async fn forward_frames(decoder: &mut FrameDecoder, core: &mpsc::Sender<CoreMsg>) -> bool {
+/// firmware does. Returns the frames sent, `None` when the simulation is gone.
+async fn forward_frames(decoder: &mut FrameDecoder, core: &mpsc::Sender<CoreMsg>) -> Option<usize> {
+    let mut sent = 0;
     while let Some(item) = decoder.next_frame() {
-        if let Ok(frame) = item
-            && core.send(CoreMsg::Payload(frame.payload)).await.is_err()
-        {
-            return false;
+        if let Ok(frame) = item {
+            core.send(CoreMsg::Payload(frame.payload)).await.ok()?;
+            sent += 1;
         }
     }
-    true
+    Some(sent)
 }
 
 /// Starts a simulated car in this process and returns the client's end of an in-memory byte
@@ -496,8 +501,8 @@ pub fn spawn_in_process(config: &SimConfig) -> (DuplexStream, SimHandle) {
 
 /// Serves a simulated car over TCP at `addr` as the reference bridge would (it listens on port
 /// 8300; bind loopback unless exposing it is intended). One client at a time: a second
-/// connection is accepted and closed at once; a client silent for `config.idle_timeout` is
-/// disconnected, freeing the slot. Like the bridge, replies stamped with id 254 are
+/// connection is accepted and closed at once; a client that sends no complete frame for
+/// `config.idle_timeout` is disconnected, freeing the slot. Like the bridge, replies stamped with id 254 are
 /// not forwarded (PRINTF excepted) and the parser waits 500 ms for a frame's next byte. The car
 /// keeps running between connections.
 ///

@@ -444,8 +444,9 @@ pub struct SimArgs {
     /// Probability that a payload is lost, for example `2%` or `0.02`.
     #[arg(long, value_parser = parse_probability)]
     pub link_loss: Option<f64>,
-    /// Over TCP, disconnect a client that sent nothing for this long, so a silent client does not
-    /// hold the car's only connection forever (`0s`: never).
+    /// Over TCP, disconnect a client that sent no complete frame for this long, so a silent
+    /// client, or one trickling bytes that make no frame, does not hold the car's only connection
+    /// (`0s`: never).
     #[arg(long, value_name = "DURATION", default_value = "30s", value_parser = humantime::parse_duration)]
     pub idle_timeout: std::time::Duration,
     /// The car profile: `default` or a TOML file (docs/twin.md); `--firmware` overrides its

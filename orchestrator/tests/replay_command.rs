@@ -231,3 +231,28 @@ fn a_case_that_leaves_the_area_is_refused_before_driving() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("commands[3]: not drivable"), "{stderr}");
 }
+
+#[test]
+fn a_fifo_as_a_case_or_scenario_file_is_refused_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("case.json");
+    let made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .expect("mkfifo runs");
+    assert!(made.success());
+    // Nothing ever writes to the FIFO: a reader that opened it would wait for ever, and this
+    // test would time out instead of failing.
+    for args in [
+        vec!["replay", path(&fifo)],
+        vec!["scenario", "check", path(&fifo)],
+    ] {
+        let out = drivecheck(&args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {}", text(&out));
+        assert!(
+            text(&out).contains("not a regular file (a directory, FIFO or device)"),
+            "{args:?}: {}",
+            text(&out)
+        );
+    }
+}

@@ -240,6 +240,9 @@ pub enum Problem {
         /// Largest allowed.
         high: f64,
     },
+    /// A value beyond one of drivecheck's limits ([`crate::limits`]).
+    #[error("{0}")]
+    BeyondLimit(Box<BeyondLimit>),
     /// A value that must be a whole number is not.
     #[error("must be a whole number, found {0}")]
     NotWhole(f64),
@@ -260,6 +263,15 @@ pub enum Problem {
     /// The fault kind `none` among the kinds to generate.
     #[error("`none` does nothing (it only occupies a fault slot): leave it out")]
     NoneKind,
+    /// A fault range that holds only its kind's neutral parameter.
+    #[error(
+        "holds only {neutral}, which leaves the probe's value as it is: a fault that does \
+         nothing (widen the range or leave the kind out)"
+    )]
+    OnlyNeutral {
+        /// The neutral parameter (an offset's 0, an amplification's 1).
+        neutral: f64,
+    },
     /// No bundled scenario has this name.
     #[error("no bundled scenario `{name}` (known: {known})")]
     UnknownBundled {
@@ -355,6 +367,30 @@ pub enum WarningKind {
         /// The generator's clearance, metres.
         clearance: f64,
     },
+}
+
+/// A value beyond one of drivecheck's limits ([`crate::limits`]).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{} is beyond drivecheck's limit: {bound} {limit} ({why})", number(*value))]
+pub struct BeyondLimit {
+    /// The value.
+    pub value: f64,
+    /// `at most` or `at least`.
+    pub bound: &'static str,
+    /// The limit.
+    pub limit: f64,
+    /// What the limit guards.
+    pub why: &'static str,
+}
+
+/// A number as a person reads it: plain, or in exponent form when very large or small (`1e300`,
+/// not three hundred digits).
+fn number(x: f64) -> String {
+    if x != 0.0 && !(1e-3..1e9).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        x.to_string()
+    }
 }
 
 #[cfg(test)]

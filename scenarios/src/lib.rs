@@ -92,6 +92,17 @@ pub fn load(path: impl AsRef<Path>) -> Result<Loaded, ScenarioError> {
     let path = path.as_ref();
     let source_name = path.display().to_string();
     if let Ok(meta) = std::fs::metadata(path)
+        && !meta.is_file()
+    {
+        return Err(ScenarioError::in_source(
+            &source_name,
+            None,
+            Problem::Read(std::io::Error::other(
+                "not a regular file (a directory, FIFO or device): a scenario is a TOML or XML file",
+            )),
+        ));
+    }
+    if let Ok(meta) = std::fs::metadata(path)
         && meta.len() > MAX_SCENARIO_BYTES
     {
         return Err(ScenarioError::in_source(
@@ -125,6 +136,35 @@ pub const MAX_SCENARIO_BYTES: u64 = 8 * 1024 * 1024;
 pub const MAX_POLYGON_VERTICES: usize = 100_000;
 /// The most tests a campaign may have (`campaign.tests`, `drivecheck run --tests`).
 pub const MAX_TESTS: usize = 1_000_000;
+
+/// Limits on every size and speed a scenario sets, far beyond any real use and low enough that no
+/// value within them exhausts memory or never ends; a value beyond one is refused with the limit
+/// named (`docs/scenario-format.md#limits`).
+pub mod limits {
+    /// `generator.ahead_margin` and `recovery_ahead_margin`, segments (the bundled scenarios
+    /// use 15–20).
+    pub const MAX_AHEAD_MARGIN: usize = 200;
+    /// `campaign.test_size.max`, segments per test (default 5–20).
+    pub const MAX_TEST_SIZE: usize = 1_000;
+    /// `campaign.points_per_segment.max` (default 4–7).
+    pub const MAX_POINTS_PER_SEGMENT: usize = 100;
+    /// `campaign.speed_kmh.min`, km/h: slower, one segment of a test takes minutes.
+    pub const MIN_SPEED_KMH: f64 = 0.5;
+    /// `generator.segment_max_m`, m.
+    pub const MAX_SEGMENT_M: f64 = 100.0;
+    /// `generator.clearance_m`, m.
+    pub const MAX_CLEARANCE_M: f64 = 50.0;
+    /// `generator.inner_tries`.
+    pub const MAX_INNER_TRIES: usize = 10_000;
+    /// `generator.outer_tries`.
+    pub const MAX_OUTER_TRIES: usize = 100_000;
+    /// A fault's offset, in its probe's unit (m, or degrees for the yaw, which is within ±180°).
+    pub const MAX_FAULT_OFFSET: f64 = 1_000.0;
+    /// A fault's amplification factor, either sign.
+    pub const MAX_FAULT_FACTOR: f64 = 1_000.0;
+    /// A fault's start and duration, probe iterations.
+    pub const MAX_FAULT_ITERATIONS: u32 = 1_000_000;
+}
 
 /// Parses and validates a TOML scenario; `source_name` names it in errors (and, when the file has
 /// no `name`, gives the name: its file stem).

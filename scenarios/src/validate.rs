@@ -12,7 +12,12 @@
 use trajgen::geometry::turn_angle;
 use trajgen::{Area, Point, Waypoint};
 
-use crate::error::{Problem, ScenarioError, Warning, WarningKind};
+use crate::error::{BeyondLimit, Problem, ScenarioError, Warning, WarningKind};
+use crate::limits::{
+    MAX_AHEAD_MARGIN, MAX_CLEARANCE_M, MAX_FAULT_FACTOR, MAX_FAULT_ITERATIONS, MAX_FAULT_OFFSET,
+    MAX_INNER_TRIES, MAX_OUTER_TRIES, MAX_POINTS_PER_SEGMENT, MAX_SEGMENT_M, MAX_TEST_SIZE,
+    MIN_SPEED_KMH,
+};
 use crate::model::{Route, Scenario};
 use crate::settings::{
     CampaignSettings, FaultKind, FaultTarget, GeneratorSettings, Interval, SHARED_PARAM_KEY,
@@ -128,6 +133,46 @@ fn counts(interval: Interval<usize>, field: &str) -> Check {
     )
 }
 
+/// `value` at most `limit` ([`crate::limits`]).
+fn at_most(value: f64, limit: f64, why: &'static str, field: &str) -> Check {
+    if value <= limit {
+        Ok(())
+    } else {
+        Err((
+            field.into(),
+            Problem::BeyondLimit(Box::new(BeyondLimit {
+                value,
+                bound: "at most",
+                limit,
+                why,
+            })),
+        ))
+    }
+}
+
+/// `value` at least `limit` ([`crate::limits`]; a tolerance of 1e-9 for unit conversions).
+fn at_least(value: f64, limit: f64, why: &'static str, field: &str) -> Check {
+    if value >= limit - 1e-9 {
+        Ok(())
+    } else {
+        Err((
+            field.into(),
+            Problem::BeyondLimit(Box::new(BeyondLimit {
+                value,
+                bound: "at least",
+                limit,
+                why,
+            })),
+        ))
+    }
+}
+
+/// Why speeds have a floor.
+const SLOW: &str = "slower, one segment of a test takes minutes";
+
+/// How far the limits are from any real use.
+const FAR: &str = "far beyond any real test; a larger value only exhausts memory or time";
+
 fn check_vehicle(v: &Vehicle) -> Check {
     positive(v.wheelbase_m, "vehicle.wheelbase_m")?;
     positive(v.max_steering_angle_rad, "vehicle.max_steering_angle_rad")?;
@@ -154,11 +199,30 @@ fn check_generator(g: &GeneratorSettings) -> Check {
     }
     positive(g.max_turn_deg, "generator.max_turn_deg")?;
     within(g.max_turn_deg, 0.0, 180.0, "generator.max_turn_deg")?;
+    at_most(
+        g.segment_max_m,
+        MAX_SEGMENT_M,
+        FAR,
+        "generator.segment_max_m",
+    )?;
     at_least_one(g.ahead_margin, "generator.ahead_margin")?;
     at_least_one(g.recovery_ahead_margin, "generator.recovery_ahead_margin")?;
     at_least_one(g.inner_tries, "generator.inner_tries")?;
     at_least_one(g.outer_tries, "generator.outer_tries")?;
-    non_negative(g.clearance_m, "generator.clearance_m")
+    for (value, limit, field) in [
+        (g.ahead_margin, MAX_AHEAD_MARGIN, "generator.ahead_margin"),
+        (
+            g.recovery_ahead_margin,
+            MAX_AHEAD_MARGIN,
+            "generator.recovery_ahead_margin",
+        ),
+        (g.inner_tries, MAX_INNER_TRIES, "generator.inner_tries"),
+        (g.outer_tries, MAX_OUTER_TRIES, "generator.outer_tries"),
+    ] {
+        at_most(value as f64, limit as f64, FAR, field)?;
+    }
+    non_negative(g.clearance_m, "generator.clearance_m")?;
+    at_most(g.clearance_m, MAX_CLEARANCE_M, FAR, "generator.clearance_m")
 }
 
 fn check_campaign(c: &CampaignSettings) -> Check {
@@ -173,9 +237,27 @@ fn check_campaign(c: &CampaignSettings) -> Check {
         ));
     }
     counts(c.test_size, "campaign.test_size")?;
+    at_most(
+        c.test_size.max as f64,
+        MAX_TEST_SIZE as f64,
+        FAR,
+        "campaign.test_size.max",
+    )?;
     counts(c.points_per_segment, "campaign.points_per_segment")?;
+    at_most(
+        c.points_per_segment.max as f64,
+        MAX_POINTS_PER_SEGMENT as f64,
+        FAR,
+        "campaign.points_per_segment.max",
+    )?;
     ordered(c.speed_kmh, "campaign.speed_kmh")?;
     positive(c.speed_kmh.min, "campaign.speed_kmh.min")?;
+    at_least(
+        c.speed_kmh.min,
+        MIN_SPEED_KMH,
+        SLOW,
+        "campaign.speed_kmh.min",
+    )?;
     within(
         c.speed_kmh.max,
         0.0,
@@ -239,6 +321,15 @@ fn check_faults(c: &CampaignSettings) -> Check {
             };
             let field = format!("{field}.{key}");
             let range = f.range(kind);
+            // Only a neutral value: every fault drawn would do nothing (a range that merely
+            // includes it has its neutral draws drawn again by the generator).
+            if let Some(neutral) = kind.spec().neutral
+                && f.kinds.contains(&kind)
+                && range.min == neutral
+                && range.max == neutral
+            {
+                return Err((field, Problem::OnlyNeutral { neutral }));
+            }
             match kind.spec().param {
                 Param::Bit => bits(range, &field)?,
                 Param::Value if target.quantity() == Quantity::Yaw => {
@@ -246,7 +337,29 @@ fn check_faults(c: &CampaignSettings) -> Check {
                     within(range.min, -180.0, 180.0, &format!("{field}.min"))?;
                     within(range.max, -180.0, 180.0, &format!("{field}.max"))?;
                 }
-                Param::Value | Param::Factor | Param::Unused => ordered(range, &field)?,
+                Param::Value => {
+                    ordered(range, &field)?;
+                    for (end, v) in [("min", range.min), ("max", range.max)] {
+                        at_most(
+                            v.abs(),
+                            MAX_FAULT_OFFSET,
+                            FAR,
+                            &format!("{field}.{end} (absolute)"),
+                        )?;
+                    }
+                }
+                Param::Factor => {
+                    ordered(range, &field)?;
+                    for (end, v) in [("min", range.min), ("max", range.max)] {
+                        at_most(
+                            v.abs(),
+                            MAX_FAULT_FACTOR,
+                            FAR,
+                            &format!("{field}.{end} (absolute)"),
+                        )?;
+                    }
+                }
+                Param::Unused => ordered(range, &field)?,
             }
         }
         probe_window(f.start, f.duration, &field)?;
@@ -260,7 +373,16 @@ fn probe_window(start: Interval<u32>, duration: Interval<u32>, field: &str) -> C
     if duration.min == 0 {
         return Err((format!("{field}.duration.min"), Problem::NotPositive(0.0)));
     }
-    ordered(as_f64(duration), &format!("{field}.duration"))
+    ordered(as_f64(duration), &format!("{field}.duration"))?;
+    for (value, name) in [(start.max, "start.max"), (duration.max, "duration.max")] {
+        at_most(
+            f64::from(value),
+            f64::from(MAX_FAULT_ITERATIONS),
+            FAR,
+            &format!("{field}.{name}"),
+        )?;
+    }
+    Ok(())
 }
 
 fn check_route(area: &Area, route: &Route, field: &str) -> Check {
@@ -274,6 +396,12 @@ fn check_route(area: &Area, route: &Route, field: &str) -> Check {
     }
     for (i, p) in route.points.iter().enumerate() {
         positive(p.speed, &format!("{field}[{i}].speed"))?;
+        at_least(
+            p.speed,
+            MIN_SPEED_KMH / 3.6,
+            SLOW,
+            &format!("{field}[{i}].speed"),
+        )?;
         if !area.contains_point(p.position) {
             return Err((
                 format!("{field}[{i}]"),
@@ -769,6 +897,43 @@ mod tests {
                 "[campaign.faults.anchor_range]\nparam = { min = 0.0, max = 1.0 }\namplification = { min = 1.0, max = 2.0 }",
                 "campaign.faults: anchor_range.amplification and anchor_range.param both give the \
                  range of amplification",
+            ),
+            (
+                "[generator]\nahead_margin = 4000000000",
+                "generator.ahead_margin: 4e9 is beyond drivecheck's limit: at most 200 (far \
+                 beyond any real test; a larger value only exhausts memory or time)",
+            ),
+            (
+                "[campaign]\ntest_size = { min = 5, max = 100000000 }",
+                "campaign.test_size.max: 100000000 is beyond drivecheck's limit: at most 1000 (far \
+                 beyond any real test; a larger value only exhausts memory or time)",
+            ),
+            (
+                "[campaign]\npoints_per_segment = { min = 4, max = 100000000 }",
+                "campaign.points_per_segment.max: 100000000 is beyond drivecheck's limit: at most \
+                 100 (far beyond any real test; a larger value only exhausts memory or time)",
+            ),
+            (
+                "[campaign]\nspeed_kmh = { min = 1e-9, max = 3.0 }",
+                "campaign.speed_kmh.min: 1e-9 is beyond drivecheck's limit: at least 0.5 \
+                 (slower, one segment of a test takes minutes)",
+            ),
+            (
+                "[campaign.faults.anchor_range]\noffset_m = { min = 0.5, max = 1e300 }",
+                "campaign.faults.anchor_range.offset_m.max (absolute): 1e300 is beyond \
+                 drivecheck's limit: at most 1000 (far beyond any real test; a larger value only \
+                 exhausts memory or time)",
+            ),
+            (
+                "[campaign.faults.wheel_slip]\namplification = { min = -1e300, max = 2.0 }",
+                "campaign.faults.wheel_slip.amplification.min (absolute): 1e300 is beyond \
+                 drivecheck's limit: at most 1000 (far beyond any real test; a larger value only \
+                 exhausts memory or time)",
+            ),
+            (
+                "[campaign.faults.wheel_slip]\namplification = { min = 1.0, max = 1.0 }",
+                "campaign.faults.wheel_slip.amplification: holds only 1, which leaves the probe's \
+                 value as it is: a fault that does nothing (widen the range or leave the kind out)",
             ),
             (
                 "[[environment.obstacles]]\nname = \" \"\npolygon = [{ x = 0.0, y = -1.0 }, { x = 1.0, y = -1.0 }, { x = 1.0, y = -2.0 }]",

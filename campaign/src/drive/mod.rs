@@ -352,9 +352,29 @@ pub struct TestDrive<'a> {
     placer: Placer,
     stopping: Stopping,
     abort: Option<Abort>,
+    /// The test's time limit ([`AbortReason::TimeLimit`]).
+    time_limit: Duration,
     /// Details of the stop or its end, for the abort's text.
     detail: Option<String>,
     actions: Vec<Action>,
+}
+
+/// A test's time limit: three times the time its route takes at its planned speeds, from the end
+/// of the start route, and a minute.
+fn time_limit(plan: &TestPlan, start: &[Waypoint]) -> Duration {
+    let mut at = start.last().map(|w| w.position);
+    let mut planned_s: f64 = 0.0;
+    for (_, segment) in plan.segments() {
+        for (point, &speed) in segment.points.iter().zip(&segment.speeds) {
+            if let Some(from) = at
+                && speed > 0.0
+            {
+                planned_s += from.dist(*point) / speed;
+            }
+            at = Some(*point);
+        }
+    }
+    Duration::from_secs_f64((3.0 * planned_s + 60.0).min(1e9))
 }
 
 impl<'a> TestDrive<'a> {
@@ -391,6 +411,7 @@ impl<'a> TestDrive<'a> {
             placer,
             stopping: Stopping::default(),
             abort: None,
+            time_limit: time_limit(plan, start),
             detail: None,
             actions: Vec::new(),
         }
@@ -587,6 +608,11 @@ impl<'a> TestDrive<'a> {
 
     fn on_tick(&mut self, now: Duration) {
         if let Some(abort) = self.safety.tick(now) {
+            self.on_abort(abort, now);
+        }
+        if matches!(self.phase, Phase::Commands | Phase::Rolling) && now > self.time_limit {
+            let limit_s = self.time_limit.as_secs_f64();
+            let abort = self.safety.stop(AbortReason::TimeLimit { limit_s }, now);
             self.on_abort(abort, now);
         }
         let late = self.stopping.brake_deadline.is_some_and(|d| now >= d);

@@ -522,6 +522,34 @@ fn a_starving_car_demands_the_safe_stop() {
 }
 
 #[test]
+fn a_car_that_does_not_keep_up_is_stopped_at_the_tests_time_limit() {
+    // 8 m of route after the start's end at 1 m/s: 3 × 8 s + 60 s = 84 s.
+    let (area, plan) = (area(), plan(vec![segment(12.0)]));
+    let mut h = Harness::new(&area, &plan, FailurePolicy::default());
+    let mut stopped = None;
+    while h.now < Duration::from_secs(100) && stopped.is_none() {
+        // Standing on the start route, reporting every 50 ms.
+        let mut actions = h.sample_at(Point::new(3.0, 10.0), 0.0);
+        actions.extend(h.drive.handle(h.now, Event::Tick));
+        stopped = actions.into_iter().find_map(|a| match a {
+            Action::Stop(abort) => Some((h.now, abort)),
+            _ => None,
+        });
+    }
+    let (at, abort) = stopped.expect("stopped");
+    assert_eq!(abort.reason, AbortReason::TimeLimit { limit_s: 84.0 });
+    assert_eq!(abort.action, StopAction::SafeStop);
+    assert!(
+        at > Duration::from_secs(84) && at < Duration::from_millis(84_100),
+        "{at:?}"
+    );
+    assert_eq!(
+        abort.reason.to_string(),
+        "ran past its time limit of 84 s (3 × its planned driving time + 60 s)"
+    );
+}
+
+#[test]
 fn a_braking_abort_abandons_the_operation_in_flight_and_brakes() {
     let (area, plan) = (area(), plan(vec![segment(12.0)]));
     let mut h = Harness::new(&area, &plan, FailurePolicy::default());

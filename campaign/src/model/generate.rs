@@ -179,7 +179,18 @@ fn param(faults: &ProbeFaults, kind: FaultKind) -> BoxedStrategy<f64> {
 /// parameter. A probe with one kind draws no kind, and kinds that share one parameter range (an
 /// anchor's offset and amplification) draw the kind and the parameter independently, so the
 /// method's default tests are drawn exactly as before the other kinds existed.
+///
+/// A neutral draw (an offset of exactly 0, an amplification of exactly 1: a fault that does
+/// nothing) is drawn again; the scenario's validation refuses a range that holds nothing else.
 fn kind_and_param(faults: &ProbeFaults) -> BoxedStrategy<(FaultKind, f64)> {
+    kind_and_any_param(faults)
+        .prop_filter("a neutral parameter does nothing", |&(kind, param)| {
+            kind.spec().neutral != Some(param)
+        })
+        .boxed()
+}
+
+fn kind_and_any_param(faults: &ProbeFaults) -> BoxedStrategy<(FaultKind, f64)> {
     let kinds = &faults.kinds;
     let continuous = |kind: FaultKind| matches!(kind.spec().param, Param::Value | Param::Factor);
     match kinds.as_slice() {

@@ -170,6 +170,29 @@ fn fault_parameters_stay_in_the_scenario_ranges() {
 }
 
 #[test]
+fn a_neutral_fault_parameter_is_drawn_again() {
+    // The yaw may draw an offset whose range is only 0 (neutral) or a set-to of 5–10°: the
+    // generator's own draws, without the scenario's validation, give only set-to faults.
+    let mut s = parking_lot();
+    let yaw = s.campaign.faults.get_mut(FaultTarget::Yaw);
+    yaw.kinds = vec![FaultKind::Offset, FaultKind::SetTo];
+    yaw.ranges
+        .insert(FaultKind::Offset, Interval::new(0.0, 0.0));
+    yaw.ranges
+        .insert(FaultKind::SetTo, Interval::new(5.0, 10.0));
+    let mut yaw_faults = 0;
+    for index in 0..10 {
+        for (_, fault) in plan(&s, 21, index).faults() {
+            if fault.probe == Probe::UwbYaw {
+                yaw_faults += 1;
+                assert_eq!(fault.kind, FaultKind::SetTo, "{fault:?}");
+            }
+        }
+    }
+    assert!(yaw_faults > 0);
+}
+
+#[test]
 fn every_test_drives_a_segment_before_its_first_fault() {
     let s = parking_lot();
     for seed in 0..20 {

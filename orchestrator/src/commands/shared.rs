@@ -550,8 +550,27 @@ pub(super) fn check_output_file(flag: &str, file: &Path, run_dir: &Path) -> Resu
     Ok(())
 }
 
-/// The case file at `path`, read and parsed; errors name the file (and the field).
+/// The largest case file read, bytes (a case of 1,000 segments of 100 points is about 20 MB).
+pub const MAX_CASE_BYTES: u64 = 64 * 1024 * 1024;
+
+/// The case file at `path`, read and parsed; errors name the file (and the field). Only a regular
+/// file of at most [`MAX_CASE_BYTES`] is read: a FIFO or a device would block or never end.
 pub(super) fn read_case(path: &Path) -> Result<Case> {
+    let meta =
+        std::fs::metadata(path).with_context(|| format!("cannot read {}", path.display()))?;
+    if !meta.is_file() {
+        bail!(
+            "{}: not a regular file (a directory, FIFO or device): a case is a JSON file",
+            path.display()
+        );
+    }
+    if meta.len() > MAX_CASE_BYTES {
+        bail!(
+            "{}: {} bytes: a case file is at most {MAX_CASE_BYTES} bytes",
+            path.display(),
+            meta.len()
+        );
+    }
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
     Case::from_json(&text).with_context(|| path.display().to_string())

@@ -31,6 +31,7 @@ pub fn sweep(args: &SweepArgs) -> Result<Exit> {
         .unwrap_or_else(|| choose_seed(None));
     let profile = LoadedProfile::load(args.profile.as_deref())?;
     let sim = profile.sim_config(&scenario)?;
+    campaign::sweep::grid_size(&axes)?;
     let points = grid(&axes);
     eprintln!(
         "sweeping {} over {} point(s), {} run(s) each, seed {seed}",

@@ -378,7 +378,8 @@ pub(crate) fn claim_out_dir(path: &Path, made: bool) -> Result<OutClaim, RunErro
                 .ok()
                 .map(|t| t.trim().to_owned())
                 .filter(|t| !t.is_empty())
-                .unwrap_or_else(|| "its claim file is empty".to_owned());
+                // Empty: the other process has created it and not yet written its pid.
+                .unwrap_or_else(|| "it is just starting".to_owned());
             return Err(RunError::OutDirClaimed {
                 path: path.to_owned(),
                 holder,
@@ -527,7 +528,9 @@ mod tests {
         for error in &lost {
             let text = error.as_ref().unwrap_err().to_string();
             assert!(
-                text.contains("another drivecheck process is writing it (pid "),
+                text.contains("another drivecheck process is writing it (pid ")
+                    || text
+                        .contains("another drivecheck process is writing it (it is just starting)"),
                 "{text}"
             );
         }

@@ -236,6 +236,18 @@ fn check_route_points(path: &str, points: &[RoutePointRecord]) -> Result<(), Cas
                 "must be positive and finite",
             ));
         }
+        let floor = scenarios::limits::MIN_SPEED_KMH / 3.6;
+        if p.speed < floor - 1e-9 {
+            return Err(invalid(
+                format!("{path}[{j}].speed"),
+                format!(
+                    "{} m/s is below drivecheck's limit of {floor:.3} m/s ({} km/h): slower, one \
+                     segment takes minutes",
+                    p.speed,
+                    scenarios::limits::MIN_SPEED_KMH
+                ),
+            ));
+        }
     }
     Ok(())
 }
