@@ -54,7 +54,7 @@ pub enum SetProblem {
     #[error("{0} values: at most {MAX_AXIS_VALUES} per parameter")]
     TooManyValues(usize),
     /// A value out of the parameter's range.
-    #[error("{value} is not a value for {parameter} ({})", expected(*.parameter))]
+    #[error("{value:?} is not a value for {parameter} ({})", expected(*.parameter))]
     OutOfRange {
         /// The parameter.
         parameter: Parameter,
