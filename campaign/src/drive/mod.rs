@@ -139,7 +139,14 @@ pub enum Event {
     Interrupt,
     /// The link to the car is lost (the telemetry ended, or the brake command found it lost).
     LinkLost,
+    /// The operator's second signal braked the car at once: the drive ends now, aborted, so that
+    /// its case can be written before the process exits.
+    BrakedAtOnce,
 }
+
+/// What the case of a test ended by [`Event::BrakedAtOnce`] says.
+pub const BRAKED_AT_ONCE: &str =
+    "a second signal braked the car at once (50 A): the drive ended there";
 
 /// What the link shows now, for the lead time.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -533,6 +540,15 @@ impl<'a> TestDrive<'a> {
                 self.on_abort(abort, now);
             }
             Event::Tick => self.on_tick(now),
+            Event::BrakedAtOnce => {
+                let abort = self.safety.stop(AbortReason::Interrupted, now);
+                self.on_abort(abort, now);
+                self.detail = Some(match self.detail.take() {
+                    Some(before) => format!("{before}; {BRAKED_AT_ONCE}"),
+                    None => BRAKED_AT_ONCE.to_owned(),
+                });
+                self.phase = Phase::Done;
+            }
         }
         if matches!(self.phase, Phase::Braking | Phase::Done)
             && self.cursor.in_flight.take().is_some()

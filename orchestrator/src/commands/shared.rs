@@ -62,7 +62,8 @@ pub(super) fn sim_view(sim: &Option<SimHandle>) -> Option<&dyn SimulatorView> {
 /// job) or SIGHUP (a closed terminal): the runner then stops the car safely, records the running
 /// test as aborted (`interrupted`), completes the run directory and the recording, and the command
 /// exits with status 2. A second signal brakes the car registered with
-/// [`Interrupt::brake_on_second`] at once and ends the process with status 2. Call it inside the
+/// [`Interrupt::brake_on_second`] at once, ends the test in flight there (aborted, the hard brake
+/// named in its case) and the process with status 2 within half a second. Call it inside the
 /// runtime.
 pub(super) fn cancel_on_ctrl_c() -> CancellationToken {
     Interrupt::listen().cancel
@@ -98,6 +99,10 @@ const SECOND_SIGNAL_BRAKE_A: f64 = 50.0;
 /// writer sends it (a brake has no reply; RC_CONTROL is fire and forget).
 const BRAKE_FLUSH: Duration = Duration::from_millis(100);
 
+/// How long the process lives after the second signal's brake for the runner to write the test
+/// in flight and complete the run directory.
+const HARD_STOP_GRACE: Duration = Duration::from_millis(500);
+
 /// At most this long for the brake to find room in the link's send queue; the car's 2 s watchdog
 /// brakes it in any case once the process is gone.
 const BRAKE_SEND_LIMIT: Duration = Duration::from_millis(500);
@@ -118,6 +123,11 @@ impl Interrupt {
             let second = signals.next().await;
             eprintln!("{second} again: braking at once and exiting");
             listener.brake_now().await;
+            // The test in flight ends at once, aborted; its case, campaign.json and the recording
+            // are written in the half second the process still lives (a command that completes
+            // sooner exits sooner).
+            crate::runner::hard_stop().cancel();
+            tokio::time::sleep(HARD_STOP_GRACE).await;
             crate::exit::Exit::Error.exit();
         });
         interrupt

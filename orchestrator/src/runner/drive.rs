@@ -116,6 +116,7 @@ type InFlight = (Recorded, OpFuture);
 /// What the loop woke up for.
 enum Woke {
     Interrupt,
+    HardStop,
     Op(Recorded, OpResult),
     Fault(Recorded, OpResult),
     FaultDue,
@@ -158,6 +159,7 @@ async fn run<V: Vehicle>(
         let due = machine.fault_due().map(|due| t0 + due);
         let woke = tokio::select! {
             biased;
+            () = super::hard_stop().cancelled() => Woke::HardStop,
             () = ctx.cancel.cancelled(), if machine.interruptible() => Woke::Interrupt,
             (recorded, result) = wait_op(&mut op) => Woke::Op(recorded, result),
             (recorded, result) = wait_any(&mut fault_ops) => Woke::Fault(recorded, result),
@@ -167,6 +169,7 @@ async fn run<V: Vehicle>(
         };
         let event = match woke {
             Woke::Interrupt => Event::Interrupt,
+            Woke::HardStop => Event::BrakedAtOnce,
             Woke::Op(recorded, result) => {
                 op = None;
                 record_answer(ctx, test_index, recorded, &result);

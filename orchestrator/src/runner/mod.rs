@@ -353,6 +353,15 @@ impl<V> Context<'_, V> {
 ///
 /// Timeout: every car command is bounded by the link's timeouts; a reset drive by its route's
 /// length at its speed plus 60 s; braking by [`campaign::drive::BRAKE_TIMEOUT`]. Cancellation:
+/// The process's hard stop: cancelled by the operator's second signal after it braked the car at
+/// once (`commands::shared::Interrupt`). The drive and the braking end at it, so that the test in
+/// flight is recorded as aborted and the run directory and the recording are completed before
+/// the process exits. Signals are the process's, and so is this token.
+pub(crate) fn hard_stop() -> &'static CancellationToken {
+    static HARD_STOP: std::sync::OnceLock<CancellationToken> = std::sync::OnceLock::new();
+    HARD_STOP.get_or_init(CancellationToken::new)
+}
+
 /// `cancel` performs the safe stop of the running test, records it as `aborted (interrupted)`
 /// and ends the campaign with [`RunError::Interrupted`]. Dropping the future instead stops at
 /// once without a safe stop (the car's watchdog then brakes it within 2 s) and leaves
@@ -759,7 +768,15 @@ fn record_stop_before_drive(
     match stopped {
         Stopped::Abort(abort) => {
             journal.write(&SafetyRecord::new(None, abort));
-            case.reason = Some(format!("reset: {}", abort.reason));
+            case.reason = Some(if hard_stop().is_cancelled() {
+                format!(
+                    "reset: {}: {}",
+                    abort.reason,
+                    campaign::drive::BRAKED_AT_ONCE
+                )
+            } else {
+                format!("reset: {}", abort.reason)
+            });
             case.abort = Some(abort);
             match abort.reason {
                 AbortReason::LinkLost => TestEnd::Stop(RunError::LinkLost { test_index }),

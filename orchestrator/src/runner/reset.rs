@@ -64,6 +64,8 @@ pub(crate) enum BrakeEnd {
     TimedOut,
     /// The link is lost.
     LinkLost,
+    /// The operator's second signal braked the car at once ([`super::hard_stop`]).
+    HardStopped,
 }
 
 /// Resets the car for test `test_index` (see the module doc).
@@ -314,6 +316,10 @@ async fn follow_to_end<V: Vehicle>(
             reason: "the car did not stop at the end of the recovery route".to_owned(),
         })),
         (Ok(true), BrakeEnd::Stopped) => Ok(()),
+        (Ok(true), BrakeEnd::HardStopped) => Err(Stopped::Abort(Abort::new(
+            AbortReason::Interrupted,
+            Duration::ZERO,
+        ))),
     }
 }
 
@@ -398,6 +404,7 @@ pub(crate) async fn brake_until_stopped<V: Vehicle>(
         }
         tokio::select! {
             biased;
+            () = super::hard_stop().cancelled() => return BrakeEnd::HardStopped,
             sample = telemetry.next(journal) => match sample {
                 Sample::LinkLost => return BrakeEnd::LinkLost,
                 Sample::State(s) if s.state.speed.abs() < STOPPED_SPEED_MPS => {
