@@ -527,6 +527,40 @@ mod tests {
     }
 
     #[test]
+    fn the_table_counts_aborted_runs_apart_from_failed_ones() {
+        let run = |verdict| RunResult {
+            seed: 1,
+            verdict: Some(verdict),
+            first_failing_segment: None,
+            max_deviation_m: None,
+        };
+        let case = case();
+        let report = SweepReport {
+            header: crate::files::Header::current(SWEEP_FORMAT, 1),
+            case: "case.json".to_owned(),
+            scenario: case.scenario.clone(),
+            seed: 1,
+            runs_per_point: 3,
+            axes: vec![Axis::parse("fault[0].param=2", &case).unwrap()],
+            points: vec![Point {
+                values: vec![2.0],
+                runs: vec![
+                    run(Verdict::Aborted),
+                    run(Verdict::Failed),
+                    run(Verdict::Passed),
+                ],
+                segments: Vec::new(),
+            }],
+        };
+        let table = report.table();
+        assert!(
+            table.starts_with("| fault[0].param | failed runs | aborted runs |"),
+            "{table}"
+        );
+        assert!(table.contains("| 2 | 1/3 | 1/3 |"), "{table}");
+    }
+
+    #[test]
     fn a_grid_above_the_limit_is_refused_before_it_is_made() {
         let case = case();
         let values = |n: usize| (0..n).map(|k| k.to_string()).collect::<Vec<_>>().join(",");
