@@ -1,5 +1,6 @@
 //! `drivecheck run --live`: a WebSocket client speaking the Foxglove protocol subscribes to the
-//! car's RTK poses and receives them while the campaign runs.
+//! area and the car's RTK poses and receives them while the campaign runs, whichever of the
+//! protocol's two subprotocol names it offers, and however late it joins.
 
 mod common;
 
@@ -11,8 +12,9 @@ use futures::{SinkExt, StreamExt};
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_client_subscribes_and_receives_poses_while_the_campaign_runs() {
+/// Runs a campaign with `--live`, connects `join_after` into it offering `subprotocol`,
+/// subscribes to the area and the RTK poses, and returns the first area and the first pose.
+async fn watch(subprotocol: &str, join_after: Duration) -> (serde_json::Value, serde_json::Value) {
     let port = std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
@@ -21,73 +23,102 @@ async fn a_client_subscribes_and_receives_poses_while_the_campaign_runs() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("run");
     let mut child = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
-        .args(["run", "--tests", "1", "--seed", "1", "--out", path(&out)])
+        .args(["run", "--tests", "2", "--seed", "1", "--out", path(&out)])
         .arg("--live")
         .arg(format!("127.0.0.1:{port}"))
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
+    tokio::time::sleep(join_after).await;
     let received = tokio::time::timeout(Duration::from_secs(60), async {
         let mut request = format!("ws://127.0.0.1:{port}")
             .into_client_request()
             .unwrap();
         request
             .headers_mut()
-            .insert("sec-websocket-protocol", "foxglove.sdk.v1".parse().unwrap());
+            .insert("sec-websocket-protocol", subprotocol.parse().unwrap());
         let mut socket = loop {
             match tokio_tungstenite::connect_async(request.clone()).await {
-                Ok((socket, _)) => break socket,
+                Ok((socket, response)) => {
+                    // The server answers with the name the client offered.
+                    assert_eq!(
+                        response.headers()["sec-websocket-protocol"],
+                        subprotocol,
+                        "{response:?}"
+                    );
+                    break socket;
+                }
                 Err(_) => tokio::time::sleep(Duration::from_millis(100)).await,
             }
         };
-        let mut subscribed = false;
+        let (mut area, mut pose) = (None, None);
         while let Some(message) = socket.next().await {
             match message.unwrap() {
-                Message::Text(text) if !subscribed => {
+                Message::Text(text) => {
                     let json: serde_json::Value = serde_json::from_str(&text).unwrap();
                     if json["op"] != "advertise" {
                         continue;
                     }
-                    let Some(channel) = json["channels"]
-                        .as_array()
-                        .unwrap()
-                        .iter()
-                        .find(|c| c["topic"] == "/foxglove/rtk")
-                    else {
-                        continue;
-                    };
-                    assert_eq!(channel["schemaName"], "foxglove.PoseInFrame");
-                    let subscribe = serde_json::json!({
-                        "op": "subscribe",
-                        "subscriptions": [{"id": 7, "channelId": channel["id"]}],
-                    });
-                    socket
-                        .send(Message::Text(subscribe.to_string().into()))
-                        .await
-                        .unwrap();
-                    subscribed = true;
+                    for channel in json["channels"].as_array().unwrap() {
+                        let id = match channel["topic"].as_str() {
+                            Some("/foxglove/area") => 1,
+                            Some("/foxglove/rtk") => {
+                                assert_eq!(channel["schemaName"], "foxglove.PoseInFrame");
+                                2
+                            }
+                            _ => continue,
+                        };
+                        let subscribe = serde_json::json!({
+                            "op": "subscribe",
+                            "subscriptions": [{"id": id, "channelId": channel["id"]}],
+                        });
+                        socket
+                            .send(Message::Text(subscribe.to_string().into()))
+                            .await
+                            .unwrap();
+                    }
                 }
-                Message::Binary(data) if subscribed && data.first() == Some(&1) => {
+                Message::Binary(data) if data.first() == Some(&1) => {
                     let subscription = u32::from_le_bytes(data[1..5].try_into().unwrap());
-                    assert_eq!(subscription, 7);
-                    let pose: serde_json::Value = serde_json::from_slice(&data[13..]).unwrap();
-                    return pose;
+                    let message: serde_json::Value = serde_json::from_slice(&data[13..]).unwrap();
+                    match subscription {
+                        1 => area = area.or(Some(message)),
+                        2 => pose = pose.or(Some(message)),
+                        other => panic!("subscription {other}"),
+                    }
+                    if let (Some(area), Some(pose)) = (&area, &pose) {
+                        return (area.clone(), pose.clone());
+                    }
                 }
                 _ => {}
             }
         }
-        panic!("the live view closed before a pose came");
+        panic!("the live view closed before the area and a pose came");
     })
     .await;
     let _ = child.kill();
     let output = child.wait_with_output().unwrap();
-    let pose = received.unwrap_or_else(|_| {
+    received.unwrap_or_else(|_| {
         panic!(
-            "no pose within 60 s: {}",
+            "no area and pose within 60 s: {}",
             String::from_utf8_lossy(&output.stderr)
         )
-    });
+    })
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_client_subscribes_and_receives_the_area_and_poses_while_the_campaign_runs() {
+    let (area, pose) = watch("foxglove.sdk.v1", Duration::ZERO).await;
+    assert!(area["entities"].is_array(), "{area}");
     assert_eq!(pose["frame_id"], "map");
+    assert!(pose["pose"]["position"]["x"].is_number(), "{pose}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_lichtblick_client_joining_five_seconds_late_still_gets_the_area() {
+    // Lichtblick and `@foxglove/ws-protocol` offer only the specification's name.
+    let (area, pose) = watch("foxglove.websocket.v1", Duration::from_secs(5)).await;
+    assert!(area["entities"].is_array(), "{area}");
     assert!(pose["pose"]["position"]["x"].is_number(), "{pose}");
 }

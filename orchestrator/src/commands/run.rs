@@ -358,7 +358,7 @@ fn jobs(args: &RunArgs, embedded: bool) -> Result<usize> {
 async fn start_live(
     live: Option<std::net::SocketAddr>,
     config: &mut RunConfig,
-) -> Result<Option<foxglove::WebSocketServerHandle>> {
+) -> Result<Option<crate::recording::live::LiveServer>> {
     let Some(addr) = live else {
         return Ok(None);
     };

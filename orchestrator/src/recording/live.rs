@@ -8,11 +8,23 @@ use std::fmt;
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
 
+use foxglove::websocket::{ChannelView, Client, ServerListener};
 use foxglove::{
-    ChannelBuilder, Context, RawChannel, Schema, WebSocketServer, WebSocketServerHandle,
+    ChannelBuilder, ChannelId, Context, RawChannel, Schema, WebSocketServer, WebSocketServerHandle,
 };
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::{TcpListener, TcpStream};
 
 use super::topic::Topic;
+
+/// The WebSocket subprotocol of the `foxglove` crate's server.
+const SDK_SUBPROTOCOL: &str = "foxglove.sdk.v1";
+/// The subprotocol of the Foxglove WebSocket protocol's specification, the only one Lichtblick,
+/// older Foxglove Studio and `@foxglove/ws-protocol` clients offer. The two are the same
+/// protocol under two names (foxglove/ws-protocol and Lichtblick PR #819 say so).
+const WS_SUBPROTOCOL: &str = "foxglove.websocket.v1";
+/// The largest HTTP upgrade request the live view reads.
+const MAX_HANDSHAKE: usize = 16 * 1024;
 
 /// Where the live view's channels go: a `foxglove` context served by a WebSocket server.
 #[derive(Clone)]
@@ -20,7 +32,76 @@ pub struct LiveView {
     context: Arc<Context>,
     /// The channels made so far: every recorder of the campaign (one per test when tests run on
     /// fresh simulated cars) logs to the same channel of a topic.
-    channels: Arc<Mutex<HashMap<Topic, Arc<RawChannel>>>>,
+    channels: Arc<Mutex<HashMap<Topic, LiveChannel>>>,
+    /// The last message of every latched channel, by channel id.
+    latched: Latched,
+}
+
+/// The last message of the channels a viewer that joins late must still see (the area, the
+/// route): sent to each new subscriber alone.
+type Latched = Arc<Mutex<HashMap<ChannelId, (Arc<RawChannel>, Vec<u8>)>>>;
+
+/// A channel of the live view.
+#[derive(Clone)]
+pub(super) struct LiveChannel {
+    raw: Arc<RawChannel>,
+    /// Set for latched topics.
+    latched: Option<Latched>,
+}
+
+impl LiveChannel {
+    /// Serves `data` to every subscriber (and keeps it for those that subscribe later, if the
+    /// topic is latched).
+    pub(super) fn log(&self, data: &[u8]) {
+        self.raw.log(data);
+        if let Some(latched) = &self.latched {
+            latched
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .insert(self.raw.id(), (Arc::clone(&self.raw), data.to_vec()));
+        }
+    }
+}
+
+/// Sends a latched channel's last message to a client as it subscribes.
+struct LateJoiner {
+    latched: Latched,
+}
+
+impl ServerListener for LateJoiner {
+    fn on_subscribe(&self, client: Client, channel: ChannelView) {
+        let last = self
+            .latched
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(&channel.id())
+            .cloned();
+        if let Some((raw, data)) = last {
+            raw.log_to_sink(&data, client.sink_id());
+        }
+    }
+}
+
+/// The live view's server: the `foxglove` crate's WebSocket server behind a front door that
+/// speaks both subprotocols.
+pub struct LiveServer {
+    /// The crate's server, on a loopback port of its own.
+    _inner: WebSocketServerHandle,
+    front: tokio::task::JoinHandle<()>,
+    port: u16,
+}
+
+impl LiveServer {
+    /// The port viewers connect to.
+    pub fn port(&self) -> u16 {
+        self.port
+    }
+}
+
+impl Drop for LiveServer {
+    fn drop(&mut self) {
+        self.front.abort();
+    }
 }
 
 impl fmt::Debug for LiveView {
@@ -46,35 +127,58 @@ pub struct LiveError {
 }
 
 impl LiveView {
-    /// Starts a WebSocket server on `addr` (port 0: any free port); the view and the server's
-    /// handle, which serves until it is stopped or dropped with the runtime. Call it inside the
-    /// runtime.
-    pub async fn start(addr: SocketAddr) -> Result<(Self, WebSocketServerHandle), LiveError> {
+    /// Starts a WebSocket server on `addr` (port 0: any free port); the view and the server,
+    /// which serves until it is dropped (or the runtime is). Viewers offering either subprotocol
+    /// (`foxglove.sdk.v1`, `foxglove.websocket.v1`) are served. Call it inside the runtime.
+    pub async fn start(addr: SocketAddr) -> Result<(Self, LiveServer), LiveError> {
+        let failed = |message: String| LiveError { addr, message };
         let context = Context::new();
-        let server = WebSocketServer::new()
+        let latched: Latched = Arc::default();
+        let inner = WebSocketServer::new()
             .name("drivecheck")
-            .bind(addr.ip().to_string(), addr.port())
+            .bind("127.0.0.1", 0)
             .context(&context)
+            .listener(Arc::new(LateJoiner {
+                latched: Arc::clone(&latched),
+            }))
             .start()
             .await
-            .map_err(|e| LiveError {
-                addr,
-                message: e.to_string(),
-            })?;
+            .map_err(|e| failed(e.to_string()))?;
+        let inner_addr = SocketAddr::from(([127, 0, 0, 1], inner.port()));
+        let listener = TcpListener::bind(addr)
+            .await
+            .map_err(|e| failed(e.to_string()))?;
+        let port = listener
+            .local_addr()
+            .map_err(|e| failed(e.to_string()))?
+            .port();
+        let front = tokio::spawn(async move {
+            while let Ok((client, _)) = listener.accept().await {
+                tokio::spawn(async move {
+                    // A client that fails its handshake only loses its own connection.
+                    let _ = front_door(client, inner_addr).await;
+                });
+            }
+        });
         Ok((
             Self {
                 context,
                 channels: Arc::default(),
+                latched,
             },
-            server,
+            LiveServer {
+                _inner: inner,
+                front,
+                port,
+            },
         ))
     }
 
     /// A channel of the view for `topic`, with its schema.
-    pub(super) fn channel(&self, topic: Topic, schema: &str) -> Option<Arc<RawChannel>> {
+    pub(super) fn channel(&self, topic: Topic, schema: &str) -> Option<LiveChannel> {
         let mut channels = self.channels.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(channel) = channels.get(&topic) {
-            return Some(Arc::clone(channel));
+            return Some(channel.clone());
         }
         let channel = ChannelBuilder::new(topic.name())
             .message_encoding("json")
@@ -86,7 +190,106 @@ impl LiveView {
             .context(&self.context)
             .build_raw()
             .ok()?;
-        channels.insert(topic, Arc::clone(&channel));
+        let channel = LiveChannel {
+            raw: channel,
+            latched: topic.is_latched().then(|| Arc::clone(&self.latched)),
+        };
+        channels.insert(topic, channel.clone());
         Some(channel)
+    }
+}
+
+/// Serves one viewer's connection: reads its HTTP upgrade request, names the crate's subprotocol
+/// where the viewer offered only the specification's, and passes everything through from then
+/// on (the server's answer naming the subprotocol the viewer offered).
+async fn front_door(mut client: TcpStream, inner: SocketAddr) -> std::io::Result<()> {
+    let mut head = Vec::new();
+    let mut buf = [0u8; 2048];
+    let end = loop {
+        let n = client.read(&mut buf).await?;
+        if n == 0 {
+            return Ok(());
+        }
+        head.extend_from_slice(&buf[..n]);
+        if let Some(end) = head.windows(4).position(|w| w == b"\r\n\r\n") {
+            break end + 4;
+        }
+        if head.len() > MAX_HANDSHAKE {
+            return Ok(());
+        }
+    };
+    let (request, rest) = head.split_at(end);
+    let request = String::from_utf8_lossy(request);
+    let (request, renamed) = offer_sdk_subprotocol(&request);
+    let mut server = TcpStream::connect(inner).await?;
+    server.write_all(request.as_bytes()).await?;
+    server.write_all(rest).await?;
+    if renamed {
+        // The server's answer: its head names the crate's subprotocol; the viewer asked for the
+        // specification's name.
+        let mut head = Vec::new();
+        let end = loop {
+            let n = server.read(&mut buf).await?;
+            if n == 0 {
+                return Ok(());
+            }
+            head.extend_from_slice(&buf[..n]);
+            if let Some(end) = head.windows(4).position(|w| w == b"\r\n\r\n") {
+                break end + 4;
+            }
+            if head.len() > MAX_HANDSHAKE {
+                return Ok(());
+            }
+        };
+        let (answer, rest) = head.split_at(end);
+        let answer = String::from_utf8_lossy(answer).replace(SDK_SUBPROTOCOL, WS_SUBPROTOCOL);
+        client.write_all(answer.as_bytes()).await?;
+        client.write_all(rest).await?;
+    }
+    tokio::io::copy_bidirectional(&mut client, &mut server).await?;
+    Ok(())
+}
+
+/// The upgrade request `request` with `foxglove.sdk.v1` offered where the viewer offered only
+/// `foxglove.websocket.v1`, and whether it was renamed.
+fn offer_sdk_subprotocol(request: &str) -> (String, bool) {
+    let mut renamed = false;
+    let lines: Vec<String> = request
+        .split("\r\n")
+        .map(|line| {
+            let Some((name, value)) = line.split_once(':') else {
+                return line.to_owned();
+            };
+            let offered: Vec<&str> = value.split(',').map(str::trim).collect();
+            if name.trim().eq_ignore_ascii_case("sec-websocket-protocol")
+                && offered.contains(&WS_SUBPROTOCOL)
+                && !offered.contains(&SDK_SUBPROTOCOL)
+            {
+                renamed = true;
+                format!("{name}: {SDK_SUBPROTOCOL}")
+            } else {
+                line.to_owned()
+            }
+        })
+        .collect();
+    (lines.join("\r\n"), renamed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_a_request_offering_the_specifications_name_alone_is_renamed() {
+        let request =
+            "GET / HTTP/1.1\r\nHost: x\r\nSec-WebSocket-Protocol: foxglove.websocket.v1\r\n\r\n";
+        let (renamed, yes) = offer_sdk_subprotocol(request);
+        assert!(yes);
+        assert_eq!(
+            renamed,
+            "GET / HTTP/1.1\r\nHost: x\r\nSec-WebSocket-Protocol: foxglove.sdk.v1\r\n\r\n"
+        );
+        let both = "GET / HTTP/1.1\r\nsec-websocket-protocol: foxglove.websocket.v1, foxglove.sdk.v1\r\n\r\n";
+        assert_eq!(offer_sdk_subprotocol(both), (both.to_owned(), false));
     }
 }

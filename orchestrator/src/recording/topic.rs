@@ -69,6 +69,12 @@ impl Topic {
         Topic::FoxgloveLog,
     ];
 
+    /// Whether a live viewer that joins late gets the topic's last message: the area and the
+    /// route, which are sent once (or once a test).
+    pub fn is_latched(self) -> bool {
+        matches!(self, Topic::FoxgloveArea | Topic::FoxgloveRoute)
+    }
+
     /// The topic name (`/car/state`, …).
     pub fn name(self) -> &'static str {
         match self {

@@ -87,7 +87,7 @@ fn recorded_topics(simulated: bool) -> impl Iterator<Item = Topic> {
 fn live_channels(
     simulated: bool,
     live: Option<&LiveView>,
-) -> HashMap<Topic, std::sync::Arc<::foxglove::RawChannel>> {
+) -> HashMap<Topic, super::live::LiveChannel> {
     let Some(view) = live else {
         return HashMap::new();
     };
@@ -206,7 +206,7 @@ pub struct Recorder {
     pending_commands: BTreeMap<u64, (u64, &'static str)>,
     sim_offset_ns: Option<i128>,
     /// The live view's channels (`run --live`), by topic.
-    live: HashMap<Topic, std::sync::Arc<::foxglove::RawChannel>>,
+    live: HashMap<Topic, super::live::LiveChannel>,
 }
 
 impl std::fmt::Debug for Recorder {

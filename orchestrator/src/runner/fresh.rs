@@ -159,7 +159,9 @@ pub fn run_campaign_fresh<C: FreshCars + ?Sized>(
                 origin,
                 simulated: true,
                 chunk_interval: DEFAULT_CHUNK_INTERVAL,
-                live: None,
+                // The area goes out to the live view from here; the tests' messages from their
+                // own recorders.
+                live: config.live.as_ref(),
                 test_spans: true,
                 sim_profile: config.car_profile.as_ref(),
             };
