@@ -1,13 +1,16 @@
-//! JUnit XML for CI (`drivecheck run --junit FILE`, `drivecheck replay --junit FILE`): one
-//! `<testsuite>` per campaign or replay, one `<testcase>` per test or run.
+//! JUnit XML for CI (`drivecheck run --junit FILE`, `drivecheck replay --junit FILE`, `drivecheck
+//! runs merge --junit FILE`): one `<testsuite>` per campaign or replay, one `<testcase>` per test
+//! or run.
 //!
-//! The shape is the common JUnit schema that CI systems read (Jenkins' `junit-10.xsd`, GitLab,
-//! GitHub test reporters): `<testsuites>` with `tests`, `failures`, `errors`, `time`; per
-//! `<testsuite>` `name`, `tests`, `failures`, `errors`, `skipped`, `time`, `timestamp` and
-//! `<properties>`; per `<testcase>` `name`, `classname`, `time`, `file`, and a `<failure>`
-//! (a failed test: the oracle's reason and every segment's largest deviation) or an `<error>`
-//! (an aborted test: why). `time` is the test's reset and drive (simulated seconds for the
-//! embedded simulated car in virtual time).
+//! The shape is Jenkins' `junit-10.xsd`, the Surefire schema pytest and Jenkins write and CI
+//! reporters read (GitLab, GitHub): `<testsuites>` with `name`, `tests`, `failures`, `errors`,
+//! `time`; per `<testsuite>` `name`, `tests`, `failures`, `errors`, `skipped`, `time`, `timestamp`
+//! and `<properties>`; per `<testcase>` `name` (`seed-7/test-003`), `classname`, `time`, a
+//! `<failure>` (a failed test: the oracle's reason and every segment's largest deviation) or an
+//! `<error>` (an aborted test: why), and `<system-out>` (the case file, the simulated time).
+//! Times are wall-clock seconds; a test in the simulator's virtual time has no wall time of its
+//! own (its `time` is left out) and says its simulated seconds in `<system-out>`, the suite its
+//! total as the property `simulated_time_s`.
 
 use std::io;
 
@@ -17,10 +20,19 @@ use quick_xml::events::{BytesDecl, BytesText, Event};
 use campaign::files::Case;
 use campaign::oracle::{SegmentVerdict, Verdict};
 
+/// Whose seconds a test's `timing` holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Clock {
+    /// The wall clock: a car, or the simulator against the wall clock.
+    Wall,
+    /// The simulator's virtual time.
+    Simulated,
+}
+
 /// One test or run.
 #[derive(Debug, Clone)]
 pub struct TestCase<'a> {
-    /// Its name (`test 003`, `run 2`).
+    /// Its name, identifying the case (`seed-7/test-003`, `seed-7/test-003/run-2`).
     pub name: String,
     /// The case it wrote.
     pub case: &'a Case,
@@ -41,6 +53,19 @@ pub struct Suite<'a> {
     pub properties: Vec<(String, String)>,
     /// Its tests.
     pub cases: Vec<TestCase<'a>>,
+    /// Whose seconds the cases' `timing` holds.
+    pub clock: Clock,
+    /// How long it took on the wall clock, seconds (when known).
+    pub wall_s: Option<f64>,
+}
+
+impl Suite<'_> {
+    /// The suite's wall-clock time: measured, or the tests' own on the wall clock.
+    fn wall_time(&self) -> Option<f64> {
+        self.wall_s.or_else(|| {
+            (self.clock == Clock::Wall).then(|| self.cases.iter().map(|c| time(c.case)).sum())
+        })
+    }
 }
 
 fn time(case: &Case) -> f64 {
@@ -88,18 +113,18 @@ pub fn to_xml(suites: &[Suite<'_>]) -> io::Result<String> {
     w.write_event(Event::Decl(BytesDecl::new("1.0", Some("UTF-8"), None)))?;
     let all = |verdict| suites.iter().map(|s| count(s, verdict)).sum::<usize>();
     let tests: usize = suites.iter().map(|s| s.cases.len()).sum();
-    let total: f64 = suites
-        .iter()
-        .flat_map(|s| s.cases.iter().map(|c| time(c.case)))
-        .sum();
+    let total: Option<f64> = suites.iter().map(Suite::wall_time).sum();
+    let mut attributes = vec![
+        ("name", "drivecheck".to_owned()),
+        ("tests", tests.to_string()),
+        ("failures", all(Verdict::Failed).to_string()),
+        ("errors", all(Verdict::Aborted).to_string()),
+    ];
+    if let Some(total) = total {
+        attributes.push(("time", format!("{total:.3}")));
+    }
     w.create_element("testsuites")
-        .with_attributes([
-            ("name", "drivecheck"),
-            ("tests", tests.to_string().as_str()),
-            ("failures", all(Verdict::Failed).to_string().as_str()),
-            ("errors", all(Verdict::Aborted).to_string().as_str()),
-            ("time", format!("{total:.3}").as_str()),
-        ])
+        .with_attributes(attributes.iter().map(|(k, v)| (*k, v.as_str())))
         .write_inner_content(|w| {
             for suite in suites {
                 write_suite(w, suite)?;
@@ -110,26 +135,27 @@ pub fn to_xml(suites: &[Suite<'_>]) -> io::Result<String> {
 }
 
 fn write_suite(w: &mut Writer<Vec<u8>>, suite: &Suite<'_>) -> io::Result<()> {
-    let time: f64 = suite.cases.iter().map(|c| time(c.case)).sum();
+    let mut attributes = vec![
+        ("name", suite.name.clone()),
+        ("tests", suite.cases.len().to_string()),
+        ("failures", count(suite, Verdict::Failed).to_string()),
+        ("errors", count(suite, Verdict::Aborted).to_string()),
+        ("skipped", "0".to_owned()),
+    ];
+    if let Some(wall) = suite.wall_time() {
+        attributes.push(("time", format!("{wall:.3}")));
+    }
+    attributes.push(("timestamp", suite.timestamp.clone()));
+    let mut properties = suite.properties.clone();
+    if suite.clock == Clock::Simulated {
+        let simulated: f64 = suite.cases.iter().map(|c| time(c.case)).sum();
+        properties.push(("simulated_time_s".to_owned(), format!("{simulated:.3}")));
+    }
     w.create_element("testsuite")
-        .with_attributes([
-            ("name", suite.name.as_str()),
-            ("tests", suite.cases.len().to_string().as_str()),
-            (
-                "failures",
-                count(suite, Verdict::Failed).to_string().as_str(),
-            ),
-            (
-                "errors",
-                count(suite, Verdict::Aborted).to_string().as_str(),
-            ),
-            ("skipped", "0"),
-            ("time", format!("{time:.3}").as_str()),
-            ("timestamp", suite.timestamp.as_str()),
-        ])
+        .with_attributes(attributes.iter().map(|(k, v)| (*k, v.as_str())))
         .write_inner_content(|w| {
             w.create_element("properties").write_inner_content(|w| {
-                for (name, value) in &suite.properties {
+                for (name, value) in &properties {
                     w.create_element("property")
                         .with_attributes([("name", name.as_str()), ("value", value.as_str())])
                         .write_empty()?;
@@ -145,27 +171,38 @@ fn write_suite(w: &mut Writer<Vec<u8>>, suite: &Suite<'_>) -> io::Result<()> {
 }
 
 fn write_case(w: &mut Writer<Vec<u8>>, suite: &Suite<'_>, case: &TestCase<'_>) -> io::Result<()> {
-    let element = w.create_element("testcase").with_attributes([
-        ("name", case.name.as_str()),
-        ("classname", suite.classname.as_str()),
-        ("time", format!("{:.3}", time(case.case)).as_str()),
-        ("file", case.file.as_str()),
-    ]);
-    let (tag, kind) = match case.case.verdict {
-        Some(Verdict::Passed) => {
-            element.write_empty()?;
-            return Ok(());
-        }
-        Some(Verdict::Failed) => ("failure", "failed"),
-        Some(Verdict::Aborted) => ("error", "aborted"),
-        None => ("error", "not run"),
+    let mut attributes = vec![
+        ("name", case.name.clone()),
+        ("classname", suite.classname.clone()),
+    ];
+    if suite.clock == Clock::Wall {
+        attributes.push(("time", format!("{:.3}", time(case.case))));
+    }
+    let element = w
+        .create_element("testcase")
+        .with_attributes(attributes.iter().map(|(k, v)| (*k, v.as_str())));
+    let problem = match case.case.verdict {
+        Some(Verdict::Passed) => None,
+        Some(Verdict::Failed) => Some(("failure", "failed")),
+        Some(Verdict::Aborted) => Some(("error", "aborted")),
+        None => Some(("error", "not run")),
     };
-    let message = case.case.reason.clone().unwrap_or_else(|| kind.to_owned());
-    let body = details(case);
+    let mut out = format!("case file: {}\n", case.file);
+    if let (Clock::Simulated, Some(t)) = (suite.clock, case.case.timing) {
+        out.push_str(&format!(
+            "simulated time: reset {:.3} s, drive {:.3} s\n",
+            t.reset_s, t.drive_s
+        ));
+    }
     element.write_inner_content(|w| {
-        w.create_element(tag)
-            .with_attributes([("message", message.as_str()), ("type", kind)])
-            .write_text_content(BytesText::new(&body))?;
+        if let Some((tag, kind)) = problem {
+            let message = case.case.reason.clone().unwrap_or_else(|| kind.to_owned());
+            w.create_element(tag)
+                .with_attributes([("message", message.as_str()), ("type", kind)])
+                .write_text_content(BytesText::new(&details(case)))?;
+        }
+        w.create_element("system-out")
+            .write_text_content(BytesText::new(&out))?;
         Ok(())
     })?;
     Ok(())
@@ -191,6 +228,26 @@ mod tests {
         case
     }
 
+    fn suite<'a>(cases: &[&'a Case], clock: Clock, wall_s: Option<f64>) -> Suite<'a> {
+        Suite {
+            name: "campaign seed 7 on s".to_owned(),
+            classname: "drivecheck.s".to_owned(),
+            timestamp: "2026-11-24T10:00:00Z".to_owned(),
+            properties: vec![("seed".to_owned(), "7".to_owned())],
+            cases: cases
+                .iter()
+                .enumerate()
+                .map(|(i, c)| TestCase {
+                    name: format!("seed-7/test-{i:03}"),
+                    case: c,
+                    file: format!("runs/x/case-{i:03}.json"),
+                })
+                .collect(),
+            clock,
+            wall_s,
+        }
+    }
+
     #[test]
     fn counts_failures_and_errors_and_escapes_text() {
         let passed = case(Some(Verdict::Passed), None);
@@ -199,30 +256,41 @@ mod tests {
             Some("segment 2 (command 3): deviation 1.28 m > 1.00 m & <worse>"),
         );
         let aborted = case(Some(Verdict::Aborted), Some("link lost"));
-        let suite = Suite {
-            name: "campaign seed 7 on s".to_owned(),
-            classname: "drivecheck.s".to_owned(),
-            timestamp: "2026-11-24T10:00:00Z".to_owned(),
-            properties: vec![("seed".to_owned(), "7".to_owned())],
-            cases: [&passed, &failed, &aborted]
-                .iter()
-                .enumerate()
-                .map(|(i, c)| TestCase {
-                    name: format!("test {i:03}"),
-                    case: c,
-                    file: format!("runs/x/case-{i:03}.json"),
-                })
-                .collect(),
-        };
-        let xml = to_xml(&[suite]).unwrap();
+        let xml = to_xml(&[suite(&[&passed, &failed, &aborted], Clock::Wall, None)]).unwrap();
         assert!(xml.starts_with("<?xml version=\"1.0\" encoding=\"UTF-8\"?>"));
         assert!(xml.contains(
             "<testsuites name=\"drivecheck\" tests=\"3\" failures=\"1\" errors=\"1\" time=\"35.250\">"
         ));
-        assert!(xml.contains("<testcase name=\"test 000\" classname=\"drivecheck.s\" time=\"11.750\" file=\"runs/x/case-000.json\"/>"));
+        assert!(xml.contains(
+            "<testcase name=\"seed-7/test-000\" classname=\"drivecheck.s\" time=\"11.750\">"
+        ));
+        assert!(xml.contains("<system-out>case file: runs/x/case-000.json\n</system-out>"));
         assert!(xml.contains("<failure message=\"segment 2 (command 3): deviation 1.28 m &gt; 1.00 m &amp; &lt;worse&gt;\" type=\"failed\">"));
         assert!(xml.contains("<error message=\"link lost\" type=\"aborted\">"));
         assert!(xml.contains("<property name=\"seed\" value=\"7\"/>"));
         assert!(xml.contains("case file: runs/x/case-001.json"));
+        assert!(
+            !xml.contains("file=\""),
+            "junit-10.xsd has no file attribute: {xml}"
+        );
+    }
+
+    #[test]
+    fn in_virtual_time_a_test_has_no_wall_time_and_says_its_simulated_seconds() {
+        let passed = case(Some(Verdict::Passed), None);
+        let xml = to_xml(&[suite(&[&passed], Clock::Simulated, Some(0.7))]).unwrap();
+        assert!(xml.contains("<testsuites name=\"drivecheck\" tests=\"1\" failures=\"0\" errors=\"0\" time=\"0.700\">"), "{xml}");
+        assert!(
+            xml.contains("<testcase name=\"seed-7/test-000\" classname=\"drivecheck.s\">"),
+            "{xml}"
+        );
+        assert!(
+            xml.contains("simulated time: reset 1.500 s, drive 10.250 s"),
+            "{xml}"
+        );
+        assert!(
+            xml.contains("<property name=\"simulated_time_s\" value=\"11.750\"/>"),
+            "{xml}"
+        );
     }
 }

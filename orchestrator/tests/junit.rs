@@ -7,8 +7,11 @@ use serde::Deserialize;
 
 use common::{campaign, drivecheck, path, text};
 
-// The JUnit schema's elements and attributes drivecheck writes (Jenkins' junit-10.xsd); unknown
-// ones are errors, so the test fails when the writer strays from the schema.
+// The elements and attributes of Jenkins' junit-10.xsd (the Surefire schema) that drivecheck
+// writes; unknown ones are errors, so the test fails when the writer strays from the schema. Its
+// rules on them: `name`, `tests`, `failures` and `errors` required on a testsuite, `name` on a
+// testcase, `name` and `value` on a property; a testcase's attributes are only `name`, `time`,
+// `classname` and `group`; times match SUREFIRE_TIME (digits, a decimal part).
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Testsuites {
@@ -21,7 +24,7 @@ struct Testsuites {
     #[serde(rename = "@errors")]
     errors: usize,
     #[serde(rename = "@time")]
-    _time: f64,
+    time: Option<String>,
     testsuite: Vec<Testsuite>,
 }
 
@@ -39,7 +42,7 @@ struct Testsuite {
     #[serde(rename = "@skipped")]
     _skipped: usize,
     #[serde(rename = "@time")]
-    time: f64,
+    time: Option<String>,
     #[serde(rename = "@timestamp")]
     timestamp: String,
     properties: Properties,
@@ -69,11 +72,11 @@ struct Testcase {
     #[serde(rename = "@classname")]
     classname: String,
     #[serde(rename = "@time")]
-    time: f64,
-    #[serde(rename = "@file")]
-    file: String,
+    time: Option<String>,
     failure: Option<Problem>,
     error: Option<Problem>,
+    #[serde(rename = "system-out")]
+    system_out: String,
 }
 
 #[derive(Debug, Deserialize)]
@@ -87,10 +90,35 @@ struct Problem {
     text: String,
 }
 
+/// Whether `time` matches junit-10.xsd's SUREFIRE_TIME as drivecheck writes it (`12.345`).
+fn surefire_time(time: &str) -> bool {
+    let (whole, fraction) = time.split_once('.').unwrap_or((time, ""));
+    !whole.is_empty()
+        && whole.bytes().all(|b| b.is_ascii_digit())
+        && fraction.bytes().all(|b| b.is_ascii_digit())
+}
+
+/// The case file a testcase names in its `<system-out>`.
+fn case_file(case: &Testcase) -> &str {
+    case.system_out
+        .lines()
+        .find_map(|l| l.strip_prefix("case file: "))
+        .unwrap_or_else(|| panic!("no case file: {case:?}"))
+}
+
 fn read(file: &std::path::Path) -> Testsuites {
     let xml = std::fs::read_to_string(file).unwrap();
     assert!(xml.starts_with("<?xml version=\"1.0\" encoding=\"UTF-8\"?>"));
-    quick_xml::de::from_str(&xml).unwrap_or_else(|e| panic!("{e}: {xml}"))
+    let doc: Testsuites = quick_xml::de::from_str(&xml).unwrap_or_else(|e| panic!("{e}: {xml}"));
+    let times = doc.time.iter().chain(doc.testsuite.iter().flat_map(|s| {
+        s.time
+            .iter()
+            .chain(s.testcase.iter().flat_map(|c| c.time.iter()))
+    }));
+    for time in times {
+        assert!(surefire_time(time), "time {time:?} in {xml}");
+    }
+    doc
 }
 
 #[test]
@@ -122,29 +150,37 @@ fn a_campaign_and_a_replay_write_junit_xml() {
             .iter()
             .any(|p| p.name == "seed" && p.value == "2")
     );
-    let mut time = 0.0;
+    // In virtual time a test has no wall time: its simulated seconds are in its output, and the
+    // suite's time is the campaign's on the wall clock.
+    assert!(suite.time.is_some());
     for (i, case) in suite.testcase.iter().enumerate() {
-        assert_eq!(case.name, format!("test {i:03}"));
+        assert_eq!(case.name, format!("seed-2/test-{i:03}"));
         assert_eq!(case.classname, "drivecheck.parking-lot-2anchors");
+        let file = case_file(case);
+        assert!(file.ends_with(&format!("case-{i:03}.json")), "{file}");
+        assert!(std::path::Path::new(file).exists());
+        assert_eq!(case.time, None, "{case:?}");
         assert!(
-            case.file.ends_with(&format!("case-{i:03}.json")),
-            "{}",
-            case.file
+            case.system_out.contains("simulated time: reset "),
+            "{case:?}"
         );
-        assert!(std::path::Path::new(&case.file).exists());
-        assert!(case.time > 1.0, "a test takes simulated seconds: {case:?}");
-        time += case.time;
-        let file = &summary.failing_cases;
+        let failing = &summary.failing_cases;
         let failed = case.failure.is_some() || case.error.is_some();
-        assert_eq!(failed, file.contains(&format!("case-{i:03}.json")));
+        assert_eq!(failed, failing.contains(&format!("case-{i:03}.json")));
         if let Some(failure) = &case.failure {
             assert_eq!(failure.kind, "failed");
             assert!(failure.message.contains("deviation"), "{failure:?}");
             assert!(failure.text.contains("FAILED"), "{failure:?}");
-            assert!(failure.text.contains(&case.file), "{failure:?}");
+            assert!(failure.text.contains(file), "{failure:?}");
         }
     }
-    assert!((suite.time - time).abs() < 0.01 * suite.testcase.len() as f64);
+    assert!(
+        suite
+            .properties
+            .property
+            .iter()
+            .any(|p| p.name == "simulated_time_s")
+    );
     assert!(summary.failed > 0, "seed 2 has failing tests");
 
     // Replay the first failing case twice: one testcase per run.
@@ -166,7 +202,53 @@ fn a_campaign_and_a_replay_write_junit_xml() {
     let suite = &doc.testsuite[0];
     assert!(suite.name.starts_with("replay of "), "{}", suite.name);
     let names: Vec<&str> = suite.testcase.iter().map(|c| c.name.as_str()).collect();
-    assert_eq!(names, ["run 1", "run 2"]);
+    let test = summary.failing_cases[0]
+        .trim_start_matches("case-")
+        .trim_end_matches(".json")
+        .to_owned();
+    assert_eq!(
+        names,
+        [
+            format!("seed-2/test-{test}/run-1"),
+            format!("seed-2/test-{test}/run-2")
+        ]
+    );
     assert!(suite.testcase.iter().all(|c| c.failure.is_some()));
-    assert!(suite.testcase[1].file.ends_with("run-2/case-000.json"));
+    assert!(case_file(&suite.testcase[1]).ends_with("run-2/case-000.json"));
+
+    // The JUnit of merged shards is of the same schema.
+    let shards: Vec<_> = (1..=2)
+        .map(|k| {
+            let out = dir.path().join(format!("shard-{k}"));
+            let shard = format!("{k}/2");
+            let run = drivecheck(&[
+                "run",
+                "--seed",
+                "2",
+                "--tests",
+                "4",
+                "--shard",
+                &shard,
+                "--out",
+                path(&out),
+            ]);
+            assert!(matches!(run.status.code(), Some(0 | 1)), "{}", text(&run));
+            out
+        })
+        .collect();
+    let junit = dir.path().join("merged.xml");
+    let merged = drivecheck(&[
+        "runs",
+        "merge",
+        path(&shards[0]),
+        path(&shards[1]),
+        "--out",
+        path(&dir.path().join("merged")),
+        "--junit",
+        path(&junit),
+    ]);
+    assert_eq!(merged.status.code(), Some(0), "{}", text(&merged));
+    let doc = read(&junit);
+    assert_eq!(doc.tests, 4);
+    assert_eq!(doc.testsuite[0].testcase[3].name, "seed-2/test-003");
 }

@@ -115,7 +115,19 @@ pub fn merge(
     );
     println!("run directory: {}", out.display());
     if let Some(file) = junit {
-        super::run::write_junit(&report, file)?;
+        // Shards of the embedded simulator run in virtual time (`run --shard` without
+        // `--realtime`); the campaign's wall time is from its first shard's start to its last's end.
+        let clock = if report.record.car == "sim" {
+            crate::junit::Clock::Simulated
+        } else {
+            crate::junit::Clock::Wall
+        };
+        let wall_s = report.record.ended_at.as_deref().and_then(|end| {
+            let start = humantime::parse_rfc3339_weak(&report.record.started_at).ok()?;
+            let end = humantime::parse_rfc3339_weak(end).ok()?;
+            Some(end.duration_since(start).ok()?.as_secs_f64())
+        });
+        super::run::write_junit(&report, file, clock, wall_s)?;
     }
     Ok(Exit::Success)
 }

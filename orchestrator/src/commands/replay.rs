@@ -154,7 +154,13 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
     crate::atomic::write(&file, format!("{}\n", comparison.to_json()?))
         .with_context(|| format!("cannot write {}", file.display()))?;
     if let Some(junit_file) = &args.junit {
-        write_junit(&runs, &of, &scenario, &out, &started_at, junit_file)?;
+        let clock = if virtual_time {
+            crate::junit::Clock::Simulated
+        } else {
+            crate::junit::Clock::Wall
+        };
+        let timing = (started_at.as_str(), started.elapsed().as_secs_f64(), clock);
+        write_junit(&runs, &of, &scenario, &out, timing, junit_file)?;
     }
     if args.report {
         super::report::write(&out, &out.join(REPORT_FILE), Some(&scenario))?;
@@ -335,19 +341,28 @@ fn worst(case: &Case) -> String {
 }
 
 /// Writes the replay's runs as JUnit XML to `file`: one testcase per run that wrote a case.
+/// `timing`: when the replay started, how long it took on the wall clock, and whose seconds
+/// the cases hold.
 fn write_junit(
     runs: &[(ReplayRun, Option<Case>)],
     of: &ReplayOf,
     scenario: &Scenario,
     out: &Path,
-    started_at: &str,
+    (started_at, wall_s, clock): (&str, f64, crate::junit::Clock),
     file: &Path,
 ) -> Result<()> {
+    // The case replayed, as the campaign named it (`seed-7/test-003`), or its file's name.
+    let replayed = match (of.campaign_seed, of.test_index) {
+        (Some(seed), Some(test)) => format!("seed-{seed}/test-{test:03}"),
+        _ => Path::new(&of.case)
+            .file_stem()
+            .map_or_else(|| of.case.clone(), |s| s.to_string_lossy().into_owned()),
+    };
     let cases = runs
         .iter()
         .filter_map(|(run, case)| {
             case.as_ref().map(|case| crate::junit::TestCase {
-                name: run.dir.replace('-', " "),
+                name: format!("{replayed}/{}", run.dir),
                 case,
                 file: out
                     .join(&run.dir)
@@ -373,6 +388,8 @@ fn write_junit(
             ("replay_directory".to_owned(), out.display().to_string()),
         ],
         cases,
+        clock,
+        wall_s: Some(wall_s),
     };
     let xml = crate::junit::to_xml(&[suite]).context("cannot write the JUnit XML")?;
     crate::atomic::write(file, xml).with_context(|| format!("cannot write {}", file.display()))?;

@@ -138,7 +138,12 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     print_report(&report, Some(wall));
     explain_failed(&report, &scenario);
     if let Some(file) = &args.junit {
-        write_junit(&report, file)?;
+        let clock = if virtual_time {
+            junit::Clock::Simulated
+        } else {
+            junit::Clock::Wall
+        };
+        write_junit(&report, file, clock, Some(wall.as_secs_f64()))?;
     }
     if args.shrink {
         shrink_failed(&report, &scenario, &sim, args.shrink_budget)?;
@@ -232,15 +237,21 @@ fn explain_failed(report: &CampaignReport, scenario: &Scenario) {
     }
 }
 
-/// Writes the campaign's tests as JUnit XML to `file`.
-pub(super) fn write_junit(report: &CampaignReport, file: &std::path::Path) -> Result<()> {
+/// Writes the campaign's tests as JUnit XML to `file`; `clock` is whose seconds the cases hold,
+/// `wall_s` how long the campaign took on the wall clock.
+pub(super) fn write_junit(
+    report: &CampaignReport,
+    file: &std::path::Path,
+    clock: junit::Clock,
+    wall_s: Option<f64>,
+) -> Result<()> {
     let record = &report.record;
     let cases: Vec<junit::TestCase<'_>> = report
         .tests
         .iter()
         .zip(&report.cases)
         .map(|(test, case)| junit::TestCase {
-            name: format!("test {:03}", test.test_index),
+            name: format!("seed-{}/test-{:03}", record.seed, test.test_index),
             case,
             file: report.dir.join(&test.file).display().to_string(),
         })
@@ -265,6 +276,8 @@ pub(super) fn write_junit(report: &CampaignReport, file: &std::path::Path) -> Re
         timestamp: record.started_at.clone(),
         properties,
         cases,
+        clock,
+        wall_s,
     };
     let xml = junit::to_xml(&[suite]).context("cannot write the JUnit XML")?;
     crate::atomic::write(file, xml).with_context(|| format!("cannot write {}", file.display()))?;
