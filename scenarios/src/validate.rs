@@ -135,43 +135,45 @@ fn counts(interval: Interval<usize>, field: &str) -> Check {
 
 /// `value` at most `limit` ([`crate::limits`]).
 fn at_most(value: f64, limit: f64, why: &'static str, field: &str) -> Check {
-    if value <= limit {
-        Ok(())
-    } else {
-        Err((
-            field.into(),
-            Problem::BeyondLimit(Box::new(BeyondLimit {
-                value,
-                bound: "at most",
-                limit,
-                why,
-            })),
-        ))
-    }
+    beyond_unless(value <= limit, (value, "at most", limit), why, field)
 }
 
 /// `value` at least `limit` ([`crate::limits`]; a tolerance of 1e-9 for unit conversions).
 fn at_least(value: f64, limit: f64, why: &'static str, field: &str) -> Check {
-    if value >= limit - 1e-9 {
-        Ok(())
-    } else {
-        Err((
-            field.into(),
-            Problem::BeyondLimit(Box::new(BeyondLimit {
-                value,
-                bound: "at least",
-                limit,
-                why,
-            })),
-        ))
-    }
+    beyond_unless(
+        value >= limit - 1e-9,
+        (value, "at least", limit),
+        why,
+        field,
+    )
 }
 
-/// Why speeds have a floor.
-const SLOW: &str = "slower, one segment of a test takes minutes";
+/// A [`Problem::BeyondLimit`] of `field` unless `within`.
+fn beyond_unless(
+    within: bool,
+    (value, bound, limit): (f64, &'static str, f64),
+    why: &'static str,
+    field: &str,
+) -> Check {
+    if within {
+        return Ok(());
+    }
+    Err((
+        field.into(),
+        Problem::BeyondLimit(Box::new(BeyondLimit {
+            value,
+            bound,
+            limit,
+            why,
+        })),
+    ))
+}
 
 /// How far the limits are from any real use.
 const FAR: &str = "far beyond any real test; a larger value only exhausts memory or time";
+
+/// Why speeds have a floor.
+const SLOW: &str = "slower, one segment of a test takes minutes";
 
 fn check_vehicle(v: &Vehicle) -> Check {
     positive(v.wheelbase_m, "vehicle.wheelbase_m")?;

@@ -203,20 +203,8 @@ impl LiveView {
 /// where the viewer offered only the specification's, and passes everything through from then
 /// on (the server's answer naming the subprotocol the viewer offered).
 async fn front_door(mut client: TcpStream, inner: SocketAddr) -> std::io::Result<()> {
-    let mut head = Vec::new();
-    let mut buf = [0u8; 2048];
-    let end = loop {
-        let n = client.read(&mut buf).await?;
-        if n == 0 {
-            return Ok(());
-        }
-        head.extend_from_slice(&buf[..n]);
-        if let Some(end) = head.windows(4).position(|w| w == b"\r\n\r\n") {
-            break end + 4;
-        }
-        if head.len() > MAX_HANDSHAKE {
-            return Ok(());
-        }
+    let Some((head, end)) = read_head(&mut client).await? else {
+        return Ok(());
     };
     let (request, rest) = head.split_at(end);
     let request = String::from_utf8_lossy(request);
@@ -227,19 +215,8 @@ async fn front_door(mut client: TcpStream, inner: SocketAddr) -> std::io::Result
     if renamed {
         // The server's answer: its head names the crate's subprotocol; the viewer asked for the
         // specification's name.
-        let mut head = Vec::new();
-        let end = loop {
-            let n = server.read(&mut buf).await?;
-            if n == 0 {
-                return Ok(());
-            }
-            head.extend_from_slice(&buf[..n]);
-            if let Some(end) = head.windows(4).position(|w| w == b"\r\n\r\n") {
-                break end + 4;
-            }
-            if head.len() > MAX_HANDSHAKE {
-                return Ok(());
-            }
+        let Some((head, end)) = read_head(&mut server).await? else {
+            return Ok(());
         };
         let (answer, rest) = head.split_at(end);
         let answer = String::from_utf8_lossy(answer).replace(SDK_SUBPROTOCOL, WS_SUBPROTOCOL);
@@ -248,6 +225,23 @@ async fn front_door(mut client: TcpStream, inner: SocketAddr) -> std::io::Result
     }
     tokio::io::copy_bidirectional(&mut client, &mut server).await?;
     Ok(())
+}
+
+/// Reads an HTTP head from `stream`: the bytes read and where the head ends (after its empty
+/// line); `None` when the stream ends first or the head is longer than [`MAX_HANDSHAKE`].
+async fn read_head(stream: &mut TcpStream) -> std::io::Result<Option<(Vec<u8>, usize)>> {
+    let mut head = Vec::new();
+    let mut buf = [0u8; 2048];
+    loop {
+        let n = stream.read(&mut buf).await?;
+        if n == 0 || head.len() + n > MAX_HANDSHAKE {
+            return Ok(None);
+        }
+        head.extend_from_slice(&buf[..n]);
+        if let Some(end) = head.windows(4).position(|w| w == b"\r\n\r\n") {
+            return Ok(Some((head, end + 4)));
+        }
+    }
 }
 
 /// The upgrade request `request` with `foxglove.sdk.v1` offered where the viewer offered only
