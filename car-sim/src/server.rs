@@ -266,6 +266,8 @@ impl ImpairedQueue {
 /// The simulation task: the board, the clock and the impaired link.
 struct Core {
     board: Board,
+    /// What the board is built from, for a reboot after an internal fault.
+    options: CarOptions,
     link: LinkImpairment,
     noise: Noise,
     inbound: ImpairedQueue,
@@ -276,6 +278,26 @@ struct Core {
 }
 
 impl Core {
+    fn new(config: &SimConfig) -> Self {
+        let options = config.car_options();
+        let car = SimCar::new(options.clone());
+        let shared = Arc::new(Mutex::new(Shared {
+            truth: car.truth(),
+            events: Vec::new(),
+        }));
+        Core {
+            board: Board::new(car),
+            options,
+            link: config.link,
+            noise: Noise::stream(config.seed, STREAM_LINK),
+            inbound: ImpairedQueue::new(),
+            outbound: ImpairedQueue::new(),
+            client: None,
+            shared,
+            record_events: config.record_events,
+        }
+    }
+
     async fn run(mut self, mut rx: mpsc::Receiver<CoreMsg>) {
         let tick = Duration::from_millis(TICK_MS);
         let mut next_tick = Instant::now() + tick;
@@ -320,17 +342,40 @@ impl Core {
             match request_due {
                 Some(due) if due <= *next_tick => {
                     if let Some(p) = self.inbound.pop_due(now) {
-                        self.handle(due, &p);
+                        self.guarded(|core| core.handle(due, &p));
                     }
                 }
                 _ if *next_tick <= now => {
-                    self.board.car_mut().step();
+                    self.guarded(|core| core.board.car_mut().step());
                     *next_tick += tick;
                     self.publish();
                 }
                 _ => return,
             }
         }
+    }
+
+    /// Runs `f` on the core; a panic in the model (a fault of the simulator itself: the
+    /// fuzzers find none) reboots the board where the car stands, as the firmware's hardware
+    /// watchdog would, instead of ending the task and leaving the server deaf.
+    fn guarded(&mut self, f: impl FnOnce(&mut Self)) {
+        if std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| f(self))).is_ok() {
+            return;
+        }
+        let truth = self.board.car().truth();
+        let mut options = self.options.clone();
+        if [truth.x, truth.y, truth.heading]
+            .iter()
+            .all(|v| v.is_finite())
+        {
+            options.placement = Placement {
+                x: truth.x,
+                y: truth.y,
+                heading: truth.heading,
+            };
+        }
+        eprintln!("simulated car: internal fault (see the panic above); the board reboots");
+        self.board = Board::new(SimCar::new(options));
     }
 
     fn handle(&mut self, at: Instant, payload: &[u8]) {
@@ -365,21 +410,8 @@ impl Core {
 }
 
 fn start_core(config: &SimConfig) -> (mpsc::Sender<CoreMsg>, Arc<Mutex<Shared>>, JoinHandle<()>) {
-    let car = SimCar::new(config.car_options());
-    let shared = Arc::new(Mutex::new(Shared {
-        truth: car.truth(),
-        events: Vec::new(),
-    }));
-    let core = Core {
-        board: Board::new(car),
-        link: config.link,
-        noise: Noise::stream(config.seed, STREAM_LINK),
-        inbound: ImpairedQueue::new(),
-        outbound: ImpairedQueue::new(),
-        client: None,
-        shared: shared.clone(),
-        record_events: config.record_events,
-    };
+    let core = Core::new(config);
+    let shared = Arc::clone(&core.shared);
     let (tx, rx) = mpsc::channel(CLIENT_QUEUE);
     let task = tokio::spawn(core.run(rx));
     (tx, shared, task)
@@ -583,4 +615,37 @@ pub async fn serve_udp(addr: SocketAddr, config: &SimConfig) -> io::Result<SimHa
         tasks: vec![core_task, task],
         local_addr: Some(local_addr),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use car_link::message::{Dialect, Request};
+
+    #[test]
+    fn a_fault_of_the_model_reboots_the_board_where_the_car_stands_and_it_answers() {
+        let config = SimConfig {
+            placement: Some(Placement {
+                x: 3.0,
+                y: -2.0,
+                heading: 0.5,
+            }),
+            ..SimConfig::default()
+        };
+        let mut core = Core::new(&config);
+        for _ in 0..10 {
+            core.board.car_mut().step();
+        }
+        core.guarded(|_| panic!("a fault of the model"));
+        let get_state = Request::GetState
+            .encode(1, Dialect::host(config.firmware))
+            .unwrap();
+        assert_eq!(core.board.handle(&get_state).len(), 1);
+        let truth = core.board.car().truth();
+        assert!(
+            (truth.x - 3.0).abs() < 1e-6 && (truth.y + 2.0).abs() < 1e-6,
+            "{truth:?}"
+        );
+        assert_eq!(truth.time_ms, 0, "a fresh board");
+    }
 }
