@@ -91,28 +91,22 @@ impl Format {
 pub fn load(path: impl AsRef<Path>) -> Result<Loaded, ScenarioError> {
     let path = path.as_ref();
     let source_name = path.display().to_string();
-    if let Ok(meta) = std::fs::metadata(path)
-        && !meta.is_file()
-    {
-        return Err(ScenarioError::in_source(
-            &source_name,
-            None,
-            Problem::Read(std::io::Error::other(
+    if let Ok(meta) = std::fs::metadata(path) {
+        let problem = if !meta.is_file() {
+            Some(Problem::Read(std::io::Error::other(
                 "not a regular file (a directory, FIFO or device): a scenario is a TOML or XML file",
-            )),
-        ));
-    }
-    if let Ok(meta) = std::fs::metadata(path)
-        && meta.len() > MAX_SCENARIO_BYTES
-    {
-        return Err(ScenarioError::in_source(
-            &source_name,
-            None,
-            Problem::TooLarge {
+            )))
+        } else if meta.len() > MAX_SCENARIO_BYTES {
+            Some(Problem::TooLarge {
                 bytes: meta.len(),
                 max: MAX_SCENARIO_BYTES,
-            },
-        ));
+            })
+        } else {
+            None
+        };
+        if let Some(problem) = problem {
+            return Err(ScenarioError::in_source(&source_name, None, problem));
+        }
     }
     let text = std::fs::read_to_string(path)
         .map_err(|e| ScenarioError::in_source(&source_name, None, Problem::Read(e)))?;

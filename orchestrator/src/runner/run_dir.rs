@@ -354,11 +354,6 @@ pub(crate) fn claim_out_dir(path: &Path, made: bool) -> Result<OutClaim, RunErro
     };
     let made = made || !path.exists();
     std::fs::create_dir_all(path).map_err(io)?;
-    // From here the guard removes the directory again if this process made it.
-    let mut claim = OutClaim {
-        dir: path.to_owned(),
-        made,
-    };
     let marker = path.join(CLAIM_FILE);
     match std::fs::OpenOptions::new()
         .write(true)
@@ -371,9 +366,7 @@ pub(crate) fn claim_out_dir(path: &Path, made: bool) -> Result<OutClaim, RunErro
             let _ = writeln!(file, "pid {} since {}", std::process::id(), rfc3339_now());
         }
         Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-            // Not ours: keep its claim file and the directory.
-            claim.made = false;
-            claim.dir = PathBuf::new();
+            // Not ours: its claim file and the directory stay as they are.
             let holder = std::fs::read_to_string(&marker)
                 .ok()
                 .map(|t| t.trim().to_owned())
@@ -385,8 +378,19 @@ pub(crate) fn claim_out_dir(path: &Path, made: bool) -> Result<OutClaim, RunErro
                 holder,
             });
         }
-        Err(e) => return Err(io(e)),
+        Err(e) => {
+            if made {
+                let _ = std::fs::remove_dir(path);
+            }
+            return Err(io(e));
+        }
     }
+    // Ours from here: the guard gives the claim back (and the directory, if this process made
+    // it and nothing was written).
+    let claim = OutClaim {
+        dir: path.to_owned(),
+        made,
+    };
     let others = std::fs::read_dir(path)
         .map_err(io)?
         .filter_map(Result::ok)
@@ -401,9 +405,6 @@ pub(crate) fn claim_out_dir(path: &Path, made: bool) -> Result<OutClaim, RunErro
 
 impl Drop for OutClaim {
     fn drop(&mut self) {
-        if self.dir.as_os_str().is_empty() {
-            return;
-        }
         let _ = std::fs::remove_file(self.dir.join(CLAIM_FILE));
         if self.made {
             // Fails, as it should, on a directory with anything in it.
