@@ -78,6 +78,29 @@ pub enum Command {
     /// 2 error.
     #[command(subcommand)]
     Bench(BenchCommand),
+    /// Print a shell completion script (`drivecheck completions bash > ~/.local/share/bash-completion/completions/drivecheck`).
+    /// Exit status: 0 printed, 2 error.
+    Completions(CompletionsArgs),
+    /// Write the manual pages (roff): `drivecheck.1` and one per command, into DIR, or the main
+    /// page on standard output (`drivecheck man | man -l -`). Exit status: 0 written, 2 error.
+    Man(ManArgs),
+}
+
+/// Options of `drivecheck completions`.
+#[derive(Debug, Args)]
+pub struct CompletionsArgs {
+    /// The shell.
+    #[arg(value_enum)]
+    pub shell: clap_complete::Shell,
+}
+
+/// Options of `drivecheck man`.
+#[derive(Debug, Args)]
+pub struct ManArgs {
+    /// The directory to write `drivecheck.1` and `drivecheck-<command>.1` into (created if
+    /// missing); without it the main page goes to standard output.
+    #[arg(short = 'o', long = "out", value_name = "DIR")]
+    pub out: Option<PathBuf>,
 }
 
 /// Options of `drivecheck run`.
@@ -122,8 +145,9 @@ pub struct RunArgs {
     /// With `--shrink`: the wall-time budget of each case's shrink.
     #[arg(long, value_name = "DURATION", default_value = "2min", value_parser = humantime::parse_duration)]
     pub shrink_budget: std::time::Duration,
-    /// The run directory (default `runs/<UTC timestamp>-<scenario>-<seed>/`).
-    #[arg(long, value_name = "DIR")]
+    /// The run directory (default `runs/<UTC timestamp>-<scenario>-<seed>/`; `runs/` is
+    /// `$DRIVECHECK_RUNS_DIR` when set).
+    #[arg(short, long, value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Also write the campaign's tests as JUnit XML to FILE (one testcase per test), for CI.
     #[arg(long, value_name = "FILE")]
@@ -154,6 +178,41 @@ pub struct RunArgs {
     /// file (`drivecheck calibrate` writes one; docs/twin.md). Only with `--car sim`.
     #[arg(long, value_name = "FILE")]
     pub profile: Option<PathBuf>,
+    /// Print the result as one JSON document on standard output instead of the table (the run
+    /// directory, `campaign.json`'s record and every test; docs/json.md). Progress and notes stay
+    /// on standard error.
+    #[arg(long)]
+    pub json: bool,
+    /// Check the car without driving it: connect, run preflight (firmware, configuration read
+    /// back, anchors, fault injection, the car inside the fence, the link's round trip), upload
+    /// the first test's route with the autopilot off and its faults, read both back, clear them.
+    /// Nothing is written (docs/car.md). Exit status: 0 ready, 2 not.
+    #[arg(long)]
+    pub dry_run: bool,
+}
+
+/// The scenario of a command about one (`area`, `route`, `scenario check`): the first positional
+/// argument, or `--scenario` as every other command takes it.
+#[derive(Debug, Clone, Args)]
+#[group(required = true, multiple = false)]
+pub struct ScenarioGiven {
+    /// Scenario: a bundled name (see `drivecheck scenario list`), a .toml file or a reference .xml.
+    #[arg(value_name = "SCENARIO")]
+    scenario_positional: Option<String>,
+    /// The scenario, as every other command takes it (the same as SCENARIO).
+    #[arg(long = "scenario", value_name = "SCENARIO")]
+    scenario: Option<String>,
+}
+
+impl ScenarioGiven {
+    /// The scenario as given (a bundled name or a file).
+    pub fn name(&self) -> &str {
+        // The group is required: clap gives one of the two.
+        self.scenario_positional
+            .as_deref()
+            .or(self.scenario.as_deref())
+            .unwrap_or_default()
+    }
 }
 
 /// What the recording keeps (`run --record`).
@@ -210,9 +269,10 @@ pub struct ReplayArgs {
     /// Run the embedded simulated car against the wall clock instead of in virtual time.
     #[arg(long)]
     pub realtime: bool,
-    /// The replay directory (default `runs/<UTC timestamp>-replay-<scenario>-<seed>/`); each run
+    /// The replay directory (default `runs/<UTC timestamp>-replay-<scenario>-<seed>/`, in
+    /// `$DRIVECHECK_RUNS_DIR` when set); each run
     /// writes a run directory `run-1/`, `run-2/`, … inside it, the comparison `replay.json`.
-    #[arg(long, value_name = "DIR")]
+    #[arg(short, long, value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Also write the runs as JUnit XML to FILE (one testcase per run), for CI.
     #[arg(long, value_name = "FILE")]
@@ -224,6 +284,10 @@ pub struct ReplayArgs {
     /// Only with `--car sim`; a warning when the case was driven on another profile.
     #[arg(long, value_name = "FILE")]
     pub profile: Option<PathBuf>,
+    /// Print the comparison as one JSON document on standard output instead of the table
+    /// (docs/json.md).
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Options of `drivecheck shrink`.
@@ -233,9 +297,10 @@ pub struct ShrinkArgs {
     /// hand).
     #[arg(value_name = "CASE.json")]
     pub case: PathBuf,
-    /// The shrink directory (default `runs/<UTC timestamp>-shrink-<scenario>-<seed>/`): it gets
+    /// The shrink directory (default `runs/<UTC timestamp>-shrink-<scenario>-<seed>/`, in
+    /// `$DRIVECHECK_RUNS_DIR` when set): it gets
     /// `minimal.json` and `shrink.json`.
-    #[arg(long, value_name = "DIR")]
+    #[arg(short, long, value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Scenario: a bundled name, a .toml file or a reference .xml (default: the bundled scenario
     /// the case names).
@@ -263,6 +328,10 @@ pub struct ShrinkArgs {
     /// file (docs/twin.md).
     #[arg(long, value_name = "FILE")]
     pub profile: Option<PathBuf>,
+    /// Print the result as one JSON document on standard output instead of the table (the
+    /// shrink report, or why the case was not shrunk; docs/json.md).
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Options of `drivecheck sweep`.
@@ -309,7 +378,7 @@ pub struct ReportArgs {
     #[arg(value_name = "RUN_DIR")]
     pub dir: PathBuf,
     /// Where to write the page (default `RUN_DIR/report.html`).
-    #[arg(long, value_name = "FILE")]
+    #[arg(short, long, value_name = "FILE")]
     pub out: Option<PathBuf>,
     /// Scenario to draw the maps in: a bundled name, a .toml file or a reference .xml (default:
     /// the scenario stored in the recording, else the bundled one the run names).
@@ -370,9 +439,18 @@ pub struct ExplainArgs {
 /// Options of `drivecheck runs`.
 #[derive(Debug, Args)]
 pub struct RunsArgs {
-    /// Where the run directories are.
-    #[arg(long, default_value = "runs", value_name = "DIR")]
+    /// Where the run directories are (where `run`, `replay` and `shrink` put them by default).
+    #[arg(
+        long,
+        env = "DRIVECHECK_RUNS_DIR",
+        default_value = "runs",
+        value_name = "DIR"
+    )]
     pub dir: PathBuf,
+    /// Print the list, the run directory shown or the merge's result as one JSON document on
+    /// standard output (docs/json.md).
+    #[arg(long, global = true)]
+    pub json: bool,
     /// Show one run directory instead of listing them.
     #[command(subcommand)]
     pub command: Option<RunsCommand>,
@@ -401,7 +479,7 @@ pub enum RunsCommand {
         #[arg(value_name = "DIR", required = true, num_args = 1..)]
         shards: Vec<PathBuf>,
         /// The run directory to write (must not exist or be empty).
-        #[arg(long, value_name = "DIR")]
+        #[arg(short, long, value_name = "DIR")]
         out: PathBuf,
         /// The scenario the shards ran, when it is not bundled (a .toml or reference .xml file).
         #[arg(long)]
@@ -482,7 +560,7 @@ pub struct CalibrateArgs {
     #[arg(required = true, value_name = "RUN_DIR")]
     pub runs: Vec<PathBuf>,
     /// Where to write the fitted profile (TOML).
-    #[arg(long, value_name = "FILE")]
+    #[arg(short, long, value_name = "FILE")]
     pub out: PathBuf,
     /// The wall-time budget of the fit; the best profile so far is written when it is spent.
     #[arg(long, value_name = "DURATION", default_value = "10min", value_parser = humantime::parse_duration)]
@@ -620,8 +698,8 @@ pub struct BenchFidelityArgs {
     #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u32).range(1..=100_000))]
     pub rock_tests: u32,
     /// Also draw where the rock lot's campaign failed as SVG to FILE: every driven track, the
-    /// samples above 1 m, the rock and the wall.
-    #[arg(long, value_name = "FILE")]
+    /// samples above 1 m, the rock and the wall (`--svg` is an older name of this option).
+    #[arg(short = 'o', long = "out", alias = "svg", value_name = "FILE.svg")]
     pub svg: Option<PathBuf>,
     /// Simulated runs of the published circle route (route following, other simulator seeds).
     #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=100))]
@@ -686,16 +764,18 @@ pub enum AreaCommand {
 /// Options of `drivecheck area validate`.
 #[derive(Debug, Args)]
 pub struct ValidateArgs {
-    /// Scenario: a bundled name (see `drivecheck scenario list`), a .toml file or a reference .xml.
-    pub scenario: String,
+    /// The scenario (`SCENARIO` or `--scenario`).
+    #[command(flatten)]
+    pub scenario: ScenarioGiven,
     /// Length of the trajectory, kilometres.
     #[arg(long, default_value_t = 100.0)]
     pub km: f64,
     /// Seed of the random trajectory (printed when not given).
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Write a picture (area, trajectory sample, coverage heat map, hot spots) to this SVG file.
-    #[arg(long, value_name = "FILE")]
+    /// Write a picture (area, trajectory sample, coverage heat map, hot spots) to this SVG file
+    /// (`--svg` is an older name of this option).
+    #[arg(short = 'o', long = "out", alias = "svg", value_name = "FILE.svg")]
     pub svg: Option<PathBuf>,
     /// Print the report as JSON on standard output.
     #[arg(long)]
@@ -721,8 +801,9 @@ pub enum RouteCommand {
 /// Options of `drivecheck route return`.
 #[derive(Debug, Args)]
 pub struct ReturnArgs {
-    /// Scenario: a bundled name, a .toml file or a reference .xml.
-    pub scenario: String,
+    /// The scenario (`SCENARIO` or `--scenario`).
+    #[command(flatten)]
+    pub scenario: ScenarioGiven,
     /// The car's pose: east and north in metres, and the heading in degrees counter-clockwise
     /// from east (the ENU convention: 0 = east, 90 = north).
     #[arg(long, value_name = "X,Y,HEADING_DEG", allow_hyphen_values = true)]
@@ -742,8 +823,9 @@ pub struct ReturnArgs {
 /// Options of `drivecheck route generate`.
 #[derive(Debug, Args)]
 pub struct GenerateArgs {
-    /// Scenario: a bundled name, a .toml file or a reference .xml.
-    pub scenario: String,
+    /// The scenario (`SCENARIO` or `--scenario`).
+    #[command(flatten)]
+    pub scenario: ScenarioGiven,
     /// How many points to generate after the start route. They come in extensions of the
     /// scenario's segment size (4–7 by default), every one within it whenever the number allows
     /// (with 4–7, any number of at least 4); fewer than 4 are one short extension.
@@ -752,10 +834,11 @@ pub struct GenerateArgs {
     /// Seed of the random route (printed when not given).
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Speed of the generated points, m/s, at most the autopilot's top speed of 8.33 m/s
-    /// (default: the scenario's lowest campaign speed).
-    #[arg(long, value_name = "M/S")]
-    pub speed: Option<f64>,
+    /// Speed of the generated points, km/h (as the scenario's campaign speeds), at most the
+    /// autopilot's top speed of 30 km/h (default: the scenario's lowest campaign speed). The
+    /// route's points carry it in m/s, as scenario files do.
+    #[arg(long, value_name = "KM/H")]
+    pub speed_kmh: Option<f64>,
     /// Print the route as JSON on standard output.
     #[arg(long)]
     pub json: bool,

@@ -4,6 +4,8 @@
 
 use std::sync::atomic::{AtomicU8, Ordering};
 
+use serde::Serialize;
+
 /// How much a command prints.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Verbosity {
@@ -34,6 +36,34 @@ pub fn verbosity() -> Verbosity {
 /// Whether progress and notes are printed (not `--quiet`).
 pub fn chatty() -> bool {
     verbosity() >= Verbosity::Normal
+}
+
+/// The version of the documents `--json` prints (docs/json.md): bumped when a field is removed,
+/// renamed or changes meaning, not when one is added.
+pub const JSON_SCHEMA_VERSION: u32 = 1;
+
+/// What `--json` prints: the command's name and [`JSON_SCHEMA_VERSION`], then its result's fields.
+#[derive(Serialize)]
+struct Document<'a, T> {
+    /// The command (`run`, `runs show`, …).
+    command: &'a str,
+    /// [`JSON_SCHEMA_VERSION`].
+    schema_version: u32,
+    /// The result's own fields.
+    #[serde(flatten)]
+    result: &'a T,
+}
+
+/// Prints `result` of `command` as one JSON document on standard output (`--json`): an object
+/// with `command`, `schema_version` and the result's fields (docs/json.md).
+pub fn print_json<T: Serialize>(command: &str, result: &T) -> anyhow::Result<()> {
+    let text = serde_json::to_string_pretty(&Document {
+        command,
+        schema_version: JSON_SCHEMA_VERSION,
+        result,
+    })?;
+    println!("{text}");
+    Ok(())
 }
 
 /// An error and its causes in one line, `outer: inner: …` like anyhow's `{:#}`, without a cause

@@ -5,7 +5,7 @@
 //! simulated car, is the same on every machine.
 //!
 //! A snapshot that differs fails the test. When the change is meant, accept the new output with
-//! `INSTA_UPDATE=always cargo test -p orchestrator --test user_output` (or `cargo insta review`)
+//! `INSTA_UPDATE=always cargo test -p drivecheck --test user_output` (or `cargo insta review`)
 //! and commit the changed `snapshots/*.snap` files with it.
 
 mod common;

@@ -41,6 +41,7 @@ enum Op {
     PollStates,
     ClearRoute,
     AddPoints(usize),
+    RoutePart,
     SetAutopilot(bool),
     Brake,
     SetPos,
@@ -198,6 +199,14 @@ impl<V: Vehicle> Vehicle for Tap<V> {
         points: &[RoutePoint],
     ) -> impl Future<Output = Result<(), CarError>> + Send {
         self.tapped(Op::AddPoints(points.len()), self.inner.add_points(points))
+    }
+
+    fn route_part(
+        &self,
+        first: i32,
+        num: u8,
+    ) -> impl Future<Output = Result<car_link::message::RoutePart, CarError>> + Send {
+        self.tapped(Op::RoutePart, self.inner.route_part(first, num))
     }
 
     fn set_autopilot(
@@ -467,4 +476,68 @@ fn a_campaign_runs_through_a_tapped_vehicle_as_the_runner_promises() {
         );
     }
     assert!(faults_sent > 0, "the campaign sent faults");
+}
+
+/// `run --dry-run` does everything before driving and nothing after: the tap sees preflight, the
+/// route uploaded and read back, the faults uploaded and listed, everything cleared, and never
+/// the autopilot switched on; the car stands where it stood.
+#[test]
+fn a_dry_run_uploads_and_reads_back_but_never_starts_the_autopilot() {
+    let scenario = scenarios::bundled::load(SCENARIO)
+        .expect("bundled")
+        .scenario;
+    let campaign = Campaign {
+        seed: SEED,
+        tests: TESTS,
+        no_faults: false,
+    };
+    let config = RunConfig::new(campaign, std::path::PathBuf::new(), "sim");
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .start_paused(true)
+        .build()
+        .expect("a runtime");
+    let (found, log, moved) = runtime.block_on(async {
+        let sim_config = car_sim::SimConfig {
+            seed: SEED,
+            ..car_sim::SimConfig::from_scenario(&scenario)
+        };
+        let (car, sim) = connect_sim(&sim_config).await.expect("the simulated car");
+        let tapped = Tap::new(car);
+        let before = tapped.state().await.expect("a state").state;
+        let found = orchestrator::runner::dry_run(&tapped, &scenario, &config)
+            .await
+            .expect("the dry run passes on the simulated car");
+        tokio::time::sleep(Duration::from_secs(2)).await;
+        let after = tapped.state().await.expect("a state").state;
+        let moved = (after.px - before.px).hypot(after.py - before.py);
+        let log = std::mem::take(&mut *tapped.log());
+        sim.shutdown();
+        (found, log, moved)
+    });
+    let ops: Vec<&Op> = log.calls.iter().map(|c| &c.op).collect();
+    assert!(
+        !ops.iter().any(|op| matches!(op, Op::SetAutopilot(true))),
+        "the autopilot was switched on: {ops:?}"
+    );
+    let count = |f: fn(&Op) -> bool| ops.iter().filter(|op| f(op)).count();
+    assert!(count(|op| matches!(op, Op::RoutePart)) >= 1, "{ops:?}");
+    assert_eq!(
+        count(|op| matches!(op, Op::AddFault { .. })),
+        found.faults_uploaded
+    );
+    assert!(
+        found.faults_uploaded > 0,
+        "seed {SEED}'s first test has faults"
+    );
+    assert_eq!(found.faults_listed, found.faults_uploaded);
+    assert!(found.route_points > 4, "{found:?}");
+    assert!(found.route_read_back_error < 0.01, "{found:?}");
+    // The last word on the route and the faults is a clear: nothing is left on the car.
+    let last = |f: fn(&Op) -> bool| ops.iter().rposition(|op| f(op));
+    assert!(last(|op| matches!(op, Op::ClearRoute)) > last(|op| matches!(op, Op::AddPoints(_))));
+    assert!(
+        last(|op| matches!(op, Op::ClearFaults)) > last(|op| matches!(op, Op::AddFault { .. }))
+    );
+    assert!(moved < 0.05, "the car moved {moved:.3} m");
 }

@@ -394,3 +394,43 @@ fn a_misnamed_module_or_item_is_found() {
     assert!(unresolved(&root, "runner::reset::NoSuchItem").is_some());
     assert!(unresolved(&root, "nosuchcrate::x").is_some());
 }
+
+/// The README's table of bundled scenarios is `scenario list`'s: every bundled scenario has a row
+/// with its drivable area (to the square metre), its cutouts and its anchors, and no other row.
+#[test]
+fn the_readme_lists_the_bundled_scenarios_as_scenario_list_does() {
+    let readme = fs::read_to_string(workspace().join("README.md")).expect("README.md");
+    let table = readme
+        .split("## Bundled scenarios")
+        .nth(1)
+        .and_then(|rest| rest.split("\n## ").next())
+        .expect("a Bundled scenarios section");
+    let rows: Vec<&str> = table.lines().filter(|l| l.starts_with("| `")).collect();
+    let names = scenarios::bundled::names();
+    assert_eq!(
+        rows.len(),
+        names.len(),
+        "one row per bundled scenario: {rows:#?}"
+    );
+    for name in names {
+        let s = scenarios::bundled::load(name).expect("bundled").scenario;
+        let anchors = match s.anchors.len() {
+            0 => "none".to_owned(),
+            _ => {
+                let mut ids: Vec<u8> = s.anchors.iter().map(|a| a.id).collect();
+                ids.sort_unstable();
+                let ids: Vec<String> = ids.iter().map(ToString::to_string).collect();
+                ids.join(" and ")
+            }
+        };
+        let row = format!(
+            "| `{name}` | {:.0} m² | {} | {anchors} |",
+            s.area.drivable_area(),
+            s.area.cutouts().len()
+        );
+        assert!(
+            rows.iter().any(|r| r.starts_with(&row)),
+            "README.md has no row starting {row}"
+        );
+    }
+}

@@ -58,7 +58,7 @@ pub fn validate(args: &ValidateArgs) -> Result<Exit> {
         "--km must be a positive number, got {}",
         args.km
     );
-    let loaded = load_scenario(&args.scenario)?;
+    let loaded = load_scenario(args.scenario.name())?;
     print_warnings(&loaded);
     let scenario = &loaded.scenario;
     let seed = choose_seed(args.seed);

@@ -34,6 +34,7 @@ pub fn merge(
     out: &Path,
     scenario: Option<&str>,
     junit: Option<&Path>,
+    json: bool,
 ) -> Result<Exit> {
     if is_used(out) {
         bail!(crate::runner::RunError::OutDirUsed {
@@ -86,7 +87,7 @@ pub fn merge(
     for case in &cases {
         dir.write_case(case)?;
     }
-    let report = dir.finish_at(ended_at)?;
+    let mut report = dir.finish_at(ended_at)?;
     if recorded[0] {
         merge_recordings(
             &shards,
@@ -97,8 +98,17 @@ pub fn merge(
         )?;
     }
     staged.commit()?;
+    // What the JUnit file and the result name is where the run directory now is.
+    out.clone_into(&mut report.dir);
     let summary = report.record.summary.as_ref();
-    println!(
+    let say = |line: String| {
+        if json {
+            eprintln!("{line}");
+        } else {
+            println!("{line}");
+        }
+    };
+    say(format!(
         "merged {} shards of campaign seed {} on {}: {} tests, {} passed, {} failed, {} aborted{}",
         shards.len(),
         report.record.seed,
@@ -112,8 +122,8 @@ pub fn merge(
         } else {
             String::new()
         }
-    );
-    println!("run directory: {}", out.display());
+    ));
+    say(format!("run directory: {}", out.display()));
     if let Some(file) = junit {
         // Shards of the embedded simulator run in virtual time (`run --shard` without
         // `--realtime`); the campaign's wall time is from its first shard's start to its last's end.
@@ -128,6 +138,9 @@ pub fn merge(
             Some(end.duration_since(start).ok()?.as_secs_f64())
         });
         super::run::write_junit(&report, file, clock, wall_s)?;
+    }
+    if json {
+        super::shared::print_report_json("runs merge", &report, None)?;
     }
     Ok(Exit::Success)
 }

@@ -165,13 +165,24 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
     if args.report {
         super::report::write(&out, &out.join(REPORT_FILE), Some(&scenario))?;
     }
-    print!("{}", comparison.table());
-    println!(
-        "{:.1} s wall time; replay directory: {} ({REPLAY_FILE} written {})",
-        started.elapsed().as_secs_f64(),
-        out.display(),
-        rfc3339_now()
-    );
+    if args.json {
+        crate::output::print_json(
+            "replay",
+            &ReplayJson {
+                dir: &out,
+                wall_time_s: started.elapsed().as_secs_f64(),
+                replay: &comparison,
+            },
+        )?;
+    } else {
+        print!("{}", comparison.table());
+        println!(
+            "{:.1} s wall time; replay directory: {} ({REPLAY_FILE} written {})",
+            started.elapsed().as_secs_f64(),
+            out.display(),
+            rfc3339_now()
+        );
+    }
     if let Some(error) = error {
         return Err(error);
     }
@@ -395,4 +406,15 @@ fn write_junit(
     crate::atomic::write(file, xml).with_context(|| format!("cannot write {}", file.display()))?;
     eprintln!("JUnit XML: {}", file.display());
     Ok(())
+}
+
+/// A replay's result as `--json` prints it (docs/json.md).
+#[derive(serde::Serialize)]
+pub(super) struct ReplayJson<'a> {
+    /// The replay directory.
+    pub(super) dir: &'a Path,
+    /// The replay's wall time, seconds.
+    pub(super) wall_time_s: f64,
+    /// `replay.json`: the runs and the comparison of their segments.
+    pub(super) replay: &'a Comparison,
 }

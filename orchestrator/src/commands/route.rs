@@ -48,18 +48,19 @@ impl RouteStats {
 
 /// Generates `--points` points after the start route, in extensions of the scenario's size.
 pub fn generate(args: &GenerateArgs) -> Result<Exit> {
-    let loaded = load_scenario(&args.scenario)?;
-    print_warnings_of_use(&args.scenario, &loaded);
+    let loaded = load_scenario(args.scenario.name())?;
+    print_warnings_of_use(args.scenario.name(), &loaded);
     let scenario = &loaded.scenario;
     let seed = choose_seed(args.seed);
     eprintln!("seed {seed}");
-    let speed_mps = args.speed.unwrap_or(scenario.campaign.speed_kmh.min / 3.6);
-    let top_mps = scenarios::MAX_SPEED_KMH / 3.6;
+    let speed_kmh = args.speed_kmh.unwrap_or(scenario.campaign.speed_kmh.min);
+    let top_kmh = scenarios::MAX_SPEED_KMH;
     ensure!(
-        speed_mps.is_finite() && speed_mps > 0.0 && speed_mps <= top_mps,
-        "--speed must be more than 0 and at most {top_mps:.2} m/s (the autopilot's top speed), \
-         got {speed_mps}"
+        speed_kmh.is_finite() && speed_kmh > 0.0 && speed_kmh <= top_kmh,
+        "--speed-kmh must be more than 0 and at most {top_kmh} km/h (the autopilot's top speed), \
+         got {speed_kmh}"
     );
+    let speed_mps = speed_kmh / 3.6;
     let generator = Generator::new(scenario.generator.generator_config(args.strategy.into()))?;
     let start_route = scenario.start_route.positions();
     let mut tail = RouteTail::from_points(&start_route)

@@ -59,8 +59,8 @@ pub fn parse_pose(text: &str) -> Result<Pose> {
 
 /// Plans and prints the return route.
 pub fn plan(args: &ReturnArgs) -> Result<Exit> {
-    let loaded = load_scenario(&args.scenario)?;
-    print_warnings_of_use(&args.scenario, &loaded);
+    let loaded = load_scenario(args.scenario.name())?;
+    print_warnings_of_use(args.scenario.name(), &loaded);
     let scenario = &loaded.scenario;
     let from = parse_pose(&args.from)?;
     let seed = choose_seed(args.seed);

@@ -71,6 +71,9 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
             humantime::format_duration(WATCHDOG),
         );
     }
+    if args.dry_run {
+        return dry_run(args, &address, &scenario, &sim, campaign);
+    }
     let made = args.out.is_none();
     let out = match &args.out {
         Some(out) => out.clone(),
@@ -135,8 +138,10 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     };
     let wall = started.elapsed();
     let report = result?;
-    print_report(&report, Some(wall));
-    explain_failed(&report, &scenario);
+    if !args.json {
+        print_report(&report, Some(wall));
+    }
+    explain_failed(&report, &scenario, !args.json);
     if let Some(file) = &args.junit {
         let clock = if virtual_time {
             junit::Clock::Simulated
@@ -146,10 +151,13 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         write_junit(&report, file, clock, Some(wall.as_secs_f64()))?;
     }
     if args.shrink {
-        shrink_failed(&report, &scenario, &sim, args.shrink_budget)?;
+        shrink_failed(&report, &scenario, &sim, args.shrink_budget, !args.json)?;
     }
     if args.report {
         super::report::write(&report.dir, &report.dir.join(REPORT_FILE), Some(&scenario))?;
+    }
+    if args.json {
+        super::shared::print_report_json("run", &report, Some(wall))?;
     }
     let summary = report.record.summary.as_ref();
     // A shard may hold no test (more shards than tests): it ran all of its tests.
@@ -162,10 +170,64 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     })
 }
 
+/// `run --dry-run`: connects, runs preflight, uploads the first test's route and faults and reads
+/// them back, clears them, and says what it found; the car does not move and nothing is written.
+fn dry_run(
+    args: &RunArgs,
+    address: &CarAddress,
+    scenario: &Scenario,
+    sim: &car_sim::SimConfig,
+    campaign: Campaign,
+) -> Result<Exit> {
+    let mut config = RunConfig::new(campaign, std::path::PathBuf::new(), args.car.clone());
+    config.safety.stale_after = args.stale_after;
+    config.shard = args.shard;
+    let found = runtime(false)?.block_on(async {
+        let (car, _sim) = connect(address, sim, campaign.seed).await?;
+        if crate::output::chatty() {
+            eprintln!(
+                "connected to {} (firmware {}); preflight, then the first test's route and faults \
+                 uploaded and read back, with the autopilot off",
+                args.car,
+                crate::vehicle::Vehicle::version(&car)
+            );
+        }
+        crate::runner::dry_run(&car, scenario, &config)
+            .await
+            .map_err(anyhow::Error::from)
+    })?;
+    if args.json {
+        crate::output::print_json("run --dry-run", &found)?;
+    } else {
+        println!(
+            "dry run passed: the car at {} is ready (nothing was driven, nothing written)",
+            args.car
+        );
+        println!("  firmware {}", found.firmware);
+        if !found.switched_off.is_empty() {
+            println!("  preflight switched off {}", found.switched_off.join(", "));
+        }
+        println!(
+            "  round trip {:.1} ms median, {:.1} ms p99; stale-telemetry limit {:.0} ms",
+            found.round_trip_ms[0], found.round_trip_ms[1], found.stale_after_ms
+        );
+        println!(
+            "  {} route points uploaded and read back (largest difference {:.3}), then cleared",
+            found.route_points, found.route_read_back_error
+        );
+        println!(
+            "  {} fault commands uploaded, {} listed back, then cleared",
+            found.faults_uploaded, found.faults_listed
+        );
+    }
+    Ok(Exit::Success)
+}
+
 /// Explains every failing segment from the recording (`drivecheck explain`), writes each case's
-/// `explanation` into its case file and prints the first cause per segment. What cannot be
-/// explained (no recording) is a warning: the campaign's results stand without it.
-fn explain_failed(report: &CampaignReport, scenario: &Scenario) {
+/// `explanation` into its case file and prints the first cause per segment (with `print`; else
+/// the causes are only in the case files). What cannot be explained (no recording) is a
+/// warning: the campaign's results stand without it.
+fn explain_failed(report: &CampaignReport, scenario: &Scenario, print: bool) {
     if !report
         .cases
         .iter()
@@ -186,7 +248,7 @@ fn explain_failed(report: &CampaignReport, scenario: &Scenario) {
         }
     };
     // Every explanation is written into its case file; a summary's share is printed.
-    let shown = if crate::output::chatty() {
+    let shown = if print && crate::output::chatty() {
         super::shared::listed_at_most()
     } else {
         0
@@ -286,13 +348,15 @@ pub(super) fn write_junit(
 }
 
 /// Shrinks every failed test's case file into `shrink-NNN/` of the run directory and prints a
-/// line per case; a case that cannot be shrunk (it does not fail the same way every time in
-/// the simulator, say) gets a warning and the next one is shrunk.
+/// line per case (on standard output, or standard error when it is not `to_stdout`: `--json`); a
+/// case that cannot be shrunk (it does not fail the same way every time in the simulator, say)
+/// gets a warning and the next one is shrunk.
 fn shrink_failed(
     report: &CampaignReport,
     scenario: &Scenario,
     sim: &car_sim::SimConfig,
     budget: Duration,
+    to_stdout: bool,
 ) -> Result<()> {
     let failed: Vec<usize> = report
         .cases
@@ -343,7 +407,11 @@ fn shrink_failed(
             Err(error) => eprintln!("warning: not shrunk: {error:#}"),
         }
     }
-    println!("{}", lines.join("\n"));
+    if to_stdout {
+        println!("{}", lines.join("\n"));
+    } else {
+        eprintln!("{}", lines.join("\n"));
+    }
     Ok(())
 }
 

@@ -10,29 +10,37 @@ use super::shared::{metres, print_report};
 use crate::cli::{RunsArgs, RunsCommand};
 use crate::exit::Exit;
 use crate::runner::{CampaignReport, TestSummary};
-use campaign::files::{CampaignRecord, Case};
+use campaign::coverage::CoverageStats;
+use campaign::files::{CampaignRecord, Case, CoverageRecord};
 use campaign::replay::{Comparison, REPLAY_FILE};
+use serde::Serialize;
 
 use crate::runner::CAMPAIGN_FILE;
 
 /// Lists or shows run directories. Exit status 0, or 2 when the directory cannot be read.
 pub fn runs(args: &RunsArgs) -> Result<Exit> {
     match &args.command {
-        None => list(&args.dir),
+        None => list(&args.dir, args.json),
         Some(RunsCommand::Show { run, coverage }) => {
             let dir = if run.exists() {
                 run.clone()
             } else {
                 args.dir.join(run)
             };
-            show(&dir, *coverage)
+            show(&dir, *coverage, args.json)
         }
         Some(RunsCommand::Merge {
             shards,
             out,
             scenario,
             junit,
-        }) => super::merge::merge(shards, out, scenario.as_deref(), junit.as_deref()),
+        }) => super::merge::merge(
+            shards,
+            out,
+            scenario.as_deref(),
+            junit.as_deref(),
+            args.json,
+        ),
     }
 }
 
@@ -74,14 +82,65 @@ fn read_campaign(path: &Path) -> Result<CampaignRecord> {
     CampaignRecord::from_json(&text).with_context(|| path.display().to_string())
 }
 
-fn list(root: &Path) -> Result<Exit> {
+/// `drivecheck runs --json`: the run directories under `dir` (docs/json.md).
+#[derive(Serialize)]
+struct ListJson<'a> {
+    /// Where the run directories are.
+    dir: &'a Path,
+    /// Every run directory, by name.
+    runs: Vec<EntryJson<'a>>,
+}
+
+/// One run directory in `runs --json` and `runs show --json`: its kind and its record.
+#[derive(Serialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+enum EntryJson<'a> {
+    /// A campaign (or a replay's run, or a shard): `campaign.json`.
+    Campaign {
+        /// The directory.
+        dir: &'a Path,
+        /// `campaign.json`.
+        campaign: &'a CampaignRecord,
+    },
+    /// A replay: `replay.json`.
+    Replay {
+        /// The directory.
+        dir: &'a Path,
+        /// `replay.json`.
+        replay: &'a Comparison,
+    },
+    /// A record that cannot be read, and why.
+    Unreadable {
+        /// The directory.
+        dir: &'a Path,
+        /// Why it cannot be read.
+        error: &'a str,
+    },
+}
+
+impl<'a> EntryJson<'a> {
+    fn of(dir: &'a Path, entry: &'a Entry) -> Self {
+        match entry {
+            Entry::Campaign(campaign) => EntryJson::Campaign { dir, campaign },
+            Entry::Replay(replay) => EntryJson::Replay { dir, replay },
+            Entry::Unreadable(error) => EntryJson::Unreadable { dir, error },
+        }
+    }
+}
+
+fn list(root: &Path, json: bool) -> Result<Exit> {
     let entries = match std::fs::read_dir(root) {
         Ok(entries) => entries,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            println!(
-                "no run directories in {} (it does not exist)",
-                root.display()
-            );
+            if json {
+                let runs = Vec::new();
+                crate::output::print_json("runs", &ListJson { dir: root, runs })?;
+            } else {
+                println!(
+                    "no run directories in {} (it does not exist)",
+                    root.display()
+                );
+            }
             return Ok(Exit::Success);
         }
         Err(e) => return Err(e).with_context(|| format!("cannot read {}", root.display())),
@@ -91,6 +150,15 @@ fn list(root: &Path) -> Result<Exit> {
         .filter(|p| p.is_dir())
         .collect();
     dirs.sort();
+    if json {
+        let read: Vec<(PathBuf, Entry)> = dirs
+            .into_iter()
+            .filter_map(|dir| read_entry(&dir).map(|entry| (dir, entry)))
+            .collect();
+        let runs = read.iter().map(|(dir, e)| EntryJson::of(dir, e)).collect();
+        crate::output::print_json("runs", &ListJson { dir: root, runs })?;
+        return Ok(Exit::Success);
+    }
     println!(
         "| run directory | kind | scenario | seed | car | tests | passed | failed | aborted | worst deviation | ended |"
     );
@@ -176,13 +244,17 @@ fn row(entry: &Entry) -> String {
     }
 }
 
-fn show(dir: &Path, coverage: bool) -> Result<Exit> {
+fn show(dir: &Path, coverage: bool, json: bool) -> Result<Exit> {
     match read_entry(dir) {
         None => bail!(
             "{} is not a run directory (no {CAMPAIGN_FILE} or {REPLAY_FILE})",
             dir.display()
         ),
         Some(Entry::Unreadable(why)) => bail!("{}: {why}", dir.display()),
+        Some(entry @ Entry::Replay(_)) if json => {
+            crate::output::print_json("runs show", &EntryJson::of(dir, &entry))?;
+            Ok(Exit::Success)
+        }
         Some(Entry::Replay(c)) => {
             println!(
                 "replay of {} in {}{}",
@@ -210,11 +282,127 @@ fn show(dir: &Path, coverage: bool) -> Result<Exit> {
             print!("{}", c.table());
             Ok(Exit::Success)
         }
+        Some(Entry::Campaign(record)) if json => {
+            show_campaign_json(dir, *record, coverage)?;
+            Ok(Exit::Success)
+        }
         Some(Entry::Campaign(record)) => {
             show_campaign(dir, *record, coverage)?;
             Ok(Exit::Success)
         }
     }
+}
+
+/// `drivecheck runs show --json` of a campaign (docs/json.md).
+#[derive(Serialize)]
+struct ShowJson<'a> {
+    /// Always `campaign` (a replay is shown as `runs --json` lists it).
+    kind: &'static str,
+    /// The run directory.
+    dir: &'a Path,
+    /// `campaign.json`.
+    campaign: &'a CampaignRecord,
+    /// The recording, when there is one: whether it is complete and how many messages it holds.
+    recording: Option<RecordingJson>,
+    /// Every test's row of the table, in order.
+    tests: &'a [TestSummary],
+    /// With `--coverage`: what the campaign covered (as `campaign.json`'s summary keeps it; also
+    /// for a record written before the summary kept it, from the case files).
+    coverage: Option<CoverageRecord>,
+}
+
+/// The state of a run's recording in `runs show --json`.
+#[derive(Serialize)]
+struct RecordingJson {
+    /// The recording file.
+    file: PathBuf,
+    /// Whether it was finished (false after kill -9 or a power cut).
+    complete: Option<bool>,
+    /// Messages read (up to the last complete chunk when unfinished).
+    messages: Option<u64>,
+    /// Why it is unreadable or cut short.
+    problem: Option<String>,
+}
+
+impl RecordingJson {
+    /// The recording of run directory `dir`, if it has one.
+    fn of(dir: &Path) -> Option<Self> {
+        let file = dir.join(crate::runner::RECORDING_FILE);
+        if !file.exists() {
+            return None;
+        }
+        Some(match crate::recording::Recording::read(&file) {
+            Ok(recording) => RecordingJson {
+                complete: Some(recording.is_complete()),
+                messages: Some(recording.message_count() as u64),
+                problem: recording.cut_short().map(ToString::to_string),
+                file,
+            },
+            Err(error) => RecordingJson {
+                complete: None,
+                messages: None,
+                problem: Some(error.to_string()),
+                file,
+            },
+        })
+    }
+}
+
+fn show_campaign_json(dir: &Path, record: CampaignRecord, coverage: bool) -> Result<()> {
+    let (tests, cases) = read_tests(dir)?;
+    let coverage = match coverage.then(|| coverage_of(&record, &cases)) {
+        Some(Ok(stats)) => Some(stats.into()),
+        Some(Err(why)) => bail!("no coverage: {why}"),
+        None => None,
+    };
+    let result = ShowJson {
+        kind: "campaign",
+        dir,
+        campaign: &record,
+        recording: RecordingJson::of(dir),
+        tests: &tests,
+        coverage,
+    };
+    crate::output::print_json("runs show", &result)
+}
+
+/// Every test's row of the table and its case, from the case files of run directory `dir`.
+fn read_tests(dir: &Path) -> Result<(Vec<TestSummary>, Vec<Case>)> {
+    let files = super::shared::case_files(dir)?;
+    let mut tests = Vec::new();
+    let mut cases = Vec::new();
+    for (i, path) in files.iter().enumerate() {
+        let file = path
+            .file_name()
+            .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+        let text = std::fs::read_to_string(path).with_context(|| path.display().to_string())?;
+        let case = Case::from_json(&text).with_context(|| path.display().to_string())?;
+        tests.push(TestSummary::of(case.test_index.unwrap_or(i), file, &case));
+        cases.push(case);
+    }
+    Ok((tests, cases))
+}
+
+/// What a campaign covered: as its record keeps it, or (a record written before the summary
+/// kept coverage) computed from its cases in its bundled scenario.
+fn coverage_of(record: &CampaignRecord, cases: &[Case]) -> Result<CoverageStats, String> {
+    record
+        .summary
+        .as_ref()
+        .and_then(|s| s.coverage.clone())
+        .map(CoverageStats::from)
+        .ok_or_else(|| format!("{CAMPAIGN_FILE} has no coverage (an older version wrote it)"))
+        .or_else(|why| {
+            let scenario = scenarios::bundled::load(&record.scenario.name)
+                .map_err(|_| {
+                    format!(
+                        "{why}, and scenario {} is not bundled",
+                        record.scenario.name
+                    )
+                })?
+                .scenario;
+            Ok(campaign::coverage::of_scenario(&scenario, cases).stats)
+        })
 }
 
 fn show_campaign(dir: &Path, record: CampaignRecord, coverage: bool) -> Result<()> {
@@ -249,37 +437,8 @@ fn show_campaign(dir: &Path, record: CampaignRecord, coverage: bool) -> Result<(
         record.ended_at.as_deref().unwrap_or("- (did not end)")
     );
     describe_recording(dir);
-    let files = super::shared::case_files(dir)?;
-    let mut tests = Vec::new();
-    let mut cases = Vec::new();
-    for (i, path) in files.iter().enumerate() {
-        let file = path
-            .file_name()
-            .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
-        let text = std::fs::read_to_string(path).with_context(|| path.display().to_string())?;
-        let case = Case::from_json(&text).with_context(|| path.display().to_string())?;
-        tests.push(TestSummary::of(case.test_index.unwrap_or(i), file, &case));
-        cases.push(case);
-    }
-    let stats = coverage.then(|| {
-        record
-            .summary
-            .as_ref()
-            .and_then(|s| s.coverage.clone())
-            .map(campaign::coverage::CoverageStats::from)
-            .ok_or_else(|| format!("{CAMPAIGN_FILE} has no coverage (an older version wrote it)"))
-            .or_else(|why| {
-                let scenario = scenarios::bundled::load(&record.scenario.name)
-                    .map_err(|_| {
-                        format!(
-                            "{why}, and scenario {} is not bundled",
-                            record.scenario.name
-                        )
-                    })?
-                    .scenario;
-                Ok::<_, String>(campaign::coverage::of_scenario(&scenario, &cases).stats)
-            })
-    });
+    let (tests, cases) = read_tests(dir)?;
+    let stats = coverage.then(|| coverage_of(&record, &cases));
     println!();
     print_report(
         &CampaignReport {

@@ -461,6 +461,37 @@ pub(super) fn print_report(report: &CampaignReport, wall: Option<Duration>) {
     print_summary(report, wall);
 }
 
+/// A campaign's result as `--json` prints it (docs/json.md): the run directory, the wall time
+/// when known, `campaign.json`'s record and every test's row of the table.
+#[derive(serde::Serialize)]
+pub(super) struct CampaignJson<'a> {
+    /// The run directory.
+    dir: &'a Path,
+    /// The campaign's wall time, seconds (when this command ran it).
+    wall_time_s: Option<f64>,
+    /// `campaign.json`: the settings and the summary.
+    campaign: &'a campaign::files::CampaignRecord,
+    /// Every test, in order.
+    tests: &'a [crate::runner::TestSummary],
+}
+
+/// Prints a campaign's result as one JSON document (`command` is the command that printed it).
+pub(super) fn print_report_json(
+    command: &str,
+    report: &CampaignReport,
+    wall: Option<Duration>,
+) -> Result<()> {
+    crate::output::print_json(
+        command,
+        &CampaignJson {
+            dir: &report.dir,
+            wall_time_s: wall.map(|w| w.as_secs_f64()),
+            campaign: &report.record,
+            tests: &report.tests,
+        },
+    )
+}
+
 /// The table of `tests`.
 fn print_table(tests: &[&crate::runner::TestSummary]) {
     println!("| test | verdict | worst deviation | starvations | smallest margin | reason |");

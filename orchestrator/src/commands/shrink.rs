@@ -103,11 +103,52 @@ pub fn shrink(args: &ShrinkArgs) -> Result<Exit> {
                 profile.name,
                 super::twin::agreement_note(path, &profile)
             );
+            if args.json {
+                let result = ShrinkJson {
+                    case: path,
+                    dir: &out,
+                    shrunk: false,
+                    not_reproduced: Some(&not_reproduced.reason),
+                    minimal: None,
+                    shrink: None,
+                };
+                crate::output::print_json("shrink", &result)?;
+            }
             return Ok(Exit::Found);
         }
     };
-    print_summary(&report, &out);
+    if args.json {
+        let result = ShrinkJson {
+            case: path,
+            dir: &out,
+            shrunk: true,
+            not_reproduced: None,
+            minimal: Some(out.join(MINIMAL_FILE)),
+            shrink: Some(&report),
+        };
+        crate::output::print_json("shrink", &result)?;
+    } else {
+        print_summary(&report, &out);
+    }
     Ok(Exit::Success)
+}
+
+/// A shrink's result as `--json` prints it (docs/json.md).
+#[derive(serde::Serialize)]
+struct ShrinkJson<'a> {
+    /// The case file shrunk.
+    case: &'a Path,
+    /// The shrink directory.
+    dir: &'a Path,
+    /// Whether the case was shrunk (or was minimal already): false when it does not fail the
+    /// same way in every run (exit status 1).
+    shrunk: bool,
+    /// Why it was not shrunk: how its runs ended.
+    not_reproduced: Option<&'a str>,
+    /// The minimal case file.
+    minimal: Option<std::path::PathBuf>,
+    /// `shrink.json`: every step, the case before and after, the confirmation runs.
+    shrink: Option<&'a ShrinkReport>,
 }
 
 /// Prints the before/after table and where the files are.

@@ -286,6 +286,24 @@ impl Recorder {
         }
     }
 
+    /// A recorder that keeps nothing and only serves every message live (`run --live --record
+    /// none`), with log times from `origin` and command ids from `first_command`; `scenario`,
+    /// when given, goes out first as the area (which the live view latches for late joiners).
+    pub fn live_only(
+        origin: Instant,
+        simulated: bool,
+        first_command: u64,
+        live: &LiveView,
+        scenario: Option<&Scenario>,
+    ) -> Result<Self, RecordingError> {
+        let mut recorder = Self::in_memory(origin, simulated, first_command, Some(live));
+        recorder.held = None;
+        if let Some(scenario) = scenario {
+            recorder.write_at_ns(0, &foxglove::area(scenario, foxglove::Time::from_ns(0)))?;
+        }
+        Ok(recorder)
+    }
+
     /// From now on, messages are held in memory instead of written, until [`Recorder::release`].
     pub fn hold(&mut self) {
         self.held.get_or_insert_with(Vec::new);

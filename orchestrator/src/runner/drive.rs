@@ -400,7 +400,10 @@ async fn holds_more_than<V: Vehicle>(
 }
 
 /// Whether two listed faults are the same slot (the iteration counter moves on between reads).
-fn same_fault(a: &car_link::fault::ListedFault, b: &car_link::fault::ListedFault) -> bool {
+pub(super) fn same_fault(
+    a: &car_link::fault::ListedFault,
+    b: &car_link::fault::ListedFault,
+) -> bool {
     a.probe == b.probe
         && a.kind == b.kind
         && a.param == b.param

@@ -150,9 +150,22 @@ pub fn run_campaign_fresh<C: FreshCars + ?Sized>(
     let settings = Settings::new(scenario, config.campaign.tests, config.policy);
     let mut dir = RunDirectory::create(config, scenario, settings.clone())
         .map_err(CampaignFailure::without_report)?;
-    let mut recorder = match config.record {
-        RecordMode::None => None,
-        RecordMode::All | RecordMode::Failing => {
+    let mut recorder = match (config.record, config.live.as_ref()) {
+        // Nothing kept, but a live view still gets the area (and each test its messages).
+        (RecordMode::None, Some(live)) => {
+            match Recorder::live_only(origin, true, 1, live, Some(scenario)) {
+                Ok(recorder) => Some(recorder),
+                Err(error) => {
+                    let report = dir.finish().map_err(CampaignFailure::without_report)?;
+                    return Err(CampaignFailure {
+                        error: RunError::Recording(error),
+                        report: Some(report),
+                    });
+                }
+            }
+        }
+        (RecordMode::None, None) => None,
+        (RecordMode::All | RecordMode::Failing, _) => {
             let start = RecordingStart {
                 campaign: dir.record(),
                 scenario,
@@ -385,9 +398,14 @@ async fn fresh_test<C: FreshCars + ?Sized>(
     let origin = tokio::time::Instant::now();
     let start = start_pose(&shared.tests, test_index)?;
     let (car, sim) = cars.connect(test_index, start).await?;
-    let journal = match config.record {
-        RecordMode::None => Journal::without_recording(Some(&*sim)),
-        RecordMode::All | RecordMode::Failing => Journal::new(
+    let journal = match (config.record, config.live.as_ref()) {
+        (RecordMode::None, Some(live)) => Journal::new(
+            Recorder::live_only(origin, true, first_command(test_index), live, None)
+                .map_err(RunError::Recording)?,
+            Some(&*sim),
+        ),
+        (RecordMode::None, None) => Journal::without_recording(Some(&*sim)),
+        (RecordMode::All | RecordMode::Failing, _) => Journal::new(
             Recorder::in_memory(
                 origin,
                 true,

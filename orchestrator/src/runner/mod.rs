@@ -41,6 +41,7 @@
 //! (`campaign::drive`), the wire protocol (`car-link`).
 
 mod drive;
+mod dry_run;
 mod events;
 mod fresh;
 mod journal;
@@ -73,10 +74,14 @@ use campaign::safety::{Abort, AbortReason, SafetyConfig};
 use campaign::shard::Shard;
 use campaign::streaming::StreamingConfig;
 
+pub use dry_run::{DryRun, dry_run};
 pub use events::{CampaignObserver, Silent, SimulatorView};
 pub(crate) use fresh::SPAN_GAP_NS;
 pub use fresh::{Connecting, FreshCar, FreshCars, StartPose, run_campaign_fresh};
-pub use run_dir::{CAMPAIGN_FILE, CampaignReport, RECORDING_FILE, TestSummary};
+pub use run_dir::{
+    CAMPAIGN_FILE, CampaignReport, DEFAULT_RUNS_DIR, RECORDING_FILE, RUNS_DIR_ENV, TestSummary,
+    runs_root,
+};
 pub(crate) use run_dir::{
     RunDirectory, Staged, claim_default_run_dir, claim_out_dir, is_used, rfc3339_now, run_dir_name,
 };
@@ -389,7 +394,22 @@ pub async fn run_campaign<V: Vehicle>(
         sim_profile: config.car_profile.as_ref().filter(|_| sim.is_some()),
     };
     let journal = if config.record == RecordMode::None {
-        Journal::without_recording(sim)
+        match config.live.as_ref() {
+            // Nothing kept, but a live view still gets the area and every message.
+            Some(live) => {
+                match Recorder::live_only(origin, sim.is_some(), 1, live, Some(scenario)) {
+                    Ok(recorder) => Journal::new(recorder, sim),
+                    Err(error) => {
+                        let report = dir.finish().map_err(CampaignFailure::without_report)?;
+                        return Err(CampaignFailure {
+                            error: RunError::Recording(error),
+                            report: Some(report),
+                        });
+                    }
+                }
+            }
+            None => Journal::without_recording(sim),
+        }
     } else {
         match Recorder::create(&dir.path().join(RECORDING_FILE), &start) {
             Ok(recorder) => Journal::new(recorder, sim),

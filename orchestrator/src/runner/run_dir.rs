@@ -22,8 +22,8 @@ pub const CAMPAIGN_FILE: &str = "campaign.json";
 /// The file name of the recording in a run directory.
 pub const RECORDING_FILE: &str = "campaign.mcap";
 
-/// One test of a campaign, as the final table shows it.
-#[derive(Debug, Clone, PartialEq)]
+/// One test of a campaign, as the final table shows it (and `--json` prints it).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct TestSummary {
     /// The test's index.
     pub test_index: usize,
@@ -293,9 +293,22 @@ pub(crate) fn claim_run_dir(root: &Path, name: &str) -> std::io::Result<PathBuf>
     unreachable!("u32 attempts")
 }
 
-/// Claims the default run directory `runs/<name>` (see [`claim_run_dir`]).
+/// The environment variable that names where run directories go (default [`DEFAULT_RUNS_DIR`]).
+pub const RUNS_DIR_ENV: &str = "DRIVECHECK_RUNS_DIR";
+/// Where run directories go when [`RUNS_DIR_ENV`] is not set: `runs/` in the working directory.
+pub const DEFAULT_RUNS_DIR: &str = "runs";
+
+/// Where run directories go: `$DRIVECHECK_RUNS_DIR` when set and not empty, else `runs/`.
+pub fn runs_root() -> PathBuf {
+    std::env::var_os(RUNS_DIR_ENV)
+        .filter(|dir| !dir.is_empty())
+        .map_or_else(|| PathBuf::from(DEFAULT_RUNS_DIR), PathBuf::from)
+}
+
+/// Claims the default run directory `<runs root>/<name>` ([`runs_root`], see [`claim_run_dir`]).
 pub(crate) fn claim_default_run_dir(name: &str) -> Result<PathBuf, RunError> {
-    let root = Path::new("runs");
+    let root = runs_root();
+    let root = root.as_path();
     claim_run_dir(root, name).map_err(|source| RunError::Io {
         path: root.join(name),
         source,

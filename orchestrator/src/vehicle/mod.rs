@@ -95,6 +95,14 @@ pub trait Vehicle: Clone + Send + Sync + 'static {
         points: &[RoutePoint],
     ) -> impl Future<Output = Result<(), CarError>> + Send;
 
+    /// Reads `num` (at most 20) points of the route back from point `first`, with the route's
+    /// length.
+    fn route_part(
+        &self,
+        first: i32,
+        num: u8,
+    ) -> impl Future<Output = Result<car_link::message::RoutePart, CarError>> + Send;
+
     /// Activates or deactivates the autopilot; `reset` restarts the route from its first point.
     fn set_autopilot(
         &self,
@@ -208,6 +216,14 @@ impl Vehicle for Car {
         points: &[RoutePoint],
     ) -> impl Future<Output = Result<(), CarError>> + Send {
         Car::add_points(self, points)
+    }
+
+    fn route_part(
+        &self,
+        first: i32,
+        num: u8,
+    ) -> impl Future<Output = Result<car_link::message::RoutePart, CarError>> + Send {
+        Car::route_part(self, first, num)
     }
 
     fn set_autopilot(
