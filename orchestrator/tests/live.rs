@@ -12,9 +12,14 @@ use futures::{SinkExt, StreamExt};
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
-/// Runs a campaign with `--live`, connects `join_after` into it offering `subprotocol`,
-/// subscribes to the area and the RTK poses, and returns the first area and the first pose.
-async fn watch(subprotocol: &str, join_after: Duration) -> (serde_json::Value, serde_json::Value) {
+/// Runs a campaign with `--live` (and `extra` options), connects `join_after` into it offering
+/// `subprotocol`, subscribes to the area and the RTK poses, and returns the first area and the
+/// first pose.
+async fn watch(
+    subprotocol: &str,
+    join_after: Duration,
+    extra: &[&str],
+) -> (serde_json::Value, serde_json::Value) {
     let port = std::net::TcpListener::bind("127.0.0.1:0")
         .unwrap()
         .local_addr()
@@ -24,6 +29,7 @@ async fn watch(subprotocol: &str, join_after: Duration) -> (serde_json::Value, s
     let out = dir.path().join("run");
     let mut child = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
         .args(["run", "--tests", "2", "--seed", "1", "--out", path(&out)])
+        .args(extra)
         .arg("--live")
         .arg(format!("127.0.0.1:{port}"))
         .stdout(Stdio::null())
@@ -109,7 +115,7 @@ async fn watch(subprotocol: &str, join_after: Duration) -> (serde_json::Value, s
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_client_subscribes_and_receives_the_area_and_poses_while_the_campaign_runs() {
-    let (area, pose) = watch("foxglove.sdk.v1", Duration::ZERO).await;
+    let (area, pose) = watch("foxglove.sdk.v1", Duration::ZERO, &[]).await;
     assert!(area["entities"].is_array(), "{area}");
     assert_eq!(pose["frame_id"], "map");
     assert!(pose["pose"]["position"]["x"].is_number(), "{pose}");
@@ -118,7 +124,20 @@ async fn a_client_subscribes_and_receives_the_area_and_poses_while_the_campaign_
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_lichtblick_client_joining_five_seconds_late_still_gets_the_area() {
     // Lichtblick and `@foxglove/ws-protocol` offer only the specification's name.
-    let (area, pose) = watch("foxglove.websocket.v1", Duration::from_secs(5)).await;
+    let (area, pose) = watch("foxglove.websocket.v1", Duration::from_secs(5), &[]).await;
+    assert!(area["entities"].is_array(), "{area}");
+    assert!(pose["pose"]["position"]["x"].is_number(), "{pose}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_campaign_that_records_nothing_still_serves_the_area_and_poses_live() {
+    // `--record none` keeps no `campaign.mcap`; the live view is served all the same.
+    let (area, pose) = watch(
+        "foxglove.sdk.v1",
+        Duration::from_secs(2),
+        &["--record", "none"],
+    )
+    .await;
     assert!(area["entities"].is_array(), "{area}");
     assert!(pose["pose"]["position"]["x"].is_number(), "{pose}");
 }
