@@ -106,7 +106,7 @@ pub struct ManArgs {
 /// Options of `drivecheck run`.
 #[derive(Debug, Args)]
 pub struct RunArgs {
-    /// Scenario: a bundled name, a .toml file or a reference .xml.
+    /// Scenario: a bundled name, a .toml, a reference .xml or a .geojson file.
     #[arg(long, default_value = "parking-lot-2anchors")]
     pub scenario: String,
     /// The car: `sim` (the embedded simulated car), `tcp://HOST:PORT`, `udp://HOST:PORT` or
@@ -196,7 +196,8 @@ pub struct RunArgs {
 #[derive(Debug, Clone, Args)]
 #[group(required = true, multiple = false)]
 pub struct ScenarioGiven {
-    /// Scenario: a bundled name (see `drivecheck scenario list`), a .toml file or a reference .xml.
+    /// Scenario: a bundled name (see `drivecheck scenario list`), a .toml file, a reference .xml
+    /// or a .geojson file.
     #[arg(value_name = "SCENARIO")]
     scenario_positional: Option<String>,
     /// The scenario, as every other command takes it (the same as SCENARIO).
@@ -252,7 +253,7 @@ pub struct ReplayArgs {
     /// `udp://HOST:PORT` or `serial:///dev/ttyACM0`.
     #[arg(long, default_value = "sim")]
     pub car: String,
-    /// Scenario: a bundled name, a .toml file or a reference .xml (default: the bundled scenario
+    /// Scenario: a bundled name, a .toml, a reference .xml or a .geojson file (default: the bundled scenario
     /// the case names).
     #[arg(long)]
     pub scenario: Option<String>,
@@ -302,7 +303,7 @@ pub struct ShrinkArgs {
     /// `minimal.json` and `shrink.json`.
     #[arg(short, long, value_name = "DIR")]
     pub out: Option<PathBuf>,
-    /// Scenario: a bundled name, a .toml file or a reference .xml (default: the bundled scenario
+    /// Scenario: a bundled name, a .toml, a reference .xml or a .geojson file (default: the bundled scenario
     /// the case names).
     #[arg(long)]
     pub scenario: Option<String>,
@@ -357,7 +358,7 @@ pub struct SweepArgs {
     /// Print the result as JSON (`drivecheck-sweep`, docs/case-format.md) instead of a table.
     #[arg(long)]
     pub json: bool,
-    /// Scenario: a bundled name, a .toml file or a reference .xml (default: the bundled scenario
+    /// Scenario: a bundled name, a .toml, a reference .xml or a .geojson file (default: the bundled scenario
     /// the case names).
     #[arg(long)]
     pub scenario: Option<String>,
@@ -493,7 +494,7 @@ pub enum RunsCommand {
 /// Options of `drivecheck sim`.
 #[derive(Debug, Args)]
 pub struct SimArgs {
-    /// Scenario: a bundled name, a .toml file or a reference .xml.
+    /// Scenario: a bundled name, a .toml, a reference .xml or a .geojson file.
     #[arg(long)]
     pub scenario: String,
     /// Address to listen on (loopback unless told otherwise); port 0 takes any free port, so
@@ -655,7 +656,7 @@ pub enum BenchCommand {
 /// Options of `drivecheck bench placement`.
 #[derive(Debug, Args)]
 pub struct BenchPlacementArgs {
-    /// Scenario: a bundled name, a .toml file or a reference .xml.
+    /// Scenario: a bundled name, a .toml, a reference .xml or a .geojson file.
     #[arg(long, default_value = "parking-lot-2anchors")]
     pub scenario: String,
     /// Campaign seeds (from `--seed` on).
@@ -850,37 +851,129 @@ pub struct GenerateArgs {
 /// `drivecheck scenario …`
 #[derive(Debug, Subcommand)]
 pub enum ScenarioCommand {
-    /// Convert a reference route XML file into a scenario TOML file. Exit status: 0 converted,
-    /// 2 error (a file that cannot be read or is invalid).
+    /// Convert a reference route XML file or a GeoJSON FeatureCollection (QGIS, geojson.io,
+    /// `scenario export --geojson`; docs/geojson.md) into a scenario TOML file. Exit status: 0
+    /// converted, 2 error (a file that cannot be read or is invalid, coordinates whose kind is
+    /// ambiguous without --crs).
     Import(ImportArgs),
+    /// Write a scenario as a GeoJSON FeatureCollection for QGIS or geojson.io (docs/geojson.md):
+    /// in local metres, or in WGS84 longitude/latitude when it has an origin (its own or
+    /// --origin). Exit status: 0 written, 2 error (an unknown scenario, longitude/latitude
+    /// without an origin, a file that cannot be written).
+    Export(ExportArgs),
     /// Load and validate a scenario; print its warnings. Exit status: 0 valid, 2 invalid.
     Check(CheckArgs),
     /// List the bundled scenarios. Exit status: 0 listed, 2 error.
-    List,
+    List(ListArgs),
 }
 
 /// Options of `drivecheck scenario import`.
 #[derive(Debug, Args)]
 pub struct ImportArgs {
-    /// The reference XML file.
-    pub xml: PathBuf,
+    /// The file: reference XML (`.xml`), or GeoJSON (`.geojson`, `.json`, or text that starts
+    /// with `{`).
+    #[arg(value_name = "FILE")]
+    pub file: PathBuf,
     /// A reference XML file that holds only the anchors (`<routes><anchors>…</anchors></routes>`),
-    /// merged into the imported area (which must then have none of its own).
+    /// merged into the imported XML area (which must then have none of its own).
     #[arg(long, value_name = "ANCHORS.xml")]
     pub anchors: Option<PathBuf>,
+    /// GeoJSON only: the coordinates are WGS84 longitude/latitude or local metres, when the file
+    /// does not say (default: inferred from the numbers, refused when both are plausible).
+    #[arg(long, value_enum)]
+    pub crs: Option<CrsArg>,
+    /// GeoJSON only: the local frame's origin, latitude and longitude in degrees and the
+    /// ellipsoidal height in metres (default 0); longitude/latitude are converted to metres
+    /// around it (default: the file's origin, else the fence's first vertex).
+    #[arg(long, value_name = "LAT,LON[,H]", value_parser = parse_origin, allow_hyphen_values = true)]
+    pub origin: Option<scenarios::EnuOrigin>,
     /// Where to write the scenario TOML (standard output when not given).
-    #[arg(short, long, value_name = "FILE")]
-    pub output: Option<PathBuf>,
-    /// Replace the `-o` file if it exists.
+    #[arg(short = 'o', long = "out", alias = "output", value_name = "FILE")]
+    pub out: Option<PathBuf>,
+    /// Replace the `--out` file if it exists.
     #[arg(long)]
     pub force: bool,
+}
+
+/// Options of `drivecheck scenario export`.
+#[derive(Debug, Args)]
+pub struct ExportArgs {
+    /// The scenario (`SCENARIO` or `--scenario`).
+    #[command(flatten)]
+    pub scenario: ScenarioGiven,
+    /// Write GeoJSON (RFC 7946; the only export format).
+    #[arg(long, required = true)]
+    pub geojson: bool,
+    /// The coordinates: `local` metres (reads back to the same scenario hash) or `wgs84`
+    /// longitude/latitude (default: wgs84 when there is an origin, local otherwise).
+    #[arg(long, value_enum)]
+    pub crs: Option<CrsArg>,
+    /// The local frame's origin on the globe, in place of the scenario's: latitude and longitude
+    /// in degrees, the ellipsoidal height in metres (default 0).
+    #[arg(long, value_name = "LAT,LON[,H]", value_parser = parse_origin, allow_hyphen_values = true)]
+    pub origin: Option<scenarios::EnuOrigin>,
+    /// Where to write the GeoJSON (standard output when not given).
+    #[arg(short = 'o', long = "out", alias = "output", value_name = "FILE")]
+    pub out: Option<PathBuf>,
+    /// Replace the `--out` file if it exists.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// The kind of coordinates of a GeoJSON file, as named on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CrsArg {
+    /// WGS84 longitude and latitude, degrees (RFC 7946; QGIS, geojson.io).
+    Wgs84,
+    /// Local metres, x east and y north of the origin (drivecheck's own).
+    Local,
+}
+
+impl From<CrsArg> for scenarios::geojson::Crs {
+    fn from(arg: CrsArg) -> Self {
+        match arg {
+            CrsArg::Wgs84 => scenarios::geojson::Crs::Wgs84,
+            CrsArg::Local => scenarios::geojson::Crs::Local,
+        }
+    }
+}
+
+/// Parses `LAT,LON` or `LAT,LON,H` (degrees, degrees, metres) into an ENU origin.
+pub fn parse_origin(text: &str) -> Result<scenarios::EnuOrigin, String> {
+    let numbers = text
+        .split(',')
+        .map(|n| n.trim().parse::<f64>().map_err(|e| format!("{n:?}: {e}")))
+        .collect::<Result<Vec<_>, _>>()?;
+    let (lat, lon, height) = match numbers[..] {
+        [lat, lon] => (lat, lon, 0.0),
+        [lat, lon, height] => (lat, lon, height),
+        _ => return Err(format!("{text:?}: expected LAT,LON or LAT,LON,H")),
+    };
+    if !(-90.0..=90.0).contains(&lat) || !(-180.0..=180.0).contains(&lon) || !height.is_finite() {
+        return Err(format!(
+            "{text:?}: latitude within ±90°, longitude within ±180°, a finite height"
+        ));
+    }
+    Ok(scenarios::EnuOrigin { lat, lon, height })
 }
 
 /// Options of `drivecheck scenario check`.
 #[derive(Debug, Args)]
 pub struct CheckArgs {
-    /// Scenario: a bundled name, a .toml file or a reference .xml.
-    pub scenario: String,
+    /// The scenario (`SCENARIO` or `--scenario`).
+    #[command(flatten)]
+    pub scenario: ScenarioGiven,
+    /// Print the summary and the warnings as one JSON document on standard output.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Options of `drivecheck scenario list`.
+#[derive(Debug, Args)]
+pub struct ListArgs {
+    /// Print the list as one JSON document (an array) on standard output.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// The generator's strategy, as named on the command line.

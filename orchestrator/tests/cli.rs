@@ -393,3 +393,112 @@ fn the_version_names_the_revision() {
         "{text}"
     );
 }
+
+/// `scenario export NAME --geojson` then `scenario import` of the file gives the same scenario
+/// hash, for every bundled scenario (`scenario list --json` names them and their hashes).
+#[test]
+fn every_bundled_scenario_exported_as_geojson_imports_to_the_same_hash() {
+    let dir = tempfile::tempdir().unwrap();
+    let listed = drivecheck(&["scenario", "list", "--json"]);
+    assert_eq!(listed.status.code(), Some(0));
+    let list = json(&listed);
+    let list = list["scenarios"].as_array().unwrap();
+    assert_eq!(list.len(), bundled::names().len());
+    for (k, entry) in list.iter().enumerate() {
+        let name = entry["name"].as_str().unwrap();
+        for key in [
+            "drivable_area_m2",
+            "cutouts",
+            "anchors",
+            "description",
+            "hash",
+        ] {
+            assert!(entry.get(key).is_some(), "{name}: no {key}");
+        }
+        let geojson = dir.path().join(format!("{name}.geojson"));
+        let toml = dir.path().join(format!("{name}.toml"));
+        let (geojson, toml) = (geojson.to_str().unwrap(), toml.to_str().unwrap());
+        let out = drivecheck(&["scenario", "export", name, "--geojson", "-o", geojson]);
+        assert_eq!(
+            out.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        // The old spelling `--output` still works.
+        let output = if k == 0 { "--output" } else { "--out" };
+        let out = drivecheck(&["scenario", "import", geojson, output, toml]);
+        assert_eq!(
+            out.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let note = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            note.contains("note: ") && note.contains("local metres (as the file says)"),
+            "{note}"
+        );
+        let checked = drivecheck(&["scenario", "check", toml, "--json"]);
+        assert_eq!(checked.status.code(), Some(0));
+        let summary = json(&checked);
+        assert_eq!(summary["hash"], entry["hash"], "{name}");
+        assert_eq!(summary["valid"], true);
+        assert!(summary["warnings"].is_array());
+        // Standard output is the GeoJSON without --out.
+        let printed = drivecheck(&["scenario", "export", name, "--geojson"]);
+        assert_eq!(
+            String::from_utf8_lossy(&printed.stdout),
+            std::fs::read_to_string(geojson).unwrap()
+        );
+    }
+}
+
+/// With an origin the export is longitude/latitude (RFC 7946 positions), and its import says
+/// which origin it used; without `--geojson` or an origin for `--crs wgs84`, exit 2.
+#[test]
+fn scenario_export_writes_longitude_latitude_around_an_origin() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("court.geojson");
+    let file = file.to_str().unwrap();
+    let args = [
+        "scenario",
+        "export",
+        "courtyard",
+        "--geojson",
+        "--origin",
+        "-33.9,151.2,10",
+        "-o",
+        file,
+    ];
+    assert_eq!(drivecheck(&args).status.code(), Some(0));
+    let written: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(file).unwrap()).unwrap();
+    assert_eq!(written["drivecheck"]["crs"], "wgs84");
+    let lon = written["features"][0]["geometry"]["coordinates"][0][0][0]
+        .as_f64()
+        .unwrap();
+    assert!((lon - 151.2).abs() < 0.01, "{lon}");
+    let out = drivecheck(&["scenario", "import", file]);
+    assert_eq!(out.status.code(), Some(0));
+    assert!(
+        String::from_utf8_lossy(&out.stderr)
+            .contains("origin -33.9, 151.2, 10 m (the file's drivecheck.origin)"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for refused in [
+        &["scenario", "export", "courtyard"][..],
+        &[
+            "scenario",
+            "export",
+            "courtyard",
+            "--geojson",
+            "--crs",
+            "wgs84",
+        ],
+        &["scenario", "import", file, "-o", file],
+    ] {
+        assert_eq!(drivecheck(refused).status.code(), Some(2), "{refused:?}");
+    }
+}

@@ -283,6 +283,120 @@ pub enum Problem {
     /// A wall whose two ends coincide.
     #[error("the wall's ends a and b coincide")]
     WallWithoutLength,
+    /// The text is not valid JSON.
+    #[error("invalid JSON: {0}")]
+    JsonSyntax(String),
+    /// The JSON is not a GeoJSON scenario drivecheck can read.
+    #[error("{0}")]
+    GeoJson(Box<GeoJsonProblem>),
+}
+
+/// What is wrong with a GeoJSON scenario (`docs/geojson.md`); the error's field names the
+/// feature and its member (`features[3].geometry`).
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum GeoJsonProblem {
+    /// A member of the wrong JSON type or GeoJSON type.
+    #[error("expected {expected}, found {found}")]
+    WrongType {
+        /// What was expected.
+        expected: &'static str,
+        /// What was found.
+        found: String,
+    },
+    /// A geometry that cannot play a feature's role (a LineString as the fence).
+    #[error("a {geometry} cannot be {role}")]
+    CannotBe {
+        /// The geometry's type, as found.
+        geometry: String,
+        /// The role, with its article (`a fence`).
+        role: &'static str,
+    },
+    /// A `drivecheck` property that names no role.
+    #[error("`{0}` is not a role: expected fence, cutout, anchor, route, obstacle or wall")]
+    UnknownRole(String),
+    /// A route's `route` property that names no route.
+    #[error("`{0}` is not a route: expected \"start\" or \"recovery\"")]
+    UnknownRoute(String),
+    /// A second feature in a role only one may have.
+    #[error("a second {role} (the first is features[{first}])")]
+    Duplicate {
+        /// The role.
+        role: &'static str,
+        /// The first feature in it.
+        first: usize,
+    },
+    /// No feature has a role a scenario needs.
+    #[error("no {role}: {how}")]
+    Missing {
+        /// The role.
+        role: &'static str,
+        /// How to give it.
+        how: &'static str,
+    },
+    /// A LineString route without speeds.
+    #[error("a route needs `speed` (m/s, every point) or `speeds` (one per point)")]
+    NoSpeed,
+    /// A route whose `speeds` do not match its points.
+    #[error("{speeds} speed(s) for {points} point(s)")]
+    SpeedsLength {
+        /// Speeds given.
+        speeds: usize,
+        /// Points of the LineString.
+        points: usize,
+    },
+    /// A position that is not two or three numbers.
+    #[error("a position is [x, y] or [longitude, latitude] (an optional third number is ignored)")]
+    BadPosition,
+    /// A wall that is not a LineString of two points.
+    #[error("a wall is a LineString of 2 points, found {0}")]
+    WallPoints(usize),
+    /// A property that must be a whole number (an anchor id) is not one.
+    #[error("`{0}` is not a whole number")]
+    NotWhole(String),
+    /// A longitude or latitude out of its range.
+    #[error("({lon}, {lat}) is not a longitude and latitude")]
+    NotLonLat {
+        /// The first number.
+        lon: f64,
+        /// The second number.
+        lat: f64,
+    },
+    /// Coordinates that could be longitude/latitude or local metres alike.
+    #[error(
+        "the coordinates could be longitude and latitude (a fence {wgs84_m:.0} m across) or \
+         local metres (a fence {local_m:.1} m across): say which with --crs wgs84 or --crs local \
+         (or \"crs\" in the collection's \"drivecheck\" member)"
+    )]
+    AmbiguousCrs {
+        /// The fence's bounding-box diagonal read as longitude and latitude, metres.
+        wgs84_m: f64,
+        /// Its diagonal read as metres.
+        local_m: f64,
+    },
+    /// A coordinate reference system drivecheck does not read.
+    #[error(
+        "coordinates in {0}: drivecheck reads longitude/latitude (WGS84, EPSG:4326, as RFC 7946 \
+         requires) or its own local metres; save the layer in EPSG:4326 (QGIS: Export → Save \
+         Features As…, CRS EPSG:4326)"
+    )]
+    UnsupportedCrs(String),
+    /// The `crs` asked for conflicts with the file's marker.
+    #[error("the file says its coordinates are {file}, the command line says {asked}")]
+    CrsConflict {
+        /// What the file says.
+        file: &'static str,
+        /// What was asked.
+        asked: &'static str,
+    },
+    /// A drivecheck GeoJSON format newer than this drivecheck.
+    #[error("format version {found}: this drivecheck reads version {supported}")]
+    NewerVersion {
+        /// The file's version.
+        found: u64,
+        /// The version read.
+        supported: u64,
+    },
 }
 
 /// A soft problem: the scenario is usable, but a person should look.
@@ -355,6 +469,34 @@ pub enum WarningKind {
         gap: f64,
         /// The longest straight step, metres.
         limit: f64,
+    },
+    /// A GeoJSON feature without a `drivecheck` property whose role was inferred from its geometry.
+    #[error("no `drivecheck` property: taken as {role} ({why})")]
+    RoleInferred {
+        /// The role, with its article.
+        role: &'static str,
+        /// Why.
+        why: &'static str,
+    },
+    /// A GeoJSON anchor without an `id` property.
+    #[error("no `id` property: the anchor is numbered {id}")]
+    AnchorNumbered {
+        /// The id given to it.
+        id: u8,
+    },
+    /// A GeoJSON anchor without a `height` property.
+    #[error("no `height` property: 0 m assumed (the firmware stores it but does not use it)")]
+    AnchorHeightAssumed,
+    /// Longitude/latitude without an origin: the fence's first vertex is the local frame's.
+    #[error(
+        "longitude/latitude and no origin given: the fence's first vertex ({lat}, {lon}) is the \
+         local frame's origin (give --origin LAT,LON[,H] to choose it)"
+    )]
+    OriginFromFirstVertex {
+        /// Its latitude, degrees.
+        lat: f64,
+        /// Its longitude, degrees.
+        lon: f64,
     },
     /// A hand-drawn route segment comes closer to an edge than the generator's clearance.
     #[error(

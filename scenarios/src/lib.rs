@@ -25,6 +25,8 @@
 
 pub mod bundled;
 pub mod error;
+pub mod geodesy;
+pub mod geojson;
 pub mod model;
 pub mod settings;
 
@@ -36,7 +38,7 @@ mod xml;
 
 use std::path::Path;
 
-pub use error::{Location, Place, Problem, ScenarioError, Warning, WarningKind};
+pub use error::{GeoJsonProblem, Location, Place, Problem, ScenarioError, Warning, WarningKind};
 pub use model::{Anchor, EnuOrigin, Environment, Obstacle, Route, Scenario, Wall};
 pub use settings::{
     CampaignSettings, CommandWeights, FaultKeyError, FaultKind, FaultSettings, FaultTarget,
@@ -59,36 +61,48 @@ pub struct Loaded {
     pub source: String,
 }
 
-/// The two file formats a scenario can be read from.
+/// The file formats a scenario can be read from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Format {
     /// The scenario format of this crate.
     Toml,
     /// The reference control station's route XML.
     Xml,
+    /// A GeoJSON FeatureCollection ([`geojson`]).
+    GeoJson,
 }
 
 impl Format {
-    /// The format of a file: by extension (`.toml`, `.xml`), else by content (XML starts with `<`).
+    /// The format of a file: by extension (`.toml`, `.xml`, `.geojson`, `.json`), else by
+    /// content (XML starts with `<`, JSON with `{`).
     pub fn detect(path: &Path, text: &str) -> Self {
+        let start = text.trim_start_matches('\u{feff}').trim_start();
         match path.extension().and_then(|e| e.to_str()) {
             Some(e) if e.eq_ignore_ascii_case("xml") => Self::Xml,
             Some(e) if e.eq_ignore_ascii_case("toml") => Self::Toml,
-            _ if text
-                .trim_start_matches('\u{feff}')
-                .trim_start()
-                .starts_with('<') =>
-            {
-                Self::Xml
+            Some(e) if e.eq_ignore_ascii_case("geojson") || e.eq_ignore_ascii_case("json") => {
+                Self::GeoJson
             }
+            _ if start.starts_with('<') => Self::Xml,
+            _ if start.starts_with('{') => Self::GeoJson,
             _ => Self::Toml,
         }
     }
 }
 
-/// Reads, parses and validates the scenario at `path` (TOML or reference XML, see
-/// [`Format::detect`]). An XML scenario is named after the file stem.
+/// Reads, parses and validates the scenario at `path` (TOML, reference XML or GeoJSON, see
+/// [`Format::detect`]). An XML scenario is named after the file stem, a GeoJSON one too unless
+/// it names itself; GeoJSON is read with the default [`geojson::ReadOptions`].
 pub fn load(path: impl AsRef<Path>) -> Result<Loaded, ScenarioError> {
+    load_with(path, &geojson::ReadOptions::default()).map(|imported| imported.loaded)
+}
+
+/// [`load`], with how to read a GeoJSON file's coordinates; also says how they were read (for a
+/// TOML or XML file: local metres, as the file says, and its origin).
+pub fn load_with(
+    path: impl AsRef<Path>,
+    options: &geojson::ReadOptions,
+) -> Result<geojson::Imported, ScenarioError> {
     let path = path.as_ref();
     let source_name = path.display().to_string();
     if let Ok(meta) = std::fs::metadata(path) {
@@ -110,16 +124,26 @@ pub fn load(path: impl AsRef<Path>) -> Result<Loaded, ScenarioError> {
     }
     let text = std::fs::read_to_string(path)
         .map_err(|e| ScenarioError::in_source(&source_name, None, Problem::Read(e)))?;
-    match Format::detect(path, &text) {
-        Format::Toml => from_toml_str(&text, &source_name),
-        Format::Xml => {
-            let name = path
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            from_xml_str(&text, &source_name, &name)
+    let name = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let loaded = match Format::detect(path, &text) {
+        Format::Toml => from_toml_str(&text, &source_name)?,
+        Format::Xml => from_xml_str(&text, &source_name, &name)?,
+        Format::GeoJson => {
+            return geojson::from_geojson_str(&text, &source_name, &name, options);
         }
-    }
+    };
+    let origin = loaded
+        .scenario
+        .origin
+        .map(|o| (o, geojson::OriginSource::File));
+    Ok(geojson::Imported {
+        loaded,
+        crs: (geojson::Crs::Local, geojson::CrsSource::File),
+        origin,
+    })
 }
 
 /// The largest scenario file [`load`] reads, bytes (8 MiB: a scenario of the largest polygons

@@ -1,62 +1,157 @@
-//! `drivecheck scenario import | check | list`.
+//! `drivecheck scenario import | export | check | list`.
 
-use anyhow::{Context, Result};
+use std::path::Path;
 
-use crate::cli::{CheckArgs, ImportArgs};
+use anyhow::{Context, Result, bail};
+use scenarios::geojson::{Crs, ReadOptions, WriteOptions};
+use scenarios::{Format, Loaded, Scenario};
+use serde_json::{Value, json};
+
+use crate::cli::{CheckArgs, ExportArgs, ImportArgs, ListArgs};
 use crate::exit::Exit;
-use crate::scenario_arg::{load_scenario, print_warnings};
+use crate::output::{Verbosity, verbosity};
+use crate::scenario_arg::{load_scenario, print_warnings, print_warnings_of_use};
 
-/// Converts a reference XML file into scenario TOML.
+/// Converts a reference XML or GeoJSON file into scenario TOML.
 pub fn import(args: &ImportArgs) -> Result<Exit> {
     let loaded = match &args.anchors {
-        None => scenarios::load(&args.xml)?,
-        Some(anchors) => {
-            let read = |path: &std::path::Path| {
-                std::fs::read_to_string(path)
-                    .with_context(|| format!("cannot read {}", path.display()))
-            };
-            let (area, anchors_text) = (read(&args.xml)?, read(anchors)?);
-            let name = args
-                .xml
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            scenarios::from_xml_with_anchors(
-                (&area, &args.xml.display().to_string()),
-                (&anchors_text, &anchors.display().to_string()),
-                &name,
-            )?
-        }
+        None => import_file(args)?,
+        Some(anchors) => import_with_anchors(args, anchors)?,
     };
     print_warnings(&loaded);
-    let toml = loaded.scenario.to_toml();
-    match &args.output {
-        Some(path) if path.exists() && !args.force => {
-            anyhow::bail!(
-                "-o {}: the file exists; give --force to replace it",
-                path.display()
-            );
-        }
-        Some(path) => {
-            crate::atomic::write(path, &toml)
-                .with_context(|| format!("cannot write {}", path.display()))?;
-            eprintln!(
-                "wrote {} (scenario {}, {} warning(s))",
-                path.display(),
-                loaded.scenario.name,
-                loaded.warnings.len()
-            );
-        }
-        None => print!("{toml}"),
+    let written = write_or_print(args.out.as_deref(), args.force, &loaded.scenario.to_toml())?;
+    if let Some(path) = written {
+        eprintln!(
+            "wrote {} (scenario {}, {} warning(s))",
+            path.display(),
+            loaded.scenario.name,
+            loaded.warnings.len()
+        );
     }
     Ok(Exit::Success)
 }
 
+/// Reads the one file to import; a GeoJSON file with `--crs` and `--origin`, and a note on how
+/// its coordinates were read.
+fn import_file(args: &ImportArgs) -> Result<Loaded> {
+    let text = std::fs::read_to_string(&args.file).unwrap_or_default();
+    let geojson = Format::detect(&args.file, &text) == Format::GeoJson;
+    if !geojson && (args.crs.is_some() || args.origin.is_some()) {
+        bail!(
+            "--crs and --origin are for GeoJSON; {} is not (a .geojson or .json file)",
+            args.file.display()
+        );
+    }
+    let options = ReadOptions {
+        crs: args.crs.map(Into::into),
+        origin: args.origin,
+    };
+    let imported = scenarios::load_with(&args.file, &options)?;
+    if geojson && verbosity() != Verbosity::Quiet {
+        eprintln!("note: {}: {}", args.file.display(), imported.note());
+    }
+    Ok(imported.loaded)
+}
+
+/// Reads a reference XML area and the reference XML file of its anchors.
+fn import_with_anchors(args: &ImportArgs, anchors: &Path) -> Result<Loaded> {
+    if args.crs.is_some() || args.origin.is_some() {
+        bail!("--crs and --origin are for GeoJSON, --anchors for reference XML");
+    }
+    let read = |path: &Path| {
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))
+    };
+    let (area, anchors_text) = (read(&args.file)?, read(anchors)?);
+    let name = args
+        .file
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    Ok(scenarios::from_xml_with_anchors(
+        (&area, &args.file.display().to_string()),
+        (&anchors_text, &anchors.display().to_string()),
+        &name,
+    )?)
+}
+
+/// Writes `text` to `out` (refusing to replace a file without `force`) and returns the path, or
+/// prints it on standard output.
+fn write_or_print<'a>(out: Option<&'a Path>, force: bool, text: &str) -> Result<Option<&'a Path>> {
+    match out {
+        Some(path) if path.exists() && !force => {
+            bail!(
+                "--out {}: the file exists; give --force to replace it",
+                path.display()
+            );
+        }
+        Some(path) => {
+            crate::atomic::write(path, text)
+                .with_context(|| format!("cannot write {}", path.display()))?;
+            Ok(Some(path))
+        }
+        None => {
+            print!("{text}");
+            Ok(None)
+        }
+    }
+}
+
+/// Writes a scenario as GeoJSON.
+pub fn export(args: &ExportArgs) -> Result<Exit> {
+    let loaded = load_scenario(args.scenario.name())?;
+    print_warnings_of_use(args.scenario.name(), &loaded);
+    let options = WriteOptions {
+        crs: args.crs.map(Into::into),
+        origin: args.origin,
+    };
+    let text = scenarios::geojson::to_geojson(&loaded.scenario, &options)?;
+    if let Some(path) = write_or_print(args.out.as_deref(), args.force, &text)? {
+        let origin = options.origin.or(loaded.scenario.origin);
+        let crs = options.crs.unwrap_or(if origin.is_some() {
+            Crs::Wgs84
+        } else {
+            Crs::Local
+        });
+        eprintln!(
+            "wrote {} (scenario {}, {})",
+            path.display(),
+            loaded.scenario.name,
+            crs.describe()
+        );
+    }
+    Ok(Exit::Success)
+}
+
+/// The summary of a scenario that `check` and `list` show.
+fn summary(s: &Scenario) -> Value {
+    json!({
+        "name": s.name,
+        "description": s.description,
+        "fence_vertices": s.area.fence().vertices().len(),
+        "cutouts": s.area.cutouts().len(),
+        "drivable_area_m2": s.area.drivable_area(),
+        "anchors": s.anchors.len(),
+        "hash": s.hash(),
+    })
+}
+
 /// Loads and validates a scenario, printing a summary and its warnings.
 pub fn check(args: &CheckArgs) -> Result<Exit> {
-    let loaded = load_scenario(&args.scenario)?;
-    print_warnings(&loaded);
+    let loaded = load_scenario(args.scenario.name())?;
     let s = &loaded.scenario;
+    if args.json {
+        let mut document = summary(s);
+        document["source"] = json!(loaded.source);
+        document["valid"] = json!(true);
+        document["warnings"] = loaded
+            .warnings
+            .iter()
+            .map(|w| json!({"field": w.field, "message": w.kind.to_string()}))
+            .collect();
+        crate::output::print_json("scenario check", &document)?;
+        return Ok(Exit::Success);
+    }
+    print_warnings(&loaded);
     println!(
         "{}: valid; fence {} vertices, {} cutout(s), drivable {:.0} m², {} anchor(s), {} warning(s); hash {}",
         loaded.source,
@@ -71,10 +166,15 @@ pub fn check(args: &CheckArgs) -> Result<Exit> {
 }
 
 /// Lists the bundled scenarios with a one-line summary each.
-pub fn list() -> Result<Exit> {
+pub fn list(args: &ListArgs) -> Result<Exit> {
+    let mut all = Vec::new();
     for name in scenarios::bundled::names() {
         let loaded = scenarios::bundled::load(name)?;
         let s = &loaded.scenario;
+        if args.json {
+            all.push(summary(s));
+            continue;
+        }
         println!(
             "{name:24} {:>6.0} m²  {} cutout(s)  {} anchor(s)  {}",
             s.area.drivable_area(),
@@ -82,6 +182,9 @@ pub fn list() -> Result<Exit> {
             s.anchors.len(),
             s.description.as_deref().unwrap_or("")
         );
+    }
+    if args.json {
+        crate::output::print_json("scenario list", &json!({ "scenarios": all }))?;
     }
     Ok(Exit::Success)
 }
