@@ -230,9 +230,64 @@ pub fn coverage(area: &Area, start_end: Point, cases: &[Case]) -> Coverage {
     }
 }
 
-/// The statistics as text, as `runs show --coverage` prints them and the report shows them: the
-/// area driven, the metres driven per heading and per speed bin (with bars), the fault table and
-/// the tests per number of segments driven.
+/// Metres driven in one bin of headings (degrees) or speeds (km/h).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Bin {
+    /// Where the bin begins.
+    pub from: f64,
+    /// Where the next begins.
+    pub to: f64,
+    /// Metres driven in it.
+    pub metres: f64,
+}
+
+impl CoverageStats {
+    /// Metres driven in all (the planned route of the driven segments).
+    pub fn driven_m(&self) -> f64 {
+        self.heading_m.iter().sum()
+    }
+
+    /// The heading bins, degrees counter-clockwise from east, all of them.
+    pub fn heading_bins(&self) -> Vec<Bin> {
+        let width = 360.0 / self.heading_m.len().max(1) as f64;
+        bins(&self.heading_m, width)
+    }
+
+    /// The speed bins, km/h, up to the last one driven.
+    pub fn speed_bins(&self) -> Vec<Bin> {
+        let last = self.speed_m.iter().rposition(|&m| m > 0.0).unwrap_or(0);
+        let mut speeds = bins(&self.speed_m, SPEED_BIN_KMH);
+        speeds.truncate(last + 1);
+        speeds
+    }
+
+    /// (segments driven, tests that drove that many) for the counts some test drove.
+    pub fn tests_by_segments(&self) -> Vec<(usize, usize)> {
+        self.segments_per_test
+            .iter()
+            .copied()
+            .enumerate()
+            .filter(|&(_, n)| n > 0)
+            .collect()
+    }
+}
+
+/// Bins of `width` holding `metres`, from 0.
+fn bins(metres: &[f64], width: f64) -> Vec<Bin> {
+    metres
+        .iter()
+        .enumerate()
+        .map(|(k, &m)| Bin {
+            from: k as f64 * width,
+            to: (k + 1) as f64 * width,
+            metres: m,
+        })
+        .collect()
+}
+
+/// The statistics as text, as `runs show --coverage` prints them: the area driven, the metres
+/// driven per heading and per speed bin (with bars), the fault table and the tests per number of
+/// segments driven. The report shows the same figures as HTML tables.
 impl std::fmt::Display for CoverageStats {
     fn fmt(&self, out: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let c = self;
@@ -245,32 +300,30 @@ impl std::fmt::Display for CoverageStats {
             c.drivable_cells,
             c.cell_m
         )?;
-        let total: f64 = c.heading_m.iter().sum();
+        let total = c.driven_m();
         writeln!(
             out,
             "metres driven by heading (counter-clockwise from east), {total:.0} m in all:"
         )?;
-        let width = 360.0 / c.heading_m.len().max(1) as f64;
-        for (k, m) in c.heading_m.iter().enumerate() {
+        for b in c.heading_bins() {
             writeln!(
                 out,
                 "  {:>3.0}°–{:>3.0}° {:>7.1} m {}",
-                k as f64 * width,
-                (k + 1) as f64 * width,
-                m,
-                bar(*m, total)
+                b.from,
+                b.to,
+                b.metres,
+                bar(b.metres, total)
             )?;
         }
         writeln!(out, "metres driven by speed:")?;
-        let last = c.speed_m.iter().rposition(|&m| m > 0.0).unwrap_or(0);
-        for (k, m) in c.speed_m.iter().enumerate().take(last + 1) {
+        for b in c.speed_bins() {
             writeln!(
                 out,
                 "  {:>2.0}–{:>2.0} km/h {:>7.1} m {}",
-                k as f64 * SPEED_BIN_KMH,
-                (k + 1) as f64 * SPEED_BIN_KMH,
-                m,
-                bar(*m, total)
+                b.from,
+                b.to,
+                b.metres,
+                bar(b.metres, total)
             )?;
         }
         if c.faults.is_empty() {
@@ -289,10 +342,8 @@ impl std::fmt::Display for CoverageStats {
             }
         }
         let counts: Vec<String> = c
-            .segments_per_test
+            .tests_by_segments()
             .iter()
-            .enumerate()
-            .filter(|(_, n)| **n > 0)
             .map(|(segments, n)| format!("{segments} segments: {n}"))
             .collect();
         writeln!(out, "tests by segments driven: {}", counts.join(", "))

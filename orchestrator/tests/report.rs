@@ -101,7 +101,7 @@ fn a_campaign_and_its_replay_get_a_self_contained_report() {
         );
         assert!(section.contains("<polyline"), "{id}: tracks are drawn");
         assert!(
-            section.contains("acknowledged the test's set_autopilot"),
+            section.contains("acknowledged the command that started the test's autopilot"),
             "{id}: the samples are timed on the test's clock"
         );
     }

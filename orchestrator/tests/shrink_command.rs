@@ -7,13 +7,21 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use campaign::files::{Case, CommandRecord};
-use campaign::shrink::{Outcome, ShrinkReport, Target};
+use campaign::shrink::{MEDIAN_ROW, Outcome, ShrinkReport, Target};
 use common::{drivecheck, path, text};
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/fixtures")
         .join(name)
+}
+
+/// The text of the element with `id` (`<td id="median-after">1.15 m</td>` → `1.15 m`).
+fn by_id<'a>(html: &'a str, id: &str) -> &'a str {
+    let marker = format!("id=\"{id}\">");
+    let start = html.find(&marker).unwrap_or_else(|| panic!("no #{id}")) + marker.len();
+    let end = start + html[start..].find('<').unwrap();
+    &html[start..end]
 }
 
 fn shrink(case: &Path, out: &Path) -> (Case, ShrinkReport, String) {
@@ -71,6 +79,27 @@ fn a_failing_case_shrinks_to_a_smaller_one_that_fails_every_time() {
     assert!(confirmation.confirmed);
     assert_eq!(confirmation.runs.len(), 6);
     assert!(confirmation.runs.iter().all(|r| r.seed >= 4));
+
+    // The report of the shrink directory shows the medians the command printed.
+    let shrunk = dir.path().join("a");
+    let out = drivecheck(&["report", path(&shrunk)]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let page = std::fs::read_to_string(shrunk.join("report.html")).unwrap();
+    let row = format!("| {MEDIAN_ROW} | ");
+    let printed: Vec<&str> = log
+        .lines()
+        .find_map(|l| l.strip_prefix(&row))
+        .unwrap_or_else(|| panic!("no median row in {log}"))
+        .trim_end_matches(" |")
+        .split(" | ")
+        .collect();
+    let shown = [by_id(&page, "median-before"), by_id(&page, "median-after")];
+    assert_eq!(printed, shown, "{log}");
+    let after = report
+        .after
+        .median_deviation_m()
+        .expect("the runs measured");
+    assert_eq!(shown[1], format!("{after:.2} m"));
 
     // Deterministic given the seed.
     let (again, again_report, _) = shrink(&case, &dir.path().join("b"));

@@ -54,7 +54,9 @@ mod tests;
 pub use crate::files::SHRINK_FORMAT;
 pub use edit::{Edit, EditError, FaultField};
 pub use policy::{Drive, Progress, Settings, ShrinkFailure, Shrunk, shrink};
-pub use report::{CaseSummary, Confirmation, Ended, MINIMAL_FILE, SHRINK_FILE, ShrinkReport};
+pub use report::{
+    CaseSummary, Confirmation, Ended, MEDIAN_ROW, MINIMAL_FILE, SHRINK_FILE, ShrinkReport,
+};
 
 use edit::{Joins, neutral, part_way, segment_commands};
 

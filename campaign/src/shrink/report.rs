@@ -11,6 +11,9 @@ pub const SHRINK_FILE: &str = "shrink.json";
 /// The minimal case's file name in the shrink directory.
 pub const MINIMAL_FILE: &str = "minimal.json";
 
+/// The row of the before/after table that holds [`CaseSummary::median_deviation_m`].
+pub const MEDIAN_ROW: &str = "its largest deviation (median of the runs)";
+
 /// Why a shrink stopped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -23,6 +26,17 @@ pub enum Ended {
     Interrupted,
 }
 
+impl Ended {
+    /// Why the shrink stopped, in words (the command's summary and the report say it).
+    pub fn words(self) -> &'static str {
+        match self {
+            Self::Minimal => "no simpler case fails the same way",
+            Self::Budget => "stopped by the time budget (--budget)",
+            Self::Interrupted => "interrupted",
+        }
+    }
+}
+
 /// A case as the shrink saw it: its size, its failing segment and the runs that confirmed it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -33,6 +47,23 @@ pub struct CaseSummary {
     pub target: Target,
     /// The runs that showed it (all failed there).
     pub runs: Vec<RunResult>,
+}
+
+impl CaseSummary {
+    /// The median over [`CaseSummary::runs`] of each run's largest deviation in its failing
+    /// segment: the nearest-rank median (`trajgen::stats`), the middle run of an odd number and
+    /// the lower of the two middle ones of an even number. `None` without a measured run. The
+    /// command's table and the report both show this.
+    pub fn median_deviation_m(&self) -> Option<f64> {
+        let mut values: Vec<f64> = self
+            .runs
+            .iter()
+            .filter_map(|r| r.max_deviation_m)
+            .filter(|m| m.is_finite())
+            .collect();
+        values.sort_by(f64::total_cmp);
+        trajgen::stats::nearest_rank(&values, 0.5)
+    }
 }
 
 /// The minimal case driven again with other seeds (those after the candidates' seeds).
@@ -113,11 +144,9 @@ impl ShrinkReport {
 
     /// The before/after table the command prints.
     pub fn table(&self) -> String {
-        let median = |runs: &[RunResult]| {
-            let mut values: Vec<f64> = runs.iter().filter_map(|r| r.max_deviation_m).collect();
-            values.sort_by(f64::total_cmp);
-            values
-                .get(values.len() / 2)
+        let median = |summary: &CaseSummary| {
+            summary
+                .median_deviation_m()
                 .map_or_else(|| "-".to_owned(), |v| format!("{v:.2} m"))
         };
         let (b, a) = (&self.before, &self.after);
@@ -148,15 +177,49 @@ impl ShrinkReport {
                 b.target.to_string(),
                 a.target.to_string(),
             ),
-            (
-                "its max deviation (median of runs)",
-                median(&b.runs),
-                median(&a.runs),
-            ),
+            (MEDIAN_ROW, median(b), median(a)),
         ];
         for (name, before, after) in rows {
             out.push_str(&format!("| {name} | {before} | {after} |\n"));
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn summary(deviations: &[Option<f64>]) -> CaseSummary {
+        CaseSummary {
+            size: Size {
+                commands: 3,
+                segments: 2,
+                faults: 1,
+                points: 10,
+            },
+            target: Target::segment(1),
+            runs: deviations
+                .iter()
+                .enumerate()
+                .map(|(k, &max_deviation_m)| RunResult {
+                    seed: k as u64,
+                    verdict: Some(crate::oracle::Verdict::Failed),
+                    first_failing_segment: Some(1),
+                    max_deviation_m,
+                })
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn the_median_is_the_nearest_rank_one_of_the_measured_runs() {
+        // The middle run of three, in any order.
+        let three = summary(&[Some(1.21), Some(1.15), Some(1.19)]);
+        assert_eq!(three.median_deviation_m(), Some(1.19));
+        // The lower middle of four; an unmeasured run does not count.
+        let four = summary(&[Some(1.2), None, Some(1.1), Some(1.3), Some(1.15)]);
+        assert_eq!(four.median_deviation_m(), Some(1.15));
+        assert_eq!(summary(&[None]).median_deviation_m(), None);
     }
 }

@@ -164,11 +164,7 @@ pub(super) fn print_summary(report: &ShrinkReport, out: &Path) {
         report.steps.len(),
         report.simulator_runs,
         report.wall_s,
-        match report.ended {
-            Ended::Minimal => "no simpler case fails the same way",
-            Ended::Budget => "stopped by the time budget (--budget)",
-            Ended::Interrupted => "interrupted",
-        }
+        report.ended.words()
     );
     if let Some(c) = &report.confirmation {
         let seeds = c.runs.first().map_or(0, |r| r.seed);

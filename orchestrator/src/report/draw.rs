@@ -13,6 +13,7 @@ use trajgen::{BBox, Point};
 
 use super::ReportError;
 use super::data::Sample;
+use super::labels::{Rect, around, place, rows, text_size};
 use super::route::Boundary;
 
 /// The most samples a track is drawn with (see [`decimate`]).
@@ -116,7 +117,7 @@ pub(crate) struct TrackLayer<'a> {
 pub(crate) struct FaultMark {
     /// The place.
     pub at: Point,
-    /// Its label (the probe).
+    /// Its label: its number in the key below the map (empty: unlabelled).
     pub label: String,
     /// The RTK track during its window.
     pub window: Vec<Point>,
@@ -147,8 +148,23 @@ struct MapFrame {
 
 const MAP_WIDTH: u32 = 860;
 const MARGIN: u32 = 12;
-const Y_LABELS: u32 = 50;
-const X_LABELS: u32 = 36;
+const Y_LABELS: u32 = 76;
+const X_LABELS: u32 = 48;
+/// Font size of the axes' tick labels and descriptions, pixels as shown (the pictures are shown
+/// at their own size on a wide page, smaller only on a narrow screen).
+const AXIS_PX: f64 = 14.0;
+/// Font size of the labels in a picture, pixels as shown.
+const LABEL_PX: f64 = 12.5;
+/// `plotters`' SVG backend writes a font of size `s` as `font-size` `s / 1.24`: a size given to
+/// it is the size shown times this.
+const SVG_FONT: f64 = 1.24;
+
+/// A sans-serif font shown `px` pixels high.
+fn sans(px: f64) -> (&'static str, f64) {
+    ("sans-serif", px * SVG_FONT)
+}
+/// Radius of a fault's marker on the map, pixels.
+const MARKER_PX: i32 = 6;
 
 impl MapFrame {
     fn new(bbox: BBox) -> Self {
@@ -287,9 +303,12 @@ fn draw_map(
         .configure_mesh()
         .light_line_style(RGBColor(0xf0, 0xf0, 0xf0))
         .bold_line_style(RGBColor(0xdd, 0xdd, 0xdd))
-        .x_desc("east, m")
-        .y_desc("north, m")
-        .label_style(("sans-serif", 12))
+        .x_desc("east")
+        .y_desc("north")
+        .x_label_formatter(&|v| tick(*v, "m"))
+        .y_label_formatter(&|v| tick(*v, "m"))
+        .label_style(sans(AXIS_PX))
+        .axis_desc_style(sans(AXIS_PX))
         .draw()
         .map_err(draw_error)?;
     let xy = |p: Point| (p.x, p.y);
@@ -370,15 +389,6 @@ fn draw_map(
                 .draw_series(DashedLineSeries::new(run, 6, 4, style))
                 .map_err(draw_error)?;
         }
-        if let Some(&first) = segment.first().filter(|&&p| driven && frame.contains(p)) {
-            chart
-                .draw_series([Text::new(
-                    format!("s{k}"),
-                    xy(first),
-                    ("sans-serif", 11).into_font().color(&PLANNED),
-                )])
-                .map_err(draw_error)?;
-        }
         previous = segment.last().copied().or(previous);
     }
     for fault in &layers.faults {
@@ -391,46 +401,151 @@ fn draw_map(
     for track in &layers.tracks {
         draw_track(&mut chart, frame, track)?;
     }
-    for fault in &layers.faults {
-        if !frame.contains(fault.at) {
-            continue;
-        }
+    for fault in layers.faults.iter().filter(|f| frame.contains(f.at)) {
         chart
             .draw_series([EmptyElement::at(xy(fault.at))
-                + Circle::new((0, 0), 6, FAULT.stroke_width(2))
+                + Circle::new((0, 0), MARKER_PX, FAULT.stroke_width(2))
                 + Circle::new((0, 0), 2, FAULT.filled())])
             .map_err(draw_error)?;
-        if !fault.label.is_empty() {
-            chart
-                .draw_series([EmptyElement::at(xy(fault.at))
-                    + Text::new(
-                        fault.label.clone(),
-                        (8, -14),
-                        ("sans-serif", 12).into_font().color(&FAULT),
-                    )])
-                .map_err(draw_error)?;
-        }
     }
+    let mut obstacles = Vec::new();
     if let Some(s) = scenario {
         for anchor in &s.anchors {
             let at = (anchor.x, anchor.y);
             if !frame.contains(Point::new(anchor.x, anchor.y)) {
                 continue;
             }
+            let name = format!("anchor {}", anchor.id);
+            let (px, py) = chart.backend_coord(&at);
+            let (w, h) = text_size(&name, LABEL_PX);
+            obstacles.push(Rect::around(f64::from(px), f64::from(py), 8.0));
+            obstacles.push(Rect::at(f64::from(px + 10), f64::from(py - 4), w, h));
             chart
                 .draw_series([EmptyElement::at(at)
                     + TriangleMarker::new((0, 0), 8, RGBColor(0x11, 0x11, 0x88).filled())
                     + Text::new(
-                        format!("anchor {}", anchor.id),
+                        name,
                         (10, -4),
-                        ("sans-serif", 12)
+                        sans(LABEL_PX)
                             .into_font()
                             .color(&RGBColor(0x11, 0x11, 0x88)),
                     )])
                 .map_err(draw_error)?;
         }
     }
+    draw_map_labels(root, &chart, frame, layers, obstacles)
+}
+
+/// A label of a picture: its text, colour, the pixel it labels and whether it is a fault's
+/// number (boxed, tied to its marker by a leader line when placed away from it).
+struct Label {
+    text: String,
+    colour: RGBColor,
+    at: (f64, f64),
+    boxed: bool,
+}
+
+/// The segments' and the faults' labels on the map, placed so that none overlaps another, a
+/// fault's marker or an anchor (see `labels`).
+fn draw_map_labels(
+    root: &DrawingArea<SVGBackend<'_>, Shift>,
+    chart: &Chart<'_, '_>,
+    frame: &MapFrame,
+    layers: &MapLayers<'_>,
+    mut obstacles: Vec<Rect>,
+) -> Result<(), ReportError> {
+    let pixel = |p: Point| {
+        let (x, y) = chart.backend_coord(&(p.x, p.y));
+        (f64::from(x), f64::from(y))
+    };
+    let mut labels = Vec::new();
+    for (k, segment) in layers.segments.iter().enumerate().take(layers.driven) {
+        if let Some(&first) = segment.first().filter(|&&p| frame.contains(p)) {
+            labels.push(Label {
+                text: format!("s{k}"),
+                colour: PLANNED,
+                at: pixel(first),
+                boxed: false,
+            });
+        }
+    }
+    for fault in layers.faults.iter().filter(|f| frame.contains(f.at)) {
+        let (x, y) = pixel(fault.at);
+        obstacles.push(Rect::around(x, y, f64::from(MARKER_PX) + 1.0));
+        if !fault.label.is_empty() {
+            labels.push(Label {
+                text: fault.label.clone(),
+                colour: FAULT,
+                at: (x, y),
+                boxed: true,
+            });
+        }
+    }
+    let candidates: Vec<Vec<Rect>> = labels
+        .iter()
+        .map(|l| around(l.at.0, l.at.1, text_size(&l.text, LABEL_PX)))
+        .collect();
+    let placed = place(&candidates, &obstacles, plot_bounds(chart));
+    draw_labels(root, &labels, &placed)
+}
+
+/// The chart's drawing area in pixels.
+fn plot_bounds(chart: &Chart<'_, '_>) -> Rect {
+    let (x, y) = chart.plotting_area().get_pixel_range();
+    Rect {
+        x0: f64::from(x.start),
+        y0: f64::from(y.start),
+        x1: f64::from(x.end),
+        y1: f64::from(y.end),
+    }
+}
+
+/// Draws `labels` in their `placed` boxes: a fault's number on white in a box of its colour, with
+/// a leader line to its marker when the box is not next to it.
+fn draw_labels(
+    root: &DrawingArea<SVGBackend<'_>, Shift>,
+    labels: &[Label],
+    placed: &[Rect],
+) -> Result<(), ReportError> {
+    let px = |v: f64| v.round() as i32;
+    for (label, r) in labels.iter().zip(placed) {
+        let (x, y) = label.at;
+        let near = r.nearest(x, y);
+        if label.boxed && (near.0 - x).hypot(near.1 - y) > f64::from(MARKER_PX) + 6.0 {
+            root.draw(&PathElement::new(
+                vec![(px(x), px(y)), (px(near.0), px(near.1))],
+                label.colour.stroke_width(1),
+            ))
+            .map_err(draw_error)?;
+        }
+        let corners = [(px(r.x0), px(r.y0)), (px(r.x1), px(r.y1))];
+        let background = WHITE.mix(if label.boxed { 1.0 } else { 0.75 });
+        root.draw(&Rectangle::new(corners, background.filled()))
+            .map_err(draw_error)?;
+        if label.boxed {
+            root.draw(&Rectangle::new(corners, label.colour.stroke_width(1)))
+                .map_err(draw_error)?;
+        }
+        let (cx, cy) = r.centre();
+        root.draw(&Text::new(
+            label.text.clone(),
+            (px(cx), px(cy)),
+            sans(LABEL_PX)
+                .into_font()
+                .color(&label.colour)
+                .pos(Pos::new(HPos::Center, VPos::Center)),
+        ))
+        .map_err(draw_error)?;
+    }
     Ok(())
+}
+
+/// A tick label with its unit: as many decimals as the value needs, up to two.
+fn tick(value: f64, unit: &str) -> String {
+    let text = format!("{value:.2}");
+    let text = text.trim_end_matches('0').trim_end_matches('.');
+    let text = if text == "-0" { "0" } else { text };
+    format!("{text} {unit}")
 }
 
 type Chart<'a, 'b> = ChartContext<
@@ -506,7 +621,7 @@ pub(crate) struct PlotInput<'a> {
 }
 
 const PLOT_WIDTH: u32 = 860;
-const PLOT_HEIGHT: u32 = 290;
+const PLOT_HEIGHT: u32 = 320;
 
 /// The deviation plot (see the module doc); `None` without samples. Deviations above five times
 /// the threshold are drawn at the top edge.
@@ -548,17 +663,18 @@ pub(crate) fn deviation_svg(input: &PlotInput<'_>) -> Result<Option<String>, Rep
             .configure_mesh()
             .light_line_style(RGBColor(0xf0, 0xf0, 0xf0))
             .bold_line_style(RGBColor(0xdd, 0xdd, 0xdd))
-            .x_desc("seconds since the test began")
-            .y_desc("|UWB − RTK|, m")
-            .label_style(("sans-serif", 12))
+            .x_desc("time since the test began")
+            .y_desc("|UWB − RTK|")
+            .x_label_formatter(&|v| tick(*v, "s"))
+            .y_label_formatter(&|v| tick(*v, "m"))
+            .label_style(sans(AXIS_PX))
+            .axis_desc_style(sans(AXIS_PX))
             .draw()
             .map_err(draw_error)?;
         // A window of a fraction of a pixel is widened to three pixels, so it stays visible.
         let min_width = (t1 - t0) * 3.0 / f64::from(PLOT_WIDTH - 2 * MARGIN - Y_LABELS);
-        // Labels in rows from the top: the windows' in the first two, the boundaries' in the third.
-        let plot_h = f64::from(PLOT_HEIGHT - 2 * MARGIN - X_LABELS);
-        let row = |r: usize| top * (1.0 - 13.0 * r as f64 / plot_h);
-        for (i, w) in input.windows.iter().enumerate() {
+        let mut labels = Vec::new();
+        for w in input.windows {
             let (from, to) = (w.from_s.max(t0), w.to_s.min(t1).max(w.from_s + min_width));
             if from >= t1 || !from.is_finite() || !to.is_finite() {
                 continue;
@@ -569,16 +685,9 @@ pub(crate) fn deviation_svg(input: &PlotInput<'_>) -> Result<Option<String>, Rep
                     FAULT.mix(0.18).filled(),
                 )])
                 .map_err(draw_error)?;
-            chart
-                .draw_series([Text::new(
-                    w.label.clone(),
-                    (from, row(i % 2)),
-                    ("sans-serif", 11)
-                        .into_font()
-                        .color(&FAULT)
-                        .pos(Pos::new(HPos::Left, VPos::Top)),
-                )])
-                .map_err(draw_error)?;
+            if !w.label.is_empty() {
+                labels.push((w.label.clone(), FAULT, from, true));
+            }
         }
         for b in input.boundaries {
             if !(t0..=t1).contains(&b.t_s) {
@@ -590,16 +699,7 @@ pub(crate) fn deviation_svg(input: &PlotInput<'_>) -> Result<Option<String>, Rep
                     RGBColor(0x88, 0x88, 0x88).stroke_width(1),
                 )])
                 .map_err(draw_error)?;
-            chart
-                .draw_series([Text::new(
-                    b.label.clone(),
-                    (b.t_s, row(2)),
-                    ("sans-serif", 11)
-                        .into_font()
-                        .color(&RGBColor(0x55, 0x55, 0x55))
-                        .pos(Pos::new(HPos::Left, VPos::Top)),
-                )])
-                .map_err(draw_error)?;
+            labels.push((b.label.clone(), RGBColor(0x44, 0x44, 0x44), b.t_s, false));
         }
         chart
             .draw_series(DashedLineSeries::new(
@@ -609,16 +709,21 @@ pub(crate) fn deviation_svg(input: &PlotInput<'_>) -> Result<Option<String>, Rep
                 RED_ABOVE.stroke_width(1),
             ))
             .map_err(draw_error)?;
+        let threshold_text = format!("threshold {threshold:.2} m");
         chart
             .draw_series([Text::new(
-                format!("threshold {threshold:.2} m"),
+                threshold_text.clone(),
                 (t0, threshold),
-                ("sans-serif", 11)
+                sans(LABEL_PX)
                     .into_font()
                     .color(&RED_ABOVE)
                     .pos(Pos::new(HPos::Left, VPos::Bottom)),
             )])
             .map_err(draw_error)?;
+        let (tx, ty) = chart.backend_coord(&(t0, threshold));
+        let (tw, th) = text_size(&threshold_text, LABEL_PX);
+        let threshold_box = Rect::at(f64::from(tx), f64::from(ty) - th, tw, th);
+        draw_plot_labels(&root, &chart, &labels, threshold_box)?;
         let runs = coloured_runs(
             input.samples,
             |s| {
@@ -642,6 +747,136 @@ pub(crate) fn deviation_svg(input: &PlotInput<'_>) -> Result<Option<String>, Rep
         root.present().map_err(draw_error)?;
     }
     Ok(Some(svg))
+}
+
+/// The windows' numbers and the segments' names at the top of the plot, each at its time (or
+/// to the right of it, tied to it by a line) in the first row where it overlaps no other label
+/// nor the threshold's (see `labels`). Each label is (text, colour, time, boxed).
+fn draw_plot_labels(
+    root: &DrawingArea<SVGBackend<'_>, Shift>,
+    chart: &Chart<'_, '_>,
+    labels: &[(String, RGBColor, f64, bool)],
+    threshold: Rect,
+) -> Result<(), ReportError> {
+    let bounds = plot_bounds(chart);
+    let labels: Vec<Label> = labels
+        .iter()
+        .map(|(text, colour, t, boxed)| {
+            let (x, _) = chart.backend_coord(&(*t, 0.0));
+            Label {
+                text: text.clone(),
+                colour: *colour,
+                at: (f64::from(x), bounds.y0),
+                boxed: *boxed,
+            }
+        })
+        .collect();
+    let candidates: Vec<Vec<Rect>> = labels
+        .iter()
+        .map(|l| {
+            let size = text_size(&l.text, LABEL_PX);
+            rows(l.at.0 + 1.0, bounds.y0 + 1.0, bounds.y1, size)
+        })
+        .collect();
+    let placed = place(&candidates, &[threshold], bounds);
+    // The leader of a label moved right runs along its row from its time.
+    let anchored: Vec<Label> = labels
+        .into_iter()
+        .zip(&placed)
+        .map(|(l, r)| Label {
+            at: (l.at.0, r.centre().1),
+            ..l
+        })
+        .collect();
+    draw_labels(root, &anchored, &placed)
+}
+
+/// One panel of the coverage chart: a bar per bin, its label under it.
+pub(crate) struct BarPanel<'a> {
+    /// What the bins are (the axis's description).
+    pub title: &'a str,
+    /// Each bin's label and share of the metres driven (0..=1).
+    pub bars: Vec<(String, f64)>,
+}
+
+const BARS_HEIGHT: u32 = 230;
+
+/// The coverage chart: the panels one above the other, each the share of the metres driven per
+/// bin; `None` without a panel.
+pub(crate) fn bars_svg(panels: &[BarPanel<'_>]) -> Result<Option<String>, ReportError> {
+    if panels.is_empty() {
+        return Ok(None);
+    }
+    let height = BARS_HEIGHT * panels.len() as u32;
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (PLOT_WIDTH, height)).into_drawing_area();
+        root.fill(&WHITE).map_err(draw_error)?;
+        let areas = root.split_evenly((panels.len(), 1));
+        for (area, panel) in areas.iter().zip(panels) {
+            draw_bars(area, panel)?;
+        }
+        root.present().map_err(draw_error)?;
+    }
+    Ok(Some(svg))
+}
+
+fn draw_bars(
+    area: &DrawingArea<SVGBackend<'_>, Shift>,
+    panel: &BarPanel<'_>,
+) -> Result<(), ReportError> {
+    let n = panel.bars.len().max(1) as f64;
+    let most = panel.bars.iter().map(|b| b.1).fold(0.0, f64::max);
+    let top = (most * 100.0 * 1.2).clamp(10.0, 100.0);
+    let mut chart = ChartBuilder::on(area)
+        .margin(MARGIN)
+        .x_label_area_size(X_LABELS)
+        .y_label_area_size(Y_LABELS)
+        .build_cartesian_2d(0.0..n, 0.0..top)
+        .map_err(draw_error)?;
+    chart
+        .configure_mesh()
+        .disable_x_mesh()
+        .x_labels(0)
+        .y_labels(5)
+        .light_line_style(RGBColor(0xf0, 0xf0, 0xf0))
+        .bold_line_style(RGBColor(0xdd, 0xdd, 0xdd))
+        .x_desc(panel.title)
+        .y_desc("share of metres")
+        .y_label_formatter(&|v| tick(*v, "%"))
+        .label_style(sans(AXIS_PX))
+        .axis_desc_style(sans(AXIS_PX))
+        .draw()
+        .map_err(draw_error)?;
+    let font = |colour: &RGBColor, v: VPos| {
+        sans(LABEL_PX)
+            .into_font()
+            .color(colour)
+            .pos(Pos::new(HPos::Center, v))
+    };
+    for (k, (label, share)) in panel.bars.iter().enumerate() {
+        let (x, percent) = (k as f64, share * 100.0);
+        chart
+            .draw_series([Rectangle::new(
+                [(x + 0.12, 0.0), (x + 0.88, percent.min(top))],
+                PLANNED.filled(),
+            )])
+            .map_err(draw_error)?;
+        let value = format!("{percent:.0} %");
+        chart
+            .draw_series([
+                EmptyElement::at((x + 0.5, 0.0))
+                    + Text::new(label.clone(), (0, 6), font(&BLACK, VPos::Top)),
+                EmptyElement::at((x + 0.5, percent.min(top)))
+                    + Text::new(
+                        value,
+                        (0, -3),
+                        font(&RGBColor(0x33, 0x33, 0x33), VPos::Bottom),
+                    ),
+            ])
+            .map_err(draw_error)?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -670,6 +905,29 @@ mod tests {
     }
 
     #[test]
+    fn the_coverage_chart_has_a_bar_and_a_label_per_bin() {
+        let panel = BarPanel {
+            title: "speed",
+            bars: vec![("0–2 km/h".to_owned(), 0.25), ("2–4 km/h".to_owned(), 0.75)],
+        };
+        let svg = bars_svg(&[panel]).unwrap().unwrap();
+        assert!(
+            svg.contains("0–2 km/h") && svg.contains("2–4 km/h"),
+            "{svg}"
+        );
+        assert!(svg.contains("75 %") && svg.contains("25 %"), "{svg}");
+        assert!(bars_svg(&[]).unwrap().is_none());
+    }
+
+    #[test]
+    fn ticks_carry_their_unit_and_no_needless_decimals() {
+        assert_eq!(tick(10.0, "m"), "10 m");
+        assert_eq!(tick(0.25, "m"), "0.25 m");
+        assert_eq!(tick(2.5, "s"), "2.5 s");
+        assert_eq!(tick(-0.0001, "m"), "0 m");
+    }
+
+    #[test]
     fn colours_follow_the_threshold() {
         assert_eq!(class_colour(0.2, 1.0), GREEN);
         assert_eq!(class_colour(0.5, 1.0), AMBER);
@@ -685,7 +943,7 @@ mod tests {
         let windows = [Window {
             from_s: 2.0,
             to_s: 2.01,
-            label: "uwb_yaw".to_owned(),
+            label: "1".to_owned(),
         }];
         let boundaries = [Boundary {
             t_s: 3.0,
@@ -700,7 +958,11 @@ mod tests {
         .unwrap()
         .unwrap();
         assert!(plot.starts_with("<svg"), "{plot}");
-        assert!(plot.contains("threshold 1.00 m") && plot.contains("uwb_yaw"));
+        let text = plot.replace('\n', "");
+        assert!(
+            text.contains("threshold 1.00 m") && text.contains(">1</text>"),
+            "{plot}"
+        );
         let layers = MapLayers {
             heat: None,
             segments: vec![vec![Point::new(0.0, 0.0), Point::new(5.0, 1.0)]],

@@ -8,16 +8,17 @@ use scenarios::Scenario;
 use super::ReportError;
 use super::data::{CampaignData, Origin, ReplayData, Sample, ShrinkData, TestData, short};
 use super::draw::{
-    AMBER, Colouring, FAULT, FaultMark, GREEN, MAX_TRACK_POINTS, MapLayers, PlotInput, RED_ABOVE,
-    RUN_COLOURS, TrackLayer, Window, css, decimate, deviation_svg, map_svg,
+    AMBER, BarPanel, Colouring, FAULT, FaultMark, GREEN, MAX_TRACK_POINTS, MapLayers, PlotInput,
+    RED_ABOVE, RUN_COLOURS, TrackLayer, Window, bars_svg, css, decimate, deviation_svg, map_svg,
 };
 use super::explain::{ExplainOptions, explain_segments};
 use super::route::{boundaries, point_along, segments};
 use crate::runner::TestSummary;
 use campaign::case::{Case, CommandRecord};
+use campaign::coverage::{Bin, CoverageStats, FaultCoverage};
 use campaign::explain::{SegmentExplanation, Source};
 use campaign::oracle::{SegmentVerdict, Verdict};
-use campaign::shrink::RunResult;
+use campaign::shrink::{Edit, FaultField, Outcome, RunResult, Step};
 
 const CSS: &str = r#"
 body { font-family: system-ui, -apple-system, "Segoe UI", Roboto, sans-serif; margin: 0 auto;
@@ -36,13 +37,19 @@ table.facts th { width: 13em; }
 .passed { background: #1a9850; } .failed { background: #d7191c; } .aborted { background: #e68a00; }
 .notrun { background: #888; }
 td.above { color: #d7191c; font-weight: 600; }
+td.runs { white-space: nowrap; }
 .figure { margin: 0.5em 0; overflow-x: auto; }
 .figure svg { max-width: 100%; height: auto; border: 1px solid #e4e4e4; }
-.legend { font-size: 0.85em; color: #444; margin: 0.2em 0 1em; }
+.legend { font-size: 0.9em; color: #444; margin: 0.2em 0 1em; line-height: 1.7; }
+.legend .entry { display: inline-block; white-space: nowrap; margin-right: 1.2em; }
+.legend p { margin: 0.1em 0; line-height: 1.4; }
 .legend span.sw { display: inline-block; width: 22px; height: 4px; vertical-align: middle;
-  margin: 0 4px 0 12px; }
+  margin: 0 5px 0 0; }
 .legend span.dot { display: inline-block; width: 10px; height: 10px; border-radius: 5px;
-  vertical-align: middle; margin: 0 4px 0 12px; }
+  vertical-align: middle; margin: 0 5px 0 0; }
+.legend b.n, td b.n { display: inline-block; min-width: 1em; padding: 0 3px; margin-right: 4px;
+  border: 1px solid #7b3294; color: #7b3294; background: #fff; text-align: center; }
+.columns { display: flex; flex-wrap: wrap; gap: 0 2.5em; align-items: flex-start; }
 .notes { background: #fff8e1; border: 1px solid #f0d890; padding: 6px 12px 6px 28px; }
 .test { border-top: 3px solid #eee; margin-top: 2em; }
 a { color: #1f5fae; }
@@ -147,12 +154,13 @@ fn threshold_of(case: &Case, fallback: f64) -> f64 {
 }
 
 /// The faults of a test on the map: the car's place when each was added, and the RTK track
-/// while it acted.
+/// while it acted; each labelled with its number in the key (see [`fault_key`]).
 fn fault_marks(scenario: &Scenario, case: &Case, samples: &[Sample]) -> Vec<FaultMark> {
     let segs = segments(case);
     case.fault_places
         .iter()
-        .filter_map(|place| {
+        .enumerate()
+        .filter_map(|(k, place)| {
             let along = place.actual_along_m.unwrap_or(place.planned_along_m);
             let at = point_along(scenario, &segs, place.segment_index, along)?;
             let window = samples
@@ -162,7 +170,7 @@ fn fault_marks(scenario: &Scenario, case: &Case, samples: &[Sample]) -> Vec<Faul
                 .collect();
             Some(FaultMark {
                 at,
-                label: probe_of(case, place.command_index),
+                label: (k + 1).to_string(),
                 window,
             })
         })
@@ -178,66 +186,143 @@ fn driven(case: &Case) -> usize {
         .unwrap_or(0)
 }
 
+/// The faults' windows on the plot, numbered as in the key.
 fn windows(case: &Case) -> Vec<Window> {
     case.fault_places
         .iter()
-        .map(|p| Window {
+        .enumerate()
+        .map(|(k, p)| Window {
             from_s: p.acts_from_s,
             to_s: p.acts_to_s,
-            label: probe_of(case, p.command_index),
+            label: (k + 1).to_string(),
         })
         .collect()
 }
 
-fn map_legend(out: &mut String, deviation: bool) {
-    out.push_str("<div class=\"legend\">");
-    out.push_str(
-        "<span class=\"sw\" style=\"background:#000\"></span>fence \
-         <span class=\"sw\" style=\"background:#9a9a9a;height:10px\"></span>cutout \
-         <span class=\"sw\" style=\"background:#b0b0b0\"></span>start route \
-         <span class=\"sw\" style=\"background:repeating-linear-gradient(90deg,#4a7fc1 0 6px,transparent 6px 10px)\"></span>planned segments (s0, s1, …; faint: not driven) \
-         <span class=\"sw\" style=\"background:#252525;height:1px\"></span>RTK track ",
-    );
-    if deviation {
+/// A fault command in few words: its probe, what it does and its parameter.
+fn fault_brief(case: &Case, command_index: usize) -> String {
+    match case.commands.get(command_index) {
+        Some(CommandRecord::AddFault {
+            probe, kind, param, ..
+        }) => format!("{probe}: {} {param:.3}", kind.spec().name.replace('_', " ")),
+        _ => format!("command {command_index}"),
+    }
+}
+
+/// The number of the fault of command `command_index` in its test's key (1, 2, …, the order
+/// of the faults' places).
+fn fault_number(case: &Case, command_index: usize) -> Option<usize> {
+    case.fault_places
+        .iter()
+        .position(|p| p.command_index == command_index)
+        .map(|k| k + 1)
+}
+
+/// A fault's number as it is drawn on the map and the plot.
+fn number_badge(number: usize) -> String {
+    format!("<b class=\"n\">{number}</b>")
+}
+
+/// The key of a test's numbered faults (the map's markers, the plot's windows): each number,
+/// its fault and when it acted.
+fn fault_key(out: &mut String, case: &Case) {
+    if case.fault_places.is_empty() {
+        return;
+    }
+    out.push_str("<div class=\"legend\"><span class=\"entry\">Faults by number:</span>");
+    for (k, p) in case.fault_places.iter().enumerate() {
         let _ = write!(
             out,
-            "UWB track: <span class=\"sw\" style=\"background:{}\"></span>below half the threshold \
-             <span class=\"sw\" style=\"background:{}\"></span>up to the threshold \
-             <span class=\"sw\" style=\"background:{}\"></span>above it ",
-            css(GREEN),
-            css(AMBER),
-            css(RED_ABOVE)
+            " <span class=\"entry\">{}{}, acts from {} to {}</span>",
+            number_badge(k + 1),
+            escape(&fault_brief(case, p.command_index)),
+            seconds(p.acts_from_s),
+            seconds(p.acts_to_s)
         );
     }
-    let _ = writeln!(
-        out,
-        "<span class=\"dot\" style=\"border:2px solid {f};width:8px;height:8px\"></span>fault \
-         added (where the car was; probe named) \
-         <span class=\"sw\" style=\"background:{f};opacity:0.35;height:9px\"></span>where it \
-         acted ▲ anchor</div>",
-        f = css(FAULT)
-    );
+    out.push_str("</div>\n");
+}
+
+/// A legend entry: a swatch of `style` and its `text` (HTML), kept on one line.
+fn swatch(style: &str, text: &str) -> String {
+    format!("<span class=\"entry\"><span class=\"sw\" style=\"{style}\"></span>{text}</span>")
+}
+
+/// A legend of `entries` (wrapping between entries, never inside one), then `note` (HTML) as
+/// a paragraph when given.
+fn legend(out: &mut String, entries: &[String], note: Option<&str>) {
+    let _ = write!(out, "<div class=\"legend\">{}", entries.join(" "));
+    if let Some(note) = note {
+        let _ = write!(out, "<p>{note}</p>");
+    }
+    out.push_str("</div>\n");
+}
+
+fn map_legend(out: &mut String, deviation: bool) {
+    let dashed = "background:repeating-linear-gradient(90deg,#4a7fc1 0 6px,transparent 6px 10px)";
+    let mut entries = vec![
+        swatch("background:#000", "fence"),
+        swatch("background:#9a9a9a;height:10px", "cutout"),
+        swatch("background:#b0b0b0", "start route"),
+        swatch(dashed, "planned segments s0, s1, … (faint: not driven)"),
+        swatch("background:#252525;height:1px", "RTK track"),
+    ];
+    if deviation {
+        for (colour, text) in [
+            (GREEN, "UWB track below half the threshold"),
+            (AMBER, "UWB up to the threshold"),
+            (RED_ABOVE, "UWB above the threshold"),
+        ] {
+            entries.push(swatch(&format!("background:{}", css(colour)), text));
+        }
+    }
+    let f = css(FAULT);
+    entries.push(format!(
+        "<span class=\"entry\"><span class=\"dot\" style=\"border:2px solid {f};width:8px;\
+         height:8px\"></span>where the car was when a fault was added</span> \
+         <span class=\"entry\">{}a fault's number (the key below)</span>",
+        number_badge(1)
+    ));
+    entries.push(swatch(
+        &format!("background:{f};opacity:0.35;height:9px"),
+        "where it drove while the fault acted",
+    ));
+    entries.push("<span class=\"entry\">▲ anchor</span>".to_owned());
+    legend(out, &entries, None);
 }
 
 fn plot_legend(out: &mut String, origin: Origin) {
     let origin = match origin {
         Origin::Autopilot => {
-            "t = 0 when the car acknowledged the test's set_autopilot, the runner's test clock"
+            "Time 0 is when the car acknowledged the command that started the test's autopilot: \
+             the runner's test clock."
         }
         Origin::StartEvent => {
-            "t = 0 at the test's start event (no set_autopilot answer recorded): the samples are drawn \
-             up to a few round trips late against the fault windows"
+            "Time 0 is the test's start event (the car's acknowledgement of the autopilot command \
+             is not recorded): the samples may be drawn up to a few round trips late against the \
+             fault windows."
         }
     };
-    let _ = writeln!(
-        out,
-        "<div class=\"legend\">Deviation per state sample, coloured as on the map; \
-         <span class=\"sw\" style=\"background:repeating-linear-gradient(90deg,{r} 0 8px,transparent 8px 13px)\"></span>threshold \
-         <span class=\"sw\" style=\"background:#888;width:2px;height:12px\"></span>segment entered (s0, s1, …; located on the route from the samples as the runner does) and left (end) \
-         <span class=\"sw\" style=\"background:{f};opacity:0.25;height:12px\"></span>fault window (fault_places acts_from_s–acts_to_s). {origin}.</div>",
-        r = css(RED_ABOVE),
-        f = css(FAULT),
-    );
+    let entries = [
+        "<span class=\"entry\">deviation per state sample, coloured as on the map</span>"
+            .to_owned(),
+        swatch(
+            &format!(
+                "background:repeating-linear-gradient(90deg,{} 0 8px,transparent 8px 13px)",
+                css(RED_ABOVE)
+            ),
+            "threshold",
+        ),
+        swatch(
+            "background:#888;width:2px;height:12px",
+            "the car enters segment s0, s1, … (located on the route as the runner does) or ends",
+        ),
+        swatch(
+            &format!("background:{};opacity:0.25;height:12px", css(FAULT)),
+            "while a fault acts (estimated from its probe's call rate), numbered",
+        ),
+    ];
+    legend(out, &entries, Some(origin));
 }
 
 fn segments_table(out: &mut String, case: &Case) {
@@ -245,8 +330,8 @@ fn segments_table(out: &mut String, case: &Case) {
         return;
     }
     out.push_str(
-        "<table><tr><th>segment</th><th>command</th><th>samples</th><th>max</th><th>RMS</th>\
-         <th>p95</th><th>verdict</th><th>faults before it</th></tr>\n",
+        "<table><tr><th>segment</th><th>command</th><th>samples</th><th>largest deviation</th>\
+         <th>RMS</th><th>95th percentile</th><th>verdict</th><th>faults added before it</th></tr>\n",
     );
     for s in &case.segments {
         let o = &s.oracle;
@@ -264,13 +349,16 @@ fn segments_table(out: &mut String, case: &Case) {
         let above = max.is_some_and(|m| m > o.threshold_m);
         let verdict = match o.verdict {
             SegmentVerdict::Passed => "passed",
-            SegmentVerdict::Failed => "FAILED",
+            SegmentVerdict::Failed => "<strong>failed</strong>",
             SegmentVerdict::NoSamples => "no samples",
         };
         let faults: Vec<String> = s
             .faults_preceding
             .iter()
-            .map(|&i| format!("{} (cmd {i})", probe_of(case, i)))
+            .map(|&i| {
+                let number = fault_number(case, i).map_or_else(String::new, number_badge);
+                format!("{number}{}", escape(&probe_of(case, i)))
+            })
             .collect();
         let _ = writeln!(
             out,
@@ -282,7 +370,7 @@ fn segments_table(out: &mut String, case: &Case) {
             metres(max),
             metres(rms),
             metres(p95),
-            escape(&faults.join(", "))
+            faults.join(", ")
         );
     }
     out.push_str("</table>\n");
@@ -293,32 +381,32 @@ fn faults_table(out: &mut String, case: &Case) {
         return;
     }
     out.push_str(
-        "<table><tr><th>command</th><th>fault</th><th>segment</th><th>planned place</th>\
-         <th>actual place</th><th>added</th><th>acted</th></tr>\n",
+        "<table><tr><th>fault</th><th>command</th><th>what it does</th><th>segment</th>\
+         <th>planned place</th><th>where the car was</th><th>added at</th>\
+         <th>acts (estimated)</th></tr>\n",
     );
-    for p in &case.fault_places {
+    for (k, p) in case.fault_places.iter().enumerate() {
         let fault = match case.commands.get(p.command_index) {
             Some(CommandRecord::AddFault {
-                probe,
-                kind,
-                param,
-                start,
-                duration,
-                ..
-            }) => format!("{probe} {kind} {param:.3}, start {start}, duration {duration}"),
+                start, duration, ..
+            }) => format!(
+                "{}; it starts {start} calls of its probe after it is added and lasts {duration} calls",
+                fault_brief(case, p.command_index)
+            ),
             _ => "?".to_owned(),
         };
         let _ = writeln!(
             out,
-            "<tr><td class=\"num\">{}</td><td>{}</td><td class=\"num\">s{}</td>\
-             <td class=\"num\">{:.2} m</td><td class=\"num\">{}</td><td class=\"num\">{:.2} s</td>\
-             <td class=\"num\">{:.2}–{:.2} s</td></tr>",
+            "<tr><td>{}</td><td class=\"num\">{}</td><td>{}</td><td class=\"num\">s{}</td>\
+             <td class=\"num\">{:.2} m along it</td><td class=\"num\">{}</td>\
+             <td class=\"num\">{:.2} s</td><td class=\"num\">from {:.2} s to {:.2} s</td></tr>",
+            number_badge(k + 1),
             p.command_index,
             escape(&fault),
             p.segment_index,
             p.planned_along_m,
             p.actual_along_m
-                .map_or_else(|| "–".to_owned(), |a| format!("{a:.2} m")),
+                .map_or_else(|| "–".to_owned(), |a| format!("{a:.2} m along it")),
             p.added_s,
             p.acts_from_s,
             p.acts_to_s
@@ -472,6 +560,7 @@ fn test_section(
             "No map: neither the scenario nor a track is known.",
         );
         map_legend(out, true);
+        fault_key(out, case);
     }
     out.push_str("<h3>Deviation against time</h3>\n");
     let bounds = match scenario {
@@ -493,6 +582,7 @@ fn test_section(
     );
     if has_plot && let Some(track) = &test.track {
         plot_legend(out, track.origin);
+        fault_key(out, case);
     }
     if let Some(scenario) = scenario
         && case
@@ -776,16 +866,123 @@ fn coverage_section(
         map_svg(Some(scenario), &layers)?,
         "No map of the area.",
     );
-    out.push_str(
-        "<p class=\"sub\">Cells of 0.5 m the tests' driven segments passed through, pale for \
-         one to dark red for the most (logarithmic).</p>\n",
-    );
     let _ = writeln!(
         out,
-        "<pre style=\"white-space:pre-wrap\">{}</pre>\n</section>",
-        escape(&coverage.stats.to_string())
+        "<p class=\"sub\">Cells of {} m the tests' driven segments passed through, pale for \
+         one to dark red for the most (logarithmic).</p>",
+        coverage.stats.cell_m
     );
+    coverage_figures(out, &coverage.stats)?;
+    out.push_str("</section>\n");
     Ok(())
+}
+
+/// The coverage figures `runs show --coverage` prints (`CoverageStats`), as tables, with a
+/// chart of the share of the metres driven per heading and per speed.
+fn coverage_figures(out: &mut String, c: &CoverageStats) -> Result<(), ReportError> {
+    let total = c.driven_m();
+    out.push_str("<table class=\"facts\">\n");
+    fact(out, "tests", &c.tests.to_string());
+    fact(
+        out,
+        "drivable area driven",
+        &format!(
+            "{:.1} % ({} of {} cells of {} m)",
+            c.area_share * 100.0,
+            c.driven_cells,
+            c.drivable_cells,
+            c.cell_m
+        ),
+    );
+    fact(out, "metres driven", &format!("{total:.0} m"));
+    let by_segments: Vec<String> = c
+        .tests_by_segments()
+        .iter()
+        .map(|(segments, n)| format!("{segments} segments: {n}"))
+        .collect();
+    fact(out, "tests by segments driven", &by_segments.join(", "));
+    out.push_str("</table>\n");
+    let share = |b: &Bin| if total > 0.0 { b.metres / total } else { 0.0 };
+    let (headings, speeds) = (c.heading_bins(), c.speed_bins());
+    let panels = [
+        BarPanel {
+            title: "heading, counter-clockwise from east",
+            bars: headings
+                .iter()
+                .map(|b| (format!("{:.0}°", b.from), share(b)))
+                .collect(),
+        },
+        BarPanel {
+            title: "speed",
+            bars: speeds
+                .iter()
+                .map(|b| (format!("{:.0}–{:.0} km/h", b.from, b.to), share(b)))
+                .collect(),
+        },
+    ];
+    if total > 0.0 {
+        out.push_str("<h3>Share of the metres driven by heading and by speed</h3>\n");
+        figure(out, bars_svg(&panels)?, "No chart.");
+    }
+    out.push_str("<div class=\"columns\">\n");
+    bins_table(
+        out,
+        "heading (counter-clockwise from east)",
+        &headings,
+        total,
+        "°",
+    );
+    bins_table(out, "speed", &speeds, total, " km/h");
+    out.push_str("</div>\n");
+    coverage_faults(out, &c.faults);
+    Ok(())
+}
+
+/// A table of the metres driven per bin (`unit` after each bound).
+fn bins_table(out: &mut String, what: &str, bins: &[Bin], total: f64, unit: &str) {
+    let _ = writeln!(
+        out,
+        "<table><tr><th>{}</th><th>metres driven</th><th>share</th></tr>",
+        escape(what)
+    );
+    for b in bins {
+        let share = if total > 0.0 { b.metres / total } else { 0.0 };
+        let _ = writeln!(
+            out,
+            "<tr><td class=\"num\">{:.0}–{:.0}{unit}</td><td class=\"num\">{:.1} m</td>\
+             <td class=\"num\">{:.0} %</td></tr>",
+            b.from,
+            b.to,
+            b.metres,
+            share * 100.0
+        );
+    }
+    out.push_str("</table>\n");
+}
+
+/// The fault kinds per probe the tests planned, the car confirmed and that began acting.
+fn coverage_faults(out: &mut String, faults: &[FaultCoverage]) {
+    if faults.is_empty() {
+        out.push_str("<p>No faults planned.</p>\n");
+        return;
+    }
+    out.push_str(
+        "<table><tr><th>probe</th><th>fault type</th><th>planned</th><th>confirmed by the car</th>\
+         <th>began acting in its test</th></tr>\n",
+    );
+    for f in faults {
+        let _ = writeln!(
+            out,
+            "<tr><td><code>{}</code></td><td>{}</td><td class=\"num\">{}</td>\
+             <td class=\"num\">{}</td><td class=\"num\">{}</td></tr>",
+            escape(&f.probe),
+            escape(&f.kind.to_lowercase().replace('_', " ")),
+            f.planned,
+            f.confirmed,
+            f.acted
+        );
+    }
+    out.push_str("</table>\n");
 }
 
 /// A replay's page: the runs on one map, the comparison, a plot per run.
@@ -958,20 +1155,28 @@ pub(crate) fn replay_page(
             "No map: neither the scenario nor a track is known.",
         );
         map_legend(&mut out, false);
-        out.push_str("<div class=\"legend\">UWB track of ");
-        for (k, _, _) in &decimated {
-            let _ = write!(
-                out,
-                "<span class=\"sw\" style=\"background:{}\"></span>run {} ",
-                css(RUN_COLOURS[k % RUN_COLOURS.len()]),
-                k + 1
-            );
-        }
-        let _ = writeln!(
-            out,
-            "<span class=\"dot\" style=\"background:{}\"></span>UWB above the threshold</div>\n</section>",
+        let mut entries: Vec<String> = decimated
+            .iter()
+            .map(|(k, _, _)| {
+                let colour = css(RUN_COLOURS[k % RUN_COLOURS.len()]);
+                swatch(
+                    &format!("background:{colour}"),
+                    &format!("UWB track of run {}", k + 1),
+                )
+            })
+            .collect();
+        entries.push(format!(
+            "<span class=\"entry\"><span class=\"dot\" style=\"background:{}\"></span>UWB above \
+             the threshold</span>",
             css(RED_ABOVE)
+        ));
+        legend(
+            &mut out,
+            &entries,
+            Some("The faults are numbered at run 1's places."),
         );
+        fault_key(&mut out, &first.case);
+        out.push_str("</section>\n");
     }
     for (k, test, _) in &decimated {
         let dir = &data.runs[*k].0.dir;
@@ -1044,11 +1249,58 @@ fn runs_cell(runs: &[RunResult]) -> String {
         .join("<br>")
 }
 
-fn json_name<T: serde::Serialize>(value: &T) -> String {
-    serde_json::to_value(value)
-        .ok()
-        .and_then(|v| v.as_str().map(str::to_owned))
-        .unwrap_or_else(|| "?".to_owned())
+/// A shrink's edit in words: the edits of a fault name the command and the value (the others'
+/// descriptions are words already).
+fn edit_words(step: &Step) -> String {
+    match step.edit {
+        Edit::DropFault { command_index } => format!("drop the fault of command {command_index}"),
+        Edit::FaultValue {
+            command_index,
+            field,
+            from,
+            to,
+        } => {
+            let what = match field {
+                FaultField::Param => "parameter",
+                FaultField::Start => "start (probe calls after it is added)",
+                FaultField::Duration => "duration (probe calls)",
+            };
+            let short = |v: f64| {
+                let text = format!("{v:.3}");
+                text.trim_end_matches('0').trim_end_matches('.').to_owned()
+            };
+            format!(
+                "the fault of command {command_index}: {what} {} → {}",
+                short(from),
+                short(to)
+            )
+        }
+        _ => step.description.clone(),
+    }
+}
+
+/// How a shrink's step ended, in words: a barely failing run's margin in centimetres above
+/// the `threshold` when it is known.
+fn outcome_words(step: &Step, min_deviation_m: f64, threshold: Option<f64>) -> String {
+    match step.outcome {
+        Outcome::Kept => "kept: every run failed there".to_owned(),
+        Outcome::Passed => "dropped: a run passed".to_owned(),
+        Outcome::FailedElsewhere => "dropped: a run failed first at another segment".to_owned(),
+        Outcome::FailedBarely => match threshold.filter(|t| *t > 0.0 && min_deviation_m > *t) {
+            Some(t) => format!(
+                "dropped: a run failed there by less than {:.0} cm above the threshold",
+                (min_deviation_m - t) * 100.0
+            ),
+            None => format!(
+                "dropped: a run failed there with a largest deviation under {min_deviation_m:.2} m"
+            ),
+        },
+        Outcome::Aborted => "dropped: a run was aborted or ended without a verdict".to_owned(),
+        Outcome::NotDrivable => match &step.not_drivable {
+            Some(why) => format!("not drivable: {why}"),
+            None => "not drivable".to_owned(),
+        },
+    }
 }
 
 /// A shrink's page: before and after, the steps; no maps (a shrink's runs are not recorded).
@@ -1096,10 +1348,13 @@ pub(crate) fn shrink_page(data: &ShrinkData, page_notes: Vec<String>) -> String 
     );
     fact(
         &mut out,
-        "kept when every run fails by",
-        &format!("at least {:.2} m", r.min_deviation_m),
+        "a candidate is kept when",
+        &format!(
+            "every run fails at its segment with a largest deviation of at least {:.2} m",
+            r.min_deviation_m
+        ),
     );
-    fact(&mut out, "ended", &json_name(&r.ended));
+    fact(&mut out, "ended", r.ended.words());
     fact(
         &mut out,
         "simulator runs, wall time",
@@ -1153,17 +1408,22 @@ pub(crate) fn shrink_page(data: &ShrinkData, page_notes: Vec<String>) -> String 
     }
     let _ = writeln!(
         out,
-        "<tr><th>failing segment</th><td>{}</td><td>{}</td></tr>\n\
-         <tr><th>runs</th><td>{}</td><td>{}</td></tr>",
+        "<tr><th>failing segment</th><td>s{}</td><td>s{}</td></tr>\n\
+         <tr><th>{}</th><td class=\"num\" id=\"median-before\">{}</td>\
+         <td class=\"num\" id=\"median-after\">{}</td></tr>\n\
+         <tr><th>runs</th><td class=\"runs\">{}</td><td class=\"runs\">{}</td></tr>",
         escape(&b.target.to_string()),
         escape(&a.target.to_string()),
+        escape(campaign::shrink::MEDIAN_ROW),
+        metres(b.median_deviation_m()),
+        metres(a.median_deviation_m()),
         runs_cell(&b.runs),
         runs_cell(&a.runs)
     );
     if let Some(runs) = &r.without_faults {
         let _ = writeln!(
             out,
-            "<tr><th>minimal case without its faults</th><td></td><td>{}</td></tr>",
+            "<tr><th>the minimal case without its faults</th><td></td><td class=\"runs\">{}</td></tr>",
             runs_cell(runs)
         );
     }
@@ -1172,13 +1432,18 @@ pub(crate) fn shrink_page(data: &ShrinkData, page_notes: Vec<String>) -> String 
         out.push_str("<section id=\"minimal\">\n<h2>The minimal case's segments</h2>\n");
         let _ = writeln!(
             out,
-            "<p class=\"sub\"><code>minimal.json</code>: {} commands, verdict {}{}</p>",
+            "<p class=\"sub\"><code>minimal.json</code>: {} commands, verdict {}{}. Its \
+             figures are those of one run, {}; the median above is over all {} runs.</p>",
             minimal.commands.len(),
             minimal.verdict.map_or("–", Verdict::as_str),
             minimal
                 .reason
                 .as_deref()
-                .map_or_else(String::new, |r| format!(" ({})", escape(r)))
+                .map_or_else(String::new, |r| format!(" ({})", escape(r))),
+            a.runs
+                .first()
+                .map_or_else(|| "the first".to_owned(), |r| format!("seed {}", r.seed)),
+            a.runs.len()
         );
         segments_table(&mut out, minimal);
         faults_table(&mut out, minimal);
@@ -1186,30 +1451,25 @@ pub(crate) fn shrink_page(data: &ShrinkData, page_notes: Vec<String>) -> String 
     }
     out.push_str(
         "<section id=\"steps\">\n<h2>Steps</h2>\n<table><tr><th>#</th><th>edit</th>\
-         <th>outcome</th><th>commands</th><th>target</th><th>runs</th></tr>\n",
+         <th>outcome</th><th>commands</th><th>must fail at</th><th>runs</th></tr>\n",
     );
+    let threshold = data.minimal.as_ref().map(|m| threshold_of(m, 0.0));
     for (i, step) in r.steps.iter().enumerate() {
-        let outcome = json_name(&step.outcome);
-        let detail = step
-            .not_drivable
-            .as_deref()
-            .map_or_else(String::new, |why| format!(": {}", escape(why)));
-        let class = if outcome == "kept" {
-            " class=\"kept\""
+        let outcome = outcome_words(step, r.min_deviation_m, threshold);
+        let (class, outcome) = if step.outcome == Outcome::Kept {
+            (
+                " class=\"kept\"",
+                format!("<strong>{}</strong>", escape(&outcome)),
+            )
         } else {
-            ""
+            ("", escape(&outcome))
         };
         let _ = writeln!(
             out,
-            "<tr{class}><td class=\"num\">{}</td><td>{}</td><td>{}{detail}</td>\
-             <td class=\"num\">{}</td><td>{}</td><td>{}</td></tr>",
+            "<tr{class}><td class=\"num\">{}</td><td>{}</td><td>{outcome}</td>\
+             <td class=\"num\">{}</td><td>s{}</td><td class=\"runs\">{}</td></tr>",
             i + 1,
-            escape(&step.description),
-            if outcome == "kept" {
-                "<strong>kept</strong>".to_owned()
-            } else {
-                escape(&outcome)
-            },
+            escape(&edit_words(step)),
             step.commands,
             escape(&step.target.to_string()),
             runs_cell(&step.runs)

@@ -22,6 +22,7 @@ pub(crate) mod data;
 mod draw;
 pub mod explain;
 mod html;
+mod labels;
 mod route;
 
 use std::path::{Path, PathBuf};
