@@ -6,7 +6,6 @@ use std::process::ExitCode;
 use clap::Parser;
 use orchestrator::cli::Cli;
 use orchestrator::exit::Exit;
-use tracing_subscriber::EnvFilter;
 
 fn main() -> ExitCode {
     exit_quietly_when_stdout_closes();
@@ -44,21 +43,33 @@ fn main() -> ExitCode {
 /// `RUST_LOG` selects them (`RUST_LOG=debug`, `RUST_LOG=orchestrator=debug,car_link=info`). Without
 /// it nothing is logged, so what drivecheck prints is what its commands print.
 fn log_as_rust_log_says() {
-    if std::env::var_os(EnvFilter::DEFAULT_ENV).is_none_or(|v| v.is_empty()) {
+    use tracing_subscriber::layer::SubscriberExt;
+    use tracing_subscriber::util::SubscriberInitExt;
+    const RUST_LOG: &str = "RUST_LOG";
+    let Some(value) = std::env::var_os(RUST_LOG).filter(|v| !v.is_empty()) else {
         return;
-    }
-    let filter = match EnvFilter::try_from_default_env() {
-        Ok(filter) => filter,
-        Err(error) => {
-            eprintln!("warning: {} ignored: {error}", EnvFilter::DEFAULT_ENV);
+    };
+    let filter = match value
+        .to_str()
+        .map(str::parse::<tracing_subscriber::filter::Targets>)
+    {
+        Some(Ok(filter)) => filter,
+        Some(Err(error)) => {
+            eprintln!("warning: {RUST_LOG} ignored: {error}");
+            return;
+        }
+        None => {
+            eprintln!("warning: {RUST_LOG} ignored: it is not UTF-8");
             return;
         }
     };
-    // The only subscriber of the process, set before anything logs: this cannot fail.
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(filter)
+    let format = tracing_subscriber::fmt::layer()
         .with_writer(std::io::stderr)
-        .with_ansi(std::io::stderr().is_terminal())
+        .with_ansi(std::io::stderr().is_terminal());
+    // The only subscriber of the process, set before anything logs: this cannot fail.
+    let _ = tracing_subscriber::registry()
+        .with(format)
+        .with(filter)
         .try_init();
 }
 
