@@ -150,21 +150,12 @@ pub fn run_campaign_fresh<C: FreshCars + ?Sized>(
     let settings = Settings::new(scenario, config.campaign.tests, config.policy);
     let mut dir = RunDirectory::create(config, scenario, settings.clone())
         .map_err(CampaignFailure::without_report)?;
-    let mut recorder = match (config.record, config.live.as_ref()) {
+    let started = match (config.record, config.live.as_ref()) {
         // Nothing kept, but a live view still gets the area (and each test its messages).
         (RecordMode::None, Some(live)) => {
-            match Recorder::live_only(origin, true, 1, live, Some(scenario)) {
-                Ok(recorder) => Some(recorder),
-                Err(error) => {
-                    let report = dir.finish().map_err(CampaignFailure::without_report)?;
-                    return Err(CampaignFailure {
-                        error: RunError::Recording(error),
-                        report: Some(report),
-                    });
-                }
-            }
+            Recorder::live_only(origin, true, 1, live, Some(scenario)).map(Some)
         }
-        (RecordMode::None, None) => None,
+        (RecordMode::None, None) => Ok(None),
         (RecordMode::All | RecordMode::Failing, _) => {
             let start = RecordingStart {
                 campaign: dir.record(),
@@ -178,17 +169,12 @@ pub fn run_campaign_fresh<C: FreshCars + ?Sized>(
                 test_spans: true,
                 sim_profile: config.car_profile.as_ref(),
             };
-            match Recorder::create(&dir.path().join(RECORDING_FILE), &start) {
-                Ok(recorder) => Some(recorder),
-                Err(error) => {
-                    let report = dir.finish().map_err(CampaignFailure::without_report)?;
-                    return Err(CampaignFailure {
-                        error: RunError::Recording(error),
-                        report: Some(report),
-                    });
-                }
-            }
+            Recorder::create(&dir.path().join(RECORDING_FILE), &start).map(Some)
         }
+    };
+    let mut recorder = match started {
+        Ok(recorder) => recorder,
+        Err(error) => return Err(super::recording_not_started(dir, error)),
     };
     let journal = match recorder.take() {
         Some(recorder) => Journal::new(recorder, None),

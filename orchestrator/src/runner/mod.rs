@@ -393,34 +393,20 @@ pub async fn run_campaign<V: Vehicle>(
         test_spans: false,
         sim_profile: config.car_profile.as_ref().filter(|_| sim.is_some()),
     };
-    let journal = if config.record == RecordMode::None {
-        match config.live.as_ref() {
-            // Nothing kept, but a live view still gets the area and every message.
-            Some(live) => {
-                match Recorder::live_only(origin, sim.is_some(), 1, live, Some(scenario)) {
-                    Ok(recorder) => Journal::new(recorder, sim),
-                    Err(error) => {
-                        let report = dir.finish().map_err(CampaignFailure::without_report)?;
-                        return Err(CampaignFailure {
-                            error: RunError::Recording(error),
-                            report: Some(report),
-                        });
-                    }
-                }
-            }
-            None => Journal::without_recording(sim),
+    let started = match (config.record, config.live.as_ref()) {
+        // Nothing kept, but a live view still gets the area and every message.
+        (RecordMode::None, Some(live)) => {
+            Recorder::live_only(origin, sim.is_some(), 1, live, Some(scenario)).map(Some)
         }
-    } else {
-        match Recorder::create(&dir.path().join(RECORDING_FILE), &start) {
-            Ok(recorder) => Journal::new(recorder, sim),
-            Err(error) => {
-                let report = dir.finish().map_err(CampaignFailure::without_report)?;
-                return Err(CampaignFailure {
-                    error: RunError::Recording(error),
-                    report: Some(report),
-                });
-            }
+        (RecordMode::None, None) => Ok(None),
+        (RecordMode::All | RecordMode::Failing, _) => {
+            Recorder::create(&dir.path().join(RECORDING_FILE), &start).map(Some)
         }
+    };
+    let journal = match started {
+        Ok(Some(recorder)) => Journal::new(recorder, sim),
+        Ok(None) => Journal::without_recording(sim),
+        Err(error) => return Err(recording_not_started(dir, error)),
     };
     let inputs = Inputs {
         car,
@@ -432,6 +418,18 @@ pub async fn run_campaign<V: Vehicle>(
     };
     let result = run_tests(&inputs, &mut dir).await;
     finish_campaign(dir, journal, result)
+}
+
+/// The failure of a campaign whose recording could not be started: the run directory is
+/// completed (no test ran) and the failure carries its report.
+fn recording_not_started(dir: RunDirectory, error: RecordingError) -> CampaignFailure {
+    match dir.finish() {
+        Ok(report) => CampaignFailure {
+            error: RunError::Recording(error),
+            report: Some(report),
+        },
+        Err(finishing) => CampaignFailure::without_report(finishing),
+    }
 }
 
 /// Completes the run directory and the recording after the tests ran with `result`: the report,
