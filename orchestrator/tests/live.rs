@@ -71,6 +71,8 @@ async fn watch(
                             Some("/foxglove/area") => 1,
                             Some("/foxglove/rtk") => {
                                 assert_eq!(channel["schemaName"], "foxglove.PoseInFrame");
+                                assert_eq!(channel["encoding"], "protobuf");
+                                assert_eq!(channel["schemaEncoding"], "protobuf");
                                 2
                             }
                             _ => continue,
@@ -87,7 +89,11 @@ async fn watch(
                 }
                 Message::Binary(data) if data.first() == Some(&1) => {
                     let subscription = u32::from_le_bytes(data[1..5].try_into().unwrap());
-                    let message: serde_json::Value = serde_json::from_slice(&data[13..]).unwrap();
+                    let message = match subscription {
+                        // The poses are Foxglove's protobuf `PoseInFrame`.
+                        2 => pose_json(&data[13..]),
+                        _ => serde_json::from_slice(&data[13..]).unwrap(),
+                    };
                     match subscription {
                         1 => area = area.or(Some(message)),
                         2 => pose = pose.or(Some(message)),
@@ -110,6 +116,16 @@ async fn watch(
             "no area and pose within 60 s: {}",
             String::from_utf8_lossy(&output.stderr)
         )
+    })
+}
+
+/// A `foxglove.PoseInFrame` in protobuf, as the JSON of its frame and position.
+fn pose_json(data: &[u8]) -> serde_json::Value {
+    let pose: foxglove::messages::PoseInFrame = prost::Message::decode(data).unwrap();
+    let position = pose.pose.and_then(|p| p.position).unwrap();
+    serde_json::json!({
+        "frame_id": pose.frame_id,
+        "pose": {"position": {"x": position.x, "y": position.y}},
     })
 }
 

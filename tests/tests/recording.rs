@@ -344,21 +344,30 @@ async fn the_recording_has_foxglove_channels_that_the_official_readers_read() {
         let t = Topic::from_name(topic).unwrap();
         assert!(recording.count(t) > 0, "no message on {topic}");
     }
+    // Every sample's RTK position is finite here: a pose for each.
     assert_eq!(
         recording.count(Topic::FoxgloveRtk),
         recording.count(Topic::CarState)
     );
+    // The official readers: JSON channels parsed, protobuf ones decoded by their schemas with
+    // the mcap package's protobuf decoder (as Foxglove decodes them).
     let python = std::env::var("DRIVECHECK_PYTHON").unwrap_or_else(|_| "python3".to_owned());
     let script = r#"
 import sys, json, collections
 from mcap.reader import make_reader
-counts, schemas = collections.Counter(), {}
+from mcap_protobuf.decoder import DecoderFactory
+counts, schemas, fields = collections.Counter(), {}, {}
+protobuf = DecoderFactory()
 with open(sys.argv[1], "rb") as f:
     for schema, channel, message in make_reader(f).iter_messages():
         counts[channel.topic] += 1
         schemas[channel.topic] = schema.name
-        json.loads(message.data)
-print(json.dumps({"counts": counts, "schemas": schemas}))
+        if channel.message_encoding == "json":
+            json.loads(message.data)
+        else:
+            decoded = protobuf.decoder_for(channel.message_encoding, schema)(message.data)
+            fields[channel.topic] = sorted(d.name for d, _ in decoded.ListFields())
+print(json.dumps({"counts": counts, "schemas": schemas, "fields": fields}))
 "#;
     let out = std::process::Command::new(&python)
         .args(["-c", script])
@@ -381,4 +390,20 @@ print(json.dumps({"counts": counts, "schemas": schemas}))
         assert_eq!(read["schemas"][topic], schema, "{read}");
         assert!(read["counts"][topic].as_u64().unwrap_or(0) > 0, "{read}");
     }
+    // The protobuf channels decoded to their fields by name.
+    assert_eq!(
+        read["fields"]["/foxglove/rtk"],
+        serde_json::json!(["frame_id", "pose", "timestamp"]),
+        "{read}"
+    );
+    let state = read["fields"]["/car/state"]
+        .as_array()
+        .expect("/car/state decoded");
+    assert!(state.contains(&serde_json::json!("deviation_m")), "{read}");
+    assert!(
+        read["fields"]["/sim/truth"]
+            .as_array()
+            .is_some_and(|f| f.contains(&serde_json::json!("heading_rad"))),
+        "{read}"
+    );
 }

@@ -6,7 +6,8 @@
 //! `foxglove.PoseInFrame`) and the events worth reading (`/foxglove/log`, `foxglove.Log`: faults
 //! sent and confirmed, tests started and ended, safety stops).
 //!
-//! They are JSON, with JSON schemas derived from the types below (Foxglove knows the message
+//! The poses are protobuf in Foxglove's own schema (`foxglove::messages::PoseInFrame`); the
+//! rest are JSON, with JSON schemas derived from the types below (Foxglove knows the message
 //! types by their schema names). Everything is in the frame `map`: x east, y north, in
 //! metres, as the area's coordinates. The recorder writes them beside the records they come from
 //! (see `Recorder`); `docs/foxglove-layout.json` is a layout with a 3D panel, a plot of the
@@ -274,6 +275,14 @@ pub struct RtkPose(pub PoseInFrame);
 
 impl Record for RtkPose {
     const TOPIC: Topic = Topic::FoxgloveRtk;
+
+    fn encode(&self) -> Result<Vec<u8>, super::RecordingError> {
+        Ok(self.0.to_protobuf())
+    }
+
+    fn from_protobuf(data: &[u8]) -> Option<Result<Self, prost::DecodeError>> {
+        Some(PoseInFrame::from_protobuf(data).map(RtkPose))
+    }
 }
 
 /// `/foxglove/uwb`: the UWB pose of a state sample.
@@ -283,6 +292,73 @@ pub struct UwbPose(pub PoseInFrame);
 
 impl Record for UwbPose {
     const TOPIC: Topic = Topic::FoxgloveUwb;
+
+    fn encode(&self) -> Result<Vec<u8>, super::RecordingError> {
+        Ok(self.0.to_protobuf())
+    }
+
+    fn from_protobuf(data: &[u8]) -> Option<Result<Self, prost::DecodeError>> {
+        Some(PoseInFrame::from_protobuf(data).map(UwbPose))
+    }
+}
+
+impl PoseInFrame {
+    /// The message in Foxglove's protobuf `foxglove.PoseInFrame` (recording version 3).
+    fn to_protobuf(self) -> Vec<u8> {
+        use ::foxglove::messages as fm;
+        let p = self.pose.position;
+        let o = self.pose.orientation;
+        let message = fm::PoseInFrame {
+            timestamp: Some(fm::Timestamp::new(
+                u32::try_from(self.timestamp.sec).unwrap_or(u32::MAX),
+                self.timestamp.nsec,
+            )),
+            frame_id: FRAME.to_owned(),
+            pose: Some(fm::Pose {
+                position: Some(fm::Vector3 {
+                    x: p.x,
+                    y: p.y,
+                    z: p.z,
+                }),
+                orientation: Some(fm::Quaternion {
+                    x: o.x,
+                    y: o.y,
+                    z: o.z,
+                    w: o.w,
+                }),
+            }),
+        };
+        prost::Message::encode_to_vec(&message)
+    }
+
+    /// A `foxglove.PoseInFrame` in protobuf.
+    fn from_protobuf(data: &[u8]) -> Result<Self, prost::DecodeError> {
+        let message: ::foxglove::messages::PoseInFrame = prost::Message::decode(data)?;
+        let time = message.timestamp.unwrap_or_default();
+        let pose = message.pose.unwrap_or_default();
+        let p = pose.position.unwrap_or_default();
+        let o = pose.orientation.unwrap_or_default();
+        Ok(PoseInFrame {
+            timestamp: Time {
+                sec: u64::from(time.sec()),
+                nsec: time.nsec(),
+            },
+            frame_id: (),
+            pose: Pose {
+                position: Vector3 {
+                    x: p.x,
+                    y: p.y,
+                    z: p.z,
+                },
+                orientation: Quaternion {
+                    x: o.x,
+                    y: o.y,
+                    z: o.z,
+                    w: o.w,
+                },
+            },
+        })
+    }
 }
 
 /// `/foxglove/log`: an event worth reading.
@@ -503,18 +579,26 @@ pub(super) fn derived<R: Record + 'static>(record: &R, at: Time) -> Option<Deriv
 }
 
 /// The RTK and UWB poses of a state sample, each where its position is finite (a pose without
-/// one is not written: JSON has no NaN, and Foxglove would draw it at the origin).
+/// one is not written: Foxglove would draw it at the origin; `/car/state` then holds the
+/// position). The RTK pose heads the RTK yaw; the UWB estimate has no heading of its own, so its
+/// pose has the identity orientation. These channels are where a version-3 recording keeps the
+/// sample's RTK and UWB positions (`super::proto`).
 pub(super) fn poses(state: &CarStateRecord, at: Time) -> (Option<RtkPose>, Option<UwbPose>) {
     let yaw = state.rtk.yaw_deg.to_radians();
-    let pose = |x: f64, y: f64| {
-        (x.is_finite() && y.is_finite()).then(|| PoseInFrame {
+    let pose = |x: f64, y: f64, yaw: f64| {
+        has_pose(x, y).then(|| PoseInFrame {
             timestamp: at,
             frame_id: (),
             pose: Pose::at(x, y, if yaw.is_finite() { yaw } else { 0.0 }),
         })
     };
     (
-        pose(state.rtk.x, state.rtk.y).map(RtkPose),
-        pose(state.uwb.x, state.uwb.y).map(UwbPose),
+        pose(state.rtk.x, state.rtk.y, yaw).map(RtkPose),
+        pose(state.uwb.x, state.uwb.y, 0.0).map(UwbPose),
     )
+}
+
+/// Whether a position gets a pose on `/foxglove/rtk` or `/foxglove/uwb`: when it is finite.
+pub(super) fn has_pose(x: f64, y: f64) -> bool {
+    x.is_finite() && y.is_finite()
 }

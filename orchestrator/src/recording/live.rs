@@ -175,17 +175,21 @@ impl LiveView {
     }
 
     /// A channel of the view for `topic`, with its schema.
-    pub(super) fn channel(&self, topic: Topic, schema: &str) -> Option<LiveChannel> {
+    pub(super) fn channel(
+        &self,
+        topic: Topic,
+        schema: &super::schema::ChannelSchema,
+    ) -> Option<LiveChannel> {
         let mut channels = self.channels.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(channel) = channels.get(&topic) {
             return Some(channel.clone());
         }
         let channel = ChannelBuilder::new(topic.name())
-            .message_encoding("json")
+            .message_encoding(topic.encoding().name())
             .schema(Schema::new(
                 topic.schema_name(),
-                "jsonschema",
-                schema.as_bytes().to_vec(),
+                schema.encoding,
+                schema.data.clone(),
             ))
             .context(&self.context)
             .build_raw()

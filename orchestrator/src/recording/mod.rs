@@ -1,12 +1,14 @@
 //! A campaign's telemetry recording: an MCAP file written as things happen, readable in Foxglove,
 //! the `mcap` CLI or any MCAP library.
 //!
-//! A [`Recorder`] opens the file at campaign start, writes one JSON message per event on the
+//! A [`Recorder`] opens the file at campaign start, writes one message per event on the
 //! channel of its [`Topic`] (car state samples, commands and acks, planned segments and return
 //! routes, faults and their confirmation, oracle results, safety events, test starts and ends, and
 //! in a simulated run the simulator's hidden truth), and is finished at campaign end. The scenario
-//! and the campaign are MCAP metadata records. Every channel carries a JSON schema (`jsonschema`
-//! encoding) and JSON messages (`json` encoding).
+//! and the campaign are MCAP metadata records. The channels written at every state sample
+//! (`/car/state`, `/sim/truth`, `/foxglove/rtk`, `/foxglove/uwb`) are protobuf with a
+//! `FileDescriptorSet` schema (`proto`; nothing is written on two of them); every other channel
+//! carries a JSON schema (`jsonschema` encoding) and JSON messages (`json` encoding).
 //!
 //! Log time: nanoseconds of the run's tokio clock since the campaign started (the `origin` the
 //! recorder is created with). In a virtual-time run the recording is therefore deterministic.
@@ -24,6 +26,7 @@
 
 pub mod foxglove;
 pub mod live;
+mod proto;
 mod reader;
 mod records;
 mod schema;
@@ -43,7 +46,7 @@ pub use records::{
     RadioPathRecord, RangeOutcome, SafetyRecord, SimEvent, SimEventKind, SimFault, SimRange,
     TestEvent, TestEventKind, TruthRecord,
 };
-pub use topic::{Record, Topic};
+pub use topic::{Encoding, Record, Topic};
 pub use writer::{
     DEFAULT_CHUNK_INTERVAL, FinishedRecording, Held, Recorder, RecordingStart,
     SIM_PROFILE_METADATA, TEST_SPAN_PREFIX,
@@ -54,10 +57,11 @@ pub const RECORDING_FORMAT: &str = "drivecheck-recording";
 /// The recording format version this build writes.
 ///
 /// Version 2 leaves a value out where version 1 wrote `null` (a number that was not finite, an
-/// absent option), so that every field has one type in the channels' schemas.
-pub const RECORDING_VERSION: u32 = 2;
+/// absent option), so that every field has one type in the channels' schemas. Version 3 writes
+/// the channels of every state sample in protobuf, each value once (`proto`).
+pub const RECORDING_VERSION: u32 = 3;
 /// The recording format versions this build reads (a version-1 `null` is read as before).
-pub const READABLE_RECORDING_VERSIONS: [u32; 2] = [1, 2];
+pub const READABLE_RECORDING_VERSIONS: [u32; 3] = [1, 2, 3];
 
 /// Why a recording could not be written or read.
 #[derive(Debug, Error)]
@@ -104,7 +108,7 @@ pub enum RecordingError {
     /// The file is not a drivecheck recording this build reads (its `drivecheck.recording`
     /// metadata record is absent or names another format or version).
     #[error(
-        "not a drivecheck recording of version 1 or 2 \
+        "not a drivecheck recording of version 1, 2 or 3 \
          (format {format:?}, schema_version {version:?})"
     )]
     UnsupportedFormat {
@@ -123,5 +127,40 @@ pub enum RecordingError {
         /// What serde said.
         #[source]
         source: serde_json::Error,
+    },
+    /// A protobuf message does not decode as its channel's record.
+    #[error("{topic} message {index}: {source}")]
+    DecodeProtobuf {
+        /// The channel.
+        topic: &'static str,
+        /// The message's position among the channel's messages, from 0.
+        index: usize,
+        /// What prost said.
+        #[source]
+        source: prost::DecodeError,
+    },
+    /// A channel's messages are in an encoding this build does not read for it.
+    #[error("{topic}: messages in {encoding:?}, which drivecheck does not read on this channel")]
+    UnknownEncoding {
+        /// The channel.
+        topic: &'static str,
+        /// The channel's `message_encoding`.
+        encoding: String,
+    },
+    /// Messages recorded in another encoding than this build writes (a recording of another
+    /// version), which cannot go into a recording this build writes (`runs merge`).
+    #[error(
+        "{topic}: a message in {found} cannot go into a recording of version {version}, which \
+         writes {expected}: the shards were recorded by another drivecheck version"
+    )]
+    MixedEncoding {
+        /// The channel.
+        topic: &'static str,
+        /// The message's encoding.
+        found: &'static str,
+        /// The channel's encoding in this version.
+        expected: &'static str,
+        /// This build's recording version.
+        version: u32,
     },
 }

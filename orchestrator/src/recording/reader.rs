@@ -7,7 +7,7 @@ use std::path::Path;
 
 use mcap::records::Record as McapRecord;
 
-use super::topic::{Record, Topic};
+use super::topic::{Encoding, Record, Topic};
 use super::{READABLE_RECORDING_VERSIONS, RECORDING_FORMAT, RecordingError};
 
 /// A channel of a recording, as the file declares it.
@@ -144,7 +144,7 @@ impl Recording {
                 .entry(id)
                 .or_insert_with(|| RecordingChannel {
                     topic: topic.name().to_owned(),
-                    message_encoding: "json".to_owned(),
+                    message_encoding: message.encoding().name().to_owned(),
                     schema_name: String::new(),
                     schema_encoding: String::new(),
                     schema: Vec::new(),
@@ -208,8 +208,15 @@ impl Recording {
         self.messages
             .iter()
             .filter_map(|m| {
-                let topic = Topic::from_name(&self.channels.get(&m.channel_id)?.topic)?;
-                Some(super::Held::new(topic, m.log_time, m.data.clone()))
+                let channel = self.channels.get(&m.channel_id)?;
+                let topic = Topic::from_name(&channel.topic)?;
+                let encoding = Encoding::from_name(&channel.message_encoding)?;
+                Some(super::Held::encoded_as(
+                    topic,
+                    encoding,
+                    m.log_time,
+                    m.data.clone(),
+                ))
             })
             .collect()
     }
@@ -229,27 +236,69 @@ impl Recording {
         self.raw(topic).count()
     }
 
-    /// The messages of `R`'s channel in file order, decoded.
+    /// The messages of `R`'s channel in file order, decoded (a state sample of a version-3
+    /// recording joined with its poses: [`Record::read_all`]).
     pub fn messages<R: Record>(&self) -> Result<Vec<Stamped<R>>, RecordingError> {
-        self.raw(R::TOPIC)
+        R::read_all(self)
+    }
+
+    /// The encoding of `topic`'s channel, if the file declares the channel in an encoding
+    /// drivecheck writes.
+    pub fn encoding(&self, topic: Topic) -> Option<Encoding> {
+        Encoding::from_name(&self.channel(topic)?.message_encoding)
+    }
+
+    /// The messages of `R`'s channel in file order, each decoded alone in its channel's
+    /// encoding.
+    pub fn decode_each<R: Record>(&self) -> Result<Vec<Stamped<R>>, RecordingError> {
+        let topic = R::TOPIC.name();
+        let encoding = match self.channel(R::TOPIC) {
+            None => return Ok(Vec::new()),
+            Some(channel) => Encoding::from_name(&channel.message_encoding).ok_or_else(|| {
+                RecordingError::UnknownEncoding {
+                    topic,
+                    encoding: channel.message_encoding.clone(),
+                }
+            })?,
+        };
+        self.raw_messages(R::TOPIC)
             .enumerate()
-            .map(|(index, m)| {
-                let message =
-                    serde_json::from_slice(&m.data).map_err(|source| RecordingError::Decode {
-                        topic: R::TOPIC.name(),
-                        index,
-                        source,
-                    })?;
+            .map(|(index, (log_time_ns, sequence, data))| {
+                let message = match encoding {
+                    Encoding::Json => {
+                        serde_json::from_slice(data).map_err(|source| RecordingError::Decode {
+                            topic,
+                            index,
+                            source,
+                        })?
+                    }
+                    Encoding::Protobuf => R::from_protobuf(data)
+                        .ok_or_else(|| RecordingError::UnknownEncoding {
+                            topic,
+                            encoding: encoding.name().to_owned(),
+                        })?
+                        .map_err(|source| RecordingError::DecodeProtobuf {
+                            topic,
+                            index,
+                            source,
+                        })?,
+                };
                 Ok(Stamped {
-                    log_time_ns: m.log_time,
-                    sequence: m.sequence,
+                    log_time_ns,
+                    sequence,
                     message,
                 })
             })
             .collect()
     }
 
-    /// The JSON payloads of `topic`'s messages in file order, undecoded.
+    /// `topic`'s messages in file order, undecoded: log time, sequence and bytes.
+    pub fn raw_messages(&self, topic: Topic) -> impl Iterator<Item = (u64, u32, &[u8])> {
+        self.raw(topic)
+            .map(|m| (m.log_time, m.sequence, m.data.as_slice()))
+    }
+
+    /// The payloads of `topic`'s messages in file order, undecoded.
     pub fn payloads(&self, topic: Topic) -> impl Iterator<Item = &[u8]> {
         self.raw(topic).map(|m| m.data.as_slice())
     }
@@ -286,7 +335,7 @@ pub struct Span {
 /// from its start on); messages after the last such record come as one span without a test.
 pub struct Spans<'a> {
     records: Records<'a>,
-    channels: BTreeMap<u16, Topic>,
+    channels: BTreeMap<u16, (Topic, Encoding)>,
     pending: Vec<super::Held>,
     done: bool,
     /// Where the file is damaged or cut short: given after what was read before it.
@@ -359,14 +408,18 @@ impl Iterator for Spans<'_> {
             };
             match record {
                 McapRecord::Channel(channel) => {
-                    if let Some(topic) = Topic::from_name(&channel.topic) {
-                        self.channels.insert(channel.id, topic);
+                    if let (Some(topic), Some(encoding)) = (
+                        Topic::from_name(&channel.topic),
+                        Encoding::from_name(&channel.message_encoding),
+                    ) {
+                        self.channels.insert(channel.id, (topic, encoding));
                     }
                 }
                 McapRecord::Message { header, data } => {
-                    if let Some(&topic) = self.channels.get(&header.channel_id) {
-                        self.pending.push(super::Held::new(
+                    if let Some(&(topic, encoding)) = self.channels.get(&header.channel_id) {
+                        self.pending.push(super::Held::encoded_as(
                             topic,
+                            encoding,
                             header.log_time,
                             data.into_owned(),
                         ));

@@ -13,7 +13,12 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Deserializer, Serialize};
 use tokio::time::Instant;
 
-use super::topic::{Record, Topic};
+use prost::Message;
+
+use super::foxglove::{RtkPose, UwbPose, has_pose};
+use super::proto::{CarStatePb, TruthPb};
+use super::topic::{Encoding, Record, Topic};
+use super::{Recording, Stamped};
 use campaign::drive::FaultPlacement;
 use campaign::files::{IntentRecord, PointRecord, RoutePointRecord, SegmentResult};
 use campaign::model::{Fault, FaultKind, Probe, Segment};
@@ -195,6 +200,113 @@ impl CarStateRecord {
 
 impl Record for CarStateRecord {
     const TOPIC: Topic = Topic::CarState;
+
+    /// `drivecheck.CarState` (`super::proto`): the RTK and UWB positions only where the pose
+    /// channels have no pose for them.
+    fn encode(&self) -> Result<Vec<u8>, super::RecordingError> {
+        let rtk = (!has_pose(self.rtk.x, self.rtk.y)).then_some(self.rtk);
+        let uwb = (!has_pose(self.uwb.x, self.uwb.y)).then_some(self.uwb);
+        let message = CarStatePb {
+            car_id: u32::from(self.car_id),
+            requested_at_ns: self.requested_at_ns,
+            received_at_ns: self.received_at_ns,
+            ms_today: self.ms_today,
+            deviation_m: self.deviation_m.map_or(f32::NAN, |d| d as f32),
+            gnss_x: self.gnss.x,
+            gnss_y: self.gnss.y,
+            speed_mps: self.speed_mps,
+            route_left: i32::from(self.route_left),
+            goal_x: self.goal.x,
+            goal_y: self.goal.y,
+            look_ahead_radius_m: self.look_ahead_radius_m,
+            input_voltage_v: self.input_voltage_v,
+            mc_fault: u32::from(self.mc_fault),
+            rtk_x: rtk.map(|p| p.x),
+            rtk_y: rtk.map(|p| p.y),
+            rtk_yaw_deg: self.rtk.yaw_deg,
+            uwb_x: uwb.map(|p| p.x),
+            uwb_y: uwb.map(|p| p.y),
+        };
+        Ok(message.encode_to_vec())
+    }
+
+    /// A state alone, its positions NaN where the pose channels hold them ([`Record::read_all`]
+    /// joins them).
+    fn from_protobuf(data: &[u8]) -> Option<Result<Self, prost::DecodeError>> {
+        Some(CarStatePb::decode(data).map(|pb| CarStateRecord::from_pb(&pb, None, None)))
+    }
+
+    /// The states, each joined with its RTK and UWB poses (version 3; the poses follow their
+    /// state in file order, one for each position the state does not hold).
+    fn read_all(recording: &Recording) -> Result<Vec<Stamped<Self>>, super::RecordingError> {
+        if recording.encoding(Topic::CarState) != Some(Encoding::Protobuf) {
+            return recording.decode_each::<Self>();
+        }
+        let rtk_poses = recording.messages::<RtkPose>()?;
+        let uwb_poses = recording.messages::<UwbPose>()?;
+        let position = |p: &super::foxglove::PoseInFrame| (p.pose.position.x, p.pose.position.y);
+        let mut rtk = rtk_poses.iter().map(|p| position(&p.message.0));
+        let mut uwb = uwb_poses.iter().map(|p| position(&p.message.0));
+        recording
+            .raw_messages(Topic::CarState)
+            .enumerate()
+            .map(|(index, (log_time_ns, sequence, data))| {
+                let pb = CarStatePb::decode(data).map_err(|source| {
+                    super::RecordingError::DecodeProtobuf {
+                        topic: Topic::CarState.name(),
+                        index,
+                        source,
+                    }
+                })?;
+                // A pose missing at the end of a cut-short file leaves the position unknown.
+                let lost = (f64::NAN, f64::NAN);
+                let rtk = match (pb.rtk_x, pb.rtk_y) {
+                    (Some(x), Some(y)) => (x, y),
+                    _ => rtk.next().unwrap_or(lost),
+                };
+                let uwb = match (pb.uwb_x, pb.uwb_y) {
+                    (Some(x), Some(y)) => (x, y),
+                    _ => uwb.next().unwrap_or(lost),
+                };
+                Ok(Stamped {
+                    log_time_ns,
+                    sequence,
+                    message: CarStateRecord::from_pb(&pb, Some(rtk), Some(uwb)),
+                })
+            })
+            .collect()
+    }
+}
+
+impl CarStateRecord {
+    /// The record of a `drivecheck.CarState` with its RTK and UWB positions (NaN when `None`);
+    /// the deviation computed from them as when it was recorded.
+    fn from_pb(pb: &CarStatePb, rtk: Option<(f64, f64)>, uwb: Option<(f64, f64)>) -> Self {
+        let (rx, ry) = rtk.unwrap_or((f64::NAN, f64::NAN));
+        let (ux, uy) = uwb.unwrap_or((f64::NAN, f64::NAN));
+        let rtk_position = Position::new(rx, ry);
+        let uwb = Position::new(ux, uy);
+        Self {
+            car_id: u8::try_from(pb.car_id).unwrap_or(u8::MAX),
+            requested_at_ns: pb.requested_at_ns,
+            received_at_ns: pb.received_at_ns,
+            ms_today: pb.ms_today,
+            rtk: Pose {
+                x: rx,
+                y: ry,
+                yaw_deg: pb.rtk_yaw_deg,
+            },
+            uwb,
+            gnss: Position::new(pb.gnss_x, pb.gnss_y),
+            deviation_m: deviation(uwb.point(), rtk_position.point()).and_then(finite),
+            speed_mps: pb.speed_mps,
+            route_left: i16::try_from(pb.route_left).unwrap_or(i16::MAX),
+            goal: Position::new(pb.goal_x, pb.goal_y),
+            look_ahead_radius_m: pb.look_ahead_radius_m,
+            input_voltage_v: pb.input_voltage_v,
+            mc_fault: u8::try_from(pb.mc_fault).unwrap_or(u8::MAX),
+        }
+    }
 }
 
 /// A command to the car (fault commands go to `/faults` instead).
@@ -655,6 +767,50 @@ impl From<&Truth> for TruthRecord {
 
 impl Record for TruthRecord {
     const TOPIC: Topic = Topic::SimTruth;
+
+    /// `drivecheck.SimTruth` (`super::proto`): the estimates as the firmware holds them (`f32`),
+    /// their errors left to the reader.
+    fn encode(&self) -> Result<Vec<u8>, super::RecordingError> {
+        let message = TruthPb {
+            sim_ms: self.sim_ms,
+            x: self.position.x,
+            y: self.position.y,
+            heading_rad: self.heading_rad,
+            speed_mps: self.speed_mps,
+            steering_rad: self.steering_rad,
+            fused_x: self.fused.x as f32,
+            fused_y: self.fused.y as f32,
+            fused_yaw_deg: self.fused.yaw_deg as f32,
+            uwb_x: self.uwb.x as f32,
+            uwb_y: self.uwb.y as f32,
+            uwb_yaw_deg: self.uwb.yaw_deg as f32,
+        };
+        Ok(message.encode_to_vec())
+    }
+
+    fn from_protobuf(data: &[u8]) -> Option<Result<Self, prost::DecodeError>> {
+        Some(TruthPb::decode(data).map(|pb| {
+            let estimate = |x: f32, y: f32, yaw: f32| Pose {
+                x: f64::from(x),
+                y: f64::from(y),
+                yaw_deg: f64::from(yaw),
+            };
+            let fused = estimate(pb.fused_x, pb.fused_y, pb.fused_yaw_deg);
+            let uwb = estimate(pb.uwb_x, pb.uwb_y, pb.uwb_yaw_deg);
+            let error = |p: Pose| finite((p.x - pb.x).hypot(p.y - pb.y));
+            TruthRecord {
+                sim_ms: pb.sim_ms,
+                position: Position::new(pb.x, pb.y),
+                heading_rad: pb.heading_rad,
+                speed_mps: pb.speed_mps,
+                steering_rad: pb.steering_rad,
+                fused,
+                uwb,
+                fused_error_m: error(fused),
+                uwb_error_m: error(uwb),
+            }
+        }))
+    }
 }
 
 /// The radio path of a simulated range.

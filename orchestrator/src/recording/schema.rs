@@ -20,13 +20,53 @@ use schemars::generate::SchemaSettings;
 use serde_json::{Value, json};
 
 use super::foxglove::{AreaScene, Log, RouteScene, RtkPose, UwbPose};
+use super::proto;
 use super::records::{
     CarStateRecord, CommandAck, CommandSent, FaultRecord, OracleRecord, PlannedReturnRoute,
     PlannedSegment, SafetyRecord, SimEvent, SimFault, SimRange, TestEvent, TruthRecord,
 };
 use super::topic::Topic;
 
-/// The schema of `topic`'s records.
+/// A channel's schema as a recording declares it.
+#[derive(Debug, Clone)]
+pub struct ChannelSchema {
+    /// The schema encoding (`jsonschema`, `protobuf`).
+    pub encoding: &'static str,
+    /// The schema: a JSON schema's text, or a protobuf `FileDescriptorSet`.
+    pub data: Vec<u8>,
+}
+
+/// The schema of `topic`'s channel in this build's encoding ([`Topic::encoding`]): the JSON
+/// schema below, or the protobuf message's `FileDescriptorSet`.
+pub fn channel_schema(topic: Topic) -> ChannelSchema {
+    use ::foxglove::Encode;
+    let protobuf = |data: Vec<u8>| ChannelSchema {
+        encoding: "protobuf",
+        data,
+    };
+    match topic {
+        Topic::CarState => protobuf(proto::descriptor_set(
+            topic.schema_name(),
+            proto::CAR_STATE_FIELDS,
+        )),
+        Topic::SimTruth => protobuf(proto::descriptor_set(
+            topic.schema_name(),
+            proto::TRUTH_FIELDS,
+        )),
+        Topic::FoxgloveRtk | Topic::FoxgloveUwb => protobuf(
+            ::foxglove::messages::PoseInFrame::get_schema()
+                .map(|s| s.data.into_owned())
+                .unwrap_or_default(),
+        ),
+        _ => ChannelSchema {
+            encoding: "jsonschema",
+            data: schema(topic).to_string().into_bytes(),
+        },
+    }
+}
+
+/// The JSON schema of `topic`'s records (the channel's schema in recordings of version 1 and 2,
+/// and from version 3 on for every channel [`Topic::encoding`] names JSON).
 pub fn schema(topic: Topic) -> Value {
     let mut root = match topic {
         Topic::CarState => derived::<CarStateRecord>(),

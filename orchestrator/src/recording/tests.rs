@@ -338,14 +338,18 @@ async fn the_scenario_and_campaign_are_metadata_records() {
 }
 
 #[tokio::test(start_paused = true)]
-async fn every_channel_has_a_json_schema_its_messages_follow() {
+async fn every_channel_has_a_schema_its_messages_follow() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("campaign.mcap");
     record_every_channel(&path, &scenario()).await;
     let recording = Recording::read(&path).unwrap();
     for topic in Topic::ALL {
         let channel = recording.channel(topic).unwrap();
-        assert_eq!(channel.message_encoding, "json");
+        assert_eq!(channel.message_encoding, topic.encoding().name());
+        if topic.encoding() == Encoding::Protobuf {
+            protobuf_messages_follow_their_schema(&recording, topic);
+            continue;
+        }
         assert_eq!(channel.schema_encoding, "jsonschema");
         assert_eq!(channel.schema_name, topic.schema_name());
         let schema: Value = serde_json::from_slice(&channel.schema).unwrap();
@@ -366,6 +370,36 @@ async fn every_channel_has_a_json_schema_its_messages_follow() {
                 panic!("{topic} message {i} does not follow its schema: {e}\n{message}");
             }
         }
+    }
+}
+
+/// A protobuf channel's schema is a `FileDescriptorSet` declaring the schema name, and each of
+/// its messages decodes by it as Foxglove decodes it (`prost-reflect`, a reader of its own),
+/// every field known to the schema.
+fn protobuf_messages_follow_their_schema(recording: &Recording, topic: Topic) {
+    let channel = recording.channel(topic).unwrap();
+    assert_eq!(channel.schema_encoding, "protobuf", "{topic}");
+    assert_eq!(channel.schema_name, topic.schema_name());
+    let pool = prost_reflect::DescriptorPool::decode(channel.schema.as_slice())
+        .unwrap_or_else(|e| panic!("{topic}: not a FileDescriptorSet: {e}"));
+    let descriptor = pool
+        .get_message_by_name(topic.schema_name())
+        .unwrap_or_else(|| {
+            panic!(
+                "{topic}: the schema does not declare {}",
+                topic.schema_name()
+            )
+        });
+    let messages: Vec<&[u8]> = recording.payloads(topic).collect();
+    assert!(!messages.is_empty(), "{topic}: no messages to check");
+    for (i, data) in messages.into_iter().enumerate() {
+        let message = prost_reflect::DynamicMessage::decode(descriptor.clone(), data)
+            .unwrap_or_else(|e| panic!("{topic} message {i} does not decode by its schema: {e}"));
+        assert_eq!(
+            message.unknown_fields().count(),
+            0,
+            "{topic} message {i} has fields its schema does not declare"
+        );
     }
 }
 
@@ -476,6 +510,63 @@ fn a_number_that_was_not_finite_is_left_out_and_read_back_as_nan() {
     let back: CarStateRecord = serde_json::from_value(version1.clone()).unwrap();
     assert!(back.speed_mps.is_nan());
     assert!(!validator.is_valid(&version1));
+}
+
+/// Version 3 keeps the RTK and UWB positions on the pose channels only; a position that is not
+/// finite (no pose) stays in the state. Every state reads back as it was, with its deviation.
+#[tokio::test(start_paused = true)]
+async fn states_join_their_poses_and_keep_what_has_no_pose() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("campaign.mcap");
+    let s = scenario();
+    let origin = Instant::now();
+    let mut recorder = create(&path, &s, false, origin);
+    let mut samples = Vec::new();
+    for i in 0..6 {
+        let mut sample = sample(Instant::now(), 1.0 + f64::from(i) * 0.123_4);
+        match i {
+            1 => sample.state.px_uwb = f64::NAN,
+            2 => sample.state.py = f64::INFINITY,
+            3 => {
+                sample.state.px = f64::NAN;
+                sample.state.py_uwb = f64::NAN;
+            }
+            4 => sample.state.yaw = f64::NAN,
+            _ => {}
+        }
+        recorder.car_state(&sample).unwrap();
+        samples.push(sample);
+        advance(Duration::from_millis(50)).await;
+    }
+    recorder.finish().unwrap();
+    let recording = Recording::read(&path).unwrap();
+    assert_eq!(
+        recording.encoding(Topic::CarState),
+        Some(Encoding::Protobuf)
+    );
+    // Poses only for the finite positions: 6 − 2 RTK, 6 − 2 UWB.
+    assert_eq!(recording.count(Topic::FoxgloveRtk), 4);
+    assert_eq!(recording.count(Topic::FoxgloveUwb), 4);
+    let read = recording.messages::<CarStateRecord>().unwrap();
+    assert_eq!(read.len(), samples.len());
+    for (read, sample) in read.iter().zip(&samples) {
+        let written = CarStateRecord::new(sample, origin);
+        // NaN ≠ NaN: compare the bits.
+        let bits = |r: &CarStateRecord| {
+            [
+                r.rtk.x,
+                r.rtk.y,
+                r.rtk.yaw_deg,
+                r.uwb.x,
+                r.uwb.y,
+                r.speed_mps,
+            ]
+            .map(f64::to_bits)
+        };
+        assert_eq!(bits(&read.message), bits(&written));
+        assert_eq!(read.message.deviation_m, written.deviation_m);
+        assert_eq!(read.message.received_at_ns, written.received_at_ns);
+    }
 }
 
 #[test]
@@ -673,7 +764,7 @@ fn a_version_1_recording_is_read_with_its_nulls_as_nan() {
     let read = &read[0].message;
     assert!(read.speed_mps.is_nan() && read.uwb.x.is_nan());
     assert_eq!(read.deviation_m, None);
-    let future = Recording::from_bytes(&recording_of_version("3", &state)).unwrap();
+    let future = Recording::from_bytes(&recording_of_version("4", &state)).unwrap();
     let error = future.check_format().unwrap_err();
     assert!(
         matches!(error, RecordingError::UnsupportedFormat { .. }),

@@ -5,6 +5,8 @@ use std::fmt;
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
+use super::{Recording, RecordingError, Stamped};
+
 /// A channel of a recording.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Topic {
@@ -127,6 +129,17 @@ impl Topic {
         Topic::ALL.into_iter().find(|t| t.name() == name)
     }
 
+    /// How this build encodes the channel's messages: protobuf for the channels written at every
+    /// state sample (`docs/recording.md`, *The encodings*), JSON for the rest.
+    pub fn encoding(self) -> Encoding {
+        match self {
+            Topic::CarState | Topic::SimTruth | Topic::FoxgloveRtk | Topic::FoxgloveUwb => {
+                Encoding::Protobuf
+            }
+            _ => Encoding::Json,
+        }
+    }
+
     /// Whether only a simulated run records this channel.
     pub fn is_simulator_only(self) -> bool {
         matches!(
@@ -142,8 +155,55 @@ impl fmt::Display for Topic {
     }
 }
 
-/// A message type of a recording: the record one channel carries, as JSON.
+/// A channel's message encoding (MCAP's `message_encoding`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Encoding {
+    /// `json`, with a JSON schema (`jsonschema`).
+    Json,
+    /// `protobuf`, with a `FileDescriptorSet` schema (`protobuf`).
+    Protobuf,
+}
+
+impl Encoding {
+    /// The name MCAP gives it (`json`, `protobuf`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Encoding::Json => "json",
+            Encoding::Protobuf => "protobuf",
+        }
+    }
+
+    /// The encoding named `name`, if it is one drivecheck writes.
+    pub fn from_name(name: &str) -> Option<Self> {
+        [Encoding::Json, Encoding::Protobuf]
+            .into_iter()
+            .find(|e| e.name() == name)
+    }
+}
+
+/// A message type of a recording: the record one channel carries. Every record is JSON in
+/// recordings of version 1 and 2; the channels [`Topic::encoding`] names protobuf are
+/// protobuf from version 3 on.
 pub trait Record: Serialize + DeserializeOwned + Clone + Send + 'static {
     /// Its channel.
     const TOPIC: Topic;
+
+    /// The message in its channel's encoding ([`Topic::encoding`]).
+    fn encode(&self) -> Result<Vec<u8>, RecordingError> {
+        serde_json::to_vec(self).map_err(|source| RecordingError::Encode {
+            topic: Self::TOPIC.name(),
+            source,
+        })
+    }
+
+    /// The record of a protobuf message; `None` for a record that is never protobuf.
+    fn from_protobuf(_data: &[u8]) -> Option<Result<Self, prost::DecodeError>> {
+        None
+    }
+
+    /// Every message of the channel in `recording`, decoded (the state samples join the pose
+    /// channels here).
+    fn read_all(recording: &Recording) -> Result<Vec<Stamped<Self>>, RecordingError> {
+        recording.decode_each::<Self>()
+    }
 }

@@ -24,7 +24,7 @@ use super::records::{
     AckOutcome, CarCommand, CarStateRecord, CommandAck, CommandSent, SimRecord, TruthRecord,
     nanos_since,
 };
-use super::topic::{Record, Topic};
+use super::topic::{Encoding, Record, Topic};
 use super::{RECORDING_FORMAT, RECORDING_VERSION, RecordingError, foxglove, schema};
 use campaign::files::{CampaignRecord, tool_version};
 
@@ -92,10 +92,7 @@ fn live_channels(
         return HashMap::new();
     };
     recorded_topics(simulated)
-        .filter_map(|topic| {
-            let schema = schema::schema(topic).to_string();
-            Some((topic, view.channel(topic, &schema)?))
-        })
+        .filter_map(|topic| Some((topic, view.channel(topic, &schema::channel_schema(topic))?)))
         .collect()
 }
 
@@ -105,19 +102,34 @@ fn live_channels(
 #[derive(Debug, Clone, PartialEq)]
 pub struct Held {
     topic: Topic,
+    /// How `data` is encoded.
+    encoding: Encoding,
     /// Log time, ns since the origin of the recorder that encoded it.
     log_time: u64,
     data: Vec<u8>,
 }
 
 impl Held {
-    /// A message on `topic` at `log_time` with its encoded bytes.
+    /// A message on `topic` at `log_time` with its bytes, encoded as this build encodes the
+    /// topic ([`Topic::encoding`]).
     pub fn new(topic: Topic, log_time: u64, data: Vec<u8>) -> Self {
+        Self::encoded_as(topic, topic.encoding(), log_time, data)
+    }
+
+    /// A message on `topic` at `log_time` with its bytes in `encoding` (read from a recording,
+    /// perhaps of another version).
+    pub fn encoded_as(topic: Topic, encoding: Encoding, log_time: u64, data: Vec<u8>) -> Self {
         Self {
             topic,
+            encoding,
             log_time,
             data,
         }
+    }
+
+    /// How its bytes are encoded.
+    pub fn encoding(&self) -> Encoding {
+        self.encoding
     }
 
     /// Its log time (ns since the origin of the recorder that encoded it).
@@ -130,7 +142,7 @@ impl Held {
         self.topic
     }
 
-    /// Its encoded bytes (JSON).
+    /// Its encoded bytes.
     pub fn data(&self) -> &[u8] {
         &self.data
     }
@@ -144,15 +156,12 @@ impl Held {
 /// A record kept as it is until it is known to be written: encoding is most of what recording
 /// costs, and `run --record failing` drops the messages of every test that passed.
 trait Deferred: Send {
-    fn encode(&self) -> Result<Vec<u8>, RecordingError>;
+    fn encode_now(&self) -> Result<Vec<u8>, RecordingError>;
 }
 
 impl<R: Record> Deferred for R {
-    fn encode(&self) -> Result<Vec<u8>, RecordingError> {
-        serde_json::to_vec(self).map_err(|source| RecordingError::Encode {
-            topic: R::TOPIC.name(),
-            source,
-        })
+    fn encode_now(&self) -> Result<Vec<u8>, RecordingError> {
+        Record::encode(self)
     }
 }
 
@@ -174,11 +183,7 @@ impl Pending {
                 topic,
                 log_time,
                 record,
-            } => Ok(Held {
-                topic,
-                log_time,
-                data: record.encode()?,
-            }),
+            } => Ok(Held::new(topic, log_time, record.encode_now()?)),
         }
     }
 }
@@ -318,12 +323,8 @@ impl Recorder {
         let held = self.held.take().unwrap_or_default();
         if keep {
             for pending in held {
-                let Held {
-                    topic,
-                    log_time,
-                    data,
-                } = pending.encoded()?;
-                self.write_data(topic, log_time, data)?;
+                let held = pending.encoded()?;
+                self.write_to_chunk(held.topic, held.log_time, &held.data)?;
             }
         }
         Ok(())
@@ -346,8 +347,20 @@ impl Recorder {
     /// not served live again. A recorder in memory holds them.
     pub fn write_held(&mut self, held: Vec<Held>, offset_ns: u64) -> Result<(), RecordingError> {
         for message in held {
+            if message.encoding != message.topic.encoding() {
+                return Err(RecordingError::MixedEncoding {
+                    topic: message.topic.name(),
+                    found: message.encoding.name(),
+                    expected: message.topic.encoding().name(),
+                    version: RECORDING_VERSION,
+                });
+            }
             let log_time = message.log_time.wrapping_add(offset_ns);
-            self.write_data(message.topic, log_time, message.data)?;
+            if self.held.is_some() {
+                self.write_data(message.topic, log_time, message.data)?;
+            } else {
+                self.write_to_chunk(message.topic, log_time, &message.data)?;
+            }
         }
         Ok(())
     }
@@ -357,12 +370,17 @@ impl Recorder {
             return Ok(());
         };
         for topic in recorded_topics(simulated) {
-            let schema = schema::schema(topic).to_string();
+            let schema = schema::channel_schema(topic);
             let schema_id = writer
-                .add_schema(topic.schema_name(), "jsonschema", schema.as_bytes())
+                .add_schema(topic.schema_name(), schema.encoding, &schema.data)
                 .map_err(RecordingError::Write)?;
             let channel = writer
-                .add_channel(schema_id, topic.name(), "json", &BTreeMap::new())
+                .add_channel(
+                    schema_id,
+                    topic.name(),
+                    topic.encoding().name(),
+                    &BTreeMap::new(),
+                )
                 .map_err(RecordingError::Write)?;
             self.channels.insert(topic, channel);
         }
@@ -511,17 +529,26 @@ impl Recorder {
         data: Vec<u8>,
     ) -> Result<(), RecordingError> {
         if let Some(held) = &mut self.held {
-            held.push(Pending::Encoded(Held {
-                topic,
-                log_time,
-                data,
-            }));
+            held.push(Pending::Encoded(Held::new(topic, log_time, data)));
             return Ok(());
         }
+        self.close_chunk_if_due(log_time)?;
+        self.write_to_chunk(topic, log_time, &data)
+    }
+
+    /// Writes one encoded message into the open chunk, whatever log time it spans: a test
+    /// written whole at once (held, or recorded in a worker thread) is as safe in one chunk as
+    /// in many, and compresses better (the chunk then closes at [`CHUNK_BYTES`] or at the
+    /// test's end).
+    fn write_to_chunk(
+        &mut self,
+        topic: Topic,
+        log_time: u64,
+        data: &[u8],
+    ) -> Result<(), RecordingError> {
         let Some(&channel_id) = self.channels.get(&topic) else {
             return Ok(());
         };
-        self.close_chunk_if_due(log_time)?;
         let sequence = self.sequences.entry(topic).or_insert(0);
         *sequence = sequence.wrapping_add(1);
         let header = MessageHeader {
@@ -532,7 +559,7 @@ impl Recorder {
         };
         if let Some(writer) = &mut self.writer {
             writer
-                .write_to_known_channel(&header, &data)
+                .write_to_known_channel(&header, data)
                 .map_err(RecordingError::Write)?;
         }
         self.chunk_opened_at.get_or_insert(log_time);
