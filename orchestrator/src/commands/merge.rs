@@ -8,7 +8,7 @@
 //! count), a shard given twice, missing shards (named), a shard that did not end or lacks a case
 //! file, and shards of which only some have a recording.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
@@ -342,54 +342,6 @@ fn not_of(case: &Case, record: &CampaignRecord) -> Option<String> {
     }
 }
 
-/// Checks a shard's recording against its campaign before anything of it is merged: of the
-/// shard's campaign (its seed), a span for every test of the shard that did not pass (a
-/// recording of the embedded simulator has one per test it keeps) and none for another's. One
-/// test in memory at a time.
-fn check_recording(shard: &ShardDir, bytes: &[u8], cases: &[Case]) -> Result<()> {
-    let dir = shard.dir.display();
-    let mut spans = Spans::new(bytes).with_context(|| dir.to_string())?;
-    let mut seen = std::collections::BTreeSet::new();
-    for span in spans.by_ref() {
-        let span = span.with_context(|| format!("{dir}: {RECORDING_FILE}"))?;
-        let Some(test) = span.test_index else {
-            continue;
-        };
-        if test >= cases.len() || !shard.shard.contains(test) {
-            bail!(
-                "{dir}: {RECORDING_FILE} holds test {test}, which is not in shard {}",
-                shard.shard
-            );
-        }
-        if !seen.insert(test) {
-            bail!("{dir}: {RECORDING_FILE} holds test {test} twice");
-        }
-    }
-    let seed = spans
-        .metadata("drivecheck.campaign")
-        .and_then(|m| m.get("seed"))
-        .map(String::as_str);
-    if seed != Some(shard.record.seed.to_string().as_str()) {
-        bail!(
-            "{dir}: {RECORDING_FILE} is the recording of campaign seed {}, campaign.json's is {}",
-            seed.unwrap_or("(none recorded)"),
-            shard.record.seed
-        );
-    }
-    // Every recording keeps the tests that did not pass (`--record failing` drops the others).
-    if shard.record.car == "sim"
-        && let Some(missing) = (0..cases.len())
-            .filter(|&t| shard.shard.contains(t))
-            .find(|&t| cases[t].verdict != Some(Verdict::Passed) && !seen.contains(&t))
-    {
-        bail!(
-            "{dir}: {RECORDING_FILE} has no span of test {missing}, which did not pass: it is not \
-             this shard's recording, or it was cut"
-        );
-    }
-    Ok(())
-}
-
 /// The campaign's scenario: `--scenario`, else the bundled one of its name; its hash must be the
 /// campaign's (the coverage in the summary is computed over its area).
 fn scenario_of(record: &CampaignRecord, arg: Option<&str>) -> Result<scenarios::Scenario> {
@@ -417,10 +369,107 @@ fn scenario_of(record: &CampaignRecord, arg: Option<&str>) -> Result<scenarios::
     Ok(scenario)
 }
 
+/// A shard's recording as the merge reads it: a span at a time from the file, each checked
+/// against the shard's campaign as it is read (see [`ShardSpans::peek`]).
+struct ShardSpans<'a> {
+    shard: &'a ShardDir,
+    spans: Spans<std::io::BufReader<std::fs::File>>,
+    /// The span read ahead, checked.
+    next: Option<Span>,
+    /// The tests whose spans were read.
+    seen: BTreeSet<usize>,
+}
+
+impl<'a> ShardSpans<'a> {
+    fn open(shard: &'a ShardDir) -> Result<Self> {
+        let spans = Spans::open(&shard.dir.join(RECORDING_FILE))
+            .with_context(|| shard.dir.display().to_string())?;
+        Ok(Self {
+            shard,
+            spans,
+            next: None,
+            seen: BTreeSet::new(),
+        })
+    }
+
+    /// The next span's test (`Some(None)`: a span without a test; `None`: the end), the span
+    /// read ahead and checked: damage is refused, and so is a span of a test that is not in the
+    /// shard, or of a test read before.
+    fn peek(&mut self, cases: &[Case]) -> Result<Option<Option<usize>>> {
+        if self.next.is_none() {
+            let dir = self.shard.dir.display();
+            let span = match self.spans.next() {
+                None => return Ok(None),
+                Some(span) => span.with_context(|| format!("{dir}: {RECORDING_FILE}"))?,
+            };
+            if let Some(test) = span.test_index {
+                if test >= cases.len() || !self.shard.shard.contains(test) {
+                    bail!(
+                        "{dir}: {RECORDING_FILE} holds test {test}, which is not in shard {}",
+                        self.shard.shard
+                    );
+                }
+                if !self.seen.insert(test) {
+                    bail!("{dir}: {RECORDING_FILE} holds test {test} twice");
+                }
+            }
+            self.next = Some(span);
+        }
+        Ok(self.next.as_ref().map(|span| span.test_index))
+    }
+
+    /// The span read ahead.
+    fn take(&mut self) -> Option<Span> {
+        self.next.take()
+    }
+
+    /// Checks that the recording is of the shard's campaign (its seed): the campaign's metadata
+    /// record comes before any message, so it is read once a span is.
+    fn check_campaign(&self) -> Result<()> {
+        let seed = self
+            .spans
+            .metadata("drivecheck.campaign")
+            .and_then(|m| m.get("seed"))
+            .map(String::as_str);
+        if seed != Some(self.shard.record.seed.to_string().as_str()) {
+            bail!(
+                "{}: {RECORDING_FILE} is the recording of campaign seed {}, campaign.json's is {}",
+                self.shard.dir.display(),
+                seed.unwrap_or("(none recorded)"),
+                self.shard.record.seed
+            );
+        }
+        Ok(())
+    }
+
+    /// Once the recording is read to its end: it has a span of every test of the shard that did
+    /// not pass (a recording of the embedded simulator has one per test it keeps; `--record
+    /// failing` drops the others).
+    fn check_every_test(&self, cases: &[Case]) -> Result<()> {
+        if self.shard.record.car == "sim"
+            && let Some(missing) = (0..cases.len())
+                .filter(|&t| self.shard.shard.contains(t))
+                .find(|&t| cases[t].verdict != Some(Verdict::Passed) && !self.seen.contains(&t))
+        {
+            bail!(
+                "{}: {RECORDING_FILE} has no span of test {missing}, which did not pass: it is not \
+                 this shard's recording, or it was cut",
+                self.shard.dir.display()
+            );
+        }
+        Ok(())
+    }
+}
+
 /// Writes `out`: every shard's tests' messages in test order, each test's log time shifted to
 /// follow the one before it as in an unsharded run; messages of a recording made without test
-/// spans (one car for the whole shard) follow, a shard at a time. One test per shard is in memory
-/// at a time (besides the shards' compressed files).
+/// spans (one car for the whole shard) follow, a shard at a time.
+///
+/// The shards' recordings are read from their files a span at a time, one test per shard in
+/// memory (a recording without test spans is one span), and checked as they are read: of the
+/// shard's campaign (its seed), a span for every test of the shard that did not pass and none
+/// for another's, no damage. A shard refused half way stops the merge; what was written is in
+/// the staging directory, which is removed.
 fn merge_recordings(
     shards: &[ShardDir],
     cases: &[Case],
@@ -428,16 +477,13 @@ fn merge_recordings(
     scenario: &scenarios::Scenario,
     out: &Path,
 ) -> Result<()> {
-    let files: Vec<Vec<u8>> = shards
-        .iter()
-        .map(|s| {
-            let path = s.dir.join(RECORDING_FILE);
-            let bytes =
-                std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))?;
-            check_recording(s, &bytes, cases)?;
-            Ok(bytes)
-        })
-        .collect::<Result<_>>()?;
+    let mut readers: Vec<ShardSpans<'_>> =
+        shards.iter().map(ShardSpans::open).collect::<Result<_>>()?;
+    // Every shard read up to its first span, where its campaign's metadata has been read.
+    for reader in &mut readers {
+        reader.peek(cases)?;
+        reader.check_campaign()?;
+    }
     let simulated = shards.iter().all(|s| s.record.car == "sim");
     let at_start = CampaignRecord {
         ended_at: None,
@@ -446,8 +492,9 @@ fn merge_recordings(
     };
     // The simulated car's profile, as the first shard recorded it (the shards agree on its
     // hash: it is in their campaign records).
-    let profile = match files.first() {
-        Some(bytes) => Spans::new(bytes)?
+    let profile = match readers.first() {
+        Some(reader) => reader
+            .spans
             .metadata(SIM_PROFILE_METADATA)
             .map(LoadedProfile::from_metadata)
             .transpose()?,
@@ -465,45 +512,32 @@ fn merge_recordings(
         sim_profile: profile.as_ref(),
     };
     let mut recorder = Recorder::create(out, &start)?;
-    let mut readers: Vec<(usize, std::iter::Peekable<Spans<'_>>)> = files
-        .iter()
-        .enumerate()
-        .map(|(i, bytes)| Ok((i, Spans::new(bytes)?.peekable())))
-        .collect::<Result<_, crate::recording::RecordingError>>()?;
     let mut offset_ns = SPAN_GAP_NS;
-    let mut leftovers: Vec<Span> = Vec::new();
     loop {
         // The shard whose next span is the lowest test.
         let mut best: Option<(usize, usize)> = None;
-        for (position, (_, spans)) in readers.iter_mut().enumerate() {
-            match spans.peek() {
-                Some(Ok(Span {
-                    test_index: Some(t),
-                    ..
-                })) if best.is_none_or(|(_, b)| *t < b) => best = Some((position, *t)),
-                Some(Ok(_)) | None => {}
-                Some(Err(_)) => {
-                    if let Some(Err(error)) = spans.next() {
-                        return Err(anyhow::Error::new(error)
-                            .context(format!("{}", shards[readers[position].0].dir.display())));
-                    }
-                }
+        for (position, reader) in readers.iter_mut().enumerate() {
+            if let Some(Some(test)) = reader.peek(cases)?
+                && best.is_none_or(|(_, b)| test < b)
+            {
+                best = Some((position, test));
             }
         }
         let Some((position, _)) = best else {
-            // Only spans without a test are left.
-            for (_, spans) in &mut readers {
-                leftovers.extend(spans.filter_map(Result::ok));
-            }
             break;
         };
-        let Some(Ok(span)) = readers[position].1.next() else {
-            continue;
-        };
-        write_span(&mut recorder, span, &mut offset_ns)?;
+        if let Some(span) = readers[position].take() {
+            write_span(&mut recorder, span, &mut offset_ns)?;
+        }
     }
-    for span in leftovers {
-        write_span(&mut recorder, span, &mut offset_ns)?;
+    // Only spans without a test are left: each shard's in turn, each shard read to its end.
+    for reader in &mut readers {
+        while reader.peek(cases)?.is_some() {
+            if let Some(span) = reader.take() {
+                write_span(&mut recorder, span, &mut offset_ns)?;
+            }
+        }
+        reader.check_every_test(cases)?;
     }
     recorder.campaign_ended(record)?;
     recorder.finish()?;

@@ -331,10 +331,10 @@ impl RecordingJson {
         if !file.exists() {
             return None;
         }
-        Some(match crate::recording::Recording::read(&file) {
+        Some(match crate::recording::Summary::read(&file) {
             Ok(recording) => RecordingJson {
                 complete: Some(recording.is_complete()),
-                messages: Some(recording.message_count() as u64),
+                messages: Some(recording.messages),
                 problem: recording.cut_short().map(ToString::to_string),
                 file,
             },
@@ -465,7 +465,7 @@ fn describe_recording(dir: &Path) {
     if !file.exists() {
         return;
     }
-    match crate::recording::Recording::read(&file) {
+    match crate::recording::Summary::read(&file) {
         Ok(recording) if recording.is_complete() => {}
         Ok(recording) => println!(
             "recording {}: unfinished (the process was killed before it ended{}); {} messages \
@@ -475,7 +475,7 @@ fn describe_recording(dir: &Path) {
             recording
                 .cut_short()
                 .map_or_else(String::new, |why| format!(": {why}")),
-            recording.message_count(),
+            recording.messages,
             file.display()
         ),
         Err(error) => println!("recording {}: unreadable: {error}", file.display()),

@@ -19,8 +19,10 @@
 //! readers) read up to the last chunk written; dropping a recorder without [`Recorder::finish`]
 //! still completes the file.
 //!
-//! [`Recording`] reads a file back (also a cut-short one) for tests and replay. The format is
-//! documented channel by channel in `docs/recording.md`.
+//! [`Recording`] reads a file back whole (also a cut-short one) for tests and small files;
+//! [`Spans`] reads it from the file a test at a time and [`Summary`] learns what it holds without
+//! keeping its messages, so that a command's memory does not grow with the campaign. The format
+//! is documented channel by channel in `docs/recording.md`.
 //!
 //! Not here: deciding what to record when (the campaign runner), replay.
 
@@ -31,6 +33,8 @@ mod reader;
 mod records;
 mod schema;
 #[cfg(test)]
+mod stream_tests;
+#[cfg(test)]
 mod tests;
 mod topic;
 mod writer;
@@ -39,7 +43,7 @@ use std::path::PathBuf;
 
 use thiserror::Error;
 
-pub use reader::{Recording, RecordingChannel, Span, Spans, Stamped};
+pub use reader::{Recording, RecordingChannel, Span, Spans, Stamped, Summary};
 pub use records::{
     AckOutcome, CarCommand, CarStateRecord, CommandAck, CommandSent, FaultRecord, FaultSpec,
     FaultStatus, OracleRecord, PlannedReturnRoute, PlannedSegment, Pose, Position, RadioPathKind,

@@ -3,7 +3,9 @@
 //! last complete chunk; [`Recording::cut_short`] says why it stopped.
 
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::fs::File;
+use std::io::{BufReader, Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
 
 use mcap::records::Record as McapRecord;
 
@@ -316,6 +318,152 @@ impl Recording {
     }
 }
 
+/// What a recording holds, learnt without keeping its messages: whether it was finished, how
+/// many messages it has, why reading stopped early (`drivecheck runs show`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Summary {
+    /// Whether the file was finished (it ends with its summary and footer) and read without
+    /// damage.
+    pub complete: bool,
+    /// Messages on all channels (up to the damage or the end of an unfinished file).
+    pub messages: u64,
+    /// Why reading stopped before the end of a complete file, if it did.
+    pub cut_short: Option<String>,
+}
+
+/// The footer record and the end magic that close a finished MCAP file: opcode, length, summary
+/// start, summary offset start, summary CRC, magic.
+const FOOTER_AND_MAGIC: u64 = 1 + 8 + 8 + 8 + 4 + 8;
+/// The data end record, just before the summary section: opcode, length, data section CRC.
+const DATA_END: u64 = 1 + 8 + 4;
+
+impl Summary {
+    /// The summary of the recording at `path`. A finished file's is read from its summary section
+    /// (its statistics record, the summary's CRC checked), a few kilobytes at its end, not from
+    /// its messages: the chunks are not read, so damage inside them shows only to a reader of
+    /// the messages. A file without a readable summary (unfinished, damaged at its end) is
+    /// [scanned](Summary::scan).
+    pub fn read(path: &Path) -> Result<Self, RecordingError> {
+        let read_error = |source| RecordingError::Read {
+            path: path.to_owned(),
+            source,
+        };
+        let mut file = File::open(path).map_err(read_error)?;
+        match Self::from_summary_section(&mut file).map_err(read_error)? {
+            Some(summary) => Ok(summary),
+            None => Self::scan(path),
+        }
+    }
+
+    /// The summary of the recording at `path`, every record read (every CRC checked) and its
+    /// messages counted, one chunk in memory at a time. Only a file that does not start like an
+    /// MCAP file is an error; damage further on ends the reading there (see
+    /// [`Summary::cut_short`]), as [`Recording::read`] does.
+    pub fn scan(path: &Path) -> Result<Self, RecordingError> {
+        let file = File::open(path).map_err(|source| RecordingError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        let mut summary = Summary {
+            complete: false,
+            messages: 0,
+            cut_short: None,
+        };
+        let mut started = false;
+        for record in Records::new(BufReader::new(file)) {
+            match record {
+                Ok(McapRecord::Header(_)) => started = true,
+                Ok(McapRecord::Message { .. }) => summary.messages += 1,
+                Ok(McapRecord::Footer(_)) => summary.complete = true,
+                Ok(_) => {}
+                Err(mcap::McapError::Io(source)) => {
+                    return Err(RecordingError::Read {
+                        path: path.to_owned(),
+                        source,
+                    });
+                }
+                Err(e) if !started => return Err(RecordingError::NotMcap(e)),
+                Err(e) => {
+                    summary.cut_short = Some(e.to_string());
+                    break;
+                }
+            }
+        }
+        if !started {
+            return Err(RecordingError::NotMcap(mcap::McapError::UnexpectedEof));
+        }
+        summary.complete &= summary.cut_short.is_none();
+        Ok(summary)
+    }
+
+    /// The summary from the statistics record of a finished file's summary section; `None` when
+    /// the file has no such section, or it does not read whole with its CRC.
+    fn from_summary_section(file: &mut File) -> std::io::Result<Option<Self>> {
+        let length = file.metadata()?.len();
+        if length < mcap::MAGIC.len() as u64 + DATA_END + FOOTER_AND_MAGIC {
+            return Ok(None);
+        }
+        let mut magic = [0; 8];
+        file.read_exact(&mut magic)?;
+        if magic.as_slice() != mcap::MAGIC {
+            return Ok(None);
+        }
+        let footer_at = length - FOOTER_AND_MAGIC;
+        file.seek(SeekFrom::Start(footer_at))?;
+        let mut footer = [0; FOOTER_AND_MAGIC as usize];
+        file.read_exact(&mut footer)?;
+        let field = |at: usize| u64::from_le_bytes(footer[at..at + 8].try_into().unwrap_or([0; 8]));
+        let summary_start = field(9);
+        if footer[0] != mcap::records::op::FOOTER
+            || field(1) != 20
+            || &footer[29..] != mcap::MAGIC
+            || summary_start < mcap::MAGIC.len() as u64 + DATA_END
+            || summary_start > footer_at
+        {
+            return Ok(None);
+        }
+        // From the data end record on: the reader checks the summary's CRC from there.
+        let from = summary_start - DATA_END;
+        file.seek(SeekFrom::Start(from))?;
+        let input = BufReader::new(Read::take(&mut *file, length - from));
+        let mut records = Records::summary(input);
+        if !matches!(records.next(), Some(Ok(McapRecord::DataEnd(_)))) {
+            return Ok(None);
+        }
+        let mut messages = None;
+        let mut footer_read = false;
+        for record in records {
+            match record {
+                Ok(McapRecord::Statistics(statistics)) => {
+                    messages = Some(statistics.message_count);
+                }
+                Ok(McapRecord::Footer(_)) => footer_read = true,
+                Ok(_) => {}
+                Err(mcap::McapError::Io(e)) => return Err(e),
+                Err(_) => return Ok(None),
+            }
+        }
+        Ok(match (messages, footer_read) {
+            (Some(messages), true) => Some(Summary {
+                complete: true,
+                messages,
+                cut_short: None,
+            }),
+            _ => None,
+        })
+    }
+
+    /// Whether the file was finished and read without damage.
+    pub fn is_complete(&self) -> bool {
+        self.complete
+    }
+
+    /// Why reading stopped before the end of a complete file, if it did.
+    pub fn cut_short(&self) -> Option<&str> {
+        self.cut_short.as_deref()
+    }
+}
+
 /// The messages of one test in a recording, as [`Spans`] reads them.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Span {
@@ -333,8 +481,14 @@ pub struct Span {
 /// Reads a recording test by test, one test's messages in memory at a time: every
 /// `drivecheck.test.<index>` metadata record closes the span of the messages before it (those
 /// from its start on); messages after the last such record come as one span without a test.
-pub struct Spans<'a> {
-    records: Records<'a>,
+///
+/// The input is read as the spans are taken ([`Spans::open`] reads the file through a
+/// [`BufReader`]), so that what is in memory is one test's messages and one chunk, whatever
+/// the size of the file.
+pub struct Spans<R> {
+    records: Records<R>,
+    /// The file read, to name it in an error of the system.
+    path: Option<PathBuf>,
     channels: BTreeMap<u16, (Topic, Encoding)>,
     pending: Vec<super::Held>,
     done: bool,
@@ -347,18 +501,51 @@ pub struct Spans<'a> {
     metadata: BTreeMap<String, BTreeMap<String, String>>,
 }
 
-impl<'a> Spans<'a> {
+impl<'a> Spans<&'a [u8]> {
     /// The spans of the recording in `bytes`.
     pub fn new(bytes: &'a [u8]) -> Result<Self, RecordingError> {
-        Ok(Self {
-            records: Records::new(bytes),
+        Ok(Self::from_reader(bytes))
+    }
+}
+
+impl Spans<BufReader<File>> {
+    /// The spans of the recording at `path`, read from the file as they are taken.
+    pub fn open(path: &Path) -> Result<Self, RecordingError> {
+        let file = File::open(path).map_err(|source| RecordingError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        let mut spans = Self::from_reader(BufReader::new(file));
+        spans.path = Some(path.to_owned());
+        Ok(spans)
+    }
+}
+
+impl<R: Read> Spans<R> {
+    /// The spans of the recording `input` holds, read from it as they are taken.
+    pub fn from_reader(input: R) -> Self {
+        Self {
+            records: Records::new(input),
+            path: None,
             channels: BTreeMap::new(),
             pending: Vec::new(),
             done: false,
             error: None,
             spanned: false,
             metadata: BTreeMap::new(),
-        })
+        }
+    }
+
+    /// An error of the reading: of the system (a file that cannot be read on) or of the file's
+    /// content (damage, an end before the footer).
+    fn failure(&self, error: mcap::McapError) -> RecordingError {
+        match (error, &self.path) {
+            (mcap::McapError::Io(source), Some(path)) => RecordingError::Read {
+                path: path.clone(),
+                source,
+            },
+            (error, _) => RecordingError::NotMcap(error),
+        }
     }
 
     /// A metadata record read so far (not a span's), by name.
@@ -382,7 +569,7 @@ impl<'a> Spans<'a> {
     }
 }
 
-impl Iterator for Spans<'_> {
+impl<R: Read> Iterator for Spans<R> {
     type Item = Result<Span, RecordingError>;
 
     fn next(&mut self) -> Option<Self::Item> {
@@ -398,7 +585,7 @@ impl Iterator for Spans<'_> {
                 Some(Err(e)) => {
                     // What was read before the damage first, then the damage.
                     self.done = true;
-                    self.error = Some(RecordingError::NotMcap(e));
+                    self.error = Some(self.failure(e));
                     return match self.leftover() {
                         Some(span) => Some(Ok(span)),
                         None => self.error.take().map(Err),
@@ -459,39 +646,72 @@ impl Iterator for Spans<'_> {
 /// chunks at 256 KiB, and no message comes near this. A larger length read from a file is damage.
 pub const RECORD_LIMIT: usize = 64 * 1024 * 1024;
 
-/// The records of the MCAP file in `bytes`, chunks unpacked (mcap's `ChunkFlattener`), every CRC
-/// the file has checked (each chunk's, the data section's, the summary's), with every length read from the file bounded by [`RECORD_LIMIT`]: a damaged
-/// length is an error, never an allocation of its size.
-struct Records<'a> {
-    buf: &'a [u8],
+/// The records of the MCAP file `input` holds, read from it as the sans-io reader asks for bytes,
+/// chunks unpacked (mcap's `ChunkFlattener`), every CRC the file has checked (each chunk's, the
+/// data section's, the summary's), with every length read from the file bounded by
+/// [`RECORD_LIMIT`]: a damaged length is an error, never an allocation of its size. An error of
+/// the input ends the records.
+struct Records<R> {
+    input: R,
     reader: mcap::sans_io::LinearReader,
+    failed: bool,
 }
 
-impl<'a> Records<'a> {
-    fn new(buf: &'a [u8]) -> Self {
+impl<R: Read> Records<R> {
+    fn new(input: R) -> Self {
         let options = mcap::sans_io::LinearReaderOptions::default()
             .with_validate_chunk_crcs(true)
             .with_validate_data_section_crc(true)
             .with_validate_summary_section_crc(true)
             .with_record_length_limit(RECORD_LIMIT);
+        Self::with_options(input, options)
+    }
+
+    /// The records of a summary section, `input` placed at its data end record (the record
+    /// before the summary, where the summary's CRC starts): the summary's CRC is checked, not the
+    /// data section's (it is not read).
+    fn summary(input: R) -> Self {
+        let options = mcap::sans_io::LinearReaderOptions::default()
+            .with_skip_start_magic(true)
+            .with_validate_summary_section_crc(true)
+            .with_record_length_limit(RECORD_LIMIT);
+        Self::with_options(input, options)
+    }
+
+    fn with_options(input: R, options: mcap::sans_io::LinearReaderOptions) -> Self {
         Self {
-            buf,
+            input,
             reader: mcap::sans_io::LinearReader::new_with_options(options),
+            failed: false,
         }
     }
 }
 
-impl Iterator for Records<'_> {
+impl<R: Read> Iterator for Records<R> {
     type Item = Result<McapRecord<'static>, mcap::McapError>;
 
     fn next(&mut self) -> Option<Self::Item> {
+        if self.failed {
+            return None;
+        }
         while let Some(event) = self.reader.next_event() {
             match event {
                 Ok(mcap::sans_io::LinearReadEvent::ReadRequest(need)) => {
-                    let n = need.min(self.buf.len());
-                    self.reader.insert(n).copy_from_slice(&self.buf[..n]);
-                    self.reader.notify_read(n);
-                    self.buf = &self.buf[n..];
+                    // As many of the `need` bytes as the input has: fewer only at its end.
+                    let buf = self.reader.insert(need);
+                    let mut filled = 0;
+                    while filled < buf.len() {
+                        match self.input.read(&mut buf[filled..]) {
+                            Ok(0) => break,
+                            Ok(n) => filled += n,
+                            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                            Err(e) => {
+                                self.failed = true;
+                                return Some(Err(mcap::McapError::Io(e)));
+                            }
+                        }
+                    }
+                    self.reader.notify_read(filled);
                 }
                 Ok(mcap::sans_io::LinearReadEvent::Record { data, opcode }) => {
                     return Some(mcap::parse_record(opcode, data).map(McapRecord::into_owned));

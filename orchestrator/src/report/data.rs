@@ -223,20 +223,10 @@ pub(crate) fn read_campaign(dir: &Path) -> Result<CampaignData, ReportError> {
 /// cars, `docs/scaling.md`), so that a large campaign's recording is never in memory decoded
 /// whole; what no span claims (a recording of one car for the whole campaign) is read at once.
 fn read_tracks(path: &Path, tests: &mut [TestData], notes: &mut Vec<String>) -> Option<String> {
-    let bytes = match std::fs::read(path) {
-        Ok(bytes) => bytes,
-        Err(e) => {
-            notes.push(format!(
-                "cannot read {}: {e}; no tracks or plots",
-                path.display()
-            ));
-            return None;
-        }
-    };
-    let mut spans = match crate::recording::Spans::new(&bytes) {
+    let mut spans = match crate::recording::Spans::open(path) {
         Ok(spans) => spans,
         Err(e) => {
-            notes.push(format!("{}: {e}; no tracks or plots", path.display()));
+            notes.push(format!("{e}; no tracks or plots"));
             return None;
         }
     };

@@ -15,7 +15,9 @@ use super::data::{CampaignData, TestData, read_campaign, scenario_for};
 use super::route::boundaries;
 use campaign::case::{Case, CommandRecord};
 use campaign::explain::calibrate::{Calibration, CalibrationError};
-use campaign::explain::score::{AppliedFault, RangeTruth, SegmentScore, SimTruth, score_segments};
+use campaign::explain::score::{
+    AppliedFault, RangeTruth, SegmentScore, SimTruth, TRUTH_SLACK_S, score_segments,
+};
 use campaign::explain::{
     ExplainAnchor, ExplainConfig, ExplainFault, ExplainSample, ExplainSegment, SegmentExplanation,
     Source, explain_segment,
@@ -310,80 +312,67 @@ pub struct Scored {
 /// ([`campaign::explain::score`], from the recording's `/sim/faults` and `/sim/ranges` and the
 /// simulated car's fault model); and the scenario the run was recorded in (its recording's copy,
 /// else the bundled one, else `scenario`), in which its cases can be driven again.
+///
+/// The recording is read a test at a time ([`Spans`](crate::recording::Spans)): a test's truth
+/// is its span's, with what the spans before it recorded in the last [`TRUTH_SLACK_S`] before
+/// its start (a segment's truth is looked for from that long before the segment, and a test's
+/// segments start in its span). A recording without test spans is one span, every test's.
 pub fn score_run(
     dir: &Path,
     scenario: Option<&Scenario>,
     options: &ExplainOptions,
 ) -> Result<(Explanations, Vec<Scored>, Option<Scenario>), ReportError> {
-    use crate::recording::{RadioPathKind, Recording, SimFault, SimRange, TruthRecord};
+    use crate::recording::{Recording, SimFault, SimRange, Spans, Stamped, TruthRecord};
     let explanations = explain_run(dir, None, scenario, options)?;
     let data = read_campaign(dir)?;
     let path = dir.join(crate::runner::RECORDING_FILE);
-    let recording = Recording::read(&path).map_err(|e| invalid(&path, e))?;
     let read = |e: crate::recording::RecordingError| invalid(&path, e);
-    if recording
-        .messages::<TruthRecord>()
-        .map_err(read)?
-        .is_empty()
-    {
+    let slack_ns = (TRUTH_SLACK_S * 1e9) as u64;
+    // Each case's scores, in the order of `explanations.cases`.
+    let mut scores: Vec<Option<Vec<Scored>>> = vec![None; explanations.cases.len()];
+    let mut truth = false;
+    let mut faults: Vec<Stamped<SimFault>> = Vec::new();
+    let mut ranges: Vec<Stamped<SimRange>> = Vec::new();
+    let mut read_any = false;
+    for span in Spans::open(&path).map_err(read)? {
+        let span = match span {
+            Ok(span) => span,
+            // A recording cut short is scored up to the damage, as far as it holds tests.
+            Err(_) if read_any => break,
+            Err(e) => return Err(read(e)),
+        };
+        read_any = true;
+        // What the spans before recorded within the slack of this one's start stays.
+        let from_ns = span.start_ns.saturating_sub(slack_ns);
+        faults.retain(|f| f.log_time_ns >= from_ns);
+        ranges.retain(|r| r.log_time_ns >= from_ns);
+        let test_index = span.test_index;
+        let recording = Recording::from_held(span.messages);
+        truth |= !recording
+            .messages::<TruthRecord>()
+            .map_err(read)?
+            .is_empty();
+        faults.extend(recording.messages::<SimFault>().map_err(read)?);
+        ranges.extend(recording.messages::<SimRange>().map_err(read)?);
+        for (case, scored) in explanations.cases.iter().zip(scores.iter_mut()) {
+            if scored.is_some() || test_index.is_some_and(|t| t != case.test_index) {
+                continue;
+            }
+            let Some(test) = data.tests.iter().find(|t| t.index == case.test_index) else {
+                continue;
+            };
+            let Some(track) = &test.track else { continue };
+            *scored = Some(score_case(case, test, track, &faults, &ranges));
+        }
+    }
+    if !truth {
         return Err(invalid(
             &path,
             "the recording has no simulator truth (/sim/truth): only a simulated run can be \
              scored",
         ));
     }
-    let faults = recording.messages::<SimFault>().map_err(read)?;
-    let ranges = recording.messages::<SimRange>().map_err(read)?;
-    let mut scored = Vec::new();
-    for case in &explanations.cases {
-        let Some(test) = data.tests.iter().find(|t| t.index == case.test_index) else {
-            continue;
-        };
-        let Some(track) = &test.track else { continue };
-        // The simulator's truth on the test's clock.
-        let t_of = |log_ns: u64| (log_ns as f64 - track.zero_ns as f64) / 1e9;
-        let applied: Vec<AppliedFault<'_>> = faults
-            .iter()
-            .map(|f| AppliedFault {
-                t_s: t_of(f.log_time_ns),
-                probe: &f.message.probe,
-                slots: f.message.slots,
-                before: f.message.before,
-                after: f.message.after,
-            })
-            .collect();
-        let ranged: Vec<RangeTruth> = ranges
-            .iter()
-            .filter_map(|r| match &r.message {
-                SimRange::Request {
-                    anchor,
-                    path: Some(p),
-                    true_range_m: Some(true_range_m),
-                    range_m: Some(range_m),
-                    ..
-                } => Some(RangeTruth {
-                    t_s: t_of(r.log_time_ns),
-                    anchor_id: u16::from(*anchor),
-                    reflected: p.kind == RadioPathKind::Reflected,
-                    range_m: *range_m,
-                    true_range_m: *true_range_m,
-                }),
-                _ => None,
-            })
-            .collect();
-        let truth = SimTruth {
-            faults: &applied,
-            ranges: &ranged,
-        };
-        scored.extend(
-            score_segments(&case.segments, &test.case, &truth)
-                .into_iter()
-                .map(|score| Scored {
-                    case: case.case.clone(),
-                    score,
-                }),
-        );
-    }
+    let scored = scores.into_iter().flatten().flatten().collect();
     let (scenario, _) = scenario_for(
         &data.record.scenario.name,
         data.record.scenario.hash.as_deref(),
@@ -391,6 +380,60 @@ pub fn score_run(
         data.recorded_scenario.as_deref(),
     );
     Ok((explanations, scored, scenario))
+}
+
+/// The scores of `case`'s failing segments against the simulator's `faults` and `ranges`
+/// around its test (see [`score_run`]).
+fn score_case(
+    case: &CaseExplanation,
+    test: &TestData,
+    track: &super::data::Track,
+    faults: &[crate::recording::Stamped<crate::recording::SimFault>],
+    ranges: &[crate::recording::Stamped<crate::recording::SimRange>],
+) -> Vec<Scored> {
+    use crate::recording::{RadioPathKind, SimRange};
+    // The simulator's truth on the test's clock.
+    let t_of = |log_ns: u64| (log_ns as f64 - track.zero_ns as f64) / 1e9;
+    let applied: Vec<AppliedFault<'_>> = faults
+        .iter()
+        .map(|f| AppliedFault {
+            t_s: t_of(f.log_time_ns),
+            probe: &f.message.probe,
+            slots: f.message.slots,
+            before: f.message.before,
+            after: f.message.after,
+        })
+        .collect();
+    let ranged: Vec<RangeTruth> = ranges
+        .iter()
+        .filter_map(|r| match &r.message {
+            SimRange::Request {
+                anchor,
+                path: Some(p),
+                true_range_m: Some(true_range_m),
+                range_m: Some(range_m),
+                ..
+            } => Some(RangeTruth {
+                t_s: t_of(r.log_time_ns),
+                anchor_id: u16::from(*anchor),
+                reflected: p.kind == RadioPathKind::Reflected,
+                range_m: *range_m,
+                true_range_m: *true_range_m,
+            }),
+            _ => None,
+        })
+        .collect();
+    let truth = SimTruth {
+        faults: &applied,
+        ranges: &ranged,
+    };
+    score_segments(&case.segments, &test.case, &truth)
+        .into_iter()
+        .map(|score| Scored {
+            case: case.case.clone(),
+            score,
+        })
+        .collect()
 }
 
 fn invalid(path: &Path, error: impl std::fmt::Display) -> ReportError {
