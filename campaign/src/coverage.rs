@@ -135,15 +135,64 @@ pub fn of_scenario(scenario: &scenarios::Scenario, cases: &[Case]) -> Coverage {
 
 /// The coverage of `cases`, tests driven in `area` from a start route ending at `start_end`.
 pub fn coverage(area: &Area, start_end: Point, cases: &[Case]) -> Coverage {
-    let mut grid = CoverageGrid::new(area, CELL_M);
-    let bins = |width: f64, full: f64| (full / width).ceil() as usize;
-    let mut heading_m = vec![0.0; bins(HEADING_BIN_DEG, 360.0)];
-    let mut speed_m = vec![0.0; bins(SPEED_BIN_KMH, 30.0)];
-    let mut faults: Vec<FaultCoverage> = Vec::new();
-    let mut segments_per_test: Vec<usize> = Vec::new();
+    let mut builder = CoverageBuilder::new(area, start_end);
     for case in cases {
+        builder.add(case);
+    }
+    builder.finish()
+}
+
+/// The coverage of tests added one at a time, so that a large campaign's cases need not be in
+/// memory together (`drivecheck report` reads its case files one by one).
+#[derive(Debug, Clone)]
+pub struct CoverageBuilder {
+    grid: CoverageGrid,
+    start_end: Point,
+    heading_m: Vec<f64>,
+    speed_m: Vec<f64>,
+    faults: Vec<FaultCoverage>,
+    segments_per_test: Vec<usize>,
+    tests: usize,
+}
+
+impl CoverageBuilder {
+    /// No test yet, in `area` from a start route ending at `start_end`.
+    pub fn new(area: &Area, start_end: Point) -> Self {
+        let bins = |width: f64, full: f64| (full / width).ceil() as usize;
+        Self {
+            grid: CoverageGrid::new(area, CELL_M),
+            start_end,
+            heading_m: vec![0.0; bins(HEADING_BIN_DEG, 360.0)],
+            speed_m: vec![0.0; bins(SPEED_BIN_KMH, 30.0)],
+            faults: Vec::new(),
+            segments_per_test: Vec::new(),
+            tests: 0,
+        }
+    }
+
+    /// No test yet, in `scenario` (from the end of its start route).
+    pub fn of_scenario(scenario: &scenarios::Scenario) -> Self {
+        let start_end = scenario
+            .start_route
+            .points
+            .last()
+            .map_or(Point::new(0.0, 0.0), |w| w.position);
+        Self::new(&scenario.area, start_end)
+    }
+
+    /// Adds a test.
+    pub fn add(&mut self, case: &Case) {
+        let Self {
+            grid,
+            heading_m,
+            speed_m,
+            faults,
+            segments_per_test,
+            ..
+        } = self;
+        self.tests += 1;
         let driven = case.segments.len();
-        let mut from = start_end;
+        let mut from = self.start_end;
         let mut segment = 0usize;
         for command in &case.commands {
             match command {
@@ -155,8 +204,8 @@ pub fn coverage(area: &Area, start_end: Point, cases: &[Case]) -> Coverage {
                             if length > 0.0 && to.is_finite() {
                                 grid.visit_segment(from, to);
                                 let heading = (to - from).heading().to_degrees().rem_euclid(360.0);
-                                add(&mut heading_m, heading / HEADING_BIN_DEG, length);
-                                add(&mut speed_m, p.speed * 3.6 / SPEED_BIN_KMH, length);
+                                add(heading_m, heading / HEADING_BIN_DEG, length);
+                                add(speed_m, p.speed * 3.6 / SPEED_BIN_KMH, length);
                             }
                             from = to;
                         }
@@ -211,22 +260,35 @@ pub fn coverage(area: &Area, start_end: Point, cases: &[Case]) -> Coverage {
         }
         segments_per_test[driven] += 1;
     }
-    faults.sort_by(|a, b| (&a.probe, &a.kind).cmp(&(&b.probe, &b.kind)));
-    let drivable_cells = grid.raster.drivable_cells();
-    let driven_cells = grid.visited_cells();
-    Coverage {
-        stats: CoverageStats {
-            tests: cases.len(),
-            cell_m: CELL_M,
-            drivable_cells,
-            driven_cells,
-            area_share: grid.coverage(),
+
+    /// The coverage of the tests added.
+    pub fn finish(self) -> Coverage {
+        let Self {
+            grid,
             heading_m,
             speed_m,
-            faults,
+            mut faults,
             segments_per_test,
-        },
-        grid,
+            tests,
+            ..
+        } = self;
+        faults.sort_by(|a, b| (&a.probe, &a.kind).cmp(&(&b.probe, &b.kind)));
+        let drivable_cells = grid.raster.drivable_cells();
+        let driven_cells = grid.visited_cells();
+        Coverage {
+            stats: CoverageStats {
+                tests,
+                cell_m: CELL_M,
+                drivable_cells,
+                driven_cells,
+                area_share: grid.coverage(),
+                heading_m,
+                speed_m,
+                faults,
+                segments_per_test,
+            },
+            grid,
+        }
     }
 }
 

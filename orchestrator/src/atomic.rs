@@ -20,6 +20,68 @@ pub fn write(path: &Path, contents: impl AsRef<[u8]>) -> std::io::Result<()> {
     result
 }
 
+/// A file written piece by piece and then put in place whole ([`Staged::commit`]): until then
+/// its contents are in a temporary file beside it, which an error or a drop removes.
+#[derive(Debug)]
+pub struct Staged {
+    file: Option<std::io::BufWriter<std::fs::File>>,
+    temporary: PathBuf,
+    path: PathBuf,
+}
+
+impl Staged {
+    /// Starts writing `path` (nothing is at `path` until [`Staged::commit`]).
+    pub fn create(path: &Path) -> std::io::Result<Self> {
+        let temporary = temporary_beside(path);
+        let file = std::fs::File::create(&temporary)?;
+        Ok(Self {
+            file: Some(std::io::BufWriter::with_capacity(1 << 16, file)),
+            temporary,
+            path: path.to_owned(),
+        })
+    }
+
+    /// Flushes the contents to disk and renames them over the target.
+    pub fn commit(mut self) -> std::io::Result<()> {
+        let Some(file) = self.file.take() else {
+            return Ok(());
+        };
+        let result = (|| {
+            let file = file.into_inner().map_err(|e| e.into_error())?;
+            file.sync_all()?;
+            std::fs::rename(&self.temporary, &self.path)
+        })();
+        if result.is_err() {
+            let _ = std::fs::remove_file(&self.temporary);
+        }
+        result
+    }
+}
+
+impl Write for Staged {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        match &mut self.file {
+            Some(file) => file.write(buf),
+            None => Err(std::io::Error::other("the file was committed")),
+        }
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        match &mut self.file {
+            Some(file) => file.flush(),
+            None => Ok(()),
+        }
+    }
+}
+
+impl Drop for Staged {
+    fn drop(&mut self) {
+        if self.file.take().is_some() {
+            let _ = std::fs::remove_file(&self.temporary);
+        }
+    }
+}
+
 /// `.<name>.tmp-<pid>` in the same directory (a rename within one file system is atomic).
 fn temporary_beside(path: &Path) -> PathBuf {
     let name = path
@@ -45,6 +107,23 @@ mod tests {
             .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
             .collect();
         assert_eq!(names, ["campaign.json"]);
+    }
+
+    #[test]
+    fn a_staged_file_appears_whole_on_commit_and_not_at_all_when_dropped() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("report.html");
+        let mut staged = Staged::create(&file).unwrap();
+        staged.write_all(b"<html>").unwrap();
+        assert!(!file.exists(), "nothing is in place before the commit");
+        staged.write_all(b"</html>").unwrap();
+        staged.commit().unwrap();
+        assert_eq!(std::fs::read_to_string(&file).unwrap(), "<html></html>");
+        let mut dropped = Staged::create(&file).unwrap();
+        dropped.write_all(b"half a page").unwrap();
+        drop(dropped);
+        assert_eq!(std::fs::read_to_string(&file).unwrap(), "<html></html>");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
     }
 
     #[test]

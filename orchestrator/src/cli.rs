@@ -155,6 +155,10 @@ pub struct RunArgs {
     /// At the end, also write `report.html` into the run directory (as `drivecheck report`).
     #[arg(long)]
     pub report: bool,
+    /// With `--report`: draw every test's maps and plot, not only the failing and aborted
+    /// tests' (as `drivecheck report --all-tests`).
+    #[arg(long, requires = "report")]
+    pub report_all_tests: bool,
     /// Serve every channel of the recording live over the Foxglove WebSocket protocol while the
     /// campaign runs, on loopback port 8765 unless an address is given (`0.0.0.0:8765` for the
     /// network); open it in Foxglove with *Open connection…* `ws://ADDR`. The embedded simulated
@@ -385,6 +389,10 @@ pub struct ReportArgs {
     /// the scenario stored in the recording, else the bundled one the run names).
     #[arg(long)]
     pub scenario: Option<String>,
+    /// Draw every test's maps and plot; by default a campaign's passing tests are rows of the
+    /// tests table only, so the page does not grow with them.
+    #[arg(long)]
+    pub all_tests: bool,
 }
 
 /// Options of `drivecheck explain`.

@@ -163,7 +163,12 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
         write_junit(&runs, &of, &scenario, &out, timing, junit_file)?;
     }
     if args.report {
-        super::report::write(&out, &out.join(REPORT_FILE), Some(&scenario))?;
+        super::report::write(
+            &out,
+            &out.join(REPORT_FILE),
+            Some(&scenario),
+            &crate::report::ReportOptions::default(),
+        )?;
     }
     if args.json {
         crate::output::print_json(

@@ -7,7 +7,7 @@ use anyhow::Result;
 
 use crate::cli::ReportArgs;
 use crate::exit::Exit;
-use crate::report::{self, REPORT_FILE, ReportKind};
+use crate::report::{self, REPORT_FILE, ReportKind, ReportOptions};
 use crate::scenario_arg::optional_scenario;
 
 /// Writes the report. Exit status 0, or 2 on an error (not a run directory, a file that cannot
@@ -28,15 +28,30 @@ pub fn report(args: &ReportArgs) -> Result<Exit> {
             out.display()
         );
     }
-    write(&args.dir, &out, scenario.as_ref())?;
+    let options = ReportOptions {
+        all_tests: args.all_tests,
+    };
+    write(&args.dir, &out, scenario.as_ref(), &options)?;
     Ok(Exit::Success)
 }
 
 /// Writes `dir`'s report to `out` and says so on standard error.
-pub(super) fn write(dir: &Path, out: &Path, scenario: Option<&scenarios::Scenario>) -> Result<()> {
-    let written = report::write(dir, out, scenario)?;
+pub(super) fn write(
+    dir: &Path,
+    out: &Path,
+    scenario: Option<&scenarios::Scenario>,
+    options: &ReportOptions,
+) -> Result<()> {
+    let written = report::write(dir, out, scenario, options)?;
     let items = match written.kind {
-        ReportKind::Campaign => format!("{} tests", written.items),
+        ReportKind::Campaign if written.pages > 0 => format!(
+            "{} tests, {} drawn on {} pages in {}",
+            written.items,
+            written.sections,
+            written.pages,
+            out.with_extension("").display()
+        ),
+        ReportKind::Campaign => format!("{} tests, {} drawn", written.items, written.sections),
         ReportKind::Replay => format!("{} runs", written.items),
         ReportKind::Shrink => format!("{} steps, no maps", written.items),
     };

@@ -154,7 +154,15 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         shrink_failed(&report, &scenario, &sim, args.shrink_budget, !args.json)?;
     }
     if args.report {
-        super::report::write(&report.dir, &report.dir.join(REPORT_FILE), Some(&scenario))?;
+        let options = crate::report::ReportOptions {
+            all_tests: args.report_all_tests,
+        };
+        super::report::write(
+            &report.dir,
+            &report.dir.join(REPORT_FILE),
+            Some(&scenario),
+            &options,
+        )?;
     }
     if args.json {
         super::shared::print_report_json("run", &report, Some(wall))?;

@@ -13,7 +13,8 @@ use crate::recording::{
     TestEventKind,
 };
 use crate::runner::RECORDING_FILE;
-use campaign::case::{CampaignRecord, Case};
+use campaign::case::{CampaignRecord, Case, TestTiming};
+use campaign::oracle::Verdict;
 use campaign::replay::{Comparison, REPLAY_FILE, ReplayRun};
 use campaign::shrink::{MINIMAL_FILE, SHRINK_FILE, ShrinkReport};
 
@@ -76,8 +77,6 @@ pub(crate) struct CampaignData {
     pub tests: Vec<TestData>,
     /// The scenario's canonical TOML from the recording (`drivecheck.scenario`), if any.
     pub recorded_scenario: Option<String>,
-    /// `twin.json`, when a twin check of the run wrote one.
-    pub twin: Option<campaign::files::TwinCheck>,
     /// What the page should say about missing or unreadable parts.
     pub notes: Vec<String>,
 }
@@ -111,8 +110,8 @@ pub(crate) struct ShrinkData {
 /// What a directory holds.
 #[derive(Debug, Clone)]
 pub(crate) enum Directory {
-    /// A campaign (or one run of a replay).
-    Campaign(Box<CampaignData>),
+    /// A campaign (or one run of a replay): read a test at a time as its page is written.
+    Campaign,
     /// A replay of a case.
     Replay(Box<ReplayData>),
     /// A shrink of a case.
@@ -135,7 +134,7 @@ impl Directory {
             return read_shrink(dir).map(|d| Directory::Shrink(Box::new(d)));
         }
         if dir.join(CAMPAIGN_FILE).is_file() {
-            return read_campaign(dir).map(|d| Directory::Campaign(Box::new(d)));
+            return Ok(Directory::Campaign);
         }
         Err(ReportError::NotARunDirectory {
             dir: dir.to_owned(),
@@ -157,11 +156,14 @@ fn invalid(path: &Path, error: impl std::fmt::Display) -> ReportError {
     }
 }
 
-/// Reads a run directory: `campaign.json`, every `case-NNN.json` and, when present,
-/// `campaign.mcap` (an unreadable recording is a note, not an error: the tables still help).
-pub(crate) fn read_campaign(dir: &Path) -> Result<CampaignData, ReportError> {
+/// `campaign.json` of the run directory `dir`.
+pub(crate) fn read_record(dir: &Path) -> Result<CampaignRecord, ReportError> {
     let path = dir.join(CAMPAIGN_FILE);
-    let record = CampaignRecord::from_json(&read_text(&path)?).map_err(|e| invalid(&path, e))?;
+    CampaignRecord::from_json(&read_text(&path)?).map_err(|e| invalid(&path, e))
+}
+
+/// The case files of the run directory `dir` (`case-NNN.json`), by the index in their names.
+pub(crate) fn case_files(dir: &Path) -> Result<Vec<(usize, String)>, ReportError> {
     let entries = std::fs::read_dir(dir).map_err(|error| ReportError::Read {
         path: dir.to_owned(),
         error,
@@ -175,30 +177,19 @@ pub(crate) fn read_campaign(dir: &Path) -> Result<CampaignData, ReportError> {
         })
         .collect();
     files.sort();
-    let mut tests = Vec::new();
-    for (index, file) in files {
-        let path = dir.join(&file);
-        let case = Case::from_json(&read_text(&path)?).map_err(|e| invalid(&path, e))?;
-        tests.push(TestData {
-            index: case.test_index.unwrap_or(index),
-            file,
-            case,
-            track: None,
-        });
-    }
-    let mut notes = Vec::new();
-    let mut recorded_scenario = None;
-    let recording_path = dir.join(RECORDING_FILE);
-    if recording_path.is_file() {
-        recorded_scenario = read_tracks(&recording_path, &mut tests, &mut notes);
-    } else {
-        notes.push(format!(
-            "{} does not exist: no tracks or plots",
-            recording_path.display()
-        ));
-    }
+    Ok(files)
+}
+
+/// The case file `file` of the run directory `dir`.
+pub(crate) fn read_case(dir: &Path, file: &str) -> Result<Case, ReportError> {
+    let path = dir.join(file);
+    Case::from_json(&read_text(&path)?).map_err(|e| invalid(&path, e))
+}
+
+/// `twin.json` of `dir`, when a twin check of the run wrote one (an unreadable one is a note).
+pub(crate) fn read_twin(dir: &Path, notes: &mut Vec<String>) -> Option<campaign::files::TwinCheck> {
     let twin_path = dir.join(campaign::twin::TWIN_FILE);
-    let twin = match std::fs::read_to_string(&twin_path) {
+    match std::fs::read_to_string(&twin_path) {
         Err(_) => None,
         Ok(text) => match campaign::files::TwinCheck::from_json(&text) {
             Ok(twin) => Some(twin),
@@ -207,35 +198,125 @@ pub(crate) fn read_campaign(dir: &Path) -> Result<CampaignData, ReportError> {
                 None
             }
         },
-    };
+    }
+}
+
+/// Reads a run directory: `campaign.json`, every `case-NNN.json` and, when present,
+/// `campaign.mcap` (an unreadable recording is a note, not an error: the tables still help).
+/// Every test's case and track in memory: for one test, a replay's runs and `explain`; the
+/// campaign's page reads a test at a time instead (`report::campaign`).
+pub(crate) fn read_campaign(dir: &Path) -> Result<CampaignData, ReportError> {
+    let record = read_record(dir)?;
+    let mut tests = Vec::new();
+    for (index, file) in case_files(dir)? {
+        let case = read_case(dir, &file)?;
+        tests.push(TestData {
+            index: case.test_index.unwrap_or(index),
+            file,
+            case,
+            track: None,
+        });
+    }
+    let mut notes = Vec::new();
+    let recorded_scenario = read_tracks(dir, &mut tests, &mut notes);
     Ok(CampaignData {
         dir: dir.to_owned(),
         record,
         tests,
         recorded_scenario,
-        twin,
         notes,
     })
 }
 
-/// Reads the recording at `path` and gives each test its track; the recording's copy of the
-/// scenario. A test at a time when the recording has test spans (a campaign on fresh simulated
-/// cars, `docs/scaling.md`), so that a large campaign's recording is never in memory decoded
-/// whole; what no span claims (a recording of one car for the whole campaign) is read at once.
-fn read_tracks(path: &Path, tests: &mut [TestData], notes: &mut Vec<String>) -> Option<String> {
-    let mut spans = match crate::recording::Spans::open(path) {
+/// What a test's row in the tests table, the summary and the choice of its section need: a few
+/// numbers of its case file (the case itself is read again when its section is drawn).
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Row {
+    /// Its index in the campaign.
+    pub index: usize,
+    /// The case file's name in the run directory.
+    pub file: String,
+    /// Its verdict (`None`: not run).
+    pub verdict: Option<Verdict>,
+    /// Why it failed or was aborted.
+    pub reason: Option<String>,
+    /// Its largest deviation, metres.
+    pub worst_deviation_m: Option<f64>,
+    /// Segments judged (driven).
+    pub segments: usize,
+    /// Faults placed.
+    pub faults: usize,
+    /// Its reset and drive times.
+    pub timing: Option<TestTiming>,
+}
+
+impl Row {
+    /// The row of test `index`, case file `file`.
+    pub(crate) fn of(index: usize, file: String, case: &Case) -> Self {
+        let summary = crate::runner::TestSummary::of(index, String::new(), case);
+        Self {
+            index,
+            file,
+            verdict: case.verdict,
+            reason: case.reason.clone(),
+            worst_deviation_m: summary.worst_deviation_m,
+            segments: case.segments.len(),
+            faults: case.fault_places.len(),
+            timing: case.timing,
+        }
+    }
+}
+
+/// Reads the run directory's case files one at a time: each test's row, and `each` given every
+/// case (the coverage) before it is dropped.
+pub(crate) fn read_rows(dir: &Path, mut each: impl FnMut(&Case)) -> Result<Vec<Row>, ReportError> {
+    let mut rows = Vec::new();
+    for (index, file) in case_files(dir)? {
+        let case = read_case(dir, &file)?;
+        each(&case);
+        rows.push(Row::of(case.test_index.unwrap_or(index), file, &case));
+    }
+    Ok(rows)
+}
+
+/// Reads the recording of the run directory `dir` a span at a time (the messages of one test,
+/// or those no test's span claims: a recording of one car for the whole campaign, read at
+/// once), giving `each` the span's test and messages and the recording's copy of the scenario
+/// (`drivecheck.scenario`, written before the first test); `each` keeps what it needs and the
+/// span is dropped. What is missing or damaged is a note. The recording's copy of the scenario.
+pub(crate) fn read_spans(
+    dir: &Path,
+    notes: &mut Vec<String>,
+    mut each: impl FnMut(
+        Option<usize>,
+        Recording,
+        Option<&str>,
+        &mut Vec<String>,
+    ) -> Result<(), ReportError>,
+) -> Result<Option<String>, ReportError> {
+    let path = dir.join(RECORDING_FILE);
+    if !path.is_file() {
+        notes.push(format!(
+            "{} does not exist: no tracks or plots",
+            path.display()
+        ));
+        return Ok(None);
+    }
+    let mut spans = match crate::recording::Spans::open(&path) {
         Ok(spans) => spans,
         Err(e) => {
             notes.push(format!("{e}; no tracks or plots"));
-            return None;
+            return Ok(None);
         }
     };
-    let by_index: BTreeMap<usize, usize> = tests
-        .iter()
-        .enumerate()
-        .map(|(i, t)| (t.index, i))
-        .collect();
-    for span in spans.by_ref() {
+    let scenario = |spans: &crate::recording::Spans<_>| {
+        spans
+            .metadata("drivecheck.scenario")
+            .and_then(|m| m.get("toml"))
+            .cloned()
+    };
+    let mut recorded = None;
+    while let Some(span) = spans.next() {
         let span = match span {
             Ok(span) => span,
             Err(why) => {
@@ -246,26 +327,42 @@ fn read_tracks(path: &Path, tests: &mut [TestData], notes: &mut Vec<String>) -> 
                 break;
             }
         };
+        if recorded.is_none() {
+            recorded = scenario(&spans);
+        }
         let recording = Recording::from_held(span.messages);
-        let mine = match span.test_index.and_then(|t| by_index.get(&t)) {
+        each(span.test_index, recording, recorded.as_deref(), notes)?;
+    }
+    Ok(scenario(&spans).or(recorded))
+}
+
+/// Reads the recording of `dir` and gives each test its track (see [`read_spans`]); the
+/// recording's copy of the scenario.
+fn read_tracks(dir: &Path, tests: &mut [TestData], notes: &mut Vec<String>) -> Option<String> {
+    let path = dir.join(RECORDING_FILE);
+    let by_index: BTreeMap<usize, usize> = tests
+        .iter()
+        .enumerate()
+        .map(|(i, t)| (t.index, i))
+        .collect();
+    let read = read_spans(dir, notes, |test, recording, _, notes| {
+        let mine = match test.and_then(|t| by_index.get(&t)) {
             Some(&i) => std::slice::from_mut(&mut tests[i]),
             None => &mut tests[..],
         };
-        match split_tracks(&recording, mine) {
-            Ok(mut tracks) => {
+        match Tracks::split(&recording) {
+            Ok(tracks) => {
                 for test in mine.iter_mut() {
-                    if let Some(track) = tracks.remove(&test.index) {
+                    if let Some(track) = tracks.track(test.index) {
                         test.track = Some(track);
                     }
                 }
             }
             Err(e) => notes.push(format!("{}: {e}; no tracks or plots", path.display())),
         }
-    }
-    spans
-        .metadata("drivecheck.scenario")
-        .and_then(|m| m.get("toml"))
-        .cloned()
+        Ok(())
+    });
+    read.unwrap_or_default()
 }
 
 fn read_replay(dir: &Path) -> Result<ReplayData, ReportError> {
@@ -335,60 +432,72 @@ struct Times {
     autopilot: Option<u64>,
 }
 
-/// Splits the recording's `/car/state` samples by test: those logged between the test's start
-/// and end events (`/tests`), timed from the test's beginning. The runner starts a test's clock
-/// (the time base of `fault_places` and `abort.at`) once the car acknowledged the test's
-/// `set_autopilot`, right after uploading the start route; that acknowledgement's log time is
-/// `t = 0` (or, when it is missing, the start event, a few round trips earlier).
-fn split_tracks(
-    recording: &Recording,
-    tests: &[TestData],
-) -> Result<BTreeMap<usize, Track>, crate::recording::RecordingError> {
-    let mut times: BTreeMap<usize, Times> = BTreeMap::new();
-    for event in recording.messages::<TestEvent>()? {
-        let entry = times.entry(event.message.test_index).or_default();
-        match event.message.event {
-            TestEventKind::Started { .. } => {
-                entry.started.get_or_insert(event.log_time_ns);
+/// The recording's `/car/state` samples and when each test began and ended, to split the
+/// samples by test ([`Tracks::track`]).
+pub(crate) struct Tracks {
+    times: BTreeMap<usize, Times>,
+    states: Vec<Stamped<CarStateRecord>>,
+    starts: Vec<u64>,
+}
+
+impl Tracks {
+    /// Reads the test events, the autopilot acknowledgements and the state samples of
+    /// `recording`. The runner starts a test's clock (the time base of `fault_places` and
+    /// `abort.at`) once the car acknowledged the test's `set_autopilot`, right after uploading
+    /// the start route; that acknowledgement's log time is `t = 0` (or, when it is missing, the
+    /// start event, a few round trips earlier).
+    pub(crate) fn split(recording: &Recording) -> Result<Self, crate::recording::RecordingError> {
+        let mut times: BTreeMap<usize, Times> = BTreeMap::new();
+        for event in recording.messages::<TestEvent>()? {
+            let entry = times.entry(event.message.test_index).or_default();
+            match event.message.event {
+                TestEventKind::Started { .. } => {
+                    entry.started.get_or_insert(event.log_time_ns);
+                }
+                TestEventKind::Ended { .. } => entry.ended = Some(event.log_time_ns),
             }
-            TestEventKind::Ended { .. } => entry.ended = Some(event.log_time_ns),
         }
-    }
-    let acks: BTreeMap<u64, (u64, bool)> = recording
-        .messages::<CommandAck>()?
-        .into_iter()
-        .map(|a| {
-            let acked = matches!(a.message.outcome, AckOutcome::Acked);
-            (a.message.id, (a.log_time_ns, acked))
+        let acks: BTreeMap<u64, (u64, bool)> = recording
+            .messages::<CommandAck>()?
+            .into_iter()
+            .map(|a| {
+                let acked = matches!(a.message.outcome, AckOutcome::Acked);
+                (a.message.id, (a.log_time_ns, acked))
+            })
+            .collect();
+        for sent in recording.messages::<CommandSent>()? {
+            let (Some(test), CarCommand::SetAutopilot { active: true, .. }) =
+                (sent.message.test_index, &sent.message.command)
+            else {
+                continue;
+            };
+            if let (Some(entry), Some(&(at, true))) =
+                (times.get_mut(&test), acks.get(&sent.message.id))
+            {
+                entry.autopilot.get_or_insert(at);
+            }
+        }
+        // Log time, not the record's own `received_at_ns`: in a campaign on fresh simulated
+        // cars (`run --jobs`) the record's times count from its test's start, log time from
+        // the campaign's.
+        let mut states: Vec<Stamped<CarStateRecord>> = recording.messages::<CarStateRecord>()?;
+        states.sort_by_key(|s| s.log_time_ns);
+        let starts: Vec<u64> = times.values().filter_map(|t| t.started).collect();
+        Ok(Self {
+            times,
+            states,
+            starts,
         })
-        .collect();
-    for sent in recording.messages::<CommandSent>()? {
-        let (Some(test), CarCommand::SetAutopilot { active: true, .. }) =
-            (sent.message.test_index, &sent.message.command)
-        else {
-            continue;
-        };
-        if let (Some(entry), Some(&(at, true))) = (times.get_mut(&test), acks.get(&sent.message.id))
-        {
-            entry.autopilot.get_or_insert(at);
-        }
     }
-    // Log time, not the record's own `received_at_ns`: in a campaign on fresh simulated cars
-    // (`run --jobs`) the record's times count from its test's start, log time from the campaign's.
-    let mut states: Vec<Stamped<CarStateRecord>> = recording.messages::<CarStateRecord>()?;
-    states.sort_by_key(|s| s.log_time_ns);
-    let starts: Vec<u64> = times.values().filter_map(|t| t.started).collect();
-    let mut tracks = BTreeMap::new();
-    for test in tests {
-        let Some(t) = times.get(&test.index) else {
-            continue;
-        };
-        let Some(started) = t.started else {
-            continue;
-        };
+
+    /// Test `index`'s samples: those logged between its start and end events (`/tests`), timed
+    /// from its beginning; `None` when the recording has no start event of it.
+    pub(crate) fn track(&self, index: usize) -> Option<Track> {
+        let t = self.times.get(&index)?;
+        let started = t.started?;
         // Without an end event (a killed campaign) the test lasts until the next one starts.
         let ended = t.ended.unwrap_or_else(|| {
-            starts
+            self.starts
                 .iter()
                 .copied()
                 .filter(|&s| s > started)
@@ -399,8 +508,8 @@ fn split_tracks(
             Some(at) if at >= started && at <= ended => (at, Origin::Autopilot),
             _ => (started, Origin::StartEvent),
         };
-        let from = states.partition_point(|s| s.log_time_ns < started);
-        let samples = states[from..]
+        let from = self.states.partition_point(|s| s.log_time_ns < started);
+        let samples = self.states[from..]
             .iter()
             .take_while(|s| s.log_time_ns <= ended)
             .map(
@@ -416,16 +525,12 @@ fn split_tracks(
                 },
             )
             .collect();
-        tracks.insert(
-            test.index,
-            Track {
-                samples,
-                origin,
-                zero_ns: zero,
-            },
-        );
+        Some(Track {
+            samples,
+            origin,
+            zero_ns: zero,
+        })
     }
-    Ok(tracks)
 }
 
 /// The scenario to draw maps with, and what the page should say about it: `given` (checked

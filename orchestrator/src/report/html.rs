@@ -6,7 +6,7 @@ use std::fmt::Write;
 use scenarios::Scenario;
 
 use super::ReportError;
-use super::data::{CampaignData, Origin, ReplayData, Sample, ShrinkData, TestData, short};
+use super::data::{Origin, ReplayData, Row, Sample, ShrinkData, TestData, short};
 use super::draw::{
     AMBER, BarPanel, Colouring, FAULT, FaultMark, GREEN, MAX_TRACK_POINTS, MapLayers, PlotInput,
     RED_ABOVE, RUN_COLOURS, TrackLayer, Window, bars_svg, css, decimate, deviation_svg, map_svg,
@@ -14,8 +14,9 @@ use super::draw::{
 use super::explain::{ExplainOptions, explain_segments};
 use super::route::{boundaries, point_along, segments};
 use crate::runner::TestSummary;
+use campaign::case::CampaignRecord;
 use campaign::case::{Case, CommandRecord};
-use campaign::coverage::{Bin, CoverageStats, FaultCoverage};
+use campaign::coverage::{Bin, Coverage, CoverageStats, FaultCoverage};
 use campaign::explain::{SegmentExplanation, Source};
 use campaign::oracle::{SegmentVerdict, Verdict};
 use campaign::shrink::{Edit, FaultField, Outcome, RunResult, Step};
@@ -116,7 +117,7 @@ fn notes(out: &mut String, notes: &[String]) {
     out.push_str("</ul>\n");
 }
 
-fn foot(out: &mut String, dir: &std::path::Path) {
+pub(crate) fn foot(out: &mut String, dir: &std::path::Path) {
     let _ = write!(
         out,
         "<footer>Written by drivecheck {} from <code>{}</code>. Every picture is inline SVG; the \
@@ -493,7 +494,7 @@ fn cause_words(source: &Source, case: &Case) -> String {
 }
 
 /// The section of one test (or one run of a replay): facts, map, plot, tables.
-fn test_section(
+pub(crate) fn test_section(
     out: &mut String,
     id: &str,
     title: &str,
@@ -612,32 +613,55 @@ fn test_section(
     Ok(())
 }
 
-/// A campaign's page.
-pub(crate) fn campaign_page(
-    data: &CampaignData,
-    scenario: Option<&Scenario>,
-    mut page_notes: Vec<String>,
-) -> Result<String, ReportError> {
-    let record = &data.record;
-    let mut out = String::new();
-    let title = format!(
+/// What the top of a campaign's page shows: `campaign.json`, a row per test, `twin.json`.
+pub(crate) struct CampaignTop<'a> {
+    /// The run directory.
+    pub dir: &'a std::path::Path,
+    /// `campaign.json`.
+    pub record: &'a CampaignRecord,
+    /// A row per test.
+    pub rows: &'a [Row],
+    /// `twin.json`, when a twin check wrote one.
+    pub twin: Option<&'a campaign::files::TwinCheck>,
+    /// What the page should say about missing or unreadable parts.
+    pub notes: &'a [String],
+}
+
+/// The title of a campaign's pages.
+fn campaign_title(record: &CampaignRecord) -> String {
+    format!(
         "drivecheck campaign seed {} on {}",
         record.seed, record.scenario.name
-    );
-    head(&mut out, &title);
+    )
+}
+
+/// The top of a campaign's page: the summary, the twin check and the tests table, each row
+/// linking to `link(test index)` when the test has a section.
+pub(crate) fn campaign_top(
+    out: &mut String,
+    top: &CampaignTop<'_>,
+    link: impl Fn(usize) -> Option<String>,
+) {
+    let CampaignTop {
+        dir,
+        record,
+        rows,
+        twin,
+        notes: page_notes,
+    } = *top;
+    head(out, &campaign_title(record));
     let _ = writeln!(
         out,
         "<h1>Campaign seed {} on {}</h1>\n<p class=\"sub\">Run directory <code>{}</code></p>",
         record.seed,
         escape(&record.scenario.name),
-        escape(&data.dir.display().to_string())
+        escape(&dir.display().to_string())
     );
-    page_notes.extend(data.notes.iter().cloned());
-    notes(&mut out, &page_notes);
+    notes(out, page_notes);
     out.push_str("<section id=\"summary\">\n<h2>Summary</h2>\n<table class=\"facts\">\n");
-    fact(&mut out, "seed", &record.seed.to_string());
+    fact(out, "seed", &record.seed.to_string());
     fact(
-        &mut out,
+        out,
         "scenario",
         &format!(
             "{} (hash {})",
@@ -645,9 +669,9 @@ pub(crate) fn campaign_page(
             record.scenario.hash.as_deref().map_or("–", short)
         ),
     );
-    fact(&mut out, "drivecheck", &escape(record.header.tool()));
+    fact(out, "drivecheck", &escape(record.header.tool()));
     fact(
-        &mut out,
+        out,
         "car",
         &format!(
             "{}, firmware {}",
@@ -656,28 +680,23 @@ pub(crate) fn campaign_page(
         ),
     );
     if let Some(of) = &record.replay_of {
-        fact(&mut out, "replay of", &escape(&of.case));
+        fact(out, "replay of", &escape(&of.case));
     }
     if record.no_faults {
-        fact(&mut out, "faults", "none (--no-faults)");
+        fact(out, "faults", "none (--no-faults)");
     }
-    let counts = |v| {
-        data.tests
-            .iter()
-            .filter(|t| t.case.verdict == Some(v))
-            .count()
-    };
+    let counts = |v| rows.iter().filter(|r| r.verdict == Some(v)).count();
     let (tests, passed, failed, aborted) = match &record.summary {
         Some(s) => (s.tests, s.passed, s.failed, s.aborted),
         None => (
-            data.tests.len(),
+            rows.len(),
             counts(Verdict::Passed),
             counts(Verdict::Failed),
             counts(Verdict::Aborted),
         ),
     };
     fact(
-        &mut out,
+        out,
         "tests",
         &format!(
             "<span id=\"count-tests\">{tests}</span>: \
@@ -691,13 +710,12 @@ pub(crate) fn campaign_page(
         .as_ref()
         .and_then(|s| s.worst_deviation_m)
         .or_else(|| {
-            data.tests
-                .iter()
-                .filter_map(|t| TestSummary::of(t.index, String::new(), &t.case).worst_deviation_m)
+            rows.iter()
+                .filter_map(|r| r.worst_deviation_m)
                 .max_by(f64::total_cmp)
         });
     fact(
-        &mut out,
+        out,
         "worst deviation",
         &format!(
             "<span id=\"worst-deviation\">{}</span> (threshold {:.2} m)",
@@ -706,7 +724,7 @@ pub(crate) fn campaign_page(
         ),
     );
     fact(
-        &mut out,
+        out,
         "started, ended",
         &format!(
             "{}, {}",
@@ -715,11 +733,11 @@ pub(crate) fn campaign_page(
         ),
     );
     match wall_seconds(&record.started_at, record.ended_at.as_deref()) {
-        Some(s) if s < 1.0 => fact(&mut out, "wall time", "under a second"),
-        Some(s) => fact(&mut out, "wall time", &seconds(s)),
-        None => fact(&mut out, "wall time", "unknown"),
+        Some(s) if s < 1.0 => fact(out, "wall time", "under a second"),
+        Some(s) => fact(out, "wall time", &seconds(s)),
+        None => fact(out, "wall time", "unknown"),
     }
-    let timed: Vec<_> = data.tests.iter().filter_map(|t| t.case.timing).collect();
+    let timed: Vec<_> = rows.iter().filter_map(|r| r.timing).collect();
     if !timed.is_empty() {
         let drive: f64 = timed.iter().map(|t| t.drive_s).sum();
         let reset: f64 = timed.iter().map(|t| t.reset_s).sum();
@@ -729,14 +747,14 @@ pub(crate) fn campaign_page(
             ""
         };
         fact(
-            &mut out,
+            out,
             "driven",
             &format!(
                 "{} in tests, {} in resets{clock}{}",
                 seconds(drive),
                 seconds(reset),
-                if timed.len() < data.tests.len() {
-                    format!(", {} of {} tests timed", timed.len(), data.tests.len())
+                if timed.len() < rows.len() {
+                    format!(", {} of {} tests timed", timed.len(), rows.len())
                 } else {
                     String::new()
                 }
@@ -745,14 +763,14 @@ pub(crate) fn campaign_page(
     }
     if let Some(profile) = &record.car_profile {
         fact(
-            &mut out,
+            out,
             "car profile",
             &format!("{} (hash {})", escape(&profile.name), short(&profile.hash)),
         );
     }
     out.push_str("</table>\n</section>\n");
-    if let Some(twin) = &data.twin {
-        twin_section(&mut out, twin);
+    if let Some(twin) = twin {
+        twin_section(out, twin);
     }
     out.push_str(
         "<section id=\"tests\">\n<h2>Tests</h2>\n<table><tr><th>test</th><th>verdict</th>\
@@ -760,41 +778,107 @@ pub(crate) fn campaign_page(
          <th>failing segment or reason</th></tr>\n",
     );
     let threshold = record.settings.oracle_threshold_m;
-    for t in &data.tests {
-        let s = TestSummary::of(t.index, t.file.clone(), &t.case);
-        let above = s.worst_deviation_m.is_some_and(|w| w > threshold);
+    for r in rows {
+        let above = r.worst_deviation_m.is_some_and(|w| w > threshold);
+        let name = format!("test {:03}", r.index);
+        let name = match link(r.index) {
+            Some(href) => format!("<a href=\"{}\">{name}</a>", escape(&href)),
+            None => name,
+        };
         let _ = writeln!(
             out,
-            "<tr><td><a href=\"#test-{i:03}\">test {i:03}</a></td><td>{}</td>\
+            "<tr><td>{name}</td><td>{}</td>\
              <td class=\"num{}\">{}</td><td class=\"num\">{}</td><td class=\"num\">{}</td>\
              <td class=\"num\">{}</td><td>{}</td></tr>",
-            badge(t.case.verdict),
+            badge(r.verdict),
             if above { " above" } else { "" },
-            metres(s.worst_deviation_m),
-            t.case.segments.len(),
-            t.case.fault_places.len(),
-            t.case
-                .timing
+            metres(r.worst_deviation_m),
+            r.segments,
+            r.faults,
+            r.timing
                 .map_or_else(|| "–".to_owned(), |t| seconds(t.drive_s)),
-            escape(t.case.reason.as_deref().unwrap_or("")),
-            i = t.index
+            escape(r.reason.as_deref().unwrap_or("")),
         );
     }
     out.push_str("</table>\n</section>\n");
-    coverage_section(&mut out, data, scenario)?;
-    for t in &data.tests {
-        test_section(
-            &mut out,
-            &format!("test-{:03}", t.index),
-            &format!("Test {:03}", t.index),
-            t,
-            scenario,
-            threshold,
-            true,
-        )?;
+}
+
+/// The head of a page of a campaign's test sections (`first` to `last`, page `page` of
+/// `pages`), linking back to the `index` page and to the pages around it.
+pub(crate) fn section_page_top(
+    out: &mut String,
+    record: &CampaignRecord,
+    index: &str,
+    page: (usize, usize),
+    tests: (usize, usize),
+    link: impl Fn(usize) -> String,
+) {
+    let (page, pages) = page;
+    head(
+        out,
+        &format!(
+            "{}, tests {:03}–{:03}",
+            campaign_title(record),
+            tests.0,
+            tests.1
+        ),
+    );
+    let _ = writeln!(
+        out,
+        "<h1>Campaign seed {} on {}: tests {:03} to {:03}</h1>",
+        record.seed,
+        escape(&record.scenario.name),
+        tests.0,
+        tests.1
+    );
+    page_nav(out, index, page, pages, link);
+}
+
+/// Links to the index page and to the previous and next pages of sections.
+pub(crate) fn page_nav(
+    out: &mut String,
+    index: &str,
+    page: usize,
+    pages: usize,
+    link: impl Fn(usize) -> String,
+) {
+    let _ = write!(
+        out,
+        "<p class=\"sub\">Page {page} of {pages} of the failing and aborted tests' sections · \
+         <a href=\"{}\">the summary, coverage and every test</a>",
+        escape(index)
+    );
+    if page > 1 {
+        let _ = write!(
+            out,
+            " · <a href=\"{}\">previous page</a>",
+            escape(&link(page - 1))
+        );
     }
-    foot(&mut out, &data.dir);
-    Ok(out)
+    if page < pages {
+        let _ = write!(
+            out,
+            " · <a href=\"{}\">next page</a>",
+            escape(&link(page + 1))
+        );
+    }
+    out.push_str("</p>\n");
+}
+
+/// The index page's list of the pages of test sections: each page's link and its tests.
+pub(crate) fn pages_section(out: &mut String, pages: &[(String, usize, usize, usize)]) {
+    out.push_str(
+        "<section id=\"pages\">\n<h2>Test sections</h2>\n<p>The failing and aborted tests' \
+         maps, plots and tables are on pages of their own, linked from the tests table above:</p>\n<ul>\n",
+    );
+    for (href, first, last, count) in pages {
+        let _ = writeln!(
+            out,
+            "<li><a href=\"{}\">tests {first:03} to {last:03}</a> ({count} tests)</li>",
+            escape(href)
+        );
+    }
+    out.push_str("</ul>\n</section>\n");
 }
 
 /// What the campaign covered: a heat map of the cells its tests drove, then the numbers
@@ -843,16 +927,14 @@ fn twin_section(out: &mut String, twin: &campaign::files::TwinCheck) {
     out.push_str("</table>\n</section>\n");
 }
 
-fn coverage_section(
+pub(crate) fn coverage_section(
     out: &mut String,
-    data: &CampaignData,
     scenario: Option<&Scenario>,
+    coverage: Option<&Coverage>,
 ) -> Result<(), ReportError> {
-    let Some(scenario) = scenario else {
+    let (Some(scenario), Some(coverage)) = (scenario, coverage) else {
         return Ok(());
     };
-    let cases: Vec<Case> = data.tests.iter().map(|t| t.case.clone()).collect();
-    let coverage = campaign::coverage::of_scenario(scenario, &cases);
     out.push_str("<section id=\"coverage\">\n<h2>Coverage</h2>\n");
     let layers = MapLayers {
         heat: Some(&coverage.grid),

@@ -18,6 +18,7 @@
 //!
 //! Not here: reading the command line (`commands::report`).
 
+mod campaign;
 pub(crate) mod data;
 mod draw;
 pub mod explain;
@@ -92,36 +93,55 @@ pub enum ReportKind {
     Shrink,
 }
 
+/// What a report shows.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ReportOptions {
+    /// A campaign's page holds every test's section (maps, plot, tables), not only the failing,
+    /// aborted and not run tests'.
+    pub all_tests: bool,
+}
+
 /// A report written.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Written {
     /// Where.
     pub path: PathBuf,
-    /// Its size, bytes.
-    pub bytes: usize,
+    /// Its size, bytes (its pages' too).
+    pub bytes: u64,
     /// What it describes.
     pub kind: ReportKind,
     /// Tests (campaign) or runs (replay) shown; steps for a shrink.
     pub items: usize,
+    /// A campaign's tests with a section (maps, plot, tables).
+    pub sections: usize,
+    /// A campaign's pages of sections besides the index page, in the directory named as the
+    /// page without its extension (`report/tests-0001.html`, …); 0 when the sections are on
+    /// the page itself.
+    pub pages: usize,
 }
 
-/// The page of directory `dir` (see the module doc) and what it describes. `scenario`, when
-/// given, is the scenario to draw the maps in (checked against the recorded hash: a mismatch is
-/// noted on the page).
-pub fn render(
+/// Writes the page of directory `dir` (see the module doc) to `out`. `scenario`, when given, is
+/// the scenario to draw the maps in (checked against the recorded hash: a mismatch is noted on
+/// the page). A campaign's page is written a test at a time (`campaign`); a replay's and a
+/// shrink's, of a case each, at once.
+pub fn write(
     dir: &Path,
+    out: &Path,
     scenario: Option<&Scenario>,
-) -> Result<(String, ReportKind, usize), ReportError> {
-    match Directory::read(dir)? {
-        Directory::Campaign(data) => {
-            let (scenario, notes) = scenario_for(
-                &data.record.scenario.name,
-                data.record.scenario.hash.as_deref(),
-                scenario,
-                data.recorded_scenario.as_deref(),
-            );
-            let page = html::campaign_page(&data, scenario.as_ref(), notes)?;
-            Ok((page, ReportKind::Campaign, data.tests.len()))
+    options: &ReportOptions,
+) -> Result<Written, ReportError> {
+    let directory = Directory::read(dir)?;
+    let (page, kind, items) = match directory {
+        Directory::Campaign => {
+            let pages = campaign::write(dir, out, scenario, options)?;
+            return Ok(Written {
+                path: out.to_owned(),
+                bytes: pages.bytes,
+                kind: ReportKind::Campaign,
+                items: pages.tests,
+                sections: pages.sections,
+                pages: pages.pages,
+            });
         }
         Directory::Replay(data) => {
             let recorded = data
@@ -136,30 +156,27 @@ pub fn render(
                 recorded.as_deref(),
             );
             let page = html::replay_page(&data, scenario.as_ref(), notes)?;
-            Ok((page, ReportKind::Replay, data.runs.len()))
+            (page, ReportKind::Replay, data.runs.len())
         }
         Directory::Shrink(data) => {
             let steps = data.report.steps.len();
-            Ok((
+            (
                 html::shrink_page(&data, Vec::new()),
                 ReportKind::Shrink,
                 steps,
-            ))
+            )
         }
-    }
-}
-
-/// Writes the page of `dir` to `out` (see [`render`]).
-pub fn write(dir: &Path, out: &Path, scenario: Option<&Scenario>) -> Result<Written, ReportError> {
-    let (page, kind, items) = render(dir, scenario)?;
+    };
     crate::atomic::write(out, &page).map_err(|error| ReportError::Write {
         path: out.to_owned(),
         error,
     })?;
     Ok(Written {
         path: out.to_owned(),
-        bytes: page.len(),
+        bytes: page.len() as u64,
         kind,
         items,
+        sections: 0,
+        pages: 0,
     })
 }
