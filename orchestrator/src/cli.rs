@@ -659,6 +659,31 @@ pub enum BenchCommand {
     /// firmware generation, the distribution of the placement errors. Exit status: 0 measured,
     /// 2 error.
     Placement(BenchPlacementArgs),
+    /// What a campaign and every reader of its run directory cost as the campaign grows:
+    /// campaigns of each size (`--record failing`, and unrecorded for the time), then `runs show`,
+    /// `report`, `explain` and `runs merge` of two shards, each a `drivecheck` process of its own:
+    /// wall time, peak memory (RSS), recording bytes per test, report size. Exit status: 0
+    /// measured, 2 error.
+    Scale(BenchScaleArgs),
+}
+
+/// Options of `drivecheck bench scale`.
+#[derive(Debug, Args)]
+pub struct BenchScaleArgs {
+    /// Campaign sizes, in tests.
+    #[arg(long, value_delimiter = ',', default_value = "100,1000,10000",
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1_000_000))]
+    pub sizes: Vec<usize>,
+    /// Tests run at once in each campaign and shard.
+    #[arg(long, default_value_t = 2, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=256))]
+    pub jobs: usize,
+    /// The campaigns' seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Where the run directories go (a new directory; default: a scratch directory removed at
+    /// the end).
+    #[arg(long, value_name = "DIR")]
+    pub scratch: Option<PathBuf>,
 }
 
 /// Options of `drivecheck bench placement`.

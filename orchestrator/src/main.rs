@@ -30,13 +30,15 @@ fn main() -> ExitCode {
     } else {
         orchestrator::output::Verbosity::Normal
     });
-    match orchestrator::commands::run(cli) {
-        Ok(exit) => exit.into(),
+    let exit = match orchestrator::commands::run(cli) {
+        Ok(exit) => exit,
         Err(error) => {
             eprintln!("error: {}", orchestrator::output::describe(&error));
-            Exit::Error.into()
+            Exit::Error
         }
-    }
+    };
+    orchestrator::commands::bench_scale::record_peak_memory();
+    exit.into()
 }
 
 /// Diagnostics (`tracing`: the car link's events, the runner's steps) go to standard error as

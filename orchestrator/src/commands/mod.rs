@@ -6,6 +6,7 @@ mod bench_fidelity;
 mod bench_fidelity_route;
 mod bench_placement;
 mod bench_recovery;
+pub mod bench_scale;
 mod calibrate;
 mod completions;
 mod explain;
@@ -55,6 +56,7 @@ pub fn run(cli: Cli) -> Result<Exit> {
         Command::Bench(BenchCommand::Recovery(args)) => bench_recovery::run(&args),
         Command::Bench(BenchCommand::Fidelity(args)) => bench_fidelity::run(&args),
         Command::Bench(BenchCommand::Placement(args)) => bench_placement::run(&args),
+        Command::Bench(BenchCommand::Scale(args)) => bench_scale::run(&args),
         Command::Completions(args) => completions::completions(&args),
         Command::Man(args) => completions::man(&args),
     }

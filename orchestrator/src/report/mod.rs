@@ -2,11 +2,13 @@
 //! `replay --report`), readable from a file without network or script.
 //!
 //! - A campaign's run directory: a summary (seed, scenario, tool, car and firmware, the verdict
-//!   counts, the worst deviation, wall and driven time), a table of the tests linking to each
-//!   test's section, and per test a map (fence, cutouts, anchors, the planned route, the RTK
-//!   track and the UWB track coloured by deviation, where each fault was added and where it
-//!   acted) and a plot of the deviation against time (threshold, segment boundaries, the faults'
-//!   windows), with its segments and faults as tables.
+//!   counts, the worst deviation, wall and driven time), a table of every test (a row each), and
+//!   for each test that did not pass (every test with `--all-tests`) a section linked from its
+//!   row: a map (fence, cutouts, anchors, the planned route, the RTK track and the UWB track
+//!   coloured by deviation, where each fault was added and where it acted) and a plot of the
+//!   deviation against time (threshold, segment boundaries, the faults' windows), with its
+//!   segments and faults as tables. Written a test at a time (`campaign`); more than 100
+//!   sections go to pages of their own beside the index.
 //! - A replay directory: the runs on one map, a plot per run, the per-segment comparison.
 //! - A shrink directory: the before/after and steps tables (no pictures: its runs are not
 //!   recorded).
