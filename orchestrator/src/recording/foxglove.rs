@@ -584,7 +584,8 @@ pub(super) fn derived<R: Record + 'static>(record: &R, at: Time) -> Option<Deriv
 /// pose has the identity orientation. These channels are where a version-3 recording keeps the
 /// sample's RTK and UWB positions (`super::proto`).
 pub(super) fn poses(state: &CarStateRecord, at: Time) -> (Option<RtkPose>, Option<UwbPose>) {
-    let yaw = state.rtk.yaw_deg.to_radians();
+    // The firmware's yaw turns clockwise from east; a pose's counter-clockwise.
+    let yaw = (-state.rtk.yaw_deg).to_radians();
     let pose = |x: f64, y: f64, yaw: f64| {
         has_pose(x, y).then(|| PoseInFrame {
             timestamp: at,

@@ -569,6 +569,23 @@ async fn states_join_their_poses_and_keep_what_has_no_pose() {
     }
 }
 
+/// The RTK pose heads where the car heads: the firmware's yaw is clockwise from east (90° is
+/// south), a pose's rotation counter-clockwise.
+#[test]
+fn the_rtk_pose_heads_where_the_car_heads() {
+    let origin = Instant::now();
+    let mut south = sample(origin, 1.0);
+    south.state.yaw = 90.0;
+    let state = CarStateRecord::new(&south, origin);
+    let (rtk, _) = foxglove::poses(&state, foxglove::Time::from_ns(0));
+    let q = rtk.unwrap().0.pose.orientation;
+    let heading = 2.0 * q.z.atan2(q.w);
+    assert!(
+        (heading + std::f64::consts::FRAC_PI_2).abs() < 1e-12,
+        "heading {heading} rad"
+    );
+}
+
 #[test]
 fn a_probe_is_one_of_the_ids_the_firmware_knows() {
     let topic = Topic::Faults;
