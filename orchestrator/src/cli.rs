@@ -106,9 +106,10 @@ pub struct ManArgs {
 /// Options of `drivecheck run`.
 #[derive(Debug, Args)]
 pub struct RunArgs {
-    /// Scenario: a bundled name, a .toml, a reference .xml or a .geojson file.
-    #[arg(long, default_value = "parking-lot-2anchors")]
-    pub scenario: String,
+    /// Scenario: a bundled name, a .toml, a reference .xml or a .geojson file (default:
+    /// `parking-lot-2anchors`, or with --cases-from the bundled scenario the earlier run names).
+    #[arg(long)]
+    pub scenario: Option<String>,
     /// The car: `sim` (the embedded simulated car), `tcp://HOST:PORT`, `udp://HOST:PORT` or
     /// `serial:///dev/ttyACM0`.
     #[arg(long, default_value = "sim")]
@@ -122,6 +123,12 @@ pub struct RunArgs {
     /// Plan the same tests without their fault commands.
     #[arg(long)]
     pub no_faults: bool,
+    /// Drive exactly the cases of an earlier run, test for test (its case files in order, with
+    /// their routes, faults and fault places), instead of generated tests: the same tests on
+    /// another car, firmware or simulator seed, for `drivecheck compare`. --seed then changes
+    /// only the car's noise, the resets and the safe stops (default: the earlier run's seed).
+    #[arg(long, value_name = "DIR", conflicts_with = "tests")]
+    pub cases_from: Option<PathBuf>,
     /// Run the embedded simulated car against the wall clock instead of in virtual time.
     #[arg(long)]
     pub realtime: bool,
@@ -131,9 +138,10 @@ pub struct RunArgs {
     #[arg(long, value_name = "DURATION", default_value = "250ms", value_parser = humantime::parse_duration)]
     pub stale_after: std::time::Duration,
     /// After a segment fails the oracle: `stop` the test there (safe stop, then the next test) or
-    /// `continue` driving it and record every segment.
-    #[arg(long, value_enum, default_value_t = OnFailure::Stop)]
-    pub on_failure: OnFailure,
+    /// `continue` driving it and record every segment (default: `stop`, or with --cases-from
+    /// the earlier run's policy).
+    #[arg(long, value_enum)]
+    pub on_failure: Option<OnFailure>,
     /// Run in a scenario without anchors: without them the UWB estimate is dead reckoning only,
     /// so the tests say nothing about UWB positioning (campaign.json's summary says so).
     #[arg(long)]
@@ -1048,7 +1056,9 @@ mod tests {
             panic!("not the run command");
         };
         assert_eq!(args.car, "sim");
-        assert_eq!(args.scenario, "parking-lot-2anchors");
+        // Resolved by the command: the two-anchor lot, or the scenario of --cases-from's run.
+        assert_eq!(args.scenario, None);
+        assert!(args.cases_from.is_none() && args.on_failure.is_none());
         assert!(!args.realtime && !args.no_faults);
     }
 

@@ -43,6 +43,10 @@ pub struct CampaignRecord {
     /// For a replay (`drivecheck replay`): the case every test drove again.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub replay_of: Option<ReplayOf>,
+    /// For a campaign that drove an earlier run's cases (`drivecheck run --cases-from DIR`):
+    /// that run. Its tests are the earlier run's, test for test.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cases_from: Option<CasesFrom>,
     /// For one shard of a campaign (`drivecheck run --shard K/N`): which one. Its run directory
     /// holds the shard's tests only; `drivecheck runs merge` joins the shards.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -66,6 +70,20 @@ pub struct ReplayOf {
     pub verdict: Option<Verdict>,
     /// True when the replay left out its fault commands.
     pub no_faults: bool,
+}
+
+/// The earlier run whose cases a campaign drove again (`run --cases-from`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CasesFrom {
+    /// Its run directory as given on the command line.
+    pub run: String,
+    /// Its campaign's seed.
+    pub campaign_seed: u64,
+    /// Its scenario.
+    pub scenario: ScenarioRef,
+    /// The cases driven: the earlier run's case files 0 to `tests` − 1.
+    pub tests: usize,
 }
 
 /// A campaign's outcome.

@@ -51,7 +51,7 @@ mod settings;
 mod twin;
 
 pub use campaign::{
-    CampaignRecord, CampaignSummary, CoverageRecord, FaultCoverageRecord, ReplayOf,
+    CampaignRecord, CampaignSummary, CasesFrom, CoverageRecord, FaultCoverageRecord, ReplayOf,
 };
 pub use case::{
     AppendRecord, Case, CommandRecord, FaultPlacementRecord, IntentRecord, PlaceRecord,

@@ -291,6 +291,11 @@ impl TestPlanner {
         })
     }
 
+    /// The generator (the scenario's, wedge strategy).
+    pub fn generator(&self) -> &Generator {
+        &self.generator
+    }
+
     /// The preconditions commands are planned under.
     pub fn preconditions(&self) -> &Preconditions {
         &self.preconditions

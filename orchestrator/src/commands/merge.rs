@@ -262,6 +262,10 @@ fn difference(a: &CampaignRecord, b: &CampaignRecord) -> Option<String> {
             })
         })
         .or_else(|| (a.replay_of != b.replay_of).then(|| "they replay different cases".to_owned()))
+        .or_else(|| {
+            (a.cases_from != b.cases_from)
+                .then(|| "they drive the cases of different runs (--cases-from)".to_owned())
+        })
 }
 
 /// Every test's case, in test order, read from its shard.

@@ -8,6 +8,7 @@ mod bench_placement;
 mod bench_recovery;
 pub mod bench_scale;
 mod calibrate;
+mod cases_from;
 mod completions;
 mod explain;
 mod merge;

@@ -8,6 +8,7 @@ use car_link::CarAddress;
 use car_link::firmware::{MAX_STALE_LIMIT, WATCHDOG};
 use scenarios::Scenario;
 
+use super::cases_from::CasesRun;
 use super::shared::{CampaignFailed, Interrupt, Progress, print_report, runtime, sim_view};
 use super::shrink;
 use crate::cli::{OnFailure, RecordArg, RunArgs};
@@ -18,7 +19,8 @@ use crate::recording::live::LiveView;
 use crate::report::REPORT_FILE;
 use crate::report::explain::{ExplainOptions, describe_source, explain_run};
 use crate::runner::{
-    CampaignReport, RecordMode, RunConfig, run_campaign, run_campaign_fresh, run_dir_name,
+    CampaignReport, CasesSource, RecordMode, RunConfig, run_campaign, run_campaign_fresh,
+    run_dir_name,
 };
 use crate::scenario_arg::{load_scenario, print_warnings_of_use};
 use crate::seed::choose_seed;
@@ -29,11 +31,20 @@ use campaign::oracle::FailurePolicy;
 use campaign::oracle::Verdict;
 use campaign::shrink::MINIMAL_FILE;
 
+/// The scenario of a campaign when none is given.
+const DEFAULT_SCENARIO: &str = "parking-lot-2anchors";
+
 /// Runs the campaign and prints the final table. Exit status: 0 every test passed, 1 a test
 /// failed or was aborted, 2 an error (preflight refused, link lost, interrupted, …).
 pub fn run(args: &RunArgs) -> Result<Exit> {
-    let loaded = load_scenario(&args.scenario)?;
-    print_warnings_of_use(&args.scenario, &loaded);
+    let source = args.cases_from.as_deref().map(CasesRun::read).transpose()?;
+    let scenario_arg = match (&args.scenario, &source) {
+        (Some(given), _) => given.clone(),
+        (None, Some(source)) => source.scenario_name()?,
+        (None, None) => DEFAULT_SCENARIO.to_owned(),
+    };
+    let loaded = load_scenario(&scenario_arg)?;
+    print_warnings_of_use(&scenario_arg, &loaded);
     let scenario = loaded.scenario;
     if scenario.anchors.is_empty() && !args.allow_no_anchors {
         anyhow::bail!(
@@ -56,12 +67,21 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     }
     let profile = LoadedProfile::load(args.profile.as_deref())?;
     let sim = profile.sim_config(&scenario)?;
-    let seed = choose_seed(args.seed);
+    let seed = match &source {
+        Some(source) => args.seed.unwrap_or(source.record.seed),
+        None => choose_seed(args.seed),
+    };
     let campaign = Campaign {
         seed,
-        tests: args.tests.unwrap_or(scenario.campaign.tests),
+        tests: match &source {
+            Some(source) => source.files.len(),
+            None => args.tests.unwrap_or(scenario.campaign.tests),
+        },
         no_faults: args.no_faults,
     };
+    let cases = source
+        .map(|source| source.check(&scenario, &campaign))
+        .transpose()?;
     if args.stale_after.is_zero() || args.stale_after > MAX_STALE_LIMIT {
         anyhow::bail!(
             "--stale-after {}: must be above 0 and at most {} (the car's watchdog brakes after {} \
@@ -72,7 +92,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         );
     }
     if args.dry_run {
-        return dry_run(args, &address, &scenario, &sim, campaign);
+        return dry_run(args, &address, &scenario, &sim, campaign, cases);
     }
     let made = args.out.is_none();
     let out = match &args.out {
@@ -91,10 +111,13 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     }
     let mut config = RunConfig::new(campaign, out, args.car.clone());
     config.safety.stale_after = args.stale_after;
-    config.policy = match args.on_failure {
-        OnFailure::Stop => FailurePolicy::StopAtFailingSegment,
-        OnFailure::Continue => FailurePolicy::ContinueAndRecord,
+    config.policy = match (args.on_failure, &cases) {
+        (Some(OnFailure::Stop), _) => FailurePolicy::StopAtFailingSegment,
+        (Some(OnFailure::Continue), _) => FailurePolicy::ContinueAndRecord,
+        (None, Some((_, policy))) => *policy,
+        (None, None) => FailurePolicy::default(),
     };
+    config.cases = cases.map(|(cases, _)| cases);
     config.shard = args.shard;
     config.record = match args.record {
         RecordArg::All => RecordMode::All,
@@ -186,10 +209,12 @@ fn dry_run(
     scenario: &Scenario,
     sim: &car_sim::SimConfig,
     campaign: Campaign,
+    cases: Option<(CasesSource, FailurePolicy)>,
 ) -> Result<Exit> {
     let mut config = RunConfig::new(campaign, std::path::PathBuf::new(), args.car.clone());
     config.safety.stale_after = args.stale_after;
     config.shard = args.shard;
+    config.cases = cases.map(|(cases, _)| cases);
     let found = runtime(false)?.block_on(async {
         let (car, _sim) = connect(address, sim, campaign.seed).await?;
         if crate::output::chatty() {

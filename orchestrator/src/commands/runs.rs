@@ -183,6 +183,10 @@ fn row(entry: &Entry) -> String {
         Entry::Campaign(r) => {
             let kind = match &r.replay_of {
                 Some(of) => format!("replay run of {}", of.case),
+                None if r.cases_from.is_some() => format!(
+                    "campaign, cases of {}",
+                    r.cases_from.as_ref().map_or("", |c| c.run.as_str())
+                ),
                 None if r.no_faults => "campaign, no faults".to_owned(),
                 None => "campaign".to_owned(),
             };
@@ -422,6 +426,12 @@ fn show_campaign(dir: &Path, record: CampaignRecord, coverage: bool) -> Result<(
     );
     if let Some(of) = &record.replay_of {
         println!("replay of {}", of.case);
+    }
+    if let Some(of) = &record.cases_from {
+        println!(
+            "the {} cases of {} (campaign seed {}), driven again test for test",
+            of.tests, of.run, of.campaign_seed
+        );
     }
     if let Some(shard) = record.shard {
         println!(

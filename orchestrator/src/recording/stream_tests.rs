@@ -38,6 +38,7 @@ fn spanned_recording(path: &Path) {
         ended_at: None,
         summary: None,
         replay_of: None,
+        cases_from: None,
         shard: None,
     };
     let origin = Instant::now();

@@ -39,6 +39,7 @@ fn campaign(s: &Scenario) -> CampaignRecord {
         ended_at: None,
         summary: None,
         replay_of: None,
+        cases_from: None,
         shard: None,
     }
 }

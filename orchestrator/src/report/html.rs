@@ -682,6 +682,18 @@ pub(crate) fn campaign_top(
     if let Some(of) = &record.replay_of {
         fact(out, "replay of", &escape(&of.case));
     }
+    if let Some(of) = &record.cases_from {
+        fact(
+            out,
+            "cases of",
+            &format!(
+                "{} (campaign seed {}, {} tests)",
+                escape(&of.run),
+                of.campaign_seed,
+                of.tests
+            ),
+        );
+    }
     if record.no_faults {
         fact(out, "faults", "none (--no-faults)");
     }

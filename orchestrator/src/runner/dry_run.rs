@@ -13,7 +13,6 @@ use super::journal::Journal;
 use super::preflight::Preflight;
 use super::{RunConfig, RunError, retried};
 use crate::vehicle::Vehicle;
-use campaign::model::TestPlanner;
 use campaign::streaming::route_points;
 use trajgen::Waypoint;
 
@@ -60,11 +59,7 @@ pub async fn dry_run<V: Vehicle>(
     let journal = Journal::without_recording(None);
     let preflight = Preflight::run(car, scenario, config, &journal).await?;
     let first = config.test_indices().first().copied().unwrap_or(0);
-    let plan = TestPlanner::new(scenario)?.plan_test(
-        &config.campaign,
-        first,
-        campaign::model::start_tail(scenario)?,
-    )?;
+    let plan = super::TestSource::new(scenario, config)?.plan(first)?;
     let route = first_route(scenario, &plan);
     let sent = route_points(&route);
     let route_read_back_error = upload_and_read_back(car, &sent).await?;

@@ -50,7 +50,7 @@ mod reset;
 mod run_dir;
 mod telemetry;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use car_link::CarError;
@@ -66,7 +66,7 @@ use crate::recording::{
 use crate::vehicle::Vehicle;
 use campaign::drive::DriveSettings;
 use campaign::files::{
-    Case, CaseError, CommandRecord, ReplayOf, RoutePointRecord, Settings, TestTiming,
+    Case, CaseError, CasesFrom, CommandRecord, ReplayOf, RoutePointRecord, Settings, TestTiming,
 };
 use campaign::model::{Campaign, Command, ModelError, ProbeRates, TestPlan, TestPlanner};
 use campaign::oracle::{FailurePolicy, Verdict};
@@ -118,6 +118,8 @@ pub struct RunConfig {
     pub car_profile: Option<crate::profile_arg::LoadedProfile>,
     /// A recorded case to drive in every test instead of generated tests (`drivecheck replay`).
     pub replay: Option<ReplaySource>,
+    /// An earlier run's cases to drive instead of generated tests (`run --cases-from`).
+    pub cases: Option<CasesSource>,
     /// What `campaign.mcap` keeps (every test by default; a shrink's candidate runs write none).
     pub record: RecordMode,
     /// Run only this shard of the campaign's tests (`run --shard K/N`).
@@ -137,6 +139,53 @@ pub struct ReplaySource {
     pub of: ReplayOf,
 }
 
+/// An earlier run's cases driven again, test for test (`run --cases-from DIR`): test *i* drives
+/// the plan of case file *i* (read when the test begins), with its faults at their places.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CasesSource {
+    /// The case file of every test, by test index.
+    pub files: Vec<PathBuf>,
+    /// Where they came from, for `campaign.json`.
+    pub of: CasesFrom,
+}
+
+impl CasesSource {
+    /// The plan of the case file `path` as test `test_index` drives it: read, checked against
+    /// the scenario and planned as a replay plans it (`Case::replay_plan`; a case a run wrote
+    /// has its ahead margins, so the commands are the case's own).
+    pub fn plan(
+        path: &Path,
+        scenario: &Scenario,
+        generator: &Generator,
+        campaign: &Campaign,
+        test_index: usize,
+    ) -> Result<TestPlan, RunError> {
+        let text = std::fs::read_to_string(path).map_err(|source| RunError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        let case_error = |source| RunError::CaseFile {
+            path: path.to_owned(),
+            source: Box::new(source),
+        };
+        let case = Case::from_json(&text).map_err(case_error)?;
+        if case.test_index != Some(test_index) {
+            return Err(case_error(CaseError::Invalid {
+                path: "test_index".to_owned(),
+                message: format!("{:?}, not test {test_index}", case.test_index),
+            }));
+        }
+        case.replay_plan(
+            scenario,
+            generator,
+            campaign.seed,
+            campaign.no_faults,
+            test_index,
+        )
+        .map_err(case_error)
+    }
+}
+
 impl RunConfig {
     /// The defaults for `campaign`, writing to `out_dir`.
     pub fn new(campaign: Campaign, out_dir: PathBuf, car_label: impl Into<String>) -> Self {
@@ -150,6 +199,7 @@ impl RunConfig {
             car_label: car_label.into(),
             car_profile: None,
             replay: None,
+            cases: None,
             record: RecordMode::All,
             shard: None,
             live: None,
@@ -229,6 +279,14 @@ pub enum RunError {
         test_index: usize,
         /// What happened.
         reason: String,
+    },
+    /// A case to drive (`run --cases-from`) cannot be read or driven.
+    #[error("{}: {source}", path.display())]
+    CaseFile {
+        /// The case file.
+        path: PathBuf,
+        /// What is wrong with it.
+        source: Box<CaseError>,
     },
     /// A case file or the campaign record could not be written.
     #[error(transparent)]
@@ -567,23 +625,41 @@ async fn open_session<'a, V: Vehicle>(
 }
 
 /// Where a campaign's test plans come from: generated from the seed, or a replayed case.
-struct TestSource<'a> {
+pub(crate) struct TestSource<'a> {
     planner: TestPlanner,
     start_tail: RouteTail,
+    scenario: &'a Scenario,
     config: &'a RunConfig,
 }
 
 impl<'a> TestSource<'a> {
-    fn new(scenario: &Scenario, config: &'a RunConfig) -> Result<Self, RunError> {
+    fn new(scenario: &'a Scenario, config: &'a RunConfig) -> Result<Self, RunError> {
         Ok(Self {
             planner: TestPlanner::new(scenario)?,
             start_tail: campaign::model::start_tail(scenario)?,
+            scenario,
             config,
         })
     }
 
     /// The plan of test `test_index`.
     fn plan(&self, test_index: usize) -> Result<TestPlan, RunError> {
+        if let Some(cases) = &self.config.cases {
+            let path = cases.files.get(test_index).ok_or(RunError::CaseFile {
+                path: PathBuf::from(&cases.of.run),
+                source: Box::new(CaseError::Invalid {
+                    path: "tests".to_owned(),
+                    message: format!("no case for test {test_index}"),
+                }),
+            })?;
+            return CasesSource::plan(
+                path,
+                self.scenario,
+                self.planner.generator(),
+                &self.config.campaign,
+                test_index,
+            );
+        }
         Ok(match &self.config.replay {
             Some(replay) => TestPlan {
                 test_index,

@@ -96,6 +96,7 @@ impl RunDirectory {
             ended_at: None,
             summary: None,
             replay_of: config.replay.as_ref().map(|r| r.of.clone()),
+            cases_from: config.cases.as_ref().map(|c| c.of.clone()),
             shard: config.shard,
         };
         Self::start(path, record, scenario)

@@ -135,6 +135,7 @@ fn a_campaign_record_survives_a_round_trip_through_json() {
             coverage: None,
         }),
         replay_of: None,
+        cases_from: None,
         shard: None,
     };
     let back = CampaignRecord::from_json(&record.to_json().unwrap()).unwrap();
