@@ -17,7 +17,7 @@ use std::io;
 use quick_xml::Writer;
 use quick_xml::events::{BytesDecl, BytesText, Event};
 
-use campaign::files::Case;
+use campaign::files::{Case, TestTiming};
 use campaign::oracle::{SegmentVerdict, Verdict};
 
 /// Whose seconds a test's `timing` holds.
@@ -31,18 +31,68 @@ pub enum Clock {
 
 /// One test or run.
 #[derive(Debug, Clone)]
-pub struct TestCase<'a> {
+pub struct TestCase {
     /// Its name, identifying the case (`seed-7/test-003`, `seed-7/test-003/run-2`).
     pub name: String,
-    /// The case it wrote.
-    pub case: &'a Case,
+    /// What the case it wrote says.
+    pub case: Outcome,
     /// Where that case file is, as the user named the directory.
     pub file: String,
 }
 
+/// What a test's JUnit element says, taken from its case: a few values per segment, so that a
+/// campaign of any size is written without its cases in memory.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Outcome {
+    /// The test's verdict (`None`: not run).
+    pub verdict: Option<Verdict>,
+    /// Why it failed or was aborted.
+    pub reason: Option<String>,
+    /// Its reset and drive times.
+    pub timing: Option<TestTiming>,
+    /// Its judged segments.
+    pub segments: Vec<SegmentOutcome>,
+}
+
+/// One judged segment of an [`Outcome`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct SegmentOutcome {
+    /// The segment's index in its test.
+    pub segment_index: usize,
+    /// Its command's index.
+    pub command_index: usize,
+    /// The oracle's verdict.
+    pub verdict: SegmentVerdict,
+    /// Its largest deviation, metres (none without samples).
+    pub max_m: Option<f64>,
+    /// The oracle's threshold, metres.
+    pub threshold_m: f64,
+}
+
+impl From<&Case> for Outcome {
+    fn from(case: &Case) -> Self {
+        Self {
+            verdict: case.verdict,
+            reason: case.reason.clone(),
+            timing: case.timing,
+            segments: case
+                .segments
+                .iter()
+                .map(|s| SegmentOutcome {
+                    segment_index: s.segment_index,
+                    command_index: s.command_index,
+                    verdict: s.oracle.verdict,
+                    max_m: s.oracle.stats.as_ref().map(|st| st.max_m),
+                    threshold_m: s.oracle.threshold_m,
+                })
+                .collect(),
+        }
+    }
+}
+
 /// A campaign or a replay.
 #[derive(Debug, Clone)]
-pub struct Suite<'a> {
+pub struct Suite {
     /// Its name (`campaign seed 7 on parking-lot-2anchors`).
     pub name: String,
     /// The test cases' class name (`drivecheck.<scenario>`).
@@ -52,27 +102,27 @@ pub struct Suite<'a> {
     /// Its properties (seed, scenario, car, firmware, tool version).
     pub properties: Vec<(String, String)>,
     /// Its tests.
-    pub cases: Vec<TestCase<'a>>,
+    pub cases: Vec<TestCase>,
     /// Whose seconds the cases' `timing` holds.
     pub clock: Clock,
     /// How long it took on the wall clock, seconds (when known).
     pub wall_s: Option<f64>,
 }
 
-impl Suite<'_> {
+impl Suite {
     /// The suite's wall-clock time: measured, or the tests' own on the wall clock.
     fn wall_time(&self) -> Option<f64> {
         self.wall_s.or_else(|| {
-            (self.clock == Clock::Wall).then(|| self.cases.iter().map(|c| time(c.case)).sum())
+            (self.clock == Clock::Wall).then(|| self.cases.iter().map(|c| time(&c.case)).sum())
         })
     }
 }
 
-fn time(case: &Case) -> f64 {
+fn time(case: &Outcome) -> f64 {
     case.timing.map_or(0.0, |t| t.reset_s + t.drive_s)
 }
 
-fn count(suite: &Suite<'_>, verdict: Verdict) -> usize {
+fn count(suite: &Suite, verdict: Verdict) -> usize {
     suite
         .cases
         .iter()
@@ -81,26 +131,24 @@ fn count(suite: &Suite<'_>, verdict: Verdict) -> usize {
 }
 
 /// What the failure's body says: the reason, each segment's largest deviation, the case file.
-fn details(case: &TestCase<'_>) -> String {
+fn details(case: &TestCase) -> String {
     let mut text = String::new();
     if let Some(reason) = &case.case.reason {
         text.push_str(reason);
         text.push('\n');
     }
     for s in &case.case.segments {
-        let verdict = match s.oracle.verdict {
+        let verdict = match s.verdict {
             SegmentVerdict::Passed => "passed",
             SegmentVerdict::Failed => "FAILED",
             SegmentVerdict::NoSamples => "no samples",
         };
         let max = s
-            .oracle
-            .stats
-            .as_ref()
-            .map_or_else(|| "-".to_owned(), |st| format!("{:.2} m", st.max_m));
+            .max_m
+            .map_or_else(|| "-".to_owned(), |max| format!("{max:.2} m"));
         text.push_str(&format!(
             "segment {} (command {}): {verdict}, max deviation {max} (threshold {:.2} m)\n",
-            s.segment_index, s.command_index, s.oracle.threshold_m
+            s.segment_index, s.command_index, s.threshold_m
         ));
     }
     text.push_str(&format!("case file: {}\n", case.file));
@@ -108,7 +156,7 @@ fn details(case: &TestCase<'_>) -> String {
 }
 
 /// The JUnit XML document for `suites`.
-pub fn to_xml(suites: &[Suite<'_>]) -> io::Result<String> {
+pub fn to_xml(suites: &[Suite]) -> io::Result<String> {
     let mut w = Writer::new_with_indent(Vec::new(), b' ', 2);
     w.write_event(Event::Decl(BytesDecl::new("1.0", Some("UTF-8"), None)))?;
     let all = |verdict| suites.iter().map(|s| count(s, verdict)).sum::<usize>();
@@ -134,7 +182,7 @@ pub fn to_xml(suites: &[Suite<'_>]) -> io::Result<String> {
     String::from_utf8(w.into_inner()).map_err(io::Error::other)
 }
 
-fn write_suite(w: &mut Writer<Vec<u8>>, suite: &Suite<'_>) -> io::Result<()> {
+fn write_suite(w: &mut Writer<Vec<u8>>, suite: &Suite) -> io::Result<()> {
     let mut attributes = vec![
         ("name", suite.name.clone()),
         ("tests", suite.cases.len().to_string()),
@@ -148,7 +196,7 @@ fn write_suite(w: &mut Writer<Vec<u8>>, suite: &Suite<'_>) -> io::Result<()> {
     attributes.push(("timestamp", suite.timestamp.clone()));
     let mut properties = suite.properties.clone();
     if suite.clock == Clock::Simulated {
-        let simulated: f64 = suite.cases.iter().map(|c| time(c.case)).sum();
+        let simulated: f64 = suite.cases.iter().map(|c| time(&c.case)).sum();
         properties.push(("simulated_time_s".to_owned(), format!("{simulated:.3}")));
     }
     w.create_element("testsuite")
@@ -170,13 +218,13 @@ fn write_suite(w: &mut Writer<Vec<u8>>, suite: &Suite<'_>) -> io::Result<()> {
     Ok(())
 }
 
-fn write_case(w: &mut Writer<Vec<u8>>, suite: &Suite<'_>, case: &TestCase<'_>) -> io::Result<()> {
+fn write_case(w: &mut Writer<Vec<u8>>, suite: &Suite, case: &TestCase) -> io::Result<()> {
     let mut attributes = vec![
         ("name", case.name.clone()),
         ("classname", suite.classname.clone()),
     ];
     if suite.clock == Clock::Wall {
-        attributes.push(("time", format!("{:.3}", time(case.case))));
+        attributes.push(("time", format!("{:.3}", time(&case.case))));
     }
     let element = w
         .create_element("testcase")
@@ -211,7 +259,6 @@ fn write_case(w: &mut Writer<Vec<u8>>, suite: &Suite<'_>, case: &TestCase<'_>) -
 #[cfg(test)]
 mod tests {
     use super::*;
-    use campaign::files::TestTiming;
 
     fn case(verdict: Option<Verdict>, reason: Option<&str>) -> Case {
         let mut case = Case::from_json(
@@ -228,7 +275,7 @@ mod tests {
         case
     }
 
-    fn suite<'a>(cases: &[&'a Case], clock: Clock, wall_s: Option<f64>) -> Suite<'a> {
+    fn suite(cases: &[&Case], clock: Clock, wall_s: Option<f64>) -> Suite {
         Suite {
             name: "campaign seed 7 on s".to_owned(),
             classname: "drivecheck.s".to_owned(),
@@ -239,7 +286,7 @@ mod tests {
                 .enumerate()
                 .map(|(i, c)| TestCase {
                     name: format!("seed-7/test-{i:03}"),
-                    case: c,
+                    case: Outcome::from(*c),
                     file: format!("runs/x/case-{i:03}.json"),
                 })
                 .collect(),

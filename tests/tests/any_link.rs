@@ -34,7 +34,7 @@ async fn run(scenario: &Scenario, config: &RunConfig, link: LinkImpairment) -> V
     };
     let (car, sim) = common::sim_car(&sim_config).await;
     let report = common::drive(&car, &sim, scenario, config).await.unwrap();
-    report.cases
+    report.cases().collect::<Result<_, _>>().unwrap()
 }
 
 fn replay_config(case: &Case, scenario: &Scenario, out: &Path) -> RunConfig {

@@ -82,15 +82,17 @@ async fn a_campaign_writes_a_run_directory_that_parses_and_validates() {
     assert_eq!(summary.tests, 3);
     assert_eq!(summary.passed + summary.failed + summary.aborted, 3);
     let s = scenario();
-    assert_eq!(report.cases.len(), 3);
+    assert_eq!(report.tests.len(), 3);
     for test_index in 0..3 {
         let case = read_case(dir.path(), test_index);
-        let file = std::fs::read_to_string(dir.path().join(format!("case-{test_index:03}.json")));
+        let row = &report.tests[test_index];
+        assert_eq!(row.file, format!("case-{test_index:03}.json"));
         assert_eq!(
-            format!("{}\n", report.cases[test_index].to_json().unwrap()),
-            file.unwrap(),
-            "the report's case is the one written"
+            (row.test_index, row.verdict, row.reason.as_ref()),
+            (test_index, case.verdict, case.reason.as_ref()),
+            "the report's row is the case written"
         );
+        assert_eq!(report.case(row).unwrap(), case);
         assert_eq!(case.check().map_err(|e| e.to_string()), Ok(()));
         assert_eq!(case.check_route(&s).map_err(|e| e.to_string()), Ok(()));
         assert!(case.verdict.is_some());
@@ -273,8 +275,8 @@ async fn an_interrupt_stops_the_car_safely_and_completes_the_run_directory() {
     );
     // The failure carries the run directory's report, with the case written.
     let report = failure.report.unwrap();
-    assert_eq!(report.cases.len(), 1);
-    assert_eq!(report.cases[0].reason.as_deref(), Some("interrupted"));
+    assert_eq!(report.tests.len(), 1);
+    assert_eq!(report.tests[0].reason.as_deref(), Some("interrupted"));
     assert!(sim.truth().speed.abs() < 0.1, "the car still moves");
     let case = read_case(dir.path(), 0);
     assert_eq!(case.verdict, Some(Verdict::Aborted));

@@ -27,8 +27,8 @@ async fn a_campaign_over_half_a_second_each_way_drives_its_tests() {
         (Duration::from_millis(2100)..Duration::from_millis(2400)).contains(&per_try),
         "{per_try:?}"
     );
-    assert_eq!(report.cases.len(), 2);
-    for case in &report.cases {
+    assert_eq!(report.tests.len(), 2);
+    for case in &report.tests {
         // Judged, not aborted: the lead time (about 5 s) fits the route the segments give.
         assert!(
             matches!(case.verdict, Some(Verdict::Passed | Verdict::Failed)),
@@ -53,15 +53,15 @@ async fn a_campaign_at_thirty_percent_loss_ends_every_test_judged_or_with_a_clea
             ..LinkImpairment::default()
         };
         let (_, report) = campaign_over(link, seed, 3, Some(Duration::from_secs(1))).await;
-        assert_eq!(report.cases.len(), 3);
+        assert_eq!(report.tests.len(), 3);
         let judged = report
-            .cases
+            .tests
             .iter()
             .filter(|c| matches!(c.verdict, Some(Verdict::Passed | Verdict::Failed)))
             .count();
         // Every one today; before, one or two of three aborted.
         assert!(judged >= 2, "seed {seed}: {judged} of 3 judged");
-        for case in &report.cases {
+        for case in &report.tests {
             match case.verdict {
                 Some(Verdict::Passed | Verdict::Failed) => {}
                 Some(Verdict::Aborted) => {

@@ -166,11 +166,7 @@ fn drive(
         &Silent,
     )
     .map_err(|failure| anyhow::anyhow!("{}", failure.error))?;
-    report
-        .cases
-        .into_iter()
-        .next()
-        .context("the run wrote no case")
+    Ok(report.cases().next().context("the run wrote no case")??)
 }
 
 /// The largest deviation of each judged segment of `case`, in order.
@@ -326,12 +322,13 @@ fn rock_lot(args: &BenchFidelityArgs, profile: &LoadedProfile) -> Result<()> {
     )
     .map_err(|failure| anyhow::anyhow!("{}", failure.error))?;
     let failed = report
-        .cases
+        .tests
         .iter()
-        .filter(|c| c.verdict == Some(Verdict::Failed))
+        .filter(|t| t.verdict == Some(Verdict::Failed))
         .count();
     let (mut samples, mut failing_samples, mut segments, mut failing_segments) = (0, 0, 0, 0);
-    for case in &report.cases {
+    for case in report.cases() {
+        let case = case?;
         for segment in &case.segments {
             let Some(stats) = segment.oracle.stats else {
                 continue;
@@ -347,14 +344,14 @@ fn rock_lot(args: &BenchFidelityArgs, profile: &LoadedProfile) -> Result<()> {
     let pct = |a: usize, b: usize| 100.0 * a as f64 / b.max(1) as f64;
     println!(
         "## parking-lot-rock without faults: {} tests (seed {})\n",
-        report.cases.len(),
+        report.tests.len(),
         args.seed
     );
     println!("| | failing | share |\n|---|---|---|");
     println!(
         "| tests | {failed}/{} | {:.0} % |",
-        report.cases.len(),
-        pct(failed, report.cases.len())
+        report.tests.len(),
+        pct(failed, report.tests.len())
     );
     println!(
         "| segments | {failing_segments}/{segments} | {:.0} % |",
@@ -384,7 +381,7 @@ fn rock_lot(args: &BenchFidelityArgs, profile: &LoadedProfile) -> Result<()> {
         let caption = format!(
             "parking-lot-rock without faults, seed {}: {failed} of {} tests fail, {:.0} % of the driven route",
             args.seed,
-            report.cases.len(),
+            report.tests.len(),
             pct(failing_samples, samples)
         );
         let svg = crate::svg::deviation_picture(&rock, &tracks, 1.0, &caption);

@@ -111,10 +111,12 @@ pub fn run(args: &BenchPlacementArgs) -> Result<Exit> {
                     &Silent,
                 )
                 .map_err(|failure| anyhow::anyhow!("{}", failure.error))?;
-                for place in report.cases.iter().flat_map(|c| &c.fault_places) {
-                    match place.error_m {
-                        Some(error) => errors.errors.push(error),
-                        None => errors.unmeasured += 1,
+                for case in report.cases() {
+                    for place in &case?.fault_places {
+                        match place.error_m {
+                            Some(error) => errors.errors.push(error),
+                            None => errors.unmeasured += 1,
+                        }
                     }
                 }
             }

@@ -47,7 +47,6 @@ pub fn merge(
     let shards = read_shards(dirs)?;
     let first = &shards[0];
     let tests = first.record.settings.tests;
-    let cases = read_cases(&shards, tests)?;
     let recorded: Vec<bool> = shards
         .iter()
         .map(|s| s.dir.join(RECORDING_FILE).is_file())
@@ -84,14 +83,12 @@ pub fn merge(
     // at `out` that `drivecheck runs` would take for a campaign.
     let staged = Staged::beside(out)?;
     let mut dir = RunDirectory::merged(staged.dir().to_owned(), record, &scenario)?;
-    for case in &cases {
-        dir.write_case(case)?;
-    }
+    let verdicts = write_cases(&shards, tests, &mut dir)?;
     let mut report = dir.finish_at(ended_at)?;
     if recorded[0] {
         merge_recordings(
             &shards,
-            &cases,
+            &verdicts,
             &report.record,
             &scenario,
             &staged.dir().join(RECORDING_FILE),
@@ -113,7 +110,7 @@ pub fn merge(
         shards.len(),
         report.record.seed,
         report.record.scenario.name,
-        cases.len(),
+        verdicts.len(),
         summary.map_or(0, |s| s.passed),
         summary.map_or(0, |s| s.failed),
         summary.map_or(0, |s| s.aborted),
@@ -268,9 +265,14 @@ fn difference(a: &CampaignRecord, b: &CampaignRecord) -> Option<String> {
         })
 }
 
-/// Every test's case, in test order, read from its shard.
-fn read_cases(shards: &[ShardDir], tests: usize) -> Result<Vec<Case>> {
-    let mut cases = Vec::with_capacity(tests);
+/// Every test's case, in test order, read from its shard, checked and written into `dir` one at
+/// a time; every test's verdict.
+fn write_cases(
+    shards: &[ShardDir],
+    tests: usize,
+    dir: &mut RunDirectory,
+) -> Result<Vec<Option<Verdict>>> {
+    let mut verdicts = Vec::with_capacity(tests);
     for test_index in 0..tests {
         let shard = shards
             .iter()
@@ -302,9 +304,10 @@ fn read_cases(shards: &[ShardDir], tests: usize) -> Result<Vec<Case>> {
                 shard.shard
             );
         }
-        cases.push(case);
+        dir.write_case(&case)?;
+        verdicts.push(case.verdict);
     }
-    Ok(cases)
+    Ok(verdicts)
 }
 
 /// What makes `case` a case of another campaign than `record`, if anything.
@@ -399,7 +402,7 @@ impl<'a> ShardSpans<'a> {
     /// The next span's test (`Some(None)`: a span without a test; `None`: the end), the span
     /// read ahead and checked: damage is refused, and so is a span of a test that is not in the
     /// shard, or of a test read before.
-    fn peek(&mut self, cases: &[Case]) -> Result<Option<Option<usize>>> {
+    fn peek(&mut self, verdicts: &[Option<Verdict>]) -> Result<Option<Option<usize>>> {
         if self.next.is_none() {
             let dir = self.shard.dir.display();
             let span = match self.spans.next() {
@@ -407,7 +410,7 @@ impl<'a> ShardSpans<'a> {
                 Some(span) => span.with_context(|| format!("{dir}: {RECORDING_FILE}"))?,
             };
             if let Some(test) = span.test_index {
-                if test >= cases.len() || !self.shard.shard.contains(test) {
+                if test >= verdicts.len() || !self.shard.shard.contains(test) {
                     bail!(
                         "{dir}: {RECORDING_FILE} holds test {test}, which is not in shard {}",
                         self.shard.shard
@@ -449,11 +452,11 @@ impl<'a> ShardSpans<'a> {
     /// Once the recording is read to its end: it has a span of every test of the shard that did
     /// not pass (a recording of the embedded simulator has one per test it keeps; `--record
     /// failing` drops the others).
-    fn check_every_test(&self, cases: &[Case]) -> Result<()> {
+    fn check_every_test(&self, verdicts: &[Option<Verdict>]) -> Result<()> {
         if self.shard.record.car == "sim"
-            && let Some(missing) = (0..cases.len())
+            && let Some(missing) = (0..verdicts.len())
                 .filter(|&t| self.shard.shard.contains(t))
-                .find(|&t| cases[t].verdict != Some(Verdict::Passed) && !self.seen.contains(&t))
+                .find(|&t| verdicts[t] != Some(Verdict::Passed) && !self.seen.contains(&t))
         {
             bail!(
                 "{}: {RECORDING_FILE} has no span of test {missing}, which did not pass: it is not \
@@ -476,7 +479,7 @@ impl<'a> ShardSpans<'a> {
 /// the staging directory, which is removed.
 fn merge_recordings(
     shards: &[ShardDir],
-    cases: &[Case],
+    verdicts: &[Option<Verdict>],
     record: &CampaignRecord,
     scenario: &scenarios::Scenario,
     out: &Path,
@@ -485,7 +488,7 @@ fn merge_recordings(
         shards.iter().map(ShardSpans::open).collect::<Result<_>>()?;
     // Every shard read up to its first span, where its campaign's metadata has been read.
     for reader in &mut readers {
-        reader.peek(cases)?;
+        reader.peek(verdicts)?;
         reader.check_campaign()?;
     }
     let simulated = shards.iter().all(|s| s.record.car == "sim");
@@ -521,7 +524,7 @@ fn merge_recordings(
         // The shard whose next span is the lowest test.
         let mut best: Option<(usize, usize)> = None;
         for (position, reader) in readers.iter_mut().enumerate() {
-            if let Some(Some(test)) = reader.peek(cases)?
+            if let Some(Some(test)) = reader.peek(verdicts)?
                 && best.is_none_or(|(_, b)| test < b)
             {
                 best = Some((position, test));
@@ -536,12 +539,12 @@ fn merge_recordings(
     }
     // Only spans without a test are left: each shard's in turn, each shard read to its end.
     for reader in &mut readers {
-        while reader.peek(cases)?.is_some() {
+        while reader.peek(verdicts)?.is_some() {
             if let Some(span) = reader.take() {
                 write_span(&mut recorder, span, &mut offset_ns)?;
             }
         }
-        reader.check_every_test(cases)?;
+        reader.check_every_test(verdicts)?;
     }
     recorder.campaign_ended(record)?;
     recorder.finish()?;

@@ -322,9 +322,15 @@ impl Job<'_> {
             sim.shutdown();
         }
         match result {
-            Ok(report) => (report.cases.into_iter().next(), Ok(())),
+            Ok(report) => match report.cases().next().transpose() {
+                Ok(case) => (case, Ok(())),
+                Err(error) => (None, Err(error.into())),
+            },
             Err(failure) => (
-                failure.report.and_then(|r| r.cases.into_iter().next()),
+                // The campaign's error is the one to say; a case it wrote is kept if readable.
+                failure
+                    .report
+                    .and_then(|r| r.cases().next().and_then(Result::ok)),
                 Err(anyhow::Error::new(CampaignFailed::new(
                     failure.error,
                     &config.out_dir,
@@ -379,7 +385,7 @@ fn write_junit(
         .filter_map(|(run, case)| {
             case.as_ref().map(|case| crate::junit::TestCase {
                 name: format!("{replayed}/{}", run.dir),
-                case,
+                case: case.into(),
                 file: out
                     .join(&run.dir)
                     .join("case-000.json")

@@ -17,7 +17,7 @@ use crate::junit;
 use crate::profile_arg::LoadedProfile;
 use crate::recording::live::LiveView;
 use crate::report::REPORT_FILE;
-use crate::report::explain::{ExplainOptions, describe_source, explain_run};
+use crate::report::explain::{ExplainOptions, describe, explain_run};
 use crate::runner::{
     CampaignReport, CasesSource, RecordMode, RunConfig, run_campaign, run_campaign_fresh,
     run_dir_name,
@@ -262,9 +262,9 @@ fn dry_run(
 /// warning: the campaign's results stand without it.
 fn explain_failed(report: &CampaignReport, scenario: &Scenario, print: bool) {
     if !report
-        .cases
+        .tests
         .iter()
-        .any(|c| c.verdict == Some(Verdict::Failed))
+        .any(|t| t.verdict == Some(Verdict::Failed))
     {
         return;
     }
@@ -294,14 +294,18 @@ fn explain_failed(report: &CampaignReport, scenario: &Scenario, print: bool) {
             .and_then(|mut on_disk| {
                 on_disk.explanation = case.segments.iter().map(Into::into).collect();
                 crate::atomic::write(&case.case, format!("{}\n", on_disk.to_json()?))?;
-                Ok(())
+                Ok(on_disk)
             });
-        if let Err(error) = written {
-            eprintln!(
-                "warning: {}: the explanation is not written: {error}",
-                case.case.display()
-            );
-        }
+        let on_disk = match written {
+            Ok(on_disk) => Some(on_disk),
+            Err(error) => {
+                eprintln!(
+                    "warning: {}: the explanation is not written: {error}",
+                    case.case.display()
+                );
+                None
+            }
+        };
         for segment in &case.segments {
             let Some(top) = segment.causes.first() else {
                 continue;
@@ -314,7 +318,7 @@ fn explain_failed(report: &CampaignReport, scenario: &Scenario, print: bool) {
                 "why test {:03} segment {} failed: {} ({:.0} % of the growth{})",
                 case.test_index,
                 segment.segment_index,
-                describe_source(&top.source, &report.cases, case.test_index),
+                describe(&top.source, on_disk.as_ref()),
                 top.share * 100.0,
                 if segment.causes.len() > 1 {
                     "; drivecheck explain for the rest"
@@ -341,16 +345,18 @@ pub(super) fn write_junit(
     wall_s: Option<f64>,
 ) -> Result<()> {
     let record = &report.record;
-    let cases: Vec<junit::TestCase<'_>> = report
+    // A test's case file at a time: what JUnit says of it is kept, the case is not.
+    let cases = report
         .tests
         .iter()
-        .zip(&report.cases)
-        .map(|(test, case)| junit::TestCase {
-            name: format!("seed-{}/test-{:03}", record.seed, test.test_index),
-            case,
-            file: report.dir.join(&test.file).display().to_string(),
+        .map(|test| {
+            Ok(junit::TestCase {
+                name: format!("seed-{}/test-{:03}", record.seed, test.test_index),
+                case: (&report.case(test)?).into(),
+                file: report.dir.join(&test.file).display().to_string(),
+            })
         })
-        .collect();
+        .collect::<Result<Vec<_>, crate::runner::RunError>>()?;
     let mut properties = vec![
         ("seed".to_owned(), record.seed.to_string()),
         ("scenario".to_owned(), record.scenario.name.clone()),
@@ -392,11 +398,10 @@ fn shrink_failed(
     to_stdout: bool,
 ) -> Result<()> {
     let failed: Vec<usize> = report
-        .cases
+        .tests
         .iter()
-        .enumerate()
-        .filter(|(_, c)| c.verdict == Some(Verdict::Failed))
-        .map(|(i, c)| c.test_index.unwrap_or(i))
+        .filter(|t| t.verdict == Some(Verdict::Failed))
+        .map(|t| t.test_index)
         .collect();
     if failed.is_empty() {
         return Ok(());

@@ -10,6 +10,7 @@ use super::shared::{metres, print_report};
 use crate::cli::{RunsArgs, RunsCommand};
 use crate::exit::Exit;
 use crate::runner::{CampaignReport, TestSummary};
+use campaign::coverage::CoverageBuilder;
 use campaign::coverage::CoverageStats;
 use campaign::files::{CampaignRecord, Case, CoverageRecord};
 use campaign::replay::{Comparison, REPLAY_FILE};
@@ -353,8 +354,8 @@ impl RecordingJson {
 }
 
 fn show_campaign_json(dir: &Path, record: CampaignRecord, coverage: bool) -> Result<()> {
-    let (tests, cases) = read_tests(dir)?;
-    let coverage = match coverage.then(|| coverage_of(&record, &cases)) {
+    let tests = read_tests(dir, |_| {})?;
+    let coverage = match coverage.then(|| coverage_of(&record, dir)) {
         Some(Ok(stats)) => Some(stats.into()),
         Some(Err(why)) => bail!("no coverage: {why}"),
         None => None,
@@ -370,26 +371,25 @@ fn show_campaign_json(dir: &Path, record: CampaignRecord, coverage: bool) -> Res
     crate::output::print_json("runs show", &result)
 }
 
-/// Every test's row of the table and its case, from the case files of run directory `dir`.
-fn read_tests(dir: &Path) -> Result<(Vec<TestSummary>, Vec<Case>)> {
-    let files = super::shared::case_files(dir)?;
+/// Every test's row of the table, from the case files of run directory `dir` in test order,
+/// read one at a time (each case given to `each`, then dropped).
+fn read_tests(dir: &Path, mut each: impl FnMut(&Case)) -> Result<Vec<TestSummary>> {
     let mut tests = Vec::new();
-    let mut cases = Vec::new();
-    for (i, path) in files.iter().enumerate() {
-        let file = path
-            .file_name()
-            .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
-        let text = std::fs::read_to_string(path).with_context(|| path.display().to_string())?;
-        let case = Case::from_json(&text).with_context(|| path.display().to_string())?;
-        tests.push(TestSummary::of(case.test_index.unwrap_or(i), file, &case));
-        cases.push(case);
+    for (index, file) in crate::report::data::case_files(dir)? {
+        let case = crate::report::data::read_case(dir, &file)?;
+        each(&case);
+        tests.push(TestSummary::of(
+            case.test_index.unwrap_or(index),
+            file,
+            &case,
+        ));
     }
-    Ok((tests, cases))
+    Ok(tests)
 }
 
 /// What a campaign covered: as its record keeps it, or (a record written before the summary
-/// kept coverage) computed from its cases in its bundled scenario.
-fn coverage_of(record: &CampaignRecord, cases: &[Case]) -> Result<CoverageStats, String> {
+/// kept coverage) computed from its case files in its bundled scenario.
+fn coverage_of(record: &CampaignRecord, dir: &Path) -> Result<CoverageStats, String> {
     record
         .summary
         .as_ref()
@@ -405,7 +405,9 @@ fn coverage_of(record: &CampaignRecord, cases: &[Case]) -> Result<CoverageStats,
                     )
                 })?
                 .scenario;
-            Ok(campaign::coverage::of_scenario(&scenario, cases).stats)
+            let mut coverage = CoverageBuilder::of_scenario(&scenario);
+            read_tests(dir, |case| coverage.add(case)).map_err(|e| format!("{e:#}"))?;
+            Ok(coverage.finish().stats)
         })
 }
 
@@ -447,15 +449,14 @@ fn show_campaign(dir: &Path, record: CampaignRecord, coverage: bool) -> Result<(
         record.ended_at.as_deref().unwrap_or("- (did not end)")
     );
     describe_recording(dir);
-    let (tests, cases) = read_tests(dir)?;
-    let stats = coverage.then(|| coverage_of(&record, &cases));
+    let tests = read_tests(dir, |_| {})?;
+    let stats = coverage.then(|| coverage_of(&record, dir));
     println!();
     print_report(
         &CampaignReport {
             dir: dir.to_owned(),
             record,
             tests,
-            cases,
         },
         None,
     );

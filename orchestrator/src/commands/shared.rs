@@ -562,7 +562,16 @@ pub(super) fn case_files(dir: &Path) -> Result<Vec<PathBuf>> {
                 .is_some_and(|n| n.starts_with("case-") && n.ends_with(".json"))
         })
         .collect();
-    files.sort();
+    // By test index: names sort wrong past 999 (`case-1000` before `case-999`).
+    let index = |p: &PathBuf| {
+        p.file_name().and_then(|n| n.to_str()).and_then(|n| {
+            n.strip_prefix("case-")?
+                .strip_suffix(".json")?
+                .parse::<u64>()
+                .ok()
+        })
+    };
+    files.sort_by_key(|p| (index(p), p.clone()));
     Ok(files)
 }
 

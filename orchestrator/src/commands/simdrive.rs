@@ -180,10 +180,6 @@ impl<'a> SimDriver<'a> {
         let report = result.map_err(|failure| {
             anyhow::Error::new(CampaignFailed::new(failure.error, &config.out_dir))
         })?;
-        report
-            .cases
-            .into_iter()
-            .next()
-            .context("the run wrote no case")
+        Ok(report.cases().next().context("the run wrote no case")??)
     }
 }

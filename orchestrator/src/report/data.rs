@@ -69,10 +69,6 @@ pub(crate) struct TestData {
 /// A campaign's run directory.
 #[derive(Debug, Clone)]
 pub(crate) struct CampaignData {
-    /// The directory.
-    pub dir: PathBuf,
-    /// `campaign.json`.
-    pub record: CampaignRecord,
     /// Every case file, by test index.
     pub tests: Vec<TestData>,
     /// The scenario's canonical TOML from the recording (`drivecheck.scenario`), if any.
@@ -203,10 +199,12 @@ pub(crate) fn read_twin(dir: &Path, notes: &mut Vec<String>) -> Option<campaign:
 
 /// Reads a run directory: `campaign.json`, every `case-NNN.json` and, when present,
 /// `campaign.mcap` (an unreadable recording is a note, not an error: the tables still help).
-/// Every test's case and track in memory: for one test, a replay's runs and `explain`; the
-/// campaign's page reads a test at a time instead (`report::campaign`).
+/// Every test's case and track in memory: for a replay's runs (one test each) and `calibrate`'s
+/// fault-free run; a campaign's page and `explain` read a test at a time instead
+/// (`report::campaign`, [`each_test`]).
 pub(crate) fn read_campaign(dir: &Path) -> Result<CampaignData, ReportError> {
-    let record = read_record(dir)?;
+    // A run directory has its record, even where only its tests are shown.
+    read_record(dir)?;
     let mut tests = Vec::new();
     for (index, file) in case_files(dir)? {
         let case = read_case(dir, &file)?;
@@ -220,8 +218,6 @@ pub(crate) fn read_campaign(dir: &Path) -> Result<CampaignData, ReportError> {
     let mut notes = Vec::new();
     let recorded_scenario = read_tracks(dir, &mut tests, &mut notes);
     Ok(CampaignData {
-        dir: dir.to_owned(),
-        record,
         tests,
         recorded_scenario,
         notes,
@@ -334,6 +330,96 @@ pub(crate) fn read_spans(
         each(span.test_index, recording, recorded.as_deref(), notes)?;
     }
     Ok(scenario(&spans).or(recorded))
+}
+
+/// What [`each_test`] read besides the tests.
+#[derive(Debug)]
+pub(crate) struct EachTest {
+    /// The scenario chosen (see [`scenario_for`]), if any.
+    pub scenario: Option<Scenario>,
+    /// What was missing or damaged, and what the choice of scenario said.
+    pub notes: Vec<String>,
+}
+
+/// Reads the run directory `dir` a test at a time, in memory bounded by one test whatever the
+/// campaign's size: every test `wanted` selects (by index and case file name) is given to
+/// `each` with its case and, when the recording has them, its samples; with the scenario
+/// [`scenario_for`] chooses (`given`, else the recording's copy, else the bundled one). Tests
+/// come in the recording's order (each in its span), then those it holds no samples of.
+pub(crate) fn each_test(
+    dir: &Path,
+    given: Option<&Scenario>,
+    wanted: impl Fn(usize, &str) -> bool,
+    mut each: impl FnMut(TestData, Option<&Scenario>) -> Result<(), ReportError>,
+) -> Result<EachTest, ReportError> {
+    let record = read_record(dir)?;
+    let mut files: BTreeMap<usize, String> = case_files(dir)?
+        .into_iter()
+        .filter(|(index, file)| wanted(*index, file))
+        .collect();
+    let mut chosen: Option<(Option<Scenario>, Vec<String>)> = None;
+    let choose = |recorded: Option<&str>| {
+        scenario_for(
+            &record.scenario.name,
+            record.scenario.hash.as_deref(),
+            given,
+            recorded,
+        )
+    };
+    let mut notes = Vec::new();
+    let path = dir.join(RECORDING_FILE);
+    read_spans(dir, &mut notes, |test, recording, recorded, notes| {
+        let (scenario, _) = chosen.get_or_insert_with(|| choose(recorded));
+        // A test's span gives its track; one no test claims (a car recorded for the whole
+        // campaign) any test's it holds.
+        let targets: Vec<usize> = match test {
+            Some(t) if files.contains_key(&t) => vec![t],
+            Some(_) => return Ok(()),
+            None => files.keys().copied().collect(),
+        };
+        let tracks = match Tracks::split(&recording) {
+            Ok(tracks) => tracks,
+            Err(e) => {
+                notes.push(format!("{}: {e}; no tracks or plots", path.display()));
+                return Ok(());
+            }
+        };
+        for index in targets {
+            let Some(track) = tracks.track(index) else {
+                continue;
+            };
+            let file = files.remove(&index).unwrap_or_default();
+            let case = read_case(dir, &file)?;
+            each(
+                TestData {
+                    index: case.test_index.unwrap_or(index),
+                    file,
+                    case,
+                    track: Some(track),
+                },
+                scenario.as_ref(),
+            )?;
+        }
+        Ok(())
+    })?;
+    let (scenario, mut chose) = chosen.unwrap_or_else(|| choose(None));
+    for (index, file) in std::mem::take(&mut files) {
+        let case = read_case(dir, &file)?;
+        each(
+            TestData {
+                index: case.test_index.unwrap_or(index),
+                file,
+                case,
+                track: None,
+            },
+            scenario.as_ref(),
+        )?;
+    }
+    chose.append(&mut notes);
+    Ok(EachTest {
+        scenario,
+        notes: chose,
+    })
 }
 
 /// Reads the recording of `dir` and gives each test its track (see [`read_spans`]); the

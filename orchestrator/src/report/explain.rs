@@ -11,7 +11,7 @@ use scenarios::Scenario;
 use serde::{Deserialize, Serialize};
 
 use super::ReportError;
-use super::data::{CampaignData, TestData, read_campaign, scenario_for};
+use super::data::{TestData, Tracks, each_test, read_campaign, read_record, scenario_for};
 use super::route::boundaries;
 use campaign::case::{Case, CommandRecord};
 use campaign::explain::calibrate::{Calibration, CalibrationError};
@@ -71,34 +71,40 @@ pub fn explain_run(
     scenario: Option<&Scenario>,
     options: &ExplainOptions,
 ) -> Result<Explanations, ReportError> {
-    let data = read_campaign(dir)?;
-    let (scenario, mut notes) = scenario_for(
-        &data.record.scenario.name,
-        data.record.scenario.hash.as_deref(),
+    let wanted = only.and_then(|p| p.file_name()).and_then(|n| n.to_str());
+    let mut cases = Vec::new();
+    let mut not_explained: Vec<(usize, String)> = Vec::new();
+    let mut found = false;
+    // A test at a time: its case and samples are dropped once it is explained.
+    let read = each_test(
+        dir,
         scenario,
-        data.recorded_scenario.as_deref(),
-    );
-    notes.extend(data.notes.iter().cloned());
-    let Some(scenario) = scenario else {
+        |_, file| wanted.is_none_or(|w| w == file),
+        |test, scenario| {
+            found = true;
+            let Some(scenario) = scenario else {
+                return Ok(());
+            };
+            match explain_test(dir, &test, scenario, options) {
+                Ok(explained) => cases.push(explained),
+                Err(why) => not_explained.push((test.index, format!("{}: {why}", test.file))),
+            }
+            Ok(())
+        },
+    )?;
+    let mut notes = read.notes;
+    if read.scenario.is_none() {
         notes.push("no scenario: the anchors and the route are unknown".to_owned());
         return Ok(Explanations {
             cases: Vec::new(),
             notes,
         });
-    };
-    let wanted = only.and_then(|p| p.file_name()).and_then(|n| n.to_str());
-    let mut cases = Vec::new();
-    for test in &data.tests {
-        if wanted.is_some_and(|w| w != test.file) {
-            continue;
-        }
-        match explain_test(&data, test, &scenario, options) {
-            Ok(explained) => cases.push(explained),
-            Err(why) => notes.push(format!("{}: {why}", test.file)),
-        }
     }
+    cases.sort_by_key(|c| c.test_index);
+    not_explained.sort();
+    notes.extend(not_explained.into_iter().map(|(_, note)| note));
     if let Some(w) = wanted
-        && !data.tests.iter().any(|t| t.file == w)
+        && !found
     {
         notes.push(format!("{w} is not a case file of {}", dir.display()));
     }
@@ -106,13 +112,13 @@ pub fn explain_run(
 }
 
 fn explain_test(
-    data: &CampaignData,
+    dir: &Path,
     test: &TestData,
     scenario: &Scenario,
     options: &ExplainOptions,
 ) -> Result<CaseExplanation, NotExplained> {
     Ok(CaseExplanation {
-        case: data.dir.join(&test.file),
+        case: dir.join(&test.file),
         test_index: test.index,
         segments: explain_segments(test, scenario, options)?,
     })
@@ -270,12 +276,6 @@ pub(crate) fn faults_of(case: &Case) -> Vec<ExplainFault> {
         .collect()
 }
 
-/// A cause of test `test_index` in words (the campaign's `cases` give the fault's command).
-pub(crate) fn describe_source(source: &Source, cases: &[Case], test_index: usize) -> String {
-    let case = cases.iter().find(|c| c.test_index == Some(test_index));
-    describe(source, case)
-}
-
 /// A cause in words: a fault with its command (what `drivecheck explain` and `run` print).
 pub(crate) fn describe(source: &Source, case: Option<&Case>) -> String {
     match source {
@@ -324,7 +324,7 @@ pub fn score_run(
 ) -> Result<(Explanations, Vec<Scored>, Option<Scenario>), ReportError> {
     use crate::recording::{Recording, SimFault, SimRange, Spans, Stamped, TruthRecord};
     let explanations = explain_run(dir, None, scenario, options)?;
-    let data = read_campaign(dir)?;
+    let record = read_record(dir)?;
     let path = dir.join(crate::runner::RECORDING_FILE);
     let read = |e: crate::recording::RecordingError| invalid(&path, e);
     let slack_ns = (TRUTH_SLACK_S * 1e9) as u64;
@@ -334,7 +334,8 @@ pub fn score_run(
     let mut faults: Vec<Stamped<SimFault>> = Vec::new();
     let mut ranges: Vec<Stamped<SimRange>> = Vec::new();
     let mut read_any = false;
-    for span in Spans::open(&path).map_err(read)? {
+    let mut spans = Spans::open(&path).map_err(read)?;
+    for span in spans.by_ref() {
         let span = match span {
             Ok(span) => span,
             // A recording cut short is scored up to the damage, as far as it holds tests.
@@ -354,17 +355,31 @@ pub fn score_run(
             .is_empty();
         faults.extend(recording.messages::<SimFault>().map_err(read)?);
         ranges.extend(recording.messages::<SimRange>().map_err(read)?);
+        let mut tracks = None;
         for (case, scored) in explanations.cases.iter().zip(scores.iter_mut()) {
             if scored.is_some() || test_index.is_some_and(|t| t != case.test_index) {
                 continue;
             }
-            let Some(test) = data.tests.iter().find(|t| t.index == case.test_index) else {
+            let tracks = match &mut tracks {
+                Some(tracks) => tracks,
+                None => tracks.insert(Tracks::split(&recording).map_err(read)?),
+            };
+            let Some(track) = tracks.track(case.test_index) else {
                 continue;
             };
-            let Some(track) = &test.track else { continue };
-            *scored = Some(score_case(case, test, track, &faults, &ranges));
+            // The case is read when its span comes, and dropped with it.
+            let text = std::fs::read_to_string(&case.case).map_err(|error| ReportError::Read {
+                path: case.case.clone(),
+                error,
+            })?;
+            let on_disk = Case::from_json(&text).map_err(|e| invalid(&case.case, e))?;
+            *scored = Some(score_case(case, &on_disk, &track, &faults, &ranges));
         }
     }
+    let recorded_scenario = spans
+        .metadata("drivecheck.scenario")
+        .and_then(|m| m.get("toml"))
+        .cloned();
     if !truth {
         return Err(invalid(
             &path,
@@ -374,10 +389,10 @@ pub fn score_run(
     }
     let scored = scores.into_iter().flatten().flatten().collect();
     let (scenario, _) = scenario_for(
-        &data.record.scenario.name,
-        data.record.scenario.hash.as_deref(),
+        &record.scenario.name,
+        record.scenario.hash.as_deref(),
         scenario,
-        data.recorded_scenario.as_deref(),
+        recorded_scenario.as_deref(),
     );
     Ok((explanations, scored, scenario))
 }
@@ -386,7 +401,7 @@ pub fn score_run(
 /// around its test (see [`score_run`]).
 fn score_case(
     case: &CaseExplanation,
-    test: &TestData,
+    on_disk: &Case,
     track: &super::data::Track,
     faults: &[crate::recording::Stamped<crate::recording::SimFault>],
     ranges: &[crate::recording::Stamped<crate::recording::SimRange>],
@@ -427,7 +442,7 @@ fn score_case(
         faults: &applied,
         ranges: &ranged,
     };
-    score_segments(&case.segments, &test.case, &truth)
+    score_segments(&case.segments, on_disk, &truth)
         .into_iter()
         .map(|score| Scored {
             case: case.case.clone(),

@@ -9,6 +9,7 @@ use std::time::{SystemTime, UNIX_EPOCH};
 use scenarios::Scenario;
 
 use super::{RunConfig, RunError};
+use campaign::coverage::CoverageBuilder;
 use campaign::files::{
     CAMPAIGN_FORMAT, CAMPAIGN_SCHEMA_VERSION, CampaignRecord, CampaignSummary, Case, Header,
     ScenarioRef, Settings,
@@ -50,9 +51,27 @@ pub struct CampaignReport {
     pub record: CampaignRecord,
     /// Every test that was started, in order.
     pub tests: Vec<TestSummary>,
-    /// The case of every test that was started, in order: what its case file holds (which
-    /// rounds durations to whole milliseconds).
-    pub cases: Vec<Case>,
+}
+
+impl CampaignReport {
+    /// The case of `test` (one of [`CampaignReport::tests`]) as its case file holds it: read
+    /// again when asked, so that a campaign of any size keeps only its rows in memory.
+    pub fn case(&self, test: &TestSummary) -> Result<Case, RunError> {
+        let path = self.dir.join(&test.file);
+        let text = std::fs::read_to_string(&path).map_err(|source| RunError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        Case::from_json(&text).map_err(|source| RunError::CaseFile {
+            path,
+            source: Box::new(source),
+        })
+    }
+
+    /// Every test's case, in order, read one at a time (see [`CampaignReport::case`]).
+    pub fn cases(&self) -> impl Iterator<Item = Result<Case, RunError>> + '_ {
+        self.tests.iter().map(|test| self.case(test))
+    }
 }
 
 /// A run directory being written.
@@ -61,11 +80,10 @@ pub(crate) struct RunDirectory {
     path: PathBuf,
     record: CampaignRecord,
     tests: Vec<TestSummary>,
-    cases: Vec<Case>,
     /// The scenario has no anchors: UWB is not tested.
     no_anchors: bool,
-    /// The scenario, for the coverage statistics.
-    scenario: Scenario,
+    /// The coverage of the tests written so far.
+    coverage: CoverageBuilder,
 }
 
 impl RunDirectory {
@@ -108,9 +126,8 @@ impl RunDirectory {
             path,
             record,
             tests: Vec::new(),
-            cases: Vec::new(),
             no_anchors: scenario.anchors.is_empty(),
-            scenario: scenario.clone(),
+            coverage: CoverageBuilder::of_scenario(scenario),
         };
         dir.write_record()?;
         Ok(dir)
@@ -161,7 +178,7 @@ impl RunDirectory {
         self.record.settings = self.record.settings.clone().with_runtime(safety, streaming);
     }
 
-    /// Writes a test's case file (and keeps the case for the report).
+    /// Writes a test's case file (and keeps its row and its coverage for the report).
     pub(crate) fn write_case(&mut self, case: &Case) -> Result<(), RunError> {
         let test_index = case.test_index.unwrap_or(self.tests.len());
         let file = format!("case-{test_index:03}.json");
@@ -171,7 +188,7 @@ impl RunDirectory {
         }
         write(&self.path.join(&file), &case.to_json()?)?;
         self.tests.push(summarise(test_index, file, &case));
-        self.cases.push(case);
+        self.coverage.add(&case);
         Ok(())
     }
 
@@ -189,7 +206,6 @@ impl RunDirectory {
             dir: self.path,
             record: self.record,
             tests: self.tests,
-            cases: self.cases,
         })
     }
 
@@ -216,11 +232,7 @@ impl RunDirectory {
                  test says anything about UWB positioning"
                     .to_owned()
             }),
-            coverage: Some(
-                campaign::coverage::of_scenario(&self.scenario, &self.cases)
-                    .stats
-                    .into(),
-            ),
+            coverage: Some(self.coverage.clone().finish().stats.into()),
         }
     }
 
