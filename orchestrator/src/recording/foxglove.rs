@@ -280,8 +280,12 @@ impl Record for RtkPose {
         Ok(self.0.to_protobuf())
     }
 
-    fn from_protobuf(data: &[u8]) -> Option<Result<Self, prost::DecodeError>> {
-        Some(PoseInFrame::from_protobuf(data).map(RtkPose))
+    fn from_protobuf(data: &[u8]) -> Option<Result<Self, super::ProtobufError>> {
+        Some(
+            PoseInFrame::from_protobuf(data)
+                .map(RtkPose)
+                .map_err(Into::into),
+        )
     }
 }
 
@@ -297,8 +301,12 @@ impl Record for UwbPose {
         Ok(self.0.to_protobuf())
     }
 
-    fn from_protobuf(data: &[u8]) -> Option<Result<Self, prost::DecodeError>> {
-        Some(PoseInFrame::from_protobuf(data).map(UwbPose))
+    fn from_protobuf(data: &[u8]) -> Option<Result<Self, super::ProtobufError>> {
+        Some(
+            PoseInFrame::from_protobuf(data)
+                .map(UwbPose)
+                .map_err(Into::into),
+        )
     }
 }
 

@@ -62,10 +62,28 @@ pub const RECORDING_FORMAT: &str = "drivecheck-recording";
 ///
 /// Version 2 leaves a value out where version 1 wrote `null` (a number that was not finite, an
 /// absent option), so that every field has one type in the channels' schemas. Version 3 writes
-/// the channels of every state sample in protobuf, each value once (`proto`).
-pub const RECORDING_VERSION: u32 = 3;
+/// the channels of every state sample in protobuf, each value once (`proto`); version 4 also
+/// `/sim/ranges` (every simulated range). Each channel names its encoding, so a reader takes
+/// every version's channels as they are.
+pub const RECORDING_VERSION: u32 = 4;
 /// The recording format versions this build reads (a version-1 `null` is read as before).
-pub const READABLE_RECORDING_VERSIONS: [u32; 3] = [1, 2, 3];
+pub const READABLE_RECORDING_VERSIONS: [u32; 4] = [1, 2, 3, 4];
+
+/// Why a protobuf message is not its channel's record.
+#[derive(Debug, Error)]
+pub enum ProtobufError {
+    /// Not a protobuf message of the channel's type (what prost said).
+    #[error(transparent)]
+    Decode(#[from] prost::DecodeError),
+    /// A field holds a number that stands for none of its record's values.
+    #[error("field {field}: {value} stands for no value")]
+    Value {
+        /// The field.
+        field: &'static str,
+        /// The number.
+        value: u64,
+    },
+}
 
 /// Why a recording could not be written or read.
 #[derive(Debug, Error)]
@@ -139,9 +157,9 @@ pub enum RecordingError {
         topic: &'static str,
         /// The message's position among the channel's messages, from 0.
         index: usize,
-        /// What prost said.
+        /// What is wrong with it.
         #[source]
-        source: prost::DecodeError,
+        source: ProtobufError,
     },
     /// A channel's messages are in an encoding this build does not read for it.
     #[error("{topic}: messages in {encoding:?}, which drivecheck does not read on this channel")]

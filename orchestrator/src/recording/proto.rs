@@ -1,5 +1,6 @@
 //! The high-rate channels in protobuf (recording version 3): `/car/state` as
-//! `drivecheck.CarState` and `/sim/truth` as `drivecheck.SimTruth` here, `/foxglove/rtk` and
+//! `drivecheck.CarState`, `/sim/truth` as `drivecheck.SimTruth` and (from version 4)
+//! `/sim/ranges` as `drivecheck.SimRange` here, `/foxglove/rtk` and
 //! `/foxglove/uwb` as Foxglove's own `foxglove.PoseInFrame` (`super::foxglove`).
 //!
 //! Nothing is written twice: the RTK and UWB positions of a state sample are on the pose
@@ -130,6 +131,54 @@ pub(super) const TRUTH_FIELDS: &[(&str, i32, Type)] = &[
     ("uwb_yaw_deg", 12, Type::Float),
 ];
 
+/// `/sim/ranges` in protobuf (from recording version 4): one flat message for both events (a
+/// range request and its fate, or a range reaching the estimator), each value as the simulator
+/// holds it (`float` for the firmware's `f32` ranges); an absent optional field is a value the
+/// event does not have.
+#[derive(Clone, PartialEq, Message)]
+pub(super) struct SimRangePb {
+    /// 0 a range request, 1 a range reaching the estimator.
+    #[prost(uint32, tag = "1")]
+    pub event: u32,
+    #[prost(uint64, tag = "2")]
+    pub sim_ms: u64,
+    #[prost(uint32, tag = "3")]
+    pub anchor: u32,
+    /// 0 line of sight, 1 reflected, 2 blocked (a request whose anchor answers).
+    #[prost(uint32, optional, tag = "4")]
+    pub path_kind: Option<u32>,
+    #[prost(double, optional, tag = "5")]
+    pub path_length_m: Option<f64>,
+    #[prost(uint64, optional, tag = "6")]
+    pub path_wall: Option<u64>,
+    #[prost(double, optional, tag = "7")]
+    pub path_direct_m: Option<f64>,
+    #[prost(double, optional, tag = "8")]
+    pub true_range_m: Option<f64>,
+    /// 0 measured, 1 blocked, 2 dropped, 3 no responder (a request).
+    #[prost(uint32, tag = "9")]
+    pub outcome: u32,
+    #[prost(float, optional, tag = "10")]
+    pub range_m: Option<f32>,
+    #[prost(bool, tag = "11")]
+    pub moved: bool,
+}
+
+/// The fields of `drivecheck.SimRange`, as its schema declares them.
+pub(super) const SIM_RANGE_FIELDS: &[(&str, i32, Type)] = &[
+    ("event", 1, Type::Uint32),
+    ("sim_ms", 2, Type::Uint64),
+    ("anchor", 3, Type::Uint32),
+    ("path_kind", 4, Type::Uint32),
+    ("path_length_m", 5, Type::Double),
+    ("path_wall", 6, Type::Uint64),
+    ("path_direct_m", 7, Type::Double),
+    ("true_range_m", 8, Type::Double),
+    ("outcome", 9, Type::Uint32),
+    ("range_m", 10, Type::Float),
+    ("moved", 11, Type::Bool),
+];
+
 /// The `FileDescriptorSet` of message `full_name` (`drivecheck.CarState`) with `fields`, every
 /// one optional (proto2: an absent field reads as its default, as the message types above
 /// encode it).
@@ -244,5 +293,19 @@ mod tests {
             uwb_yaw_deg: 11.0,
         };
         check(&truth.encode_to_vec(), TRUTH_FIELDS);
+        let range = SimRangePb {
+            event: 1,
+            sim_ms: 2,
+            anchor: 3,
+            path_kind: Some(1),
+            path_length_m: Some(4.0),
+            path_wall: Some(5),
+            path_direct_m: Some(6.0),
+            true_range_m: Some(7.0),
+            outcome: 2,
+            range_m: Some(8.0),
+            moved: true,
+        };
+        check(&range.encode_to_vec(), SIM_RANGE_FIELDS);
     }
 }

@@ -232,8 +232,12 @@ impl Record for CarStateRecord {
 
     /// A state alone, its positions NaN where the pose channels hold them ([`Record::read_all`]
     /// joins them).
-    fn from_protobuf(data: &[u8]) -> Option<Result<Self, prost::DecodeError>> {
-        Some(CarStatePb::decode(data).map(|pb| CarStateRecord::from_pb(&pb, None, None)))
+    fn from_protobuf(data: &[u8]) -> Option<Result<Self, super::ProtobufError>> {
+        Some(
+            CarStatePb::decode(data)
+                .map(|pb| CarStateRecord::from_pb(&pb, None, None))
+                .map_err(Into::into),
+        )
     }
 
     /// The states, each joined with its RTK and UWB poses (version 3; the poses follow their
@@ -255,7 +259,7 @@ impl Record for CarStateRecord {
                     super::RecordingError::DecodeProtobuf {
                         topic: Topic::CarState.name(),
                         index,
-                        source,
+                        source: source.into(),
                     }
                 })?;
                 // A pose missing at the end of a cut-short file leaves the position unknown.
@@ -788,8 +792,8 @@ impl Record for TruthRecord {
         Ok(message.encode_to_vec())
     }
 
-    fn from_protobuf(data: &[u8]) -> Option<Result<Self, prost::DecodeError>> {
-        Some(TruthPb::decode(data).map(|pb| {
+    fn from_protobuf(data: &[u8]) -> Option<Result<Self, super::ProtobufError>> {
+        Some(TruthPb::decode(data).map_err(Into::into).map(|pb| {
             let estimate = |x: f32, y: f32, yaw: f32| Pose {
                 x: f64::from(x),
                 y: f64::from(y),
@@ -916,6 +920,107 @@ pub enum SimRange {
 
 impl Record for SimRange {
     const TOPIC: Topic = Topic::SimRanges;
+
+    /// `drivecheck.SimRange` (`super::proto`), from recording version 4.
+    fn encode(&self) -> Result<Vec<u8>, super::RecordingError> {
+        use super::proto::SimRangePb;
+        // The simulator's ranges are the firmware's `f32`s: `float` keeps them exactly.
+        let message = match *self {
+            SimRange::Request {
+                sim_ms,
+                anchor,
+                path,
+                true_range_m,
+                outcome,
+                range_m,
+            } => SimRangePb {
+                event: 0,
+                sim_ms,
+                anchor: u32::from(anchor),
+                path_kind: path.map(|p| match p.kind {
+                    RadioPathKind::LineOfSight => 0,
+                    RadioPathKind::Reflected => 1,
+                    RadioPathKind::Blocked => 2,
+                }),
+                path_length_m: path.and_then(|p| p.length_m),
+                path_wall: path.and_then(|p| p.wall).map(|w| w as u64),
+                path_direct_m: path.and_then(|p| p.direct_m),
+                true_range_m,
+                outcome: match outcome {
+                    RangeOutcome::Measured => 0,
+                    RangeOutcome::Blocked => 1,
+                    RangeOutcome::Dropped => 2,
+                    RangeOutcome::NoResponder => 3,
+                },
+                range_m: range_m.map(|r| r as f32),
+                moved: false,
+            },
+            SimRange::Fused {
+                sim_ms,
+                anchor,
+                range_m,
+                moved,
+            } => SimRangePb {
+                event: 1,
+                sim_ms,
+                anchor: u32::from(anchor),
+                range_m: finite(range_m).map(|r| r as f32),
+                moved,
+                ..SimRangePb::default()
+            },
+        };
+        Ok(message.encode_to_vec())
+    }
+
+    fn from_protobuf(data: &[u8]) -> Option<Result<Self, super::ProtobufError>> {
+        use super::proto::SimRangePb;
+        let decoded = SimRangePb::decode(data)
+            .map_err(super::ProtobufError::from)
+            .and_then(|pb| {
+                let invalid =
+                    |field: &'static str, value: u64| super::ProtobufError::Value { field, value };
+                let anchor =
+                    u8::try_from(pb.anchor).map_err(|_| invalid("anchor", pb.anchor.into()))?;
+                let range_m = pb.range_m.map(f64::from);
+                Ok(match pb.event {
+                    0 => SimRange::Request {
+                        sim_ms: pb.sim_ms,
+                        anchor,
+                        path: match pb.path_kind {
+                            None => None,
+                            Some(kind) => Some(RadioPathRecord {
+                                kind: match kind {
+                                    0 => RadioPathKind::LineOfSight,
+                                    1 => RadioPathKind::Reflected,
+                                    2 => RadioPathKind::Blocked,
+                                    other => return Err(invalid("path_kind", other.into())),
+                                },
+                                length_m: pb.path_length_m,
+                                wall: pb.path_wall.map(|w| w as usize),
+                                direct_m: pb.path_direct_m,
+                            }),
+                        },
+                        true_range_m: pb.true_range_m,
+                        outcome: match pb.outcome {
+                            0 => RangeOutcome::Measured,
+                            1 => RangeOutcome::Blocked,
+                            2 => RangeOutcome::Dropped,
+                            3 => RangeOutcome::NoResponder,
+                            other => return Err(invalid("outcome", other.into())),
+                        },
+                        range_m,
+                    },
+                    1 => SimRange::Fused {
+                        sim_ms: pb.sim_ms,
+                        anchor,
+                        range_m: range_m.unwrap_or(f64::NAN),
+                        moved: pb.moved,
+                    },
+                    other => return Err(invalid("event", other.into())),
+                })
+            });
+        Some(decoded)
+    }
 }
 
 fn range_outcome(result: &RangeResult) -> (RangeOutcome, Option<f64>) {

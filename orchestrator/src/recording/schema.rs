@@ -53,6 +53,10 @@ pub fn channel_schema(topic: Topic) -> ChannelSchema {
             topic.schema_name(),
             proto::TRUTH_FIELDS,
         )),
+        Topic::SimRanges => protobuf(proto::descriptor_set(
+            topic.schema_name(),
+            proto::SIM_RANGE_FIELDS,
+        )),
         Topic::FoxgloveRtk | Topic::FoxgloveUwb => protobuf(
             ::foxglove::messages::PoseInFrame::get_schema()
                 .map(|s| s.data.into_owned())

@@ -317,6 +317,83 @@ async fn sim_records_carry_the_hidden_truth_at_their_simulation_time() {
     assert_eq!(events[0].message.event, SimEventKind::WatchdogExpired);
 }
 
+#[test]
+fn every_kind_of_simulated_range_reads_back_from_protobuf_as_written() {
+    let path = |kind, wall: Option<usize>| RadioPathRecord {
+        kind,
+        length_m: (kind != RadioPathKind::Blocked).then_some(12.5),
+        wall,
+        direct_m: wall.map(|_| 9.0),
+    };
+    let ranges = [
+        SimRange::Request {
+            sim_ms: 900,
+            anchor: 50,
+            path: Some(path(RadioPathKind::Reflected, Some(3))),
+            true_range_m: Some(9.1),
+            outcome: RangeOutcome::Measured,
+            range_m: Some(f64::from(12.25_f32)),
+        },
+        SimRange::Request {
+            sim_ms: 1000,
+            anchor: 234,
+            path: Some(path(RadioPathKind::Blocked, None)),
+            true_range_m: Some(4.0),
+            outcome: RangeOutcome::Blocked,
+            range_m: None,
+        },
+        SimRange::Request {
+            sim_ms: 1100,
+            anchor: 7,
+            path: None,
+            true_range_m: None,
+            outcome: RangeOutcome::NoResponder,
+            range_m: None,
+        },
+        SimRange::Request {
+            sim_ms: 1200,
+            anchor: 50,
+            path: Some(path(RadioPathKind::LineOfSight, None)),
+            true_range_m: Some(3.0),
+            outcome: RangeOutcome::Dropped,
+            range_m: None,
+        },
+        SimRange::Fused {
+            sim_ms: 1300,
+            anchor: 50,
+            range_m: f64::from(13.75_f32),
+            moved: true,
+        },
+    ];
+    for range in &ranges {
+        let bytes = range.encode().unwrap();
+        let back = SimRange::from_protobuf(&bytes).unwrap().unwrap();
+        assert_eq!(&back, range);
+        let json = serde_json::to_vec(range).unwrap().len();
+        assert!(
+            bytes.len() * 3 < json,
+            "{} bytes against {json} in JSON: {range:?}",
+            bytes.len()
+        );
+    }
+    // A fused range that was not finite is left out and reads back as NaN.
+    let lost = SimRange::Fused {
+        sim_ms: 1,
+        anchor: 1,
+        range_m: f64::INFINITY,
+        moved: false,
+    };
+    let back = SimRange::from_protobuf(&lost.encode().unwrap())
+        .unwrap()
+        .unwrap();
+    assert!(matches!(back, SimRange::Fused { range_m, .. } if range_m.is_nan()));
+    // A number that stands for no outcome is an error naming the field, not a guess.
+    let mut bytes = ranges[0].encode().unwrap();
+    bytes.extend([9 << 3, 7]); // outcome = 7
+    let error = SimRange::from_protobuf(&bytes).unwrap().unwrap_err();
+    assert_eq!(error.to_string(), "field outcome: 7 stands for no value");
+}
+
 #[tokio::test(start_paused = true)]
 async fn the_scenario_and_campaign_are_metadata_records() {
     let dir = tempfile::tempdir().unwrap();
@@ -782,7 +859,7 @@ fn a_version_1_recording_is_read_with_its_nulls_as_nan() {
     let read = &read[0].message;
     assert!(read.speed_mps.is_nan() && read.uwb.x.is_nan());
     assert_eq!(read.deviation_m, None);
-    let future = Recording::from_bytes(&recording_of_version("4", &state)).unwrap();
+    let future = Recording::from_bytes(&recording_of_version("5", &state)).unwrap();
     let error = future.check_format().unwrap_err();
     assert!(
         matches!(error, RecordingError::UnsupportedFormat { .. }),

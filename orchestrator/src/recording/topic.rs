@@ -130,12 +130,15 @@ impl Topic {
     }
 
     /// How this build encodes the channel's messages: protobuf for the channels written at every
-    /// state sample (`docs/recording.md`, *The encodings*), JSON for the rest.
+    /// state sample and for every simulated range (`docs/recording.md`, *The encodings*), JSON
+    /// for the rest.
     pub fn encoding(self) -> Encoding {
         match self {
-            Topic::CarState | Topic::SimTruth | Topic::FoxgloveRtk | Topic::FoxgloveUwb => {
-                Encoding::Protobuf
-            }
+            Topic::CarState
+            | Topic::SimTruth
+            | Topic::SimRanges
+            | Topic::FoxgloveRtk
+            | Topic::FoxgloveUwb => Encoding::Protobuf,
             _ => Encoding::Json,
         }
     }
@@ -197,7 +200,7 @@ pub trait Record: Serialize + DeserializeOwned + Clone + Send + 'static {
     }
 
     /// The record of a protobuf message; `None` for a record that is never protobuf.
-    fn from_protobuf(_data: &[u8]) -> Option<Result<Self, prost::DecodeError>> {
+    fn from_protobuf(_data: &[u8]) -> Option<Result<Self, super::ProtobufError>> {
         None
     }
 
