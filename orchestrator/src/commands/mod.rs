@@ -8,6 +8,7 @@ mod bench_placement;
 mod bench_recovery;
 pub mod bench_scale;
 mod calibrate;
+pub mod compare;
 mod completions;
 mod explain;
 mod merge;
@@ -42,6 +43,7 @@ pub fn run(cli: Cli) -> Result<Exit> {
         Command::Runs(args) => runs::runs(&args),
         Command::Report(args) => report::report(&args),
         Command::Explain(args) => explain::explain(&args),
+        Command::Compare(args) => compare::compare(&args),
         Command::Sim(args) => sim::serve(&args),
         Command::Calibrate(args) => calibrate::calibrate(&args),
         Command::Twin(TwinCommand::Check(args)) => twin::check(&args),
