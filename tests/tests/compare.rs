@@ -23,7 +23,16 @@ fn path(p: &Path) -> &str {
 
 /// A campaign of `tests` tests with `seed`, on the default car or the car `profile`.
 fn campaign(out: &Path, seed: &str, tests: &str, profile: Option<&Path>) {
-    let mut args = vec!["-q", "run", "--seed", seed, "--tests", tests, "--out", path(out)];
+    let mut args = vec![
+        "-q",
+        "run",
+        "--seed",
+        seed,
+        "--tests",
+        tests,
+        "--out",
+        path(out),
+    ];
     if let Some(p) = profile {
         args.extend(["--profile", path(p)]);
     }
@@ -40,7 +49,10 @@ fn the_same_seed_twice_is_no_difference_even_when_failing_on_regression() {
     let compared = compare_dirs(&a, &b, None, None, 0.05, 0).unwrap();
     let r = &compared.report;
     assert_eq!(r.significance, Significance::NoDifference, "{}", r.verdict);
-    assert_eq!((r.tests.paired, r.tests.fixed, r.tests.regressed), (20, 0, 0));
+    assert_eq!(
+        (r.tests.paired, r.tests.fixed, r.tests.regressed),
+        (20, 0, 0)
+    );
     assert_eq!(r.segments.worse + r.segments.better, 0);
     assert_eq!(r.median_change.unwrap().median_m, 0.0);
     assert_eq!(r.mcnemar.p, 1.0);
