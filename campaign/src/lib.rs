@@ -14,6 +14,8 @@
 //!   `shrink.json`, `sweep.json`): their header, schema versions, record types and checks.
 //! - [`replay`]: replay planning (the test a recorded case is driven as) and the comparison of a
 //!   replay's runs.
+//! - [`compare`]: two runs of the same tests compared (`drivecheck compare`): pairing, McNemar's
+//!   exact test, the median change with a cluster bootstrap over tests, the breakdowns.
 //! - [`seed`]: the one random number generator of every run.
 //! - [`shard`]: the deterministic partition of a campaign's tests into shards.
 //!
@@ -21,6 +23,7 @@
 //! facts are used here), the run directory, the recording and the command line (`orchestrator`).
 
 pub mod calibrate;
+pub mod compare;
 pub mod coverage;
 pub mod drive;
 pub mod explain;

@@ -23,7 +23,8 @@
 //! | [`Purpose::RecoveryPose`] | `s`, pose `i` | `s + i` | `bench recovery`'s return route from pose `i` |
 //!
 //! The commands with a seed of their own that no campaign shares (`area validate`, `route
-//! generate`, `route return`, `bench generator`, `bench recovery`'s poses, `sim`) seed [`rng`]
+//! generate`, `route return`, `bench generator`, `bench recovery`'s poses, `sim`, `compare`'s
+//! bootstrap) seed [`rng`]
 //! (or the simulator) with it directly.
 //!
 //! The derivations are part of what a case file and a recording mean: changing one changes every

@@ -54,6 +54,11 @@ pub enum Command {
     /// anchor's ranges, the odometry, the heading), from the recorded samples. Exit status: 0
     /// explained, 2 error.
     Explain(ExplainArgs),
+    /// Compare two runs of the same tests (two firmware builds, two cars): is NEW better or
+    /// worse than BASE, and where? Paired and noise-aware (docs/compare.md). Exit status: 0
+    /// compared (with `--fail-on regression`: and NEW is not significantly worse), 1 with
+    /// `--fail-on regression` when NEW is significantly worse, 2 error (runs of other tests).
+    Compare(CompareArgs),
     /// Serve a simulated car over TCP (like the reference bridge) or UDP, until Ctrl-C. Exit
     /// status: 0 stopped by Ctrl-C, 2 error.
     Sim(SimArgs),
@@ -403,6 +408,50 @@ pub struct ReportArgs {
     pub all_tests: bool,
 }
 
+/// Options of `drivecheck compare`.
+#[derive(Debug, Args)]
+pub struct CompareArgs {
+    /// The run directory compared against (`campaign.json` and its case files).
+    #[arg(value_name = "BASE")]
+    pub base: PathBuf,
+    /// The run directory judged: the same tests (same scenario, seed and tool), driven on the
+    /// other build or car.
+    #[arg(value_name = "NEW")]
+    pub new: PathBuf,
+    /// Print the comparison as one JSON document (docs/json.md) instead of the summary.
+    #[arg(long)]
+    pub json: bool,
+    /// Also write the comparison as an HTML page: FILE, or `compare.html` in NEW's run
+    /// directory (`--report=FILE`).
+    #[arg(long, value_name = "FILE", num_args = 0..=1, require_equals = true)]
+    pub report: Option<Option<PathBuf>>,
+    /// Exit with status 1 when NEW is significantly worse than BASE (for CI).
+    #[arg(long, value_name = "WHAT")]
+    pub fail_on: Option<FailOn>,
+    /// The significance level: the chance of calling a difference that is only noise, at most.
+    #[arg(long, default_value_t = campaign::compare::DEFAULT_ALPHA, value_name = "ALPHA")]
+    pub alpha: f64,
+    /// The noise of a segment's largest deviation, metres: a change larger than this is worse
+    /// (or better) than the noise (default 0.2 m, docs/compare.md).
+    #[arg(long, value_name = "M", conflicts_with = "noise_from")]
+    pub noise: Option<f64>,
+    /// Measure the noise instead: DIR is BASE's tests driven again on the same car with another
+    /// seed; the noise is the 95th percentile of the segments' |change| between BASE and DIR.
+    #[arg(long, value_name = "DIR")]
+    pub noise_from: Option<PathBuf>,
+    /// The bootstrap's seed (its resamples are the same for the same seed).
+    #[arg(long, default_value_t = campaign::compare::DEFAULT_BOOTSTRAP_SEED)]
+    pub seed: u64,
+}
+
+/// What `drivecheck compare --fail-on` fails on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum FailOn {
+    /// NEW significantly worse than BASE (by McNemar's test on the tests' verdicts or by the
+    /// median change of the segments' largest deviation).
+    Regression,
+}
+
 /// Options of `drivecheck explain`.
 #[derive(Debug, Args)]
 pub struct ExplainArgs {
@@ -673,6 +722,30 @@ pub enum BenchCommand {
     /// wall time, peak memory (RSS), recording bytes per test, report size. Exit status: 0
     /// measured, 2 error.
     Scale(BenchScaleArgs),
+    /// How `drivecheck compare` decides, measured on the simulated car: the same cases driven in
+    /// pairs of runs on the same car with other seeds (false alarms, and the noise of a
+    /// segment's largest deviation), and on degraded cars (how often the regression is found,
+    /// by number of tests), and firmware 10.1 against 12.3. Exit status: 0 measured, 2 error.
+    Compare(BenchCompareArgs),
+}
+
+/// Options of `drivecheck bench compare`.
+#[derive(Debug, Args)]
+pub struct BenchCompareArgs {
+    /// Tests of the cases every run drives (the power table also compares their first quarter
+    /// and half).
+    #[arg(long, default_value_t = 200, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(4..=100_000))]
+    pub tests: usize,
+    /// Pairs of runs on the same car (false alarms), and of runs on each degraded car.
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub pairs: u32,
+    /// The cases' seed; run k drives them with seed SEED + k.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Where the run directories go (a new directory; default: a scratch directory removed at
+    /// the end).
+    #[arg(long, value_name = "DIR")]
+    pub scratch: Option<PathBuf>,
 }
 
 /// Options of `drivecheck bench scale`.

@@ -20,6 +20,7 @@ use std::process::ExitCode;
 /// | `shrink` | shrunk (or minimal already) | the case does not fail the same way in every run: nothing to shrink |
 /// | `area validate` | the area is safe | the area is unsafe |
 /// | `route return` | a route | no route from the pose (the car must be moved by hand) |
+/// | `compare --fail-on regression` | NEW is not significantly worse than BASE | NEW is significantly worse (docs/compare.md) |
 /// | every other command | done | (never) |
 ///
 /// 2 is every error: a command line that does not parse (as clap's own status), a scenario or
@@ -38,7 +39,8 @@ pub enum Exit {
     /// 0: the command did what it was asked, and what it checked is fine.
     Success = 0,
     /// 1: the command ran to its end and its check found a problem: a failed or aborted test or
-    /// run, an unsafe area, no return route, a case whose failure does not reproduce.
+    /// run, an unsafe area, no return route, a case whose failure does not reproduce, a
+    /// significant regression (`compare --fail-on regression`).
     Found = 1,
     /// 2: the command could not do its work (see the type's doc).
     Error = 2,

@@ -281,6 +281,14 @@ fn every_command_that_prints_a_result_prints_one_json_document() {
     );
     assert!(back.is_object(), "{back:#}");
 
+    let compared = try_it(
+        "compare",
+        &["compare", path(&run_dir), path(&run_dir), "--json"],
+        &[0],
+    );
+    assert_eq!(compared["command"], "compare");
+    assert_eq!(compared["comparison"]["significance"], "no_difference");
+
     let list = try_it("scenario list", &["scenario", "list", "--json"], &[0]);
     assert_eq!(list["command"], "scenario list");
     let check = try_it(

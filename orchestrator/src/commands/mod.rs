@@ -2,6 +2,7 @@
 
 mod area;
 mod bench;
+mod bench_compare;
 mod bench_fidelity;
 mod bench_fidelity_route;
 mod bench_placement;
@@ -9,6 +10,7 @@ mod bench_recovery;
 pub mod bench_scale;
 mod calibrate;
 mod cases_from;
+pub(crate) mod compare;
 mod completions;
 mod explain;
 mod merge;
@@ -43,6 +45,7 @@ pub fn run(cli: Cli) -> Result<Exit> {
         Command::Runs(args) => runs::runs(&args),
         Command::Report(args) => report::report(&args),
         Command::Explain(args) => explain::explain(&args),
+        Command::Compare(args) => compare::compare(&args),
         Command::Sim(args) => sim::serve(&args),
         Command::Calibrate(args) => calibrate::calibrate(&args),
         Command::Twin(TwinCommand::Check(args)) => twin::check(&args),
@@ -58,6 +61,7 @@ pub fn run(cli: Cli) -> Result<Exit> {
         Command::Bench(BenchCommand::Fidelity(args)) => bench_fidelity::run(&args),
         Command::Bench(BenchCommand::Placement(args)) => bench_placement::run(&args),
         Command::Bench(BenchCommand::Scale(args)) => bench_scale::run(&args),
+        Command::Bench(BenchCommand::Compare(args)) => bench_compare::run(&args),
         Command::Completions(args) => completions::completions(&args),
         Command::Man(args) => completions::man(&args),
     }

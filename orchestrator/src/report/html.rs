@@ -96,7 +96,7 @@ fn badge(verdict: Option<Verdict>) -> String {
     format!(r#"<span class="verdict {class}">{text}</span>"#)
 }
 
-fn head(out: &mut String, title: &str) {
+pub(crate) fn head(out: &mut String, title: &str) {
     let _ = write!(
         out,
         "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n\
@@ -127,7 +127,7 @@ pub(crate) fn foot(out: &mut String, dir: &std::path::Path) {
     );
 }
 
-fn fact(out: &mut String, name: &str, value: &str) {
+pub(crate) fn fact(out: &mut String, name: &str, value: &str) {
     let _ = writeln!(out, "<tr><th>{}</th><td>{value}</td></tr>", escape(name));
 }
 
@@ -245,13 +245,13 @@ fn fault_key(out: &mut String, case: &Case) {
 }
 
 /// A legend entry: a swatch of `style` and its `text` (HTML), kept on one line.
-fn swatch(style: &str, text: &str) -> String {
+pub(crate) fn swatch(style: &str, text: &str) -> String {
     format!("<span class=\"entry\"><span class=\"sw\" style=\"{style}\"></span>{text}</span>")
 }
 
 /// A legend of `entries` (wrapping between entries, never inside one), then `note` (HTML) as
 /// a paragraph when given.
-fn legend(out: &mut String, entries: &[String], note: Option<&str>) {
+pub(crate) fn legend(out: &mut String, entries: &[String], note: Option<&str>) {
     let _ = write!(out, "<div class=\"legend\">{}", entries.join(" "));
     if let Some(note) = note {
         let _ = write!(out, "<p>{note}</p>");
@@ -416,7 +416,7 @@ fn faults_table(out: &mut String, case: &Case) {
     out.push_str("</table>\n");
 }
 
-fn figure(out: &mut String, svg: Option<String>, missing: &str) {
+pub(crate) fn figure(out: &mut String, svg: Option<String>, missing: &str) {
     match svg {
         Some(svg) => {
             out.push_str("<div class=\"figure\">\n");

@@ -18,9 +18,13 @@
 //! (`draw`) and put inline into the page (`html`). The scenario for the maps is the one the
 //! caller gives, else the recording's copy, else the bundled scenario of the record's name.
 //!
+//! `compare.html` (`drivecheck compare --report`, `compare`) is the page of two runs compared, in
+//! the same style.
+//!
 //! Not here: reading the command line (`commands::report`).
 
 mod campaign;
+pub(crate) mod compare;
 pub(crate) mod data;
 mod draw;
 pub mod explain;

@@ -1,0 +1,167 @@
+//! Where a difference lives: the paired segments grouped by active fault, by commanded speed and
+//! by region, a row per group.
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+use super::stats::median;
+use super::{Options, Paired, PairedSegment};
+
+/// One group of paired segments.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BreakdownRow {
+    /// The group: `uwb_range_50 offset` (or `none`), `2–3 m/s`, `x 10–20 m, y 0–10 m`.
+    pub key: String,
+    /// Segments driven in both runs.
+    pub segments: usize,
+    /// The median change of their largest deviation (NEW − BASE), metres (`None` without a
+    /// measured one).
+    pub median_change_m: Option<f64>,
+    /// Changed upwards by more than the noise.
+    pub worse: usize,
+    /// Downwards by more than the noise.
+    pub better: usize,
+    /// Segments BASE passed and NEW did not.
+    pub regressed: usize,
+    /// Segments NEW passed and BASE did not.
+    pub fixed: usize,
+}
+
+impl BreakdownRow {
+    /// How much of the regression the row holds: worse than the noise minus better, plus
+    /// regressed minus fixed segment verdicts.
+    pub fn regression_score(&self) -> i64 {
+        self.worse as i64 - self.better as i64 + self.regressed as i64 - self.fixed as i64
+    }
+}
+
+/// The breakdowns of a comparison, each sorted so the row that explains most of the regression
+/// comes first: by [`BreakdownRow::regression_score`], then the larger median change, then more
+/// segments, then the key.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Breakdowns {
+    /// By the probe and kind of each fault acting while the segment was driven (in either run; a
+    /// segment with two faults is in both rows), `none` for a segment without one.
+    pub by_fault: Vec<BreakdownRow>,
+    /// By commanded speed, in bands of `speed_band_mps`.
+    pub by_speed: Vec<BreakdownRow>,
+    /// By the square cell of side `region_cell_m` holding the middle of the segment's route.
+    pub by_region: Vec<BreakdownRow>,
+}
+
+#[derive(Default)]
+struct Group {
+    segments: usize,
+    changes: Vec<f64>,
+    worse: usize,
+    better: usize,
+    regressed: usize,
+    fixed: usize,
+}
+
+impl Breakdowns {
+    /// The breakdowns of `paired` with `options`' noise, band and cell.
+    pub fn of(paired: &Paired, options: &Options) -> Self {
+        let band = options.speed_band_mps;
+        let cell = options.region_cell_m;
+        Self {
+            by_fault: rows(paired, options.noise_m, |s| {
+                if s.faults.is_empty() {
+                    vec!["none".to_owned()]
+                } else {
+                    s.faults.iter().map(ToString::to_string).collect()
+                }
+            }),
+            by_speed: rows(paired, options.noise_m, |s| {
+                vec![match s.speed_mps {
+                    Some(v) if v.is_finite() => {
+                        let k = (v / band).floor();
+                        format!("{}–{} m/s", trim(k * band), trim((k + 1.0) * band))
+                    }
+                    _ => "unknown speed".to_owned(),
+                }]
+            }),
+            by_region: rows(paired, options.noise_m, |s| {
+                vec![match s.midpoint() {
+                    Some([x, y]) if x.is_finite() && y.is_finite() => {
+                        let (i, j) = ((x / cell).floor(), (y / cell).floor());
+                        format!(
+                            "x {}–{} m, y {}–{} m",
+                            trim(i * cell),
+                            trim((i + 1.0) * cell),
+                            trim(j * cell),
+                            trim((j + 1.0) * cell)
+                        )
+                    }
+                    _ => "unknown place".to_owned(),
+                }]
+            }),
+        }
+    }
+}
+
+/// A number without a needless fraction (`10`, `2.5`), and `0` for −0.
+fn trim(v: f64) -> String {
+    let v = if v == 0.0 { 0.0 } else { v };
+    let text = format!("{v:.3}");
+    text.trim_end_matches('0').trim_end_matches('.').to_owned()
+}
+
+fn rows(
+    paired: &Paired,
+    noise: f64,
+    keys: impl Fn(&PairedSegment) -> Vec<String>,
+) -> Vec<BreakdownRow> {
+    let mut groups: BTreeMap<String, Group> = BTreeMap::new();
+    for s in paired.segments() {
+        let change = s.change_m();
+        for key in keys(s) {
+            let g = groups.entry(key).or_default();
+            g.segments += 1;
+            g.regressed += usize::from(s.regressed());
+            g.fixed += usize::from(s.fixed());
+            if let Some(c) = change {
+                g.changes.push(c);
+                g.worse += usize::from(c > noise);
+                g.better += usize::from(c < -noise);
+            }
+        }
+    }
+    let mut rows: Vec<BreakdownRow> = groups
+        .into_iter()
+        .map(|(key, g)| BreakdownRow {
+            key,
+            segments: g.segments,
+            median_change_m: median(&g.changes),
+            worse: g.worse,
+            better: g.better,
+            regressed: g.regressed,
+            fixed: g.fixed,
+        })
+        .collect();
+    rows.sort_by(|a, b| {
+        b.regression_score()
+            .cmp(&a.regression_score())
+            .then_with(|| {
+                let m = |r: &BreakdownRow| r.median_change_m.unwrap_or(f64::NEG_INFINITY);
+                m(b).total_cmp(&m(a))
+            })
+            .then_with(|| b.segments.cmp(&a.segments))
+            .then_with(|| a.key.cmp(&b.key))
+    });
+    rows
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn numbers_in_keys_are_short() {
+        assert_eq!(trim(10.0), "10");
+        assert_eq!(trim(-0.0), "0");
+        assert_eq!(trim(2.5), "2.5");
+        assert_eq!(trim(-20.0), "-20");
+    }
+}
