@@ -2,8 +2,11 @@
 
 #![allow(dead_code)] // each test file uses its own part
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
+
+use orchestrator::recording::Recording;
 
 /// Runs the `drivecheck` binary with `args` and waits for it.
 pub fn drivecheck(args: &[&str]) -> Output {
@@ -38,4 +41,81 @@ pub fn campaign(dir: &Path, seed: u64, tests: usize, extra: &[&str], code: i32) 
     let out = drivecheck(&args);
     assert_eq!(out.status.code(), Some(code), "{}", text(&out));
     out_dir
+}
+
+/// The case files of a run directory, by name.
+pub fn cases(dir: &Path) -> BTreeMap<String, String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|name| name.starts_with("case-") && name.ends_with(".json"))
+        .map(|name| {
+            let text = std::fs::read_to_string(dir.join(&name)).unwrap();
+            (name, text)
+        })
+        .collect()
+}
+
+/// `campaign.json`'s summary.
+pub fn summary(dir: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(dir.join("campaign.json")).unwrap();
+    let record: serde_json::Value = serde_json::from_str(&text).unwrap();
+    record["summary"].clone()
+}
+
+/// Every message of a recording: topic, log time and bytes, in file order.
+pub fn messages(dir: &Path) -> Vec<(String, u64, Vec<u8>)> {
+    let recording = Recording::read(&dir.join("campaign.mcap")).unwrap();
+    assert!(recording.is_complete());
+    recording
+        .held()
+        .into_iter()
+        .map(|m| (m.topic().name().to_owned(), m.log_time(), m.data().to_vec()))
+        .collect()
+}
+
+/// Asserts two recordings hold the same messages, naming the first difference.
+pub fn assert_same_messages(a: &Path, b: &Path) {
+    let (ma, mb) = (messages(a), messages(b));
+    let first = ma.iter().zip(&mb).position(|(x, y)| x != y);
+    let show = |m: Option<&(String, u64, Vec<u8>)>| {
+        m.map(|(topic, t, data)| format!("{topic} at {t}: {}", String::from_utf8_lossy(data)))
+    };
+    assert!(
+        first.is_none() && ma.len() == mb.len(),
+        "{} has {} messages, {} has {}; first difference at {first:?}: {:?} and {:?}",
+        a.display(),
+        ma.len(),
+        b.display(),
+        mb.len(),
+        show(first.and_then(|i| ma.get(i))),
+        show(first.and_then(|i| mb.get(i)))
+    );
+}
+
+/// Asserts two run directories hold the same case files, byte for byte, and the same summary.
+pub fn assert_same_campaign(a: &Path, b: &Path) {
+    let (ca, cb) = (cases(a), cases(b));
+    assert!(!ca.is_empty());
+    assert_eq!(ca.keys().collect::<Vec<_>>(), cb.keys().collect::<Vec<_>>());
+    for (name, text) in &ca {
+        assert!(
+            cb[name] == *text,
+            "{name} differs between {} and {}",
+            a.display(),
+            b.display()
+        );
+    }
+    assert_eq!(summary(a), summary(b));
+}
+
+/// The shell block after `<!-- scaling-test: NAME -->` in `docs/scaling.md`.
+pub fn documented(name: &str) -> String {
+    let doc = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/scaling.md"))
+        .unwrap();
+    let marker = format!("<!-- scaling-test: {name} -->");
+    let after = &doc[doc.find(&marker).unwrap_or_else(|| panic!("{marker}")) + marker.len()..];
+    let block = after.split("```sh\n").nth(1).unwrap();
+    block.split("\n```").next().unwrap().trim().to_owned()
 }
