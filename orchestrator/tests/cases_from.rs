@@ -4,10 +4,9 @@
 
 mod common;
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use common::{drivecheck, path, text};
+use common::{cases, drivecheck, path, text};
 use serde_json::Value;
 
 /// `drivecheck run ARGS --record none --out OUT`; its exit status must be 0 or 1.
@@ -21,20 +20,6 @@ fn run(args: &[&str], out: &Path) {
         "{}",
         text(&output)
     );
-}
-
-/// The case files of a run directory, by name, as text.
-fn cases(dir: &Path) -> BTreeMap<String, String> {
-    std::fs::read_dir(dir)
-        .unwrap()
-        .filter_map(|e| e.ok())
-        .map(|e| e.file_name().to_string_lossy().into_owned())
-        .filter(|name| name.starts_with("case-") && name.ends_with(".json"))
-        .map(|name| {
-            let text = std::fs::read_to_string(dir.join(&name)).unwrap();
-            (name, text)
-        })
-        .collect()
 }
 
 fn json(text: &str) -> Value {

@@ -53,18 +53,7 @@ const FIRMWARE_12: Car = Car {
 /// Measures and prints the tables.
 pub fn run(args: &BenchCompareArgs) -> Result<Exit> {
     let exe = std::env::current_exe().context("cannot find the drivecheck executable")?;
-    let (_scratch, root) = match &args.scratch {
-        Some(dir) => {
-            std::fs::create_dir(dir)
-                .with_context(|| format!("--scratch {}: cannot create it", dir.display()))?;
-            (None, dir.clone())
-        }
-        None => {
-            let scratch = Scratch::new("bench", "compare")?;
-            let root = scratch.0.clone();
-            (Some(scratch), root)
-        }
-    };
+    let (_scratch, root) = Scratch::given_or_new(args.scratch.as_deref(), "bench", "compare")?;
     let pairs = args.pairs as usize;
     let sizes = [args.tests / 4, args.tests / 2, args.tests];
     println!(

@@ -67,18 +67,7 @@ struct SizeRow {
 /// Measures every size of `args` and prints the tables.
 pub fn run(args: &BenchScaleArgs) -> Result<Exit> {
     let exe = std::env::current_exe().context("cannot find the drivecheck executable")?;
-    let (_scratch, root) = match &args.scratch {
-        Some(dir) => {
-            std::fs::create_dir(dir)
-                .with_context(|| format!("--scratch {}: cannot create it", dir.display()))?;
-            (None, dir.clone())
-        }
-        None => {
-            let scratch = Scratch::new("bench", "scale")?;
-            let root = scratch.0.clone();
-            (Some(scratch), root)
-        }
-    };
+    let (_scratch, root) = Scratch::given_or_new(args.scratch.as_deref(), "bench", "scale")?;
     println!(
         "bench scale: seed {}, --jobs {}, --record failing; each step a process of its own \
          (peak memory: its VmHWM)",

@@ -685,6 +685,27 @@ fn short(hash: &str) -> &str {
 pub(super) struct Scratch(pub PathBuf);
 
 impl Scratch {
+    /// Where a bench puts its run directories: `given` (`--scratch DIR`, created new and kept),
+    /// else a scratch directory removed when the returned guard is dropped.
+    pub(super) fn given_or_new(
+        given: Option<&Path>,
+        kind: &str,
+        name: &str,
+    ) -> Result<(Option<Self>, PathBuf)> {
+        match given {
+            Some(dir) => {
+                std::fs::create_dir(dir)
+                    .with_context(|| format!("--scratch {}: cannot create it", dir.display()))?;
+                Ok((None, dir.to_owned()))
+            }
+            None => {
+                let scratch = Self::new(kind, name)?;
+                let root = scratch.0.clone();
+                Ok((Some(scratch), root))
+            }
+        }
+    }
+
     pub(super) fn new(kind: &str, name: &str) -> Result<Self> {
         let path =
             std::env::temp_dir().join(format!("drivecheck-{kind}-{}-{name}", std::process::id()));
