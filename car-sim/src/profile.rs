@@ -22,6 +22,7 @@
 //! | `imu.yaw_drift_deg_per_min` | °/min | [`SensorErrors::yaw_drift_deg_per_min`] |
 //! | `gnss.sigma_m` | m | [`crate::GnssModel::sigma_m`] |
 //! | `gnss.correlation_s` | s | [`crate::GnssModel::correlation_s`] |
+//! | `estimator.uwb_correction_clamp_m` | m | [`SimConfig::uwb_step_clamp_m`]: a firmware build with another compile-time clamp (unset: the firmware's 0.2 m) |
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -54,6 +55,8 @@ pub struct CarProfile {
     pub imu: ImuProfile,
     /// The GNSS (RTK) reference.
     pub gnss: GnssProfile,
+    /// The firmware build's UWB estimator, where it differs from the version's.
+    pub estimator: EstimatorProfile,
 }
 
 /// `[radio]`.
@@ -110,6 +113,16 @@ pub struct GnssProfile {
     pub correlation_s: f64,
 }
 
+/// `[estimator]`: compile-time constants of the car's firmware build (a build with other
+/// constants is another car, though its version is the same).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct EstimatorProfile {
+    /// The UWB estimator's largest correction per range, m (unset: the firmware's
+    /// [`car_link::firmware::UWB_CORRECTION_CLAMP_M`]).
+    pub uwb_correction_clamp_m: Option<f64>,
+}
+
 impl Default for RadioProfile {
     fn default() -> Self {
         let radio = RadioModel::default();
@@ -161,6 +174,7 @@ impl Default for CarProfile {
             odometry: OdometryProfile::default(),
             imu: ImuProfile::default(),
             gnss: GnssProfile::default(),
+            estimator: EstimatorProfile::default(),
         }
     }
 }
@@ -183,6 +197,8 @@ struct ProfileFile {
     imu: ImuProfile,
     #[serde(default)]
     gnss: GnssProfile,
+    #[serde(default)]
+    estimator: EstimatorProfile,
 }
 
 /// A profile that cannot be read or used, with the place: the file, the line and column of a
@@ -291,6 +307,7 @@ impl CarProfile {
             odometry: file.odometry,
             imu: file.imu,
             gnss: file.gnss,
+            estimator: file.estimator,
         };
         profile.check(source_name)?;
         Ok(profile)
@@ -388,6 +405,14 @@ impl CarProfile {
             (0.0..=3600.0).contains(&self.gnss.correlation_s),
             "a correlation time from 0 to 3600 s",
         );
+        if let Some(clamp) = self.estimator.uwb_correction_clamp_m {
+            need(
+                "estimator.uwb_correction_clamp_m".into(),
+                clamp,
+                clamp > 0.0 && clamp <= 10.0,
+                "a correction clamp above 0 and at most 10 m",
+            );
+        }
         match problems.into_iter().next() {
             None => Ok(()),
             Some((field, value, what)) => Err(ProfileError::field(
@@ -440,6 +465,14 @@ impl CarProfile {
             num(self.gnss.sigma_m),
             num(self.gnss.correlation_s)
         );
+        // Written only when set, so that the profiles written before it keep their hash.
+        if let Some(clamp) = self.estimator.uwb_correction_clamp_m {
+            let _ = writeln!(
+                out,
+                "\n[estimator]\nuwb_correction_clamp_m = {}",
+                num(clamp)
+            );
+        }
         out
     }
 
@@ -462,8 +495,8 @@ impl CarProfile {
         }
     }
 
-    /// Makes `config` (a scenario's simulated car) this car: its firmware, radio, GNSS and
-    /// sensors, and its anchors moved and biased as listed. An anchor the scenario does not have
+    /// Makes `config` (a scenario's simulated car) this car: its firmware, radio, GNSS,
+    /// sensors and estimator, and its anchors moved and biased as listed. An anchor the scenario does not have
     /// is an error (a profile of another area, or a typo).
     pub fn apply(&self, config: &mut SimConfig, source_name: &str) -> Result<(), ProfileError> {
         config.firmware = self.firmware;
@@ -473,6 +506,7 @@ impl CarProfile {
             anchor_bias_seed: config.radio.anchor_bias_seed,
             ..self.radio_model()
         };
+        config.uwb_step_clamp_m = self.estimator.uwb_correction_clamp_m.map(|m| m as f32);
         config.gnss.sigma_m = self.gnss.sigma_m;
         config.gnss.correlation_s = self.gnss.correlation_s;
         config.sensors = SensorErrors {
@@ -599,6 +633,10 @@ correlation_s = 0.6
                 "car.toml: format: \"drivecheck-scenario\" is not a car profile (\"drivecheck-car-profile\")",
             ),
             ("format = [", "car.toml:1:11: "),
+            (
+                "format = \"drivecheck-car-profile\"\nversion = 1\n[estimator]\nuwb_correction_clamp_m = 0.0\n",
+                "car.toml: estimator.uwb_correction_clamp_m: 0 is not a correction clamp above 0 and at most 10 m",
+            ),
         ];
         for (text, expected) in cases {
             let error = CarProfile::from_toml(text, "car.toml")
@@ -632,6 +670,34 @@ correlation_s = 0.6
         assert!(
             error.contains("anchors.\"50\": the scenario has no anchor 50"),
             "{error}"
+        );
+    }
+
+    #[test]
+    fn a_firmware_build_with_another_correction_clamp_is_written_only_when_set() {
+        let default_hash = CarProfile::default().hash();
+        let text = "format = \"drivecheck-car-profile\"\nversion = 1\n[estimator]\n\
+                    uwb_correction_clamp_m = 0.5\n";
+        let profile = CarProfile::from_toml(text, "clamp.toml").unwrap();
+        assert_eq!(profile.estimator.uwb_correction_clamp_m, Some(0.5));
+        assert!(
+            profile
+                .to_toml()
+                .ends_with("[estimator]\nuwb_correction_clamp_m = 0.5\n")
+        );
+        assert_ne!(profile.hash(), default_hash);
+        assert!(!CarProfile::default().to_toml().contains("estimator"));
+        assert_eq!(
+            CarProfile::from_toml(&profile.to_toml(), "again").unwrap(),
+            profile
+        );
+        let mut config = SimConfig::default();
+        profile.apply(&mut config, "clamp.toml").unwrap();
+        assert_eq!(config.uwb_step_clamp_m, Some(0.5));
+        CarProfile::default().apply(&mut config, "default").unwrap();
+        assert_eq!(
+            config.uwb_step_clamp_m, None,
+            "the firmware's own clamp again"
         );
     }
 }

@@ -12,11 +12,12 @@
 //!    those driven in only one (a test stopped at a failing segment) are counted, not paired.
 //! 3. **Statistics** ([`compare`]): McNemar's exact test on the tests whose verdict differs
 //!    (regressed `b`: BASE passed, NEW did not; fixed `c`: the other way), and the median change
-//!    of a paired segment's largest deviation (NEW − BASE) with a cluster bootstrap over tests.
-//!    NEW is significantly worse when McNemar's two-sided p < α/2 with `b > c`, or the bootstrap
-//!    interval at level 1 − α/2 lies wholly above 0 (Bonferroni over the two tests: the chance of
-//!    a false alarm stays at most α); better likewise; [`Significance::Mixed`] when one test says
-//!    worse and the other better.
+//!    of a paired segment's largest deviation (NEW − BASE) with its 95 % interval from a cluster
+//!    bootstrap over tests and its p from a sign-flip randomization test over tests. NEW is
+//!    significantly worse when McNemar's two-sided p < α/2 with `b > c`, or the sign-flip p <
+//!    α/2 with a median change above 0 (Bonferroni over the two tests: the chance of a false
+//!    alarm stays at most α); better likewise; [`Significance::Mixed`] when one test says worse
+//!    and the other better.
 //! 4. **Breakdowns** ([`Breakdowns`]): by active fault (probe and kind), by commanded speed band
 //!    and by region of the area, the row that explains most of the regression first.
 
@@ -34,7 +35,9 @@ use crate::model::{Command, FaultKind, Probe};
 use crate::oracle::{SegmentVerdict, Verdict};
 
 pub use breakdown::{BreakdownRow, Breakdowns};
-pub use stats::{Bootstrap, bootstrap_median, mcnemar_p, median, nearest_rank};
+pub use stats::{
+    Bootstrap, SignFlip, bootstrap_median, mcnemar_p, median, nearest_rank, sign_flip_median,
+};
 
 /// The significance level when none is given.
 pub const DEFAULT_ALPHA: f64 = 0.05;
@@ -732,20 +735,22 @@ pub struct McNemar {
     pub p: f64,
 }
 
-/// The median change of a paired segment's largest deviation and its bootstrap intervals.
+/// The median change of a paired segment's largest deviation: its bootstrap interval and its
+/// sign-flip p.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct MedianChange {
     /// The median of NEW − BASE over the measured segments, metres.
     pub median_m: f64,
     /// The 95 % interval, metres.
     pub ci95_m: [f64; 2],
-    /// The decision's level, 1 − α/2.
-    pub decision_level: f64,
-    /// The interval at the decision's level, metres.
-    pub decision_ci_m: [f64; 2],
-    /// Resamples drawn.
+    /// The sign-flip randomization test's two-sided p (the decision's).
+    pub p: f64,
+    /// Sign assignments of the randomization test (all `2^tests` when that is at most
+    /// `resamples`: then `p` is exact).
+    pub flips: usize,
+    /// Bootstrap resamples drawn.
     pub resamples: usize,
-    /// The bootstrap's seed.
+    /// The seed of the bootstrap and of the sign flips.
     pub seed: u64,
     /// Tests resampled (those with a measured segment).
     pub tests: usize,
@@ -772,9 +777,9 @@ pub struct Evidence {
     pub verdicts_worse: bool,
     /// McNemar's p < α/2 with more fixed than regressed tests.
     pub verdicts_better: bool,
-    /// The decision interval of the median change lies wholly above 0.
+    /// The sign-flip p of the median change < α/2 with a median above 0.
     pub deviation_worse: bool,
-    /// Wholly below 0.
+    /// The same with a median below 0.
     pub deviation_better: bool,
 }
 
@@ -859,26 +864,27 @@ pub fn compare(paired: &Paired, options: &Options) -> Result<Report, OptionsErro
         fixed: tests.fixed,
         p: mcnemar_p(tests.regressed as u64, tests.fixed as u64),
     };
-    let decision_level = 1.0 - options.alpha / 2.0;
-    let median_change = bootstrap_median(&clusters, options.resamples, options.seed).map(|boot| {
-        let (lo, hi) = boot.interval(SHOWN_LEVEL);
-        let (dlo, dhi) = boot.interval(decision_level);
-        MedianChange {
-            median_m: boot.median,
-            ci95_m: [lo, hi],
-            decision_level,
-            decision_ci_m: [dlo, dhi],
-            resamples: options.resamples,
-            seed: options.seed,
-            tests: boot.clusters,
-        }
-    });
+    let flips = sign_flip_median(&clusters, options.resamples, options.seed);
+    let median_change = bootstrap_median(&clusters, options.resamples, options.seed)
+        .zip(flips)
+        .map(|(boot, flips)| {
+            let (lo, hi) = boot.interval(SHOWN_LEVEL);
+            MedianChange {
+                median_m: boot.median,
+                ci95_m: [lo, hi],
+                p: flips.p,
+                flips: flips.flips,
+                resamples: options.resamples,
+                seed: options.seed,
+                tests: boot.clusters,
+            }
+        });
     let half = options.alpha / 2.0;
     let evidence = Evidence {
         verdicts_worse: mcnemar.p < half && mcnemar.regressed > mcnemar.fixed,
         verdicts_better: mcnemar.p < half && mcnemar.fixed > mcnemar.regressed,
-        deviation_worse: median_change.is_some_and(|m| m.decision_ci_m[0] > 0.0),
-        deviation_better: median_change.is_some_and(|m| m.decision_ci_m[1] < 0.0),
+        deviation_worse: median_change.is_some_and(|m| m.p < half && m.median_m > 0.0),
+        deviation_better: median_change.is_some_and(|m| m.p < half && m.median_m < 0.0),
     };
     let worse = evidence.verdicts_worse || evidence.deviation_worse;
     let better = evidence.verdicts_better || evidence.deviation_better;
@@ -954,8 +960,11 @@ fn verdict_words(
                 "did not change".to_owned()
             };
             format!(
-                "a segment's largest deviation {how} (median; 95 % CI {:+.3} to {:+.3} m)",
-                m.ci95_m[0], m.ci95_m[1]
+                "a segment's largest deviation {how} (median; 95 % CI {:+.3} to {:+.3} m; \
+                 sign-flip p = {})",
+                m.ci95_m[0],
+                m.ci95_m[1],
+                p_words(m.p)
             )
         }
     };

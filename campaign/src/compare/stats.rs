@@ -1,5 +1,6 @@
 //! The statistics of a comparison: McNemar's exact test on the discordant test verdicts, the
-//! median with a cluster bootstrap over tests, and nearest-rank quantiles.
+//! median with a cluster bootstrap over tests (its interval), a sign-flip randomization test of
+//! the median over tests (its significance), and nearest-rank quantiles.
 
 use rand::RngExt;
 
@@ -148,6 +149,101 @@ pub fn bootstrap_median(clusters: &[Vec<f64>], resamples: usize, seed: u64) -> O
     })
 }
 
+/// A sign-flip randomization test of the median: the median of every value and its two-sided p.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SignFlip {
+    /// The median of every value (every cluster once).
+    pub median: f64,
+    /// The two-sided p: the share of sign assignments whose median is at least as far from 0.
+    pub p: f64,
+    /// Sign assignments drawn (every one of the `2^k` when that is at most the flips asked).
+    pub flips: usize,
+    /// Whether every assignment was counted (`p` exact) rather than drawn.
+    pub exhaustive: bool,
+    /// The clusters (those with at least one value).
+    pub clusters: usize,
+}
+
+/// Is the median of the values of `clusters` further from 0 than chance makes it? A sign-flip
+/// randomization test over clusters: were NEW no different from BASE, which of the two runs of
+/// a test is called BASE would not matter, so the changes of one test (NEW − BASE, one cluster)
+/// could as well all have the opposite sign. Each of `flips` assignments negates every value of
+/// each cluster with probability ½ (a cluster's values together: they are not independent) and
+/// takes the median of all values; `p = (1 + #{|median*| ≥ |median|}) / (flips + 1)`, which never
+/// exceeds α more often than α when the runs are exchangeable, whatever the distribution or the
+/// number of tests. With `k` clusters and `2^k ≤ flips` every assignment is counted once instead
+/// and `p = #{|median*| ≥ |median|} / 2^k` exactly. A median of 0 gives `p = 1`. Clusters without
+/// a value are left out; `None` without any value. Deterministic for `seed`.
+///
+/// Fast for large inputs: every value and its negation are ranked once; an assignment puts
+/// weight 1 on one of each pair and walks the weights to the middle, `O(values)` per assignment.
+pub fn sign_flip_median(clusters: &[Vec<f64>], flips: usize, seed: u64) -> Option<SignFlip> {
+    let clusters: Vec<&Vec<f64>> = clusters.iter().filter(|c| !c.is_empty()).collect();
+    let count: usize = clusters.iter().map(|c| c.len()).sum();
+    if count == 0 {
+        return None;
+    }
+    // Every value (sign +) and its negation (sign −), ranked together.
+    let mut all: Vec<(f64, usize, bool)> = clusters
+        .iter()
+        .enumerate()
+        .flat_map(|(i, c)| c.iter().flat_map(move |&v| [(v, i, true), (-v, i, false)]))
+        .collect();
+    all.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let values: Vec<f64> = all.iter().map(|&(v, _, _)| v).collect();
+    let k = clusters.len();
+    let mut ranks: Vec<[Vec<u32>; 2]> = vec![[Vec::new(), Vec::new()]; k];
+    for (rank, &(_, cluster, kept)) in all.iter().enumerate() {
+        ranks[cluster][usize::from(!kept)].push(rank as u32);
+    }
+    let total = count as u64;
+    let mut weights = vec![0u32; values.len()];
+    let mut median_of = |negated: &mut dyn FnMut(usize) -> bool| -> f64 {
+        weights.iter_mut().for_each(|w| *w = 0);
+        for (cluster, pair) in ranks.iter().enumerate() {
+            for &r in &pair[usize::from(negated(cluster))] {
+                weights[r as usize] = 1;
+            }
+        }
+        weighted_median(&values, &weights, total)
+    };
+    let observed = median_of(&mut |_| false);
+    if observed == 0.0 {
+        return Some(SignFlip {
+            median: observed,
+            p: 1.0,
+            flips: 0,
+            exhaustive: true,
+            clusters: k,
+        });
+    }
+    let far = |m: f64| m.abs() >= observed.abs();
+    let exhaustive = k < usize::BITS as usize - 1 && (1usize << k) <= flips.max(1);
+    let (extreme, drawn) = if exhaustive {
+        let n = 1usize << k;
+        let extreme = (0..n)
+            .filter(|&mask| far(median_of(&mut |c| mask >> c & 1 == 1)))
+            .count();
+        (extreme, n)
+    } else {
+        let mut rng = seed::rng(seed);
+        let mut signs = vec![false; k];
+        let mut extreme = 1; // the observed assignment
+        for _ in 0..flips {
+            signs.iter_mut().for_each(|s| *s = rng.random_bool(0.5));
+            extreme += usize::from(far(median_of(&mut |c| signs[c])));
+        }
+        (extreme, flips + 1)
+    };
+    Some(SignFlip {
+        median: observed,
+        p: extreme as f64 / drawn as f64,
+        flips: if exhaustive { drawn } else { flips },
+        exhaustive,
+        clusters: k,
+    })
+}
+
 /// The median of `sorted` with each value repeated `weights[i]` times, `total` values in all
 /// (at least one).
 fn weighted_median(sorted: &[f64], weights: &[u32], total: u64) -> f64 {
@@ -272,7 +368,119 @@ mod tests {
         assert_eq!(weighted_median(&v, &[0, 0, 1, 0], 1), 3.0);
     }
 
+    /// The sign-flip p by brute force: every assignment, the median by sorting.
+    fn brute_sign_flip_p(clusters: &[Vec<f64>]) -> f64 {
+        let clusters: Vec<&Vec<f64>> = clusters.iter().filter(|c| !c.is_empty()).collect();
+        let all: Vec<f64> = clusters.iter().flat_map(|c| c.iter().copied()).collect();
+        let observed = median(&all).unwrap();
+        if observed == 0.0 {
+            return 1.0;
+        }
+        let n = 1usize << clusters.len();
+        let extreme = (0..n)
+            .filter(|mask| {
+                let flipped: Vec<f64> = clusters
+                    .iter()
+                    .enumerate()
+                    .flat_map(|(c, v)| {
+                        let sign = if mask >> c & 1 == 1 { -1.0 } else { 1.0 };
+                        v.iter().map(move |x| sign * x)
+                    })
+                    .collect();
+                median(&flipped).unwrap().abs() >= observed.abs()
+            })
+            .count();
+        extreme as f64 / n as f64
+    }
+
+    #[test]
+    fn a_few_tests_all_worse_are_not_enough_for_the_sign_flips() {
+        // Three tests all worse, median 0.35: of the 8 assignments, all + and all − are as far,
+        // and so are the two that flip only the smallest (−0.2, 0.3, 0.4, 0.5): p = 4/8.
+        let s = sign_flip_median(&[vec![0.3], vec![0.5, 0.4], vec![0.2]], 2000, 1).unwrap();
+        assert!(s.exhaustive);
+        assert_eq!((s.flips, s.p, s.median, s.clusters), (8, 0.5, 0.35, 3));
+        // Ten tests all worse by about the same: the median (0.1045) does not see the signs of
+        // the four values below its two middle ones, so the 16 assignments flipping only those,
+        // and their mirrors, are as far: p = 32/1024.
+        let ten: Vec<Vec<f64>> = (0..10).map(|t| vec![0.1 + 0.001 * t as f64]).collect();
+        let s = sign_flip_median(&ten, 2000, 1).unwrap();
+        assert_eq!((s.flips, s.p), (1024, 32.0 / 1024.0));
+        assert!(sign_flip_median(&[vec![], vec![]], 10, 1).is_none());
+        assert_eq!(
+            sign_flip_median(&[vec![0.0, 1.0, -1.0]], 10, 1).unwrap().p,
+            1.0
+        );
+    }
+
+    /// A run of `tests` tests of 6 segments whose changes share a test-wide part: `shift` plus a
+    /// symmetric test-wide draw plus a smaller segment draw.
+    fn clustered(rng: &mut seed::RunRng, tests: usize, shift: f64) -> Vec<Vec<f64>> {
+        (0..tests)
+            .map(|_| {
+                let common = rng.random_range(-0.3..0.3);
+                (0..6)
+                    .map(|_| shift + common + rng.random_range(-0.05..0.05))
+                    .collect()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_sign_flips_hold_alpha_on_clustered_noise_where_a_segment_bootstrap_would_not() {
+        // 400 comparisons without a difference: at α = 0.05 about 20 false alarms; a test that
+        // treated the 6 segments of a test as independent would raise far more (its intervals
+        // are about √6 too narrow). The bound leaves room for chance: Binomial(400, 0.05)
+        // exceeds 32 with probability below 0.3 %.
+        let mut rng = seed::rng(11);
+        let alarms = (0..400)
+            .filter(|&i| {
+                let s = sign_flip_median(&clustered(&mut rng, 30, 0.0), 200, i).unwrap();
+                s.p < 0.05
+            })
+            .count();
+        assert!(alarms <= 32, "{alarms} false alarms of 400");
+        // And it finds a shift of a third of the test-wide spread with 30 tests most times.
+        let found = (0..100)
+            .filter(|&i| {
+                let s = sign_flip_median(&clustered(&mut rng, 30, 0.1), 200, i).unwrap();
+                s.p < 0.05 && s.median > 0.0
+            })
+            .count();
+        assert!(found >= 50, "found {found} of 100");
+    }
+
     proptest! {
+        #[test]
+        fn the_exhaustive_sign_flips_match_a_brute_force_count(
+            clusters in prop::collection::vec(prop::collection::vec(-2.0f64..2.0, 0..4), 1..8),
+        ) {
+            let s = sign_flip_median(&clusters, 1 << 10, 3);
+            let any = clusters.iter().any(|c| !c.is_empty());
+            prop_assert_eq!(s.is_some(), any);
+            if let Some(s) = s {
+                prop_assert!(s.exhaustive);
+                prop_assert_eq!(s.p, brute_sign_flip_p(&clusters));
+                // Negating everything changes nothing but the median's sign.
+                let negated: Vec<Vec<f64>> =
+                    clusters.iter().map(|c| c.iter().map(|v| -v).collect()).collect();
+                let n = sign_flip_median(&negated, 1 << 10, 3).unwrap();
+                prop_assert_eq!((n.p, n.median), (s.p, -s.median));
+            }
+        }
+
+        #[test]
+        fn the_drawn_sign_flips_are_a_deterministic_probability(
+            clusters in prop::collection::vec(prop::collection::vec(-2.0f64..2.0, 1..4), 12..20),
+            seed in any::<u64>(),
+        ) {
+            let a = sign_flip_median(&clusters, 100, seed).unwrap();
+            prop_assert_eq!(a, sign_flip_median(&clusters, 100, seed).unwrap());
+            prop_assert!(!a.exhaustive);
+            prop_assert_eq!(a.flips, 100);
+            prop_assert!(a.p >= 1.0 / 101.0 && a.p <= 1.0);
+        }
+
         #[test]
         fn mcnemar_is_a_probability_symmetric_and_one_when_balanced(b in 0u64..3000, c in 0u64..3000) {
             let p = mcnemar_p(b, c);

@@ -27,9 +27,10 @@ struct Car {
     profile: Option<&'static str>,
 }
 
-/// The degraded cars (each against the default car, whose ranging σ is 0.1 m and whose anchors'
-/// range biases are drawn from 0–0.25 m by their ids: `docs/twin.md`).
-const DEGRADED: [Car; 3] = [
+/// The degraded cars (each against the default car, whose ranging σ is 0.1 m, whose anchors'
+/// range biases are drawn from 0–0.25 m by their ids and whose firmware clamps a UWB correction
+/// to 0.2 m per range: `docs/twin.md`).
+const DEGRADED: [Car; 4] = [
     Car {
         name: "ranging σ 0.15 m (1.5×)",
         profile: Some("[radio]\nrange_sigma_m = 0.15\n"),
@@ -41,6 +42,10 @@ const DEGRADED: [Car; 3] = [
     Car {
         name: "anchor 50 biased 0.5 m",
         profile: Some("[anchors.\"50\"]\nrange_bias_m = 0.5\n"),
+    },
+    Car {
+        name: "a firmware build clamping a UWB correction to 0.5 m",
+        profile: Some("[estimator]\nuwb_correction_clamp_m = 0.5\n"),
     },
 ];
 
@@ -142,11 +147,18 @@ pub fn run(args: &BenchCompareArgs) -> Result<Exit> {
         .collect::<Result<_>>()?;
     let alarms = (0..sizes.len())
         .map(|i| {
-            let k = same_reports
+            let raised: Vec<&Report> = same_reports
                 .iter()
-                .filter(|r| r[i].significance != Significance::NoDifference)
-                .count();
-            format!("{k} of {pairs} (false alarms)")
+                .map(|r| &r[i])
+                .filter(|r| r.significance != Significance::NoDifference)
+                .collect();
+            let by = |test: fn(&Report) -> bool| raised.iter().filter(|r| test(r)).count();
+            format!(
+                "{} of {pairs} (false alarms: McNemar {}, sign flips {})",
+                raised.len(),
+                by(|r| r.evidence.verdicts_worse || r.evidence.verdicts_better),
+                by(|r| r.evidence.deviation_worse || r.evidence.deviation_better)
+            )
         })
         .collect::<Vec<_>>()
         .join(" | ");
@@ -178,9 +190,9 @@ pub fn run(args: &BenchCompareArgs) -> Result<Exit> {
     );
     for (name, report) in &where_found {
         println!(
-            "- {name}: {}; first fault row {}; first region row {}",
+            "- {name}: {}; fault rows {}; first region row {}",
             report.verdict,
-            top(&report.breakdowns.by_fault),
+            first_rows(&report.breakdowns.by_fault, 3),
             top(&report.breakdowns.by_region)
         );
     }
@@ -212,6 +224,15 @@ fn by_size(base: &[TestRow], new: &[TestRow], sizes: &[usize], noise: f64) -> Re
             Ok(compare(&paired, &Options::with_noise(noise))?)
         })
         .collect()
+}
+
+/// A breakdown's first `n` rows in words.
+fn first_rows(rows: &[BreakdownRow], n: usize) -> String {
+    rows.iter()
+        .take(n)
+        .map(|row| top(std::slice::from_ref(row)))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// A breakdown's first row in words.

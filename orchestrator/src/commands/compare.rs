@@ -291,15 +291,16 @@ pub fn summary(compared: &Compared) -> String {
         Some(m) => {
             let _ = writeln!(
                 out,
-                "median change of a segment's largest deviation: {} m, 95 % CI {} to {} m; \
-                 {:.1} % CI {} to {} m ({} resamples of {} tests, seed {})",
+                "median change of a segment's largest deviation: {} m, 95 % CI {} to {} m \
+                 ({} bootstrap resamples); sign-flip p = {} (significant below {}; {} sign \
+                 assignments of {} tests, seed {})",
                 signed(Some(m.median_m)),
                 signed(Some(m.ci95_m[0])),
                 signed(Some(m.ci95_m[1])),
-                m.decision_level * 100.0,
-                signed(Some(m.decision_ci_m[0])),
-                signed(Some(m.decision_ci_m[1])),
                 m.resamples,
+                p_words(m.p),
+                r.alpha / 2.0,
+                m.flips,
                 m.tests,
                 m.seed
             );

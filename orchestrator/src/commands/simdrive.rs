@@ -38,7 +38,9 @@ impl SimSettings {
             seed,
             ..sim.clone()
         };
-        config.uwb_step_clamp_m = self.uwb_clamp_m.map(|m| m as f32);
+        if let Some(clamp) = self.uwb_clamp_m {
+            config.uwb_step_clamp_m = Some(clamp as f32);
+        }
         if let Some(error) = self.anchor_error_m {
             const GOLDEN_ANGLE: f64 = 2.399_963_229_728_653;
             for anchor in &mut config.world.anchors {

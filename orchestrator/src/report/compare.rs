@@ -135,14 +135,15 @@ fn page(compared: &Compared) -> Result<String, ReportError> {
             );
             fact(
                 &mut out,
-                "decision interval",
+                "sign-flip test",
                 &format!(
-                    "{:.1} %: {} to {} m ({} resamples of {} tests, seed {})",
-                    m.decision_level * 100.0,
-                    signed(Some(m.decision_ci_m[0])),
-                    signed(Some(m.decision_ci_m[1])),
-                    m.resamples,
+                    "p = {} (significant below α/2 = {}; {} sign assignments of {} tests; the \
+                     interval from {} bootstrap resamples; seed {})",
+                    p_words(m.p),
+                    r.alpha / 2.0,
+                    m.flips,
                     m.tests,
+                    m.resamples,
                     m.seed
                 ),
             );
