@@ -134,6 +134,12 @@ pub struct RunArgs {
     /// only the car's noise, the resets and the safe stops (default: the earlier run's seed).
     #[arg(long, value_name = "DIR", conflicts_with = "tests")]
     pub cases_from: Option<PathBuf>,
+    /// Continue the interrupted campaign of run directory DIR (Ctrl-C, a signal, a lost link, a
+    /// crash or kill -9) in DIR: the same plan and settings (given ones must agree), the tests
+    /// that did not end driven (one cut off is driven again from its start, its case kept as
+    /// case-NNN.partial-K.json), its recording continued; --car may name another car.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["out", "cases_from", "dry_run"])]
+    pub resume: Option<PathBuf>,
     /// Run the embedded simulated car against the wall clock instead of in virtual time.
     #[arg(long)]
     pub realtime: bool,
@@ -439,7 +445,8 @@ pub struct CompareArgs {
     /// seed; the noise is the 95th percentile of the segments' |change| between BASE and DIR.
     #[arg(long, value_name = "DIR")]
     pub noise_from: Option<PathBuf>,
-    /// The bootstrap's seed (its resamples are the same for the same seed).
+    /// The seed of the bootstrap's resamples and of the sign-flip test's assignments (the same
+    /// seed gives the same interval and p).
     #[arg(long, default_value_t = campaign::compare::DEFAULT_BOOTSTRAP_SEED)]
     pub seed: u64,
 }

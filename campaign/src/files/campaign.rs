@@ -51,6 +51,31 @@ pub struct CampaignRecord {
     /// holds the shard's tests only; `drivecheck runs merge` joins the shards.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub shard: Option<Shard>,
+    /// The sessions of a campaign resumed after an interruption (`drivecheck run --resume`), in
+    /// order, the first included; empty for a campaign that ran in one go.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sessions: Vec<Session>,
+}
+
+/// One session of a resumed campaign: one `drivecheck run` (or `run --resume`) process.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Session {
+    /// When it started, RFC 3339.
+    pub started_at: String,
+    /// When it ended, RFC 3339; absent when the process died (`kill -9`, a crash, power).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ended_at: Option<String>,
+    /// The car it drove.
+    pub car: String,
+    /// The tests whose case files it wrote, in order (an interrupted test included: it is
+    /// driven again by the next session, its case kept as `case-NNN.partial-K.json`).
+    pub tests: Vec<usize>,
+    /// How it ended: `completed`, `interrupted` (a signal, a lost link or another stop; the run
+    /// directory was completed) or `died` (found unfinished by the next session); absent while
+    /// it runs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub end: Option<String>,
 }
 
 /// The case a replay drove again.

@@ -52,6 +52,7 @@ mod twin;
 
 pub use campaign::{
     CampaignRecord, CampaignSummary, CasesFrom, CoverageRecord, FaultCoverageRecord, ReplayOf,
+    Session,
 };
 pub use case::{
     AppendRecord, Case, CommandRecord, FaultPlacementRecord, IntentRecord, PlaceRecord,

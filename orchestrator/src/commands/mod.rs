@@ -16,6 +16,7 @@ mod explain;
 mod merge;
 mod replay;
 mod report;
+mod resume;
 mod route;
 mod route_return;
 mod run;

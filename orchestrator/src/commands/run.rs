@@ -9,6 +9,7 @@ use car_link::firmware::{MAX_STALE_LIMIT, WATCHDOG};
 use scenarios::Scenario;
 
 use super::cases_from::CasesRun;
+use super::resume::Resumed;
 use super::shared::{CampaignFailed, Interrupt, Progress, print_report, runtime, sim_view};
 use super::shrink;
 use crate::cli::{OnFailure, RecordArg, RunArgs};
@@ -37,11 +38,22 @@ const DEFAULT_SCENARIO: &str = "parking-lot-2anchors";
 /// Runs the campaign and prints the final table. Exit status: 0 every test passed, 1 a test
 /// failed or was aborted, 2 an error (preflight refused, link lost, interrupted, …).
 pub fn run(args: &RunArgs) -> Result<Exit> {
-    let source = args.cases_from.as_deref().map(CasesRun::read).transpose()?;
-    let scenario_arg = match (&args.scenario, &source) {
-        (Some(given), _) => given.clone(),
-        (None, Some(source)) => source.scenario_name()?,
-        (None, None) => DEFAULT_SCENARIO.to_owned(),
+    let resumed = args.resume.as_deref().map(Resumed::read).transpose()?;
+    // A resumed campaign that drove an earlier run's cases drives them again.
+    let cases_dir = match &resumed {
+        Some(resumed) => resumed
+            .record
+            .cases_from
+            .as_ref()
+            .map(|c| std::path::PathBuf::from(&c.run)),
+        None => args.cases_from.clone(),
+    };
+    let source = cases_dir.as_deref().map(CasesRun::read).transpose()?;
+    let scenario_arg = match (&args.scenario, &resumed, &source) {
+        (Some(given), _, _) => given.clone(),
+        (None, Some(resumed), _) => resumed.scenario_name()?,
+        (None, None, Some(source)) => source.scenario_name()?,
+        (None, None, None) => DEFAULT_SCENARIO.to_owned(),
     };
     let loaded = load_scenario(&scenario_arg)?;
     print_warnings_of_use(&scenario_arg, &loaded);
@@ -67,17 +79,24 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     }
     let profile = LoadedProfile::load(args.profile.as_deref())?;
     let sim = profile.sim_config(&scenario)?;
-    let seed = match &source {
-        Some(source) => args.seed.unwrap_or(source.record.seed),
-        None => choose_seed(args.seed),
+    if let Some(resumed) = &resumed {
+        resumed.check(args, &scenario, &profile)?;
+    }
+    let seed = match (&resumed, &source) {
+        (Some(resumed), _) => resumed.record.seed,
+        (None, Some(source)) => args.seed.unwrap_or(source.record.seed),
+        (None, None) => choose_seed(args.seed),
     };
     let campaign = Campaign {
         seed,
-        tests: match &source {
-            Some(source) => source.files.len(),
-            None => args.tests.unwrap_or(scenario.campaign.tests),
+        tests: match (&resumed, &source) {
+            (Some(resumed), _) => resumed.record.settings.tests,
+            (None, Some(source)) => source.files.len(),
+            (None, None) => args.tests.unwrap_or(scenario.campaign.tests),
         },
-        no_faults: args.no_faults,
+        no_faults: resumed
+            .as_ref()
+            .map_or(args.no_faults, |r| r.record.no_faults),
     };
     let cases = source
         .map(|source| source.check(&scenario, &campaign))
@@ -94,10 +113,11 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     if args.dry_run {
         return dry_run(args, &address, &scenario, &sim, campaign, cases);
     }
-    let made = args.out.is_none();
-    let out = match &args.out {
-        Some(out) => out.clone(),
-        None => {
+    let made = args.out.is_none() && resumed.is_none();
+    let out = match (&args.out, &resumed) {
+        (_, Some(resumed)) => resumed.dir.clone(),
+        (Some(out), None) => out.clone(),
+        (None, None) => {
             let name = run_dir_name(&scenario.name, seed);
             crate::runner::claim_default_run_dir(&match args.shard {
                 Some(shard) => format!("{name}-shard{}of{}", shard.index, shard.count),
@@ -105,7 +125,11 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
             })?
         }
     };
-    let _claim = crate::runner::claim_out_dir(&out, made)?;
+    // A resumed campaign's directory is its own.
+    let _claim = match &resumed {
+        Some(_) => None,
+        None => Some(crate::runner::claim_out_dir(&out, made)?),
+    };
     if let Some(file) = &args.junit {
         super::shared::check_output_file("--junit", file, &out)?;
     }
@@ -114,11 +138,17 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     config.policy = match (args.on_failure, &cases) {
         (Some(OnFailure::Stop), _) => FailurePolicy::StopAtFailingSegment,
         (Some(OnFailure::Continue), _) => FailurePolicy::ContinueAndRecord,
+        (None, _) if resumed.is_some() => resumed
+            .as_ref()
+            .map_or_else(FailurePolicy::default, Resumed::policy),
         (None, Some((_, policy))) => *policy,
         (None, None) => FailurePolicy::default(),
     };
     config.cases = cases.map(|(cases, _)| cases);
-    config.shard = args.shard;
+    config.shard = match &resumed {
+        Some(resumed) => resumed.record.shard,
+        None => args.shard,
+    };
     config.record = match args.record {
         RecordArg::All => RecordMode::All,
         RecordArg::Failing => RecordMode::Failing,
@@ -134,7 +164,8 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         eprintln!(
             "seed {seed}: {}{} tests on {} with car {}{}{}, writing {}",
             config.test_indices().len(),
-            args.shard
+            config
+                .shard
                 .map(|s| format!(" of {} (shard {s})", campaign.tests))
                 .unwrap_or_default(),
             scenario.name,
@@ -147,6 +178,12 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
             },
             config.out_dir.display()
         );
+    }
+    if let Some(resumed) = resumed {
+        if crate::output::chatty() {
+            eprintln!("{}", resumed.describe());
+        }
+        config.resume = Some(resumed.prepare()?);
     }
     let started = Instant::now();
     let result = if embedded {

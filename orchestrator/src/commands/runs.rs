@@ -435,6 +435,20 @@ fn show_campaign(dir: &Path, record: CampaignRecord, coverage: bool) -> Result<(
             of.tests, of.run, of.campaign_seed
         );
     }
+    if !record.sessions.is_empty() {
+        println!("resumed: {} sessions", record.sessions.len());
+        for (k, session) in record.sessions.iter().enumerate() {
+            println!(
+                "  session {}: {} to {}, car {}, {} test(s), {}",
+                k + 1,
+                session.started_at,
+                session.ended_at.as_deref().unwrap_or("-"),
+                session.car,
+                session.tests.len(),
+                session.end.as_deref().unwrap_or("running")
+            );
+        }
+    }
     if let Some(shard) = record.shard {
         println!(
             "shard {shard} of a {}-test campaign: its tests i with i mod {} = {} (`drivecheck runs merge` joins the shards)",

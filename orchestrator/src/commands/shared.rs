@@ -553,16 +553,8 @@ pub(super) fn metres(value: Option<f64>) -> String {
 
 /// The case files (`case-NNN.json`) of run directory `dir`, in test order.
 pub(super) fn case_files(dir: &Path) -> Result<Vec<PathBuf>> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .with_context(|| format!("cannot read {}", dir.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            p.file_name()
-                .and_then(|n| n.to_str())
-                .is_some_and(|n| n.starts_with("case-") && n.ends_with(".json"))
-        })
-        .collect();
-    // By test index: names sort wrong past 999 (`case-1000` before `case-999`).
+    // `case-NNN.json` only: not a partial case kept by a resumed campaign
+    // (`case-NNN.partial-K.json`).
     let index = |p: &PathBuf| {
         p.file_name().and_then(|n| n.to_str()).and_then(|n| {
             n.strip_prefix("case-")?
@@ -571,6 +563,12 @@ pub(super) fn case_files(dir: &Path) -> Result<Vec<PathBuf>> {
                 .ok()
         })
     };
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("cannot read {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| index(p).is_some())
+        .collect();
+    // By test index: names sort wrong past 999 (`case-1000` before `case-999`).
     files.sort_by_key(|p| (index(p), p.clone()));
     Ok(files)
 }

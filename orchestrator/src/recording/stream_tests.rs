@@ -40,6 +40,7 @@ fn spanned_recording(path: &Path) {
         replay_of: None,
         cases_from: None,
         shard: None,
+        sessions: Vec::new(),
     };
     let origin = Instant::now();
     let start = RecordingStart {

@@ -41,6 +41,7 @@ fn campaign(s: &Scenario) -> CampaignRecord {
         replay_of: None,
         cases_from: None,
         shard: None,
+        sessions: Vec::new(),
     }
 }
 

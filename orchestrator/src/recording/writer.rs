@@ -474,6 +474,20 @@ impl Recorder {
         self.flush()
     }
 
+    /// Moves the origin `ns` earlier, so that every message recorded from now on has a log time
+    /// after `ns` (a resumed campaign's, after the sessions before: `run --resume`). The tokio
+    /// clock cannot go before its start; the origin then moves as far as it can.
+    pub fn continue_after(&mut self, ns: u64) {
+        let mut back = Duration::from_nanos(ns);
+        while !back.is_zero() {
+            if let Some(origin) = self.origin.checked_sub(back) {
+                self.origin = origin;
+                return;
+            }
+            back /= 2;
+        }
+    }
+
     /// The log time of now: ns of the tokio clock since the origin.
     pub fn now_ns(&self) -> u64 {
         nanos_since(self.origin, Instant::now())

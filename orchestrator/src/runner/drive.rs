@@ -54,6 +54,7 @@ pub(crate) async fn drive<V: Vehicle>(
     let mut machine = TestDrive::new(ctx.drive_settings(), plan, &start, generation);
     let error = match uploaded {
         Ok(()) => {
+            super::pause::pause(super::pause::At::In, plan.test_index, ctx.cancel);
             run(ctx, telemetry, &mut machine, plan.test_index, t0).await;
             None
         }

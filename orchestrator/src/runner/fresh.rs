@@ -176,12 +176,30 @@ pub fn run_campaign_fresh<C: FreshCars + ?Sized>(
         Ok(recorder) => recorder,
         Err(error) => return Err(super::recording_not_started(dir, error)),
     };
+    // A resumed campaign's tests follow those of the sessions before in the recording.
+    let mut first_offset_ns = SPAN_GAP_NS;
+    if let (Some(resume), Some(recorder)) = (&config.resume, recorder.as_mut())
+        && config.record != RecordMode::None
+    {
+        match super::continue_recording(recorder, resume, observer) {
+            Ok(after_ns) => first_offset_ns = first_offset_ns.max(after_ns),
+            Err(error) => return Err(super::recording_not_started(dir, error)),
+        }
+    }
     let journal = match recorder.take() {
         Some(recorder) => Journal::new(recorder, None),
         None => Journal::without_recording(None),
     };
-    let result = prepare(scenario, config, cars, cancel, settings)
-        .and_then(|shared| run_tests(&shared, jobs.max(1), observer, &mut dir, &journal));
+    let result = prepare(scenario, config, cars, cancel, settings).and_then(|shared| {
+        run_tests(
+            &shared,
+            jobs.max(1),
+            observer,
+            &mut dir,
+            &journal,
+            first_offset_ns,
+        )
+    });
     finish_campaign(dir, journal, result)
 }
 
@@ -210,6 +228,7 @@ fn run_tests<C: FreshCars + ?Sized>(
     observer: &dyn CampaignObserver,
     dir: &mut RunDirectory,
     journal: &Journal<'_>,
+    first_offset_ns: u64,
 ) -> Result<(), RunError> {
     let indices = shared.config.test_indices();
     observer.tests_planned(indices.len());
@@ -228,6 +247,10 @@ fn run_tests<C: FreshCars + ?Sized>(
                     let Some(&test_index) = indices.get(next.fetch_add(1, Ordering::SeqCst)) else {
                         break;
                     };
+                    super::pause::pause(super::pause::At::Before, test_index, shared.cancel);
+                    if shared.cancel.is_cancelled() {
+                        break;
+                    }
                     let ran = run_one(shared, test_index);
                     if matches!(
                         &ran,
@@ -246,7 +269,7 @@ fn run_tests<C: FreshCars + ?Sized>(
             });
         }
         drop(tx);
-        let mut writer = InOrder::new(indices.clone());
+        let mut writer = InOrder::new(indices.clone(), first_offset_ns);
         let mut first_error = None;
         for (test_index, ran) in rx {
             for (test_index, ran) in writer.ready(test_index, ran) {
@@ -280,13 +303,14 @@ struct InOrder {
 }
 
 impl InOrder {
-    fn new(indices: Vec<usize>) -> Self {
+    /// `offset_ns`: where the first test's messages start (after the campaign's own messages at
+    /// log time 0, the area, and a resumed campaign's earlier tests).
+    fn new(indices: Vec<usize>, offset_ns: u64) -> Self {
         Self {
             indices,
             next: 0,
             waiting: BTreeMap::new(),
-            // After the campaign's own messages at log time 0 (the area).
-            offset_ns: SPAN_GAP_NS,
+            offset_ns,
             first: true,
         }
     }

@@ -45,6 +45,7 @@ mod dry_run;
 mod events;
 mod fresh;
 mod journal;
+mod pause;
 mod preflight;
 mod reset;
 mod run_dir;
@@ -78,12 +79,14 @@ pub use dry_run::{DryRun, dry_run};
 pub use events::{CampaignObserver, Silent, SimulatorView};
 pub(crate) use fresh::SPAN_GAP_NS;
 pub use fresh::{Connecting, FreshCar, FreshCars, StartPose, run_campaign_fresh};
+pub use pause::PAUSE_ENV;
 pub use run_dir::{
     CAMPAIGN_FILE, CampaignReport, DEFAULT_RUNS_DIR, RECORDING_FILE, RUNS_DIR_ENV, TestSummary,
     runs_root,
 };
 pub(crate) use run_dir::{
-    RunDirectory, Staged, claim_default_run_dir, claim_out_dir, is_used, rfc3339_now, run_dir_name,
+    RunDirectory, Staged, claim_default_run_dir, claim_out_dir, is_cut_off, is_used, rfc3339_now,
+    run_dir_name,
 };
 
 use journal::Journal;
@@ -126,6 +129,24 @@ pub struct RunConfig {
     pub shard: Option<Shard>,
     /// Serve every recorded message live as well (`run --live`).
     pub live: Option<crate::recording::live::LiveView>,
+    /// An interrupted campaign continued in its run directory (`run --resume`).
+    pub resume: Option<ResumeSource>,
+}
+
+/// An interrupted campaign continued (`run --resume`): its run directory is `out_dir`; the tests
+/// whose case files stay are not driven again.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ResumeSource {
+    /// Its `campaign.json` as the sessions before left it.
+    pub record: campaign::files::CampaignRecord,
+    /// The tests that ended: their case files stay, and they are not driven.
+    pub kept: std::collections::BTreeSet<usize>,
+    /// Every test a case file was written for before (`kept` and those cut off).
+    pub earlier: Vec<usize>,
+    /// The recording of the sessions before, moved aside: copied into the new `campaign.mcap`
+    /// (the kept tests' spans, or everything of a recording without spans), up to any damage
+    /// a killed process left, then removed.
+    pub prior_recording: Option<PathBuf>,
 }
 
 /// A case driven again instead of generated tests: every test of the campaign drives its plan
@@ -203,15 +224,23 @@ impl RunConfig {
             record: RecordMode::All,
             shard: None,
             live: None,
+            resume: None,
         }
     }
 
     /// The indices of the tests this run drives: all of the campaign's, or its shard's.
     pub fn test_indices(&self) -> Vec<usize> {
         let tests = self.campaign.tests;
-        match self.shard {
+        let all: Vec<usize> = match self.shard {
             Some(shard) => shard.tests(tests).collect(),
             None => (0..tests).collect(),
+        };
+        match &self.resume {
+            Some(resume) => all
+                .into_iter()
+                .filter(|t| !resume.kept.contains(t))
+                .collect(),
+            None => all,
         }
     }
 }
@@ -462,7 +491,18 @@ pub async fn run_campaign<V: Vehicle>(
         }
     };
     let journal = match started {
-        Ok(Some(recorder)) => Journal::new(recorder, sim),
+        Ok(Some(mut recorder)) => {
+            // A resumed campaign's messages follow those of the sessions before.
+            if let Some(resume) = &config.resume
+                && config.record != RecordMode::None
+            {
+                match continue_recording(&mut recorder, resume, observer) {
+                    Ok(after_ns) => recorder.continue_after(after_ns),
+                    Err(error) => return Err(recording_not_started(dir, error)),
+                }
+            }
+            Journal::new(recorder, sim)
+        }
         Ok(None) => Journal::without_recording(sim),
         Err(error) => return Err(recording_not_started(dir, error)),
     };
@@ -476,6 +516,71 @@ pub async fn run_campaign<V: Vehicle>(
     };
     let result = run_tests(&inputs, &mut dir).await;
     finish_campaign(dir, journal, result)
+}
+
+/// Copies the recording of the sessions before into `recorder` (`run --resume`, see
+/// [`ResumeSource::prior_recording`]) and removes it; returns the log time after which the new
+/// session's messages go (0 without one). The copy is read a span at a time: the kept tests'
+/// spans of a recording with test spans (the embedded simulator's: a span of a test cut off is
+/// left out, it is driven again), or every message of one without (a car for the whole
+/// campaign). Damage (the unfinished end a `kill -9` leaves) ends the copy: what was whole
+/// before it is kept, and a note says so.
+pub(crate) fn continue_recording(
+    recorder: &mut Recorder,
+    resume: &ResumeSource,
+    observer: &dyn CampaignObserver,
+) -> Result<u64, RecordingError> {
+    let Some(prior) = &resume.prior_recording else {
+        return Ok(0);
+    };
+    let mut spans = crate::recording::Spans::open(prior)?;
+    let mut end_ns = 0;
+    let mut copied = 0;
+    while let Some(span) = spans.next() {
+        let span = match span {
+            Ok(span) => span,
+            Err(error) => {
+                observer.note(&format!(
+                    "the recording of the session before ends early ({error}): kept its {copied} \
+                     whole span(s)"
+                ));
+                break;
+            }
+        };
+        let spanned = spans_claim_tests(&spans);
+        match span.test_index {
+            Some(test) if resume.kept.contains(&test) => {
+                end_ns = end_ns.max(span.end_ns);
+                recorder.write_held(span.messages, 0)?;
+                recorder.test_span(test, span.start_ns, span.end_ns)?;
+            }
+            // A test driven again, or what follows the last test of a spanned recording (a
+            // test whose span was never closed).
+            Some(_) => continue,
+            None if spanned => continue,
+            None => {
+                end_ns = end_ns.max(span.end_ns);
+                recorder.write_held(span.messages, 0)?;
+                recorder.flush()?;
+            }
+        }
+        copied += 1;
+    }
+    if let Err(error) = std::fs::remove_file(prior) {
+        observer.note(&format!(
+            "cannot remove {} after copying it: {error}",
+            prior.display()
+        ));
+    }
+    Ok(if end_ns == 0 { 0 } else { end_ns + SPAN_GAP_NS })
+}
+
+/// Does the recording `spans` reads give a span per test (the embedded simulator's)?
+fn spans_claim_tests<R: std::io::Read>(spans: &crate::recording::Spans<R>) -> bool {
+    spans
+        .metadata("drivecheck.recording")
+        .and_then(|m| m.get("test_spans"))
+        .is_some_and(|v| v == "true")
 }
 
 /// The failure of a campaign whose recording could not be started: the run directory is

@@ -12,7 +12,7 @@ use super::{RunConfig, RunError};
 use campaign::coverage::CoverageBuilder;
 use campaign::files::{
     CAMPAIGN_FORMAT, CAMPAIGN_SCHEMA_VERSION, CampaignRecord, CampaignSummary, Case, Header,
-    ScenarioRef, Settings,
+    ScenarioRef, Session, Settings,
 };
 use campaign::oracle::Verdict;
 use campaign::safety::SafetyConfig;
@@ -40,6 +40,9 @@ pub struct TestSummary {
     pub starvations: usize,
     /// The smallest margin left at an append, seconds.
     pub smallest_margin_s: Option<f64>,
+    /// It was cut off (aborted `interrupted` or `link lost`): `run --resume` drives it again.
+    #[serde(skip)]
+    pub cut_off: bool,
 }
 
 /// What a finished campaign wrote.
@@ -94,6 +97,17 @@ impl RunDirectory {
         settings: Settings,
     ) -> Result<Self, RunError> {
         let path = config.out_dir.clone();
+        if let Some(resume) = &config.resume {
+            let kept: Vec<usize> = resume.kept.iter().copied().collect();
+            return Self::resume(
+                path,
+                resume.record.clone(),
+                scenario,
+                &config.car_label,
+                &kept,
+                &resume.earlier,
+            );
+        }
         std::fs::create_dir_all(&path).map_err(|source| RunError::Io {
             path: path.clone(),
             source,
@@ -116,6 +130,7 @@ impl RunDirectory {
             replay_of: config.replay.as_ref().map(|r| r.of.clone()),
             cases_from: config.cases.as_ref().map(|c| c.of.clone()),
             shard: config.shard,
+            sessions: Vec::new(),
         };
         Self::start(path, record, scenario)
     }
@@ -148,9 +163,96 @@ impl RunDirectory {
             shard: None,
             ended_at: None,
             summary: None,
+            sessions: Vec::new(),
             ..record
         };
         Self::start(path, record, scenario)
+    }
+
+    /// Opens the run directory `path` of an interrupted campaign again (`run --resume`): `record`
+    /// is its `campaign.json`, `kept` the tests whose case files stay (read again for their rows
+    /// and coverage), `earlier` every test a case file was written for before (`kept` and the
+    /// interrupted ones). The sessions are completed (the first from the record itself; the last
+    /// one before this, if it never ended, `died`, its tests those written after the sessions
+    /// before it), a new session of `car` starts, and `campaign.json` is written without an end.
+    pub(crate) fn resume(
+        path: PathBuf,
+        mut record: CampaignRecord,
+        scenario: &Scenario,
+        car: &str,
+        kept: &[usize],
+        earlier: &[usize],
+    ) -> Result<Self, RunError> {
+        if record.sessions.is_empty() {
+            record.sessions.push(Session {
+                started_at: record.started_at.clone(),
+                ended_at: record.ended_at.clone(),
+                car: record.car.clone(),
+                tests: Vec::new(),
+                end: None,
+            });
+        }
+        // The last session's tests: those whose case file it wrote. A test an earlier session
+        // listed was written by a later one when every file those sessions wrote for it was
+        // since kept as a partial (it was cut off each time).
+        let mut listed: std::collections::BTreeMap<usize, usize> = Default::default();
+        for session in record.sessions.iter().rev().skip(1) {
+            for &t in &session.tests {
+                *listed.entry(t).or_default() += 1;
+            }
+        }
+        let partials = partial_counts(&path);
+        if let Some(last) = record.sessions.last_mut() {
+            last.tests = earlier
+                .iter()
+                .copied()
+                .filter(|t| {
+                    listed.get(t).copied().unwrap_or(0) <= partials.get(t).copied().unwrap_or(0)
+                })
+                .collect();
+            if last.end.is_none() {
+                last.end = Some(
+                    if last.ended_at.is_some() {
+                        "interrupted"
+                    } else {
+                        "died"
+                    }
+                    .to_owned(),
+                );
+            }
+        }
+        record.sessions.push(Session {
+            started_at: rfc3339_now(),
+            ended_at: None,
+            car: car.to_owned(),
+            tests: Vec::new(),
+            end: None,
+        });
+        record.ended_at = None;
+        record.summary = None;
+        let mut dir = Self {
+            path,
+            record,
+            tests: Vec::new(),
+            no_anchors: scenario.anchors.is_empty(),
+            coverage: CoverageBuilder::of_scenario(scenario),
+        };
+        for &test_index in kept {
+            let file = format!("case-{test_index:03}.json");
+            let case_path = dir.path.join(&file);
+            let text = std::fs::read_to_string(&case_path).map_err(|source| RunError::Io {
+                path: case_path.clone(),
+                source,
+            })?;
+            let case = Case::from_json(&text).map_err(|source| RunError::CaseFile {
+                path: case_path,
+                source: Box::new(source),
+            })?;
+            dir.tests.push(summarise(test_index, file, &case));
+            dir.coverage.add(&case);
+        }
+        dir.write_record()?;
+        Ok(dir)
     }
 
     /// The directory.
@@ -187,7 +289,12 @@ impl RunDirectory {
             case.car_profile = self.record.car_profile.clone();
         }
         write(&self.path.join(&file), &case.to_json()?)?;
-        self.tests.push(summarise(test_index, file, &case));
+        if let Some(session) = self.record.sessions.last_mut() {
+            session.tests.push(test_index);
+        }
+        // In test order, also when a resumed campaign drives the tests it had not ended.
+        let at = self.tests.partition_point(|t| t.test_index < test_index);
+        self.tests.insert(at, summarise(test_index, file, &case));
         self.coverage.add(&case);
         Ok(())
     }
@@ -199,8 +306,26 @@ impl RunDirectory {
 
     /// [`RunDirectory::finish`] with the end time `ended_at` (RFC 3339).
     pub(crate) fn finish_at(mut self, ended_at: String) -> Result<CampaignReport, RunError> {
+        let summary = self.summary();
+        let planned = match self.record.shard {
+            Some(shard) => shard.tests(self.record.settings.tests).count(),
+            None => self.record.settings.tests,
+        };
+        // Every planned test ended, none of them cut off by an interruption.
+        let completed = summary.tests == planned && !self.tests.iter().any(|t| t.cut_off);
+        if let Some(session) = self.record.sessions.last_mut() {
+            session.ended_at = Some(ended_at.clone());
+            session.end = Some(
+                if completed {
+                    "completed"
+                } else {
+                    "interrupted"
+                }
+                .to_owned(),
+            );
+        }
         self.record.ended_at = Some(ended_at);
-        self.record.summary = Some(self.summary());
+        self.record.summary = Some(summary);
         self.write_record()?;
         Ok(CampaignReport {
             dir: self.path,
@@ -263,7 +388,35 @@ fn summarise(test_index: usize, file: String, case: &Case) -> TestSummary {
             .max_by(f64::total_cmp),
         starvations: streaming.map_or(0, |s| s.starvations_ms.len()),
         smallest_margin_s: streaming.and_then(|s| s.smallest_margin_s),
+        cut_off: is_cut_off(case),
     }
+}
+
+/// How many partial cases (`case-NNN.partial-K.json`, kept by `run --resume`) each test has in
+/// run directory `dir`.
+fn partial_counts(dir: &Path) -> std::collections::BTreeMap<usize, usize> {
+    let mut counts = std::collections::BTreeMap::new();
+    for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let name = entry.file_name();
+        let test = name
+            .to_str()
+            .and_then(|n| n.strip_prefix("case-"))
+            .and_then(|n| n.split_once(".partial-"))
+            .and_then(|(index, _)| index.parse::<usize>().ok());
+        if let Some(test) = test {
+            *counts.entry(test).or_default() += 1;
+        }
+    }
+    counts
+}
+
+/// Was `case` cut off before it could end (aborted `interrupted` by a signal, or `link lost`)?
+/// `run --resume` drives such a test again from its start.
+pub(crate) fn is_cut_off(case: &Case) -> bool {
+    use campaign::safety::AbortReason;
+    case.abort
+        .as_ref()
+        .is_some_and(|a| matches!(a.reason, AbortReason::Interrupted | AbortReason::LinkLost))
 }
 
 fn write(path: &Path, text: &str) -> Result<(), RunError> {

@@ -137,6 +137,7 @@ fn a_campaign_record_survives_a_round_trip_through_json() {
         replay_of: None,
         cases_from: None,
         shard: None,
+        sessions: Vec::new(),
     };
     let back = CampaignRecord::from_json(&record.to_json().unwrap()).unwrap();
     assert_eq!(back, record);

@@ -1,0 +1,273 @@
+//! `drivecheck run --resume DIR`: an interrupted campaign, read and checked before anything is
+//! driven, then continued in its run directory (`docs/scaling.md`, *Long campaigns*).
+//!
+//! A test *ended* when its case file holds a verdict that was not cut off (aborted
+//! `interrupted` or `link lost`); every other test of the plan (or of the shard) is driven. A
+//! cut-off test's case is kept beside it as `case-NNN.partial-K.json` (K from 1, the first name
+//! free) and the test is driven again from its start. The recording of the sessions before is
+//! moved aside to `campaign.mcap.resumed` and copied into the new `campaign.mcap` by the runner
+//! ([`crate::runner::ResumeSource`]); a `campaign.mcap.resumed` already there is one a resume
+//! that died did not finish copying, and it is the one used.
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, bail};
+use scenarios::Scenario;
+
+use crate::cli::{OnFailure, RunArgs};
+use crate::profile_arg::LoadedProfile;
+use crate::report::data::{case_files, read_case, read_record};
+use crate::runner::{RECORDING_FILE, ResumeSource, is_cut_off};
+use campaign::files::CampaignRecord;
+use campaign::oracle::FailurePolicy;
+
+/// Where the recording of the sessions before waits to be copied.
+pub(super) const PRIOR_RECORDING: &str = "campaign.mcap.resumed";
+
+/// An interrupted campaign's run directory as read.
+#[derive(Debug)]
+pub(super) struct Resumed {
+    /// The directory as given.
+    pub(super) dir: PathBuf,
+    /// Its `campaign.json`.
+    pub(super) record: CampaignRecord,
+    /// The tests that ended.
+    kept: BTreeSet<usize>,
+    /// The tests cut off: driven again.
+    cut_off: Vec<usize>,
+}
+
+impl Resumed {
+    /// Reads `dir`: its campaign record and every case file, each a test of the plan. Refuses a
+    /// campaign every test of which ended.
+    pub(super) fn read(dir: &Path) -> Result<Self> {
+        let at = || format!("--resume {}", dir.display());
+        let record = read_record(dir).with_context(at)?;
+        if record.replay_of.is_some() {
+            bail!(
+                "--resume {}: a replay (drivecheck replay) is not resumed; replay the case again",
+                dir.display()
+            );
+        }
+        let planned: BTreeSet<usize> = match record.shard {
+            Some(shard) => shard.tests(record.settings.tests).collect(),
+            None => (0..record.settings.tests).collect(),
+        };
+        let mut kept = BTreeSet::new();
+        let mut cut_off = Vec::new();
+        for (index, name) in case_files(dir).with_context(at)? {
+            if !planned.contains(&index) {
+                bail!(
+                    "--resume {}: {name} is not a test of its campaign ({} tests{})",
+                    dir.display(),
+                    record.settings.tests,
+                    record
+                        .shard
+                        .map(|s| format!(", shard {s}"))
+                        .unwrap_or_default()
+                );
+            }
+            let case = read_case(dir, &name).with_context(at)?;
+            if is_cut_off(&case) {
+                cut_off.push(index);
+            } else {
+                kept.insert(index);
+            }
+        }
+        if cut_off.is_empty() && kept.len() == planned.len() {
+            bail!(
+                "--resume {}: nothing to resume: every one of its {} tests ended{}",
+                dir.display(),
+                planned.len(),
+                if record.ended_at.is_none() {
+                    " (its campaign.json has no end: the process died after the last test)"
+                } else {
+                    ""
+                }
+            );
+        }
+        Ok(Self {
+            dir: dir.to_owned(),
+            record,
+            kept,
+            cut_off,
+        })
+    }
+
+    /// The scenario to load when none is given: the bundled one the campaign names.
+    pub(super) fn scenario_name(&self) -> Result<String> {
+        let name = &self.record.scenario.name;
+        if scenarios::bundled::text(name).is_none() {
+            bail!(
+                "--resume {}: its scenario `{name}` is not bundled; give its file with --scenario",
+                self.dir.display()
+            );
+        }
+        Ok(name.clone())
+    }
+
+    /// Refuses a setting given on the command line that differs from the campaign's, naming it:
+    /// the scenario (by hash), the seed, the number of tests, `--no-faults`, the shard, the
+    /// failure policy and the car profile.
+    pub(super) fn check(
+        &self,
+        args: &RunArgs,
+        scenario: &Scenario,
+        profile: &LoadedProfile,
+    ) -> Result<()> {
+        let r = &self.record;
+        let dir = self.dir.display();
+        let differs = |flag: String, campaign: String| -> anyhow::Error {
+            anyhow::anyhow!(
+                "--resume {dir}: {flag} differs from the campaign's {campaign}; a resumed \
+                 campaign keeps its plan and settings (leave {} out)",
+                flag.split(' ').next().unwrap_or(&flag)
+            )
+        };
+        let hash = scenario.hash();
+        if r.scenario.hash.as_deref().is_some_and(|h| h != hash) || r.scenario.name != scenario.name
+        {
+            return Err(differs(
+                format!("--scenario {} (hash {hash})", scenario.name),
+                format!(
+                    "scenario `{}` (hash {})",
+                    r.scenario.name,
+                    r.scenario.hash.as_deref().unwrap_or("unrecorded")
+                ),
+            ));
+        }
+        if let Some(seed) = args.seed.filter(|&s| s != r.seed) {
+            return Err(differs(
+                format!("--seed {seed}"),
+                format!("seed {}", r.seed),
+            ));
+        }
+        if let Some(tests) = args.tests.filter(|&t| t != r.settings.tests) {
+            return Err(differs(
+                format!("--tests {tests}"),
+                format!("{} tests", r.settings.tests),
+            ));
+        }
+        if args.no_faults && !r.no_faults {
+            return Err(differs(
+                "--no-faults".to_owned(),
+                "tests with their faults".to_owned(),
+            ));
+        }
+        if args.shard.is_some() && args.shard != r.shard {
+            return Err(differs(
+                format!(
+                    "--shard {}",
+                    args.shard.map(|s| s.to_string()).unwrap_or_default()
+                ),
+                r.shard
+                    .map_or("whole campaign".to_owned(), |s| format!("shard {s}")),
+            ));
+        }
+        if let Some(given) = args.on_failure {
+            let policy = match given {
+                OnFailure::Stop => FailurePolicy::StopAtFailingSegment,
+                OnFailure::Continue => FailurePolicy::ContinueAndRecord,
+            };
+            if policy != r.settings.failure_policy {
+                return Err(differs(
+                    format!("--on-failure {}", policy_name(policy)),
+                    format!("--on-failure {}", policy_name(r.settings.failure_policy)),
+                ));
+            }
+        }
+        if let Some(recorded) = &r.car_profile {
+            let given = profile.reference();
+            if given.hash != recorded.hash {
+                bail!(
+                    "--resume {dir}: the campaign's simulated car is the profile {} (hash {}), \
+                     this one is {} (hash {}): give the campaign's with --profile",
+                    recorded.name,
+                    recorded.hash,
+                    given.name,
+                    given.hash
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// The failure policy of the campaign.
+    pub(super) fn policy(&self) -> FailurePolicy {
+        self.record.settings.failure_policy
+    }
+
+    /// The tests to drive: how many and which, in words.
+    pub(super) fn describe(&self) -> String {
+        let planned = match self.record.shard {
+            Some(shard) => shard.tests(self.record.settings.tests).count(),
+            None => self.record.settings.tests,
+        };
+        format!(
+            "resuming {}: {} of {planned} tests ended{}",
+            self.dir.display(),
+            self.kept.len(),
+            if self.cut_off.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    "; driving again the test(s) cut off: {}",
+                    self.cut_off
+                        .iter()
+                        .map(usize::to_string)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
+            }
+        )
+    }
+
+    /// Moves the cut-off tests' cases to their partial names and the recording of the sessions
+    /// before aside, and gives what the runner continues from. Nothing is driven yet.
+    pub(super) fn prepare(self) -> Result<ResumeSource> {
+        let mut earlier: Vec<usize> = self.kept.iter().copied().collect();
+        for &test in &self.cut_off {
+            let from = self.dir.join(format!("case-{test:03}.json"));
+            let mut k = 1;
+            let mut to = self.dir.join(format!("case-{test:03}.partial-{k}.json"));
+            while to.exists() {
+                k += 1;
+                to = self.dir.join(format!("case-{test:03}.partial-{k}.json"));
+            }
+            std::fs::rename(&from, &to)
+                .with_context(|| format!("cannot keep {} as {}", from.display(), to.display()))?;
+            earlier.push(test);
+        }
+        earlier.sort_unstable();
+        let recording = self.dir.join(RECORDING_FILE);
+        let prior = self.dir.join(PRIOR_RECORDING);
+        let prior_recording = if prior.exists() {
+            // A resume that died while copying: its campaign.mcap is the partial copy.
+            if recording.exists() {
+                std::fs::remove_file(&recording)
+                    .with_context(|| format!("cannot remove {}", recording.display()))?;
+            }
+            Some(prior)
+        } else if recording.exists() {
+            std::fs::rename(&recording, &prior)
+                .with_context(|| format!("cannot move {} aside", recording.display()))?;
+            Some(prior)
+        } else {
+            None
+        };
+        Ok(ResumeSource {
+            record: self.record,
+            kept: self.kept,
+            earlier,
+            prior_recording,
+        })
+    }
+}
+
+fn policy_name(policy: FailurePolicy) -> &'static str {
+    match policy {
+        FailurePolicy::StopAtFailingSegment => "stop",
+        FailurePolicy::ContinueAndRecord => "continue",
+    }
+}
