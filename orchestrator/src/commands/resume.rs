@@ -223,9 +223,11 @@ impl Resumed {
         )
     }
 
-    /// Moves the cut-off tests' cases to their partial names and the recording of the sessions
-    /// before aside, and gives what the runner continues from. Nothing is driven yet.
-    pub(super) fn prepare(self) -> Result<ResumeSource> {
+    /// Moves the cut-off tests' cases to their partial names and, when this session `records`,
+    /// the recording of the sessions before aside (without a recording of its own, `--record
+    /// none`, `campaign.mcap` stays as the sessions before left it), and gives what the runner
+    /// continues from. Nothing is driven yet.
+    pub(super) fn prepare(self, records: bool) -> Result<ResumeSource> {
         let mut earlier: Vec<usize> = self.kept.iter().copied().collect();
         for &test in &self.cut_off {
             let from = self.dir.join(format!("case-{test:03}.json"));
@@ -242,7 +244,9 @@ impl Resumed {
         earlier.sort_unstable();
         let recording = self.dir.join(RECORDING_FILE);
         let prior = self.dir.join(PRIOR_RECORDING);
-        let prior_recording = if prior.exists() {
+        let prior_recording = if !records {
+            None
+        } else if prior.exists() {
             // A resume that died while copying: its campaign.mcap is the partial copy.
             if recording.exists() {
                 std::fs::remove_file(&recording)

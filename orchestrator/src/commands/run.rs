@@ -183,7 +183,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         if crate::output::chatty() {
             eprintln!("{}", resumed.describe());
         }
-        config.resume = Some(resumed.prepare()?);
+        config.resume = Some(resumed.prepare(config.record != RecordMode::None)?);
     }
     let started = Instant::now();
     let result = if embedded {
