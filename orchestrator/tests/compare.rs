@@ -4,7 +4,7 @@
 
 mod common;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use common::{drivecheck, path, text};
 use serde_json::Value;
@@ -30,6 +30,29 @@ fn compare(base: &Path, new: &Path, extra: &[&str]) -> (Value, Option<i32>) {
     let json: Value = serde_json::from_slice(&output.stdout)
         .unwrap_or_else(|e| panic!("not JSON ({e}): {}", text(&output)));
     (json["comparison"].clone(), output.status.code())
+}
+
+/// `TESTS` tests of seed 5 in `dir/base`, and the same cases (`--cases-from`, seed 6) on the
+/// car of the profile `body` in `dir/new`.
+fn base_and_degraded(dir: &Path, tests: &str, body: &str) -> (PathBuf, PathBuf) {
+    let profile = dir.join("degraded.toml");
+    std::fs::write(
+        &profile,
+        format!("format = \"drivecheck-car-profile\"\nversion = 1\n\n{body}"),
+    )
+    .unwrap();
+    let (base, new) = (dir.join("base"), dir.join("new"));
+    run(&["--seed", "5", "--tests", tests], &base);
+    let args = [
+        "--cases-from",
+        path(&base),
+        "--seed",
+        "6",
+        "--profile",
+        path(&profile),
+    ];
+    run(&args, &new);
+    (base, new)
 }
 
 #[test]
@@ -72,26 +95,8 @@ fn the_same_cases_on_the_same_car_with_another_seed_are_no_difference() {
 #[test]
 fn a_car_with_noisier_ranging_is_a_significant_regression_and_fails_the_gate() {
     let dir = tempfile::tempdir().unwrap();
-    let profile = dir.path().join("noisy.toml");
     // The default car ranges with σ = 0.1 m per exchange (docs/twin.md); this one with 0.3 m.
-    std::fs::write(
-        &profile,
-        "format = \"drivecheck-car-profile\"\nversion = 1\n\n[radio]\nrange_sigma_m = 0.3\n",
-    )
-    .unwrap();
-    let (base, new) = (dir.path().join("base"), dir.path().join("new"));
-    run(&["--seed", "5", "--tests", "60"], &base);
-    run(
-        &[
-            "--cases-from",
-            path(&base),
-            "--seed",
-            "6",
-            "--profile",
-            path(&profile),
-        ],
-        &new,
-    );
+    let (base, new) = base_and_degraded(dir.path(), "60", "[radio]\nrange_sigma_m = 0.3\n");
     let (c, code) = compare(&base, &new, &["--fail-on", "regression"]);
     assert_eq!(c["significance"], "worse", "{}", c["verdict"]);
     assert_eq!(code, Some(1), "--fail-on regression fails the gate");
@@ -128,25 +133,10 @@ fn a_firmware_build_with_a_looser_correction_clamp_is_blamed_on_the_range_probes
     // corrections are small anyway. The breakdown must say so: the range probes' rows first.
     // (`bench compare` finds this build worse in 10 of 20 pairs of 50 tests, 20 of 20 of 100.)
     let dir = tempfile::tempdir().unwrap();
-    let profile = dir.path().join("clamp.toml");
-    std::fs::write(
-        &profile,
-        "format = \"drivecheck-car-profile\"\nversion = 1\n\n[estimator]\n\
-         uwb_correction_clamp_m = 0.5\n",
-    )
-    .unwrap();
-    let (base, new) = (dir.path().join("base"), dir.path().join("new"));
-    run(&["--seed", "5", "--tests", "100"], &base);
-    run(
-        &[
-            "--cases-from",
-            path(&base),
-            "--seed",
-            "6",
-            "--profile",
-            path(&profile),
-        ],
-        &new,
+    let (base, new) = base_and_degraded(
+        dir.path(),
+        "100",
+        "[estimator]\nuwb_correction_clamp_m = 0.5\n",
     );
     let (c, _) = compare(&base, &new, &[]);
     assert_eq!(c["significance"], "worse", "{}", c["verdict"]);

@@ -72,15 +72,7 @@ impl CasesRun {
 
     /// The scenario to load when none is given: the bundled one the run names.
     pub(super) fn scenario_name(&self) -> Result<String> {
-        let name = &self.record.scenario.name;
-        if scenarios::bundled::text(name).is_none() {
-            bail!(
-                "--cases-from {}: its scenario `{name}` is not bundled; give its file with \
-                 --scenario",
-                self.dir.display()
-            );
-        }
-        Ok(name.clone())
+        super::shared::bundled_scenario("--cases-from", &self.dir, &self.record.scenario.name)
     }
 
     /// Checks every case against `scenario` (the run's, by hash) and plans it as the campaign

@@ -97,14 +97,7 @@ impl Resumed {
 
     /// The scenario to load when none is given: the bundled one the campaign names.
     pub(super) fn scenario_name(&self) -> Result<String> {
-        let name = &self.record.scenario.name;
-        if scenarios::bundled::text(name).is_none() {
-            bail!(
-                "--resume {}: its scenario `{name}` is not bundled; give its file with --scenario",
-                self.dir.display()
-            );
-        }
-        Ok(name.clone())
+        super::shared::bundled_scenario("--resume", &self.dir, &self.record.scenario.name)
     }
 
     /// Refuses a setting given on the command line that differs from the campaign's, naming it:

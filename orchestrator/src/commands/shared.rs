@@ -551,6 +551,18 @@ pub(super) fn metres(value: Option<f64>) -> String {
     value.map_or_else(|| "-".to_owned(), |m| format!("{m:.2} m"))
 }
 
+/// The scenario `name` a run directory `dir` (given with `flag`) names, to load when no
+/// `--scenario` is given: it must be bundled.
+pub(super) fn bundled_scenario(flag: &str, dir: &Path, name: &str) -> Result<String> {
+    if scenarios::bundled::text(name).is_none() {
+        bail!(
+            "{flag} {}: its scenario `{name}` is not bundled; give its file with --scenario",
+            dir.display()
+        );
+    }
+    Ok(name.to_owned())
+}
+
 /// The case files (`case-NNN.json`) of run directory `dir`, in test order.
 pub(super) fn case_files(dir: &Path) -> Result<Vec<PathBuf>> {
     // `case-NNN.json` only: not a partial case kept by a resumed campaign
