@@ -17,10 +17,15 @@ use std::time::Duration;
 use common::{assert_same_messages, cases, drivecheck, path, summary, text};
 use serde_json::Value;
 
-/// Starts `drivecheck ARGS` with `DRIVECHECK_PAUSE=pause`, waits until it says it paused, and
-/// sends it `signal` (`-INT`, `-TERM`) or kills it (`KILL`); returns its exit status and
-/// standard error.
-fn interrupted(args: &[&str], pause: &str, signal: &str) -> (Option<i32>, String) {
+/// Starts `drivecheck ARGS` with `DRIVECHECK_PAUSE=pause`, waits until it says it paused, runs
+/// `while_paused`, and sends it `signal` (`-INT`, `-TERM`) or kills it (`KILL`); returns its
+/// exit status and standard error.
+fn interrupted(
+    args: &[&str],
+    pause: &str,
+    signal: &str,
+    while_paused: impl FnOnce(),
+) -> (Option<i32>, String) {
     let mut child: Child = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
         .args(args)
         .env(orchestrator::runner::PAUSE_ENV, pause)
@@ -43,6 +48,7 @@ fn interrupted(args: &[&str], pause: &str, signal: &str) -> (Option<i32>, String
     });
     rx.recv_timeout(Duration::from_secs(120))
         .unwrap_or_else(|_| panic!("{args:?} never paused at {pause}"));
+    while_paused();
     if signal == "KILL" {
         child.kill().unwrap();
     } else {
@@ -89,7 +95,12 @@ fn a_campaign_interrupted_three_times_and_resumed_is_the_uninterrupted_one() {
     // SIGINT after test 4: the campaign stops before test 5, its run directory completed.
     let args = run(&[], &cut);
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let (code, said) = interrupted(&args, "before:5", "-INT");
+    let (code, said) = interrupted(&args, "before:5", "-INT", || {
+        // Not while the campaign's own process writes it.
+        let refused = drivecheck(&["run", "--resume", path(&cut)]);
+        assert_eq!(refused.status.code(), Some(2), "{}", text(&refused));
+        assert!(text(&refused).contains("pid"), "{}", text(&refused));
+    });
     assert_eq!(code, Some(2), "{said}");
     assert!(said.contains("interrupted during test 5"), "{said}");
     assert_eq!(whole_cases(&cut).len(), 5);
@@ -106,7 +117,7 @@ fn a_campaign_interrupted_three_times_and_resumed_is_the_uninterrupted_one() {
 
     // SIGTERM in the middle of test 11: test 11 is cut off (aborted, interrupted).
     let resume = ["run", "--resume", path(&cut), "--jobs", "1"];
-    let (code, said) = interrupted(&resume, "in:11", "-TERM");
+    let (code, said) = interrupted(&resume, "in:11", "-TERM", || {});
     assert_eq!(code, Some(2), "{said}");
     assert!(said.contains("resuming"), "{said}");
     let case_11: Value =
@@ -114,8 +125,10 @@ fn a_campaign_interrupted_three_times_and_resumed_is_the_uninterrupted_one() {
     assert_eq!(case_11["verdict"], "aborted", "{case_11}");
 
     // kill -9 in the middle of test 20: no end, an unfinished recording.
-    let (code, said) = interrupted(&resume, "in:20", "KILL");
+    let (code, said) = interrupted(&resume, "in:20", "KILL", || {});
     assert_eq!(code, None, "killed by a signal: {said}");
+    // Its claim of the directory stays, void: its process is gone.
+    assert!(cut.join(".drivecheck-writing").exists());
     assert!(record(&cut)["ended_at"].is_null());
     assert!(cut.join("case-011.partial-1.json").exists());
 
@@ -169,6 +182,7 @@ fn a_campaign_interrupted_three_times_and_resumed_is_the_uninterrupted_one() {
     assert_eq!(tests(3), (killed_after + 1..30).collect::<Vec<_>>());
     assert!(sessions.iter().all(|s| s["car"] == "sim"));
 
+    assert!(!cut.join(".drivecheck-writing").exists());
     // Nothing is left to resume.
     let again = drivecheck(&["run", "--resume", path(&cut)]);
     assert_eq!(again.status.code(), Some(2));
@@ -216,7 +230,7 @@ fn a_campaign_on_a_car_over_tcp_cut_off_by_sigterm_is_resumed() {
         "--out",
         path(&out),
     ];
-    let (code, said) = interrupted(&args, "in:0", "-TERM");
+    let (code, said) = interrupted(&args, "in:0", "-TERM", || {});
     assert_eq!(code, Some(2), "{said}");
     let resumed = drivecheck(&["run", "--resume", path(&out), "--car", &car]);
     let _ = (sim.kill(), sim.wait());

@@ -125,10 +125,10 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
             })?
         }
     };
-    // A resumed campaign's directory is its own.
+    // A resumed campaign's directory is claimed again: not while another process writes it.
     let _claim = match &resumed {
-        Some(_) => None,
-        None => Some(crate::runner::claim_out_dir(&out, made)?),
+        Some(_) => crate::runner::claim_run_dir_again(&out)?,
+        None => crate::runner::claim_out_dir(&out, made)?,
     };
     if let Some(file) = &args.junit {
         super::shared::check_output_file("--junit", file, &out)?;

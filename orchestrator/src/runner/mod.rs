@@ -85,8 +85,8 @@ pub use run_dir::{
     runs_root,
 };
 pub(crate) use run_dir::{
-    RunDirectory, Staged, claim_default_run_dir, claim_out_dir, is_cut_off, is_used, rfc3339_now,
-    run_dir_name,
+    RunDirectory, Staged, claim_default_run_dir, claim_out_dir, claim_run_dir_again, is_cut_off,
+    is_used, rfc3339_now, run_dir_name,
 };
 
 use journal::Journal;

@@ -582,6 +582,64 @@ pub(crate) fn claim_out_dir(path: &Path, made: bool) -> Result<OutClaim, RunErro
     Ok(claim)
 }
 
+/// Claims an existing run directory again for this process (`run --resume`): its [`CLAIM_FILE`]
+/// is created as [`claim_out_dir`] creates it; one already there is another process's claim,
+/// refused, unless that process no longer lives (`kill -9`, a crash: its pid is not in `/proc`),
+/// when the claim becomes this process's. The directory is never removed by the claim.
+pub(crate) fn claim_run_dir_again(path: &Path) -> Result<OutClaim, RunError> {
+    let marker = path.join(CLAIM_FILE);
+    let io = |source| RunError::Io {
+        path: marker.clone(),
+        source,
+    };
+    for _ in 0..2 {
+        match std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&marker)
+        {
+            Ok(mut file) => {
+                use std::io::Write;
+                let _ = writeln!(file, "pid {} since {}", std::process::id(), rfc3339_now());
+                return Ok(OutClaim {
+                    dir: path.to_owned(),
+                    made: false,
+                });
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                let holder = std::fs::read_to_string(&marker).unwrap_or_default();
+                let pid = holder
+                    .trim()
+                    .strip_prefix("pid ")
+                    .and_then(|rest| rest.split_whitespace().next())
+                    .and_then(|pid| pid.parse::<u32>().ok());
+                let proc = Path::new("/proc");
+                let dead = match pid {
+                    Some(pid) => proc.is_dir() && !proc.join(pid.to_string()).exists(),
+                    None => false,
+                };
+                if !dead {
+                    return Err(RunError::OutDirClaimed {
+                        path: path.to_owned(),
+                        holder: if holder.trim().is_empty() {
+                            "it is just starting".to_owned()
+                        } else {
+                            holder.trim().to_owned()
+                        },
+                    });
+                }
+                // The process that held it died: its claim is void.
+                std::fs::remove_file(&marker).map_err(io)?;
+            }
+            Err(e) => return Err(io(e)),
+        }
+    }
+    Err(RunError::OutDirClaimed {
+        path: path.to_owned(),
+        holder: "another process claimed it at the same moment".to_owned(),
+    })
+}
+
 impl Drop for OutClaim {
     fn drop(&mut self) {
         let _ = std::fs::remove_file(self.dir.join(CLAIM_FILE));
