@@ -105,6 +105,17 @@ fn a_campaign_interrupted_three_times_and_resumed_is_the_uninterrupted_one() {
     assert!(said.contains("interrupted during test 5"), "{said}");
     assert_eq!(whole_cases(&cut).len(), 5);
     assert_eq!(record(&cut)["summary"]["tests"], 5);
+    // `runs` says how to go on.
+    let listed = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
+        .arg("runs")
+        .env("DRIVECHECK_RUNS_DIR", tmp.path())
+        .output()
+        .unwrap();
+    let listed = String::from_utf8_lossy(&listed.stdout);
+    assert!(
+        listed.contains("| cut | campaign, not finished (drivecheck run --resume) |"),
+        "{listed}"
+    );
 
     // A resume must keep the plan: another seed is refused, naming it.
     let refused = drivecheck(&["run", "--resume", path(&cut), "--seed", "4"]);

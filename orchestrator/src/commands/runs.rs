@@ -195,6 +195,19 @@ fn row(entry: &Entry) -> String {
                 Some(shard) => format!("{kind}, shard {shard}"),
                 None => kind,
             };
+            let kind = match r.sessions.len() {
+                0 | 1 => kind,
+                n => format!("{kind}, {n} sessions"),
+            };
+            let planned = r.shard.map_or(r.settings.tests, |shard| {
+                shard.tests(r.settings.tests).count()
+            });
+            let ran = r.summary.as_ref().map_or(0, |s| s.tests);
+            let kind = if r.replay_of.is_none() && (r.ended_at.is_none() || ran < planned) {
+                format!("{kind}, not finished (drivecheck run --resume)")
+            } else {
+                kind
+            };
             let counts = r.summary.as_ref().map_or_else(
                 || "- | - | - | - | -".to_owned(),
                 |s| {
