@@ -98,12 +98,12 @@ fn page(compared: &Compared) -> Result<String, ReportError> {
     fact(
         &mut out,
         "worse than the noise",
-        &format!("{} segments ({})", s.worse, share(s.worse_share)),
+        &format!("{} ({})", segments(s.worse), share(s.worse_share)),
     );
     fact(
         &mut out,
         "better than the noise",
-        &format!("{} segments ({})", s.better, share(s.better_share)),
+        &format!("{} ({})", segments(s.better), share(s.better_share)),
     );
     fact(
         &mut out,
@@ -166,8 +166,8 @@ fn page(compared: &Compared) -> Result<String, ReportError> {
     );
     out.push_str(
         "<p class=\"sub\">Failed includes aborted. NEW is significantly worse when McNemar's p \
-         is below α/2 with more regressed than fixed tests, or the decision interval of the median \
-         change lies wholly above 0 (docs/compare.md).</p>\n",
+         is below α/2 with more regressed than fixed tests, or the sign-flip test's p is below \
+         α/2 with a median change above 0 (docs/compare.md).</p>\n",
     );
 
     let noise = r.noise_m;
@@ -231,6 +231,15 @@ fn page(compared: &Compared) -> Result<String, ReportError> {
     }
     foot(&mut out, &compared.new);
     Ok(out)
+}
+
+/// `n segments`, or `1 segment`.
+fn segments(n: usize) -> String {
+    if n == 1 {
+        "1 segment".to_owned()
+    } else {
+        format!("{n} segments")
+    }
 }
 
 fn share(value: f64) -> String {
