@@ -275,3 +275,40 @@ fn a_campaign_on_a_car_over_tcp_cut_off_by_sigterm_is_resumed() {
         "the log times go back at a session's start"
     );
 }
+
+/// A process that died after its last test's case but before the campaign's end: the resume
+/// drives nothing and completes the run directory (its summary and recording).
+#[test]
+fn a_campaign_that_died_after_its_last_test_is_completed_by_the_resume() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("run");
+    let ran = drivecheck(&["run", "--seed", "2", "--tests", "3", "--out", path(&out)]);
+    assert!(matches!(ran.status.code(), Some(0 | 1)), "{}", text(&ran));
+    let before = summary(&out);
+    let mut r = record(&out);
+    let fields = r.as_object_mut().unwrap();
+    fields.remove("ended_at");
+    fields.remove("summary");
+    std::fs::write(out.join("campaign.json"), r.to_string()).unwrap();
+    let resumed = drivecheck(&["run", "--resume", path(&out)]);
+    assert_eq!(
+        resumed.status.code(),
+        ran.status.code(),
+        "{}",
+        text(&resumed)
+    );
+    assert_eq!(summary(&out), before);
+    let r = record(&out);
+    let ends: Vec<&str> = r["sessions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["end"].as_str().unwrap())
+        .collect();
+    assert_eq!(ends, ["died", "completed"]);
+    assert!(
+        orchestrator::recording::Recording::read(&out.join("campaign.mcap"))
+            .unwrap()
+            .is_complete()
+    );
+}

@@ -75,16 +75,13 @@ impl Resumed {
                 kept.insert(index);
             }
         }
-        if cut_off.is_empty() && kept.len() == planned.len() {
+        // Every test ended: nothing to resume, unless the process died before it wrote the
+        // campaign's end (then the resume only completes the run directory and its recording).
+        if cut_off.is_empty() && kept.len() == planned.len() && record.ended_at.is_some() {
             bail!(
-                "--resume {}: nothing to resume: every one of its {} tests ended{}",
+                "--resume {}: nothing to resume: every one of its {} tests ended",
                 dir.display(),
-                planned.len(),
-                if record.ended_at.is_none() {
-                    " (its campaign.json has no end: the process died after the last test)"
-                } else {
-                    ""
-                }
+                planned.len()
             );
         }
         Ok(Self {
