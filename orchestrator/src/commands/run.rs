@@ -160,6 +160,12 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     let jobs = jobs(args, embedded)?;
     // A live view is for watching: a virtual-time campaign would be over before anyone looks.
     let virtual_time = embedded && !args.realtime && args.live.is_none();
+    if let Some(resumed) = resumed {
+        if crate::output::chatty() {
+            eprintln!("{}", resumed.describe());
+        }
+        config.resume = Some(resumed.prepare(config.record != RecordMode::None)?);
+    }
     if crate::output::chatty() {
         eprintln!(
             "seed {seed}: {}{} tests on {} with car {}{}{}, writing {}",
@@ -178,12 +184,6 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
             },
             config.out_dir.display()
         );
-    }
-    if let Some(resumed) = resumed {
-        if crate::output::chatty() {
-            eprintln!("{}", resumed.describe());
-        }
-        config.resume = Some(resumed.prepare(config.record != RecordMode::None)?);
     }
     let started = Instant::now();
     let result = if embedded {
