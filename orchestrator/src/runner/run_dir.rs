@@ -534,16 +534,8 @@ pub(crate) fn claim_out_dir(path: &Path, made: bool) -> Result<OutClaim, RunErro
     let made = made || !path.exists();
     std::fs::create_dir_all(path).map_err(io)?;
     let marker = path.join(CLAIM_FILE);
-    match std::fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(&marker)
-    {
-        Ok(mut file) => {
-            use std::io::Write;
-            // Who holds it, for the other process's error; the claim is the file itself.
-            let _ = writeln!(file, "pid {} since {}", std::process::id(), rfc3339_now());
-        }
+    match create_claim(&marker) {
+        Ok(()) => {}
         Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
             // Not ours: its claim file and the directory stay as they are.
             let holder = std::fs::read_to_string(&marker)
@@ -582,6 +574,18 @@ pub(crate) fn claim_out_dir(path: &Path, made: bool) -> Result<OutClaim, RunErro
     Ok(claim)
 }
 
+/// Creates the claim file `marker` with `O_EXCL` (an existing one is `AlreadyExists`) and writes
+/// who holds it, for another process's error: the claim is the file itself.
+fn create_claim(marker: &Path) -> std::io::Result<()> {
+    use std::io::Write;
+    let mut file = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(marker)?;
+    let _ = writeln!(file, "pid {} since {}", std::process::id(), rfc3339_now());
+    Ok(())
+}
+
 /// Claims an existing run directory again for this process (`run --resume`): its [`CLAIM_FILE`]
 /// is created as [`claim_out_dir`] creates it; one already there is another process's claim,
 /// refused, unless that process no longer lives (`kill -9`, a crash: its pid is not in `/proc`),
@@ -593,14 +597,8 @@ pub(crate) fn claim_run_dir_again(path: &Path) -> Result<OutClaim, RunError> {
         source,
     };
     for _ in 0..2 {
-        match std::fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&marker)
-        {
-            Ok(mut file) => {
-                use std::io::Write;
-                let _ = writeln!(file, "pid {} since {}", std::process::id(), rfc3339_now());
+        match create_claim(&marker) {
+            Ok(()) => {
                 return Ok(OutClaim {
                     dir: path.to_owned(),
                     made: false,
