@@ -6,21 +6,8 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{cases, drivecheck, path, text};
+use common::{cases, drivecheck, path, run_unrecorded, text};
 use serde_json::Value;
-
-/// `drivecheck run ARGS --record none --out OUT`; its exit status must be 0 or 1.
-fn run(args: &[&str], out: &Path) {
-    let mut all = vec!["run"];
-    all.extend_from_slice(args);
-    all.extend_from_slice(&["--record", "none", "--out", path(out)]);
-    let output = drivecheck(&all);
-    assert!(
-        matches!(output.status.code(), Some(0 | 1)),
-        "{}",
-        text(&output)
-    );
-}
 
 fn json(text: &str) -> Value {
     serde_json::from_str(text).unwrap()
@@ -35,13 +22,13 @@ fn record(dir: &Path) -> Value {
 fn a_forty_test_run_is_driven_again_command_for_command_also_sharded_and_merged() {
     let dir = tempfile::tempdir().unwrap();
     let source = dir.path().join("source");
-    run(&["--seed", "7", "--tests", "40"], &source);
+    run_unrecorded(&["--seed", "7", "--tests", "40"], &source);
     let source_cases = cases(&source);
     assert_eq!(source_cases.len(), 40);
 
     // The same seed: the same tests on the same car, so the very same case files.
     let again = dir.path().join("again");
-    run(&["--cases-from", path(&source)], &again);
+    run_unrecorded(&["--cases-from", path(&source)], &again);
     assert_eq!(cases(&again), source_cases);
     let of = &record(&again)["cases_from"];
     assert_eq!(of["run"], path(&source));
@@ -50,7 +37,7 @@ fn a_forty_test_run_is_driven_again_command_for_command_also_sharded_and_merged(
 
     // Another seed: other sensor noise and resets, the same commands in every test.
     let other = dir.path().join("other");
-    run(&["--cases-from", path(&source), "--seed", "8"], &other);
+    run_unrecorded(&["--cases-from", path(&source), "--seed", "8"], &other);
     let other_cases = cases(&other);
     assert_eq!(other_cases.len(), 40);
     let mut verdicts_differ = 0;
@@ -71,7 +58,7 @@ fn a_forty_test_run_is_driven_again_command_for_command_also_sharded_and_merged(
         .collect();
     for (k, shard) in shards.iter().enumerate() {
         let arg = format!("{}/2", k + 1);
-        run(
+        run_unrecorded(
             &[
                 "--cases-from",
                 path(&source),
@@ -111,7 +98,7 @@ fn a_forty_test_run_is_driven_again_command_for_command_also_sharded_and_merged(
 fn a_run_with_a_missing_or_broken_case_is_refused_naming_it_before_driving() {
     let dir = tempfile::tempdir().unwrap();
     let source = dir.path().join("source");
-    run(&["--seed", "3", "--tests", "6"], &source);
+    run_unrecorded(&["--seed", "3", "--tests", "6"], &source);
 
     std::fs::remove_file(source.join("case-002.json")).unwrap();
     let out = dir.path().join("gap");

@@ -6,21 +6,8 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{drivecheck, path, text};
+use common::{drivecheck, path, run_unrecorded, text};
 use serde_json::Value;
-
-/// `drivecheck run ARGS --record none --out OUT`; its exit status must be 0 or 1.
-fn run(args: &[&str], out: &Path) {
-    let mut all = vec!["-q", "run"];
-    all.extend_from_slice(args);
-    all.extend_from_slice(&["--record", "none", "--out", path(out)]);
-    let output = drivecheck(&all);
-    assert!(
-        matches!(output.status.code(), Some(0 | 1)),
-        "{}",
-        text(&output)
-    );
-}
 
 /// `drivecheck compare BASE NEW --json [extra]`: the comparison, and the exit status.
 fn compare(base: &Path, new: &Path, extra: &[&str]) -> (Value, Option<i32>) {
@@ -42,7 +29,7 @@ fn base_and_degraded(dir: &Path, tests: &str, body: &str) -> (PathBuf, PathBuf) 
     )
     .unwrap();
     let (base, new) = (dir.join("base"), dir.join("new"));
-    run(&["--seed", "5", "--tests", tests], &base);
+    run_unrecorded(&["--seed", "5", "--tests", tests], &base);
     let args = [
         "--cases-from",
         path(&base),
@@ -51,7 +38,7 @@ fn base_and_degraded(dir: &Path, tests: &str, body: &str) -> (PathBuf, PathBuf) 
         "--profile",
         path(&profile),
     ];
-    run(&args, &new);
+    run_unrecorded(&args, &new);
     (base, new)
 }
 
@@ -59,8 +46,8 @@ fn base_and_degraded(dir: &Path, tests: &str, body: &str) -> (PathBuf, PathBuf) 
 fn the_same_cases_on_the_same_car_with_another_seed_are_no_difference() {
     let dir = tempfile::tempdir().unwrap();
     let (base, again) = (dir.path().join("base"), dir.path().join("again"));
-    run(&["--seed", "11", "--tests", "40"], &base);
-    run(&["--cases-from", path(&base), "--seed", "12"], &again);
+    run_unrecorded(&["--seed", "11", "--tests", "40"], &base);
+    run_unrecorded(&["--cases-from", path(&base), "--seed", "12"], &again);
     let (c, code) = compare(&base, &again, &["--fail-on", "regression"]);
     assert_eq!(c["significance"], "no_difference", "{}", c["verdict"]);
     assert_eq!(code, Some(0));
@@ -165,8 +152,8 @@ fn runs_of_other_tests_are_refused_naming_the_first_difference() {
         dir.path().join("b"),
         dir.path().join("c"),
     );
-    run(&["--seed", "1", "--tests", "3"], &a);
-    run(&["--seed", "2", "--tests", "3"], &b);
+    run_unrecorded(&["--seed", "1", "--tests", "3"], &a);
+    run_unrecorded(&["--seed", "2", "--tests", "3"], &b);
     // The same run without its last test.
     std::fs::create_dir(&c).unwrap();
     for file in ["campaign.json", "case-000.json", "case-001.json"] {

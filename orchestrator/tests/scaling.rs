@@ -227,14 +227,7 @@ fn a_shard_with_a_damaged_recording_leaves_nothing_where_the_merge_was_to_go() {
 
 /// Runs `command` with `sh -c` in `dir`, the `drivecheck` under test first on the path.
 fn shell(command: &str, dir: &Path, env: &[(&str, String)]) {
-    let bin = Path::new(env!("CARGO_BIN_EXE_drivecheck"))
-        .parent()
-        .unwrap();
-    let path_var = format!(
-        "{}:{}",
-        bin.display(),
-        std::env::var("PATH").unwrap_or_default()
-    );
+    let path_var = common::path_with_drivecheck();
     let output = Command::new("sh")
         .arg("-c")
         .arg(command)

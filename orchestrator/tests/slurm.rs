@@ -458,14 +458,7 @@ fn the_slurm_job_array_runs_on_a_slurm_cluster_and_its_merge_is_the_unsharded_ru
 
     // sbatch hands the submitter's environment to the jobs: the drivecheck under test first on
     // PATH, HOME the test's.
-    let bin = Path::new(env!("CARGO_BIN_EXE_drivecheck"))
-        .parent()
-        .unwrap();
-    let path_var = format!(
-        "{}:{}",
-        bin.display(),
-        std::env::var("PATH").unwrap_or_default()
-    );
+    let path_var = common::path_with_drivecheck();
     let submitted = cluster
         .client("sh")
         .arg("-c")

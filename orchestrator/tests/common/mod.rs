@@ -30,6 +30,31 @@ pub fn path(p: &Path) -> &str {
     p.to_str().expect("temporary paths are UTF-8")
 }
 
+/// `drivecheck -q run ARGS --record none --out OUT`; its exit status must be 0 or 1.
+pub fn run_unrecorded(args: &[&str], out: &Path) {
+    let mut all = vec!["-q", "run"];
+    all.extend_from_slice(args);
+    all.extend_from_slice(&["--record", "none", "--out", path(out)]);
+    let output = drivecheck(&all);
+    assert!(
+        matches!(output.status.code(), Some(0 | 1)),
+        "{}",
+        text(&output)
+    );
+}
+
+/// `PATH` with the directory of the `drivecheck` under test first.
+pub fn path_with_drivecheck() -> String {
+    let bin = Path::new(env!("CARGO_BIN_EXE_drivecheck"))
+        .parent()
+        .unwrap();
+    format!(
+        "{}:{}",
+        bin.display(),
+        std::env::var("PATH").unwrap_or_default()
+    )
+}
+
 /// Runs a campaign (`drivecheck run --seed SEED --tests TESTS [extra] --out DIR/campaign`),
 /// expects exit status `code`, and returns the run directory.
 pub fn campaign(dir: &Path, seed: u64, tests: usize, extra: &[&str], code: i32) -> PathBuf {
