@@ -116,9 +116,11 @@ pub struct RunArgs {
     #[arg(long)]
     pub scenario: Option<String>,
     /// The car: `sim` (the embedded simulated car), `tcp://HOST:PORT`, `udp://HOST:PORT` or
-    /// `serial:///dev/ttyACM0`.
-    #[arg(long, default_value = "sim")]
-    pub car: String,
+    /// `serial:///dev/ttyACM0`. Given again, several cars drive the campaign together, each
+    /// test on whichever is free (cars behind links, each on its own track or HIL board), named
+    /// `NAME=ADDRESS` (`--car a=tcp://10.0.0.5:8300`) or `car1`, `car2`, … in the order given.
+    #[arg(long, default_value = "sim", value_name = "[NAME=]CAR")]
+    pub car: Vec<String>,
     /// Tests in the campaign (default: the scenario's, 10 for the bundled ones; at most 1,000,000).
     #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=scenarios::MAX_TESTS as u64))]
     pub tests: Option<usize>,
@@ -1135,7 +1137,7 @@ mod tests {
         let Command::Run(args) = cli.command else {
             panic!("not the run command");
         };
-        assert_eq!(args.car, "sim");
+        assert_eq!(args.car, ["sim"]);
         // Resolved by the command: the two-anchor lot, or the scenario of --cases-from's run.
         assert_eq!(args.scenario, None);
         assert!(args.cases_from.is_none() && args.on_failure.is_none());

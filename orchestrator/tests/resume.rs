@@ -209,26 +209,7 @@ fn a_campaign_interrupted_three_times_and_resumed_is_the_uninterrupted_one() {
 #[test]
 fn a_campaign_on_a_car_over_tcp_cut_off_by_sigterm_is_resumed() {
     let tmp = tempfile::tempdir().unwrap();
-    let address_file = tmp.path().join("car.addr");
-    let mut sim = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
-        .args(["sim", "--scenario", "parking-lot-2anchors", "--listen"])
-        .arg("127.0.0.1:0")
-        .arg("--address-file")
-        .arg(&address_file)
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut car = String::new();
-    for _ in 0..200 {
-        car = std::fs::read_to_string(&address_file).unwrap_or_default();
-        if !car.trim().is_empty() {
-            break;
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    let car = car.trim().to_owned();
-    assert!(car.starts_with("tcp://"), "{car:?}");
+    let (mut sim, car) = common::start_sim(tmp.path(), "car");
     let out = tmp.path().join("run");
     let args = [
         "run",

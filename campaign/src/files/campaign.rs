@@ -55,6 +55,35 @@ pub struct CampaignRecord {
     /// order, the first included; empty for a campaign that ran in one go.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub sessions: Vec<Session>,
+    /// The cars of a campaign on several cars (`drivecheck run --car A --car B …`), one entry
+    /// per car and session, in the order given; empty with one car.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub cars: Vec<CarRun>,
+}
+
+/// One car of a campaign on several cars: which tests it drove, and why it left if it did.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CarRun {
+    /// Its name (`A` of `--car A=tcp://…`, or `car1`, `car2`, … in the order given): what the
+    /// progress, the case files (`car`) and the live view call it.
+    pub name: String,
+    /// Its address as given (`tcp://…`, `udp://…`, `serial://…`).
+    pub address: String,
+    /// Its firmware version as it reported it (absent when it never answered).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub firmware: Option<String>,
+    /// The tests whose case files it wrote, in order (a test it was cut off in is not listed:
+    /// its partial case is kept as `case-NNN.partial-K.json` and another car drove it).
+    pub tests: Vec<usize>,
+    /// The session it drove in, from 1, for a resumed campaign (`sessions`); absent for a
+    /// campaign that ran in one go.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub session: Option<usize>,
+    /// Why it left the campaign before its end (its link was lost, preflight refused it, …);
+    /// absent when it stayed to the end.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub left: Option<String>,
 }
 
 /// One session of a resumed campaign: one `drivecheck run` (or `run --resume`) process.

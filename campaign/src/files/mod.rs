@@ -51,8 +51,8 @@ mod settings;
 mod twin;
 
 pub use campaign::{
-    CampaignRecord, CampaignSummary, CasesFrom, CoverageRecord, FaultCoverageRecord, ReplayOf,
-    Session,
+    CampaignRecord, CampaignSummary, CarRun, CasesFrom, CoverageRecord, FaultCoverageRecord,
+    ReplayOf, Session,
 };
 pub use case::{
     AppendRecord, Case, CommandRecord, FaultPlacementRecord, IntentRecord, PlaceRecord,

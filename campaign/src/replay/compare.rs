@@ -168,6 +168,7 @@ mod tests {
             },
             settings: None,
             car_profile: None,
+            car: None,
             no_faults: false,
             commands: vec![CommandRecord::RunSegments {
                 intent: None,

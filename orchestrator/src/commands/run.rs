@@ -66,15 +66,13 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
             loaded.source
         );
     }
-    let address: CarAddress = args
-        .car
-        .parse()
-        .with_context(|| format!("--car {}", args.car))?;
+    let cars = named_cars(&args.car)?;
+    let car_label = cars_label(&cars);
+    let address = cars[0].address.clone();
     let embedded = address == CarAddress::Sim;
     if args.profile.is_some() && !embedded {
         anyhow::bail!(
-            "--profile describes the embedded simulated car (--car sim), not the car at {}",
-            args.car
+            "--profile describes the embedded simulated car (--car sim), not the car at {car_label}"
         );
     }
     let profile = LoadedProfile::load(args.profile.as_deref())?;
@@ -111,7 +109,13 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         );
     }
     if args.dry_run {
-        return dry_run(args, &address, &scenario, &sim, campaign, cases);
+        for car in &cars {
+            let exit = dry_run(args, car, &scenario, &sim, campaign, cases.clone())?;
+            if exit != Exit::Success {
+                return Ok(exit);
+            }
+        }
+        return Ok(Exit::Success);
     }
     let made = args.out.is_none() && resumed.is_none();
     let out = match (&args.out, &resumed) {
@@ -133,7 +137,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     if let Some(file) = &args.junit {
         super::shared::check_output_file("--junit", file, &out)?;
     }
-    let mut config = RunConfig::new(campaign, out, args.car.clone());
+    let mut config = RunConfig::new(campaign, out, car_label.clone());
     config.safety.stale_after = args.stale_after;
     config.policy = match (args.on_failure, &cases) {
         (Some(OnFailure::Stop), _) => FailurePolicy::StopAtFailingSegment,
@@ -157,7 +161,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     if embedded {
         config.car_profile = Some(profile.clone());
     }
-    let jobs = jobs(args, embedded)?;
+    let jobs = jobs(args, embedded, &car_label)?;
     // A live view is for watching: a virtual-time campaign would be over before anyone looks.
     let virtual_time = embedded && !args.realtime && args.live.is_none();
     if let Some(resumed) = resumed {
@@ -168,14 +172,15 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     }
     if crate::output::chatty() {
         eprintln!(
-            "seed {seed}: {}{} tests on {} with car {}{}{}, writing {}",
+            "seed {seed}: {}{} tests on {} with car{} {}{}{}, writing {}",
             config.test_indices().len(),
             config
                 .shard
                 .map(|s| format!(" of {} (shard {s})", campaign.tests))
                 .unwrap_or_default(),
             scenario.name,
-            args.car,
+            if cars.len() > 1 { "s" } else { "" },
+            car_label,
             if virtual_time { " (virtual time)" } else { "" },
             if jobs > 1 {
                 format!(", {jobs} at once")
@@ -188,6 +193,12 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     let started = Instant::now();
     let result = if embedded {
         campaign_on_fresh_cars(&scenario, &sim, &mut config, jobs, virtual_time, args.live)
+    } else if cars.len() > 1 {
+        let runtime = runtime(false)?;
+        runtime.block_on(async {
+            let _server = start_live(args.live, &mut config).await?;
+            campaign_on_cars(&cars, &scenario, &config).await
+        })
     } else {
         let runtime = runtime(false)?;
         runtime.block_on(async {
@@ -242,27 +253,28 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
 /// them back, clears them, and says what it found; the car does not move and nothing is written.
 fn dry_run(
     args: &RunArgs,
-    address: &CarAddress,
+    car: &NamedCar,
     scenario: &Scenario,
     sim: &car_sim::SimConfig,
     campaign: Campaign,
     cases: Option<(CasesSource, FailurePolicy)>,
 ) -> Result<Exit> {
-    let mut config = RunConfig::new(campaign, std::path::PathBuf::new(), args.car.clone());
+    let address = &car.address;
+    let mut config = RunConfig::new(campaign, std::path::PathBuf::new(), car.given.clone());
     config.safety.stale_after = args.stale_after;
     config.shard = args.shard;
     config.cases = cases.map(|(cases, _)| cases);
     let found = runtime(false)?.block_on(async {
-        let (car, _sim) = connect(address, sim, campaign.seed).await?;
+        let (connected, _sim) = connect(address, sim, campaign.seed).await?;
         if crate::output::chatty() {
             eprintln!(
                 "connected to {} (firmware {}); preflight, then the first test's route and faults \
                  uploaded and read back, with the autopilot off",
-                args.car,
-                crate::vehicle::Vehicle::version(&car)
+                car.given,
+                crate::vehicle::Vehicle::version(&connected)
             );
         }
-        crate::runner::dry_run(&car, scenario, &config)
+        crate::runner::dry_run(&connected, scenario, &config)
             .await
             .map_err(anyhow::Error::from)
     })?;
@@ -271,7 +283,7 @@ fn dry_run(
     } else {
         println!(
             "dry run passed: the car at {} is ready (nothing was driven, nothing written)",
-            args.car
+            car.given
         );
         println!("  firmware {}", found.firmware);
         if !found.switched_off.is_empty() {
@@ -492,13 +504,12 @@ fn shrink_failed(
 
 /// How many tests run at once: `--jobs`, by default the cores for the embedded simulated car
 /// (one with a live view, which shows one car); a real car drives one test at a time.
-fn jobs(args: &RunArgs, embedded: bool) -> Result<usize> {
+fn jobs(args: &RunArgs, embedded: bool, car_label: &str) -> Result<usize> {
     let cores = std::thread::available_parallelism().map_or(1, usize::from);
     match (args.jobs, embedded, args.live) {
         (Some(n), false, _) if n > 1 => anyhow::bail!(
-            "--jobs {n}: a real car (--car {}) drives one test at a time; split a campaign over \
-             several cars with --shard K/N",
-            args.car
+            "--jobs {n}: a real car (--car {car_label}) drives one test at a time; give several \
+             cars (--car A=… --car B=…) to drive tests at once"
         ),
         (Some(n), true, Some(_)) if n > 1 => {
             anyhow::bail!("--jobs {n} with --live: the live view shows one car; use --jobs 1")
@@ -574,6 +585,138 @@ async fn campaign_on(
         interrupt.token(),
         &progress,
         sim_view(&sim),
+    )
+    .await;
+    progress.finish();
+    result
+        .map_err(|failure| anyhow::Error::new(CampaignFailed::new(failure.error, &config.out_dir)))
+}
+
+/// A car `--car` names.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct NamedCar {
+    /// Its name (`A` of `A=tcp://…`; `car1`, `car2`, … in the order given).
+    pub(super) name: String,
+    /// Its address.
+    pub(super) address: CarAddress,
+    /// The address as given.
+    pub(super) given: String,
+}
+
+/// The longest name of a car.
+const MAX_CAR_NAME: usize = 32;
+
+/// The cars of `--car` given `given` times: one car (any address), or several cars behind links,
+/// each with a name of its own (`NAME=ADDRESS`, or `car<k>` by its place) and an address of its
+/// own.
+pub(super) fn named_cars(given: &[String]) -> Result<Vec<NamedCar>> {
+    let mut cars: Vec<NamedCar> = Vec::new();
+    for (k, text) in given.iter().enumerate() {
+        // `NAME=` only when NAME is a name: an address may hold `=` (`serial://…?baud=…`).
+        let (name, address_text) = match text.split_once('=') {
+            Some((name, rest))
+                if !name.is_empty()
+                    && name
+                        .chars()
+                        .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_') =>
+            {
+                (name.to_owned(), rest)
+            }
+            _ => (format!("car{}", k + 1), text.as_str()),
+        };
+        if name.len() > MAX_CAR_NAME {
+            anyhow::bail!(
+                "--car {text}: the name {name:?} is longer than {MAX_CAR_NAME} characters"
+            );
+        }
+        let address: CarAddress = address_text
+            .parse()
+            .with_context(|| format!("--car {text}"))?;
+        if given.len() > 1 && address == CarAddress::Sim {
+            anyhow::bail!(
+                "--car {text}: the embedded simulated car gives every test a fresh car already; \
+                 run its tests at once with --jobs N, and give several --car only for cars behind \
+                 links (tcp://, udp://, serial://)"
+            );
+        }
+        if let Some(other) = cars.iter().find(|c| c.name == name) {
+            anyhow::bail!(
+                "--car {text}: the name {name} is already the car at {}; name each car once",
+                other.given
+            );
+        }
+        if let Some(other) = cars.iter().find(|c| c.address == address) {
+            anyhow::bail!(
+                "--car {text}: the car at {address_text} is already car {}: a car drives one test at a time",
+                other.name
+            );
+        }
+        cars.push(NamedCar {
+            name,
+            address,
+            given: address_text.to_owned(),
+        });
+    }
+    if cars.is_empty() {
+        anyhow::bail!("--car: no car given");
+    }
+    Ok(cars)
+}
+
+/// What `campaign.json` calls the cars: the address of one, `A=…, B=…` of several.
+fn cars_label(cars: &[NamedCar]) -> String {
+    match cars {
+        [one] => one.given.clone(),
+        several => several
+            .iter()
+            .map(|c| format!("{}={}", c.name, c.given))
+            .collect::<Vec<_>>()
+            .join(", "),
+    }
+}
+
+/// Connects to every car and runs the campaign on them together, interrupted by Ctrl-C. A car
+/// that cannot be connected leaves before the campaign starts (named); with none left, the
+/// campaign does not start.
+async fn campaign_on_cars(
+    cars: &[NamedCar],
+    scenario: &Scenario,
+    config: &RunConfig,
+) -> Result<CampaignReport, anyhow::Error> {
+    let sim = &car_sim::SimConfig::from_scenario(scenario);
+    let connecting = cars
+        .iter()
+        .map(|car| async move { (car, connect(&car.address, sim, config.campaign.seed).await) });
+    let mut connected = Vec::new();
+    let mut unreachable = Vec::new();
+    for (car, result) in futures::future::join_all(connecting).await {
+        match result {
+            Ok((vehicle, _)) => connected.push(crate::runner::LabCar {
+                name: car.name.clone(),
+                address: car.given.clone(),
+                car: vehicle,
+            }),
+            Err(error) => {
+                unreachable.push(format!("car {}: {:#}", car.name, anyhow::Error::new(error)))
+            }
+        }
+    }
+    if connected.is_empty() {
+        anyhow::bail!("no car could be connected: {}", unreachable.join("; "));
+    }
+    for text in &unreachable {
+        eprintln!("warning: {text}; the campaign goes on without it");
+    }
+    let interrupt = Interrupt::listen();
+    let vehicles: Vec<_> = connected.iter().map(|c| c.car.clone()).collect();
+    let _brake = interrupt.brake_all_on_second(&vehicles);
+    let progress = Progress::new(config.test_indices().len());
+    let result = crate::runner::run_campaign_on_cars(
+        &connected,
+        scenario,
+        config,
+        interrupt.token(),
+        &progress,
     )
     .await;
     progress.finish();

@@ -199,6 +199,10 @@ fn row(entry: &Entry) -> String {
                 0 | 1 => kind,
                 n => format!("{kind}, {n} sessions"),
             };
+            let kind = match r.cars.len() {
+                0 | 1 => kind,
+                n => format!("{kind}, {n} cars"),
+            };
             let planned = r.shard.map_or(r.settings.tests, |shard| {
                 shard.tests(r.settings.tests).count()
             });
@@ -460,6 +464,12 @@ fn show_campaign(dir: &Path, record: CampaignRecord, coverage: bool) -> Result<(
                 session.tests.len(),
                 session.end.as_deref().unwrap_or("running")
             );
+        }
+    }
+    if !record.cars.is_empty() {
+        println!("on {} cars:", record.cars.len());
+        for line in super::shared::cars_lines(&record.cars) {
+            println!("  {line}");
         }
     }
     if let Some(shard) = record.shard {

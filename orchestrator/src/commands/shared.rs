@@ -141,10 +141,23 @@ impl Interrupt {
     /// Registers `car` as the one the second signal brakes, until the returned guard is dropped
     /// (a registered car keeps its link, and so its keepalive, alive).
     pub(super) fn brake_on_second<V: Vehicle>(&self, car: &V) -> BrakeOnSecond {
-        let car = car.clone();
+        self.brake_all_on_second(std::slice::from_ref(car))
+    }
+
+    /// [`Interrupt::brake_on_second`] for every car of a campaign on several cars, braked at
+    /// once.
+    pub(super) fn brake_all_on_second<V: Vehicle>(&self, cars: &[V]) -> BrakeOnSecond {
+        let cars = cars.to_vec();
         let brake: Brake = Box::new(move |current_a| {
-            let car = car.clone();
-            Box::pin(async move { car.brake(current_a).await })
+            let cars = cars.clone();
+            Box::pin(async move {
+                let braked =
+                    futures::future::join_all(cars.iter().map(|car| car.brake(current_a))).await;
+                braked
+                    .into_iter()
+                    .collect::<Result<Vec<()>, CarError>>()
+                    .map(drop)
+            })
         });
         *lock(&self.car) = Some(brake);
         BrakeOnSecond {
@@ -279,6 +292,30 @@ struct Tally {
     started: std::time::Instant,
     last_status: std::time::Instant,
     last_percent: usize,
+    /// On several cars: the test each car drives (by car, in the order they started).
+    driving: Vec<(String, Option<usize>)>,
+}
+
+impl Tally {
+    /// The car that drives `test_index`, on several cars.
+    fn car_of(&self, test_index: usize) -> Option<&str> {
+        self.driving
+            .iter()
+            .find(|(_, t)| *t == Some(test_index))
+            .map(|(car, _)| car.as_str())
+    }
+
+    /// `car1: test 3, car2: test 4` (a car between tests says `reset`).
+    fn cars(&self) -> String {
+        self.driving
+            .iter()
+            .map(|(car, test)| match test {
+                Some(test) => format!("{car}: test {test}"),
+                None => format!("{car}: -"),
+            })
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
 }
 
 /// Up to this many tests, every test gets a line.
@@ -333,6 +370,7 @@ impl Progress {
                 started: now,
                 last_status: now,
                 last_percent: 0,
+                driving: Vec::new(),
             }),
         }
     }
@@ -388,6 +426,32 @@ impl CampaignObserver for Progress {
         self.bar.set_message(format!("test {test_index}: running"));
     }
 
+    fn test_started_on(&self, test_index: usize, car: &str) {
+        let Ok(mut tally) = self.state.lock() else {
+            return;
+        };
+        match tally.driving.iter_mut().find(|(c, _)| c == car) {
+            Some(driving) => driving.1 = Some(test_index),
+            None => tally.driving.push((car.to_owned(), Some(test_index))),
+        }
+        self.bar.set_message(tally.cars());
+        if self.lines && self.every_test && !self.quiet {
+            self.line(&format!("test {test_index}: started on car {car}"));
+        }
+    }
+
+    fn car_left(&self, car: &str, reason: &str) {
+        if let Ok(mut tally) = self.state.lock() {
+            tally.driving.retain(|(c, _)| c != car);
+            self.bar.set_message(tally.cars());
+        }
+        if !self.quiet {
+            self.line(&format!(
+                "car {car} left the campaign: {reason}; the other cars go on"
+            ));
+        }
+    }
+
     fn test_finished(&self, test_index: usize, verdict: Option<Verdict>) {
         self.bar.inc(1);
         if self.quiet {
@@ -399,7 +463,19 @@ impl CampaignObserver for Progress {
         };
         tally.done += 1;
         tally.not_passed += usize::from(!passed);
-        let word = verdict.map_or("not run", Verdict::as_str);
+        let on = tally
+            .car_of(test_index)
+            .map(|car| format!(" on car {car}"))
+            .unwrap_or_default();
+        if let Some(driving) = tally
+            .driving
+            .iter_mut()
+            .find(|(_, t)| *t == Some(test_index))
+        {
+            driving.1 = None;
+        }
+        let word = verdict.map_or("not run".to_owned(), |v| format!("{}{on}", v.as_str()));
+        let word = word.as_str();
         if self.every_test || !passed {
             if self.lines && self.every_test {
                 self.line(&format!(
@@ -533,6 +609,18 @@ fn print_summary(report: &CampaignReport, wall: Option<Duration>) {
     if let Some(why) = &s.uwb_not_tested {
         println!("UWB NOT TESTED: {why}");
     }
+    // This session's cars (a resumed campaign's earlier ones are in `runs show`).
+    let last = report.record.cars.last().and_then(|c| c.session);
+    let cars: Vec<_> = report
+        .record
+        .cars
+        .iter()
+        .filter(|c| c.session == last)
+        .cloned()
+        .collect();
+    for line in cars_lines(&cars) {
+        println!("{line}");
+    }
     let shown = listed_at_most();
     for file in s.failing_cases.iter().take(shown) {
         println!("  {}", report.dir.join(file).display());
@@ -544,6 +632,30 @@ fn print_summary(report: &CampaignReport, wall: Option<Duration>) {
         );
     }
     println!("run directory: {}", report.dir.display());
+}
+
+/// A line per car of a campaign on several cars: `car A (tcp://…): 12 tests`, or for a car that
+/// left, `car B (tcp://…): LEFT after 3 tests: <why>`.
+pub(super) fn cars_lines(cars: &[campaign::files::CarRun]) -> Vec<String> {
+    cars.iter()
+        .map(|car| {
+            let tests = match car.tests.len() {
+                1 => "1 test".to_owned(),
+                n => format!("{n} tests"),
+            };
+            let line = match &car.left {
+                Some(why) => format!(
+                    "car {} ({}): LEFT the campaign after {tests}: {why}",
+                    car.name, car.address
+                ),
+                None => format!("car {} ({}): {tests}", car.name, car.address),
+            };
+            match car.session {
+                Some(session) => format!("session {session}: {line}"),
+                None => line,
+            }
+        })
+        .collect()
 }
 
 /// Metres with two decimals, or `-`.

@@ -30,9 +30,12 @@ const MAX_HANDSHAKE: usize = 16 * 1024;
 #[derive(Clone)]
 pub struct LiveView {
     context: Arc<Context>,
-    /// The channels made so far: every recorder of the campaign (one per test when tests run on
-    /// fresh simulated cars) logs to the same channel of a topic.
-    channels: Arc<Mutex<HashMap<Topic, LiveChannel>>>,
+    /// The channels made so far, by car (`""` for a campaign on one car) and topic: every
+    /// recorder of the campaign (one per test when tests run on fresh simulated cars) logs to
+    /// the same channel of a topic.
+    channels: Arc<Mutex<HashMap<(String, Topic), LiveChannel>>>,
+    /// The car whose channels this view makes (see [`LiveView::for_car`]); empty for one car.
+    car: String,
     /// The last message of every latched channel, by channel id.
     latched: Latched,
 }
@@ -165,6 +168,7 @@ impl LiveView {
                 context,
                 channels: Arc::default(),
                 latched,
+                car: String::new(),
             },
             LiveServer {
                 _inner: inner,
@@ -181,10 +185,16 @@ impl LiveView {
         schema: &super::schema::ChannelSchema,
     ) -> Option<LiveChannel> {
         let mut channels = self.channels.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(channel) = channels.get(&topic) {
+        let key = (self.car.clone(), topic);
+        if let Some(channel) = channels.get(&key) {
             return Some(channel.clone());
         }
-        let channel = ChannelBuilder::new(topic.name())
+        let name = if self.car.is_empty() {
+            topic.name().to_owned()
+        } else {
+            format!("/{}{}", self.car, topic.name())
+        };
+        let channel = ChannelBuilder::new(name)
             .message_encoding(topic.encoding().name())
             .schema(Schema::new(
                 topic.schema_name(),
@@ -198,8 +208,19 @@ impl LiveView {
             raw: channel,
             latched: topic.is_latched().then(|| Arc::clone(&self.latched)),
         };
-        channels.insert(topic, channel.clone());
+        channels.insert(key, channel.clone());
         Some(channel)
+    }
+
+    /// The view of car `car` of a campaign on several cars: the same server, its channels named
+    /// `/<car>/car/state`, `/<car>/foxglove/rtk`, … so that every car is seen at once (the area
+    /// stays `/foxglove/area`, shared). `car` is a name `run --car` accepted (letters, digits,
+    /// `-`, `_`).
+    pub fn for_car(&self, car: &str) -> Self {
+        Self {
+            car: car.to_owned(),
+            ..self.clone()
+        }
     }
 }
 

@@ -41,6 +41,7 @@ fn spanned_recording(path: &Path) {
         cases_from: None,
         shard: None,
         sessions: Vec::new(),
+        cars: Vec::new(),
     };
     let origin = Instant::now();
     let start = RecordingStart {

@@ -42,6 +42,7 @@ fn campaign(s: &Scenario) -> CampaignRecord {
         cases_from: None,
         shard: None,
         sessions: Vec::new(),
+        cars: Vec::new(),
     }
 }
 

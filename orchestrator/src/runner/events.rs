@@ -19,6 +19,15 @@ pub trait CampaignObserver: Sync {
     fn tests_planned(&self, tests: usize);
     /// Test `test_index` starts (its reset, then its drive).
     fn test_started(&self, test_index: usize);
+    /// Test `test_index` starts on car `car` of a campaign on several cars.
+    fn test_started_on(&self, test_index: usize, car: &str) {
+        let _ = car;
+        self.test_started(test_index);
+    }
+    /// Car `car` left a campaign on several cars for `reason`; the others go on.
+    fn car_left(&self, car: &str, reason: &str) {
+        self.note(&format!("car {car} left the campaign: {reason}"));
+    }
     /// Test `test_index` ended with `verdict` (`None`: it did not run to one); its case file is
     /// written.
     fn test_finished(&self, test_index: usize, verdict: Option<Verdict>);

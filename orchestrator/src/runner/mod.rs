@@ -45,6 +45,7 @@ mod dry_run;
 mod events;
 mod fresh;
 mod journal;
+mod lab;
 mod pause;
 mod preflight;
 mod reset;
@@ -79,6 +80,7 @@ pub use dry_run::{DryRun, dry_run};
 pub use events::{CampaignObserver, Silent, SimulatorView};
 pub(crate) use fresh::SPAN_GAP_NS;
 pub use fresh::{Connecting, FreshCar, FreshCars, StartPose, run_campaign_fresh};
+pub use lab::{LabCar, run_campaign_on_cars};
 pub use pause::PAUSE_ENV;
 pub use run_dir::{
     CAMPAIGN_FILE, CampaignReport, DEFAULT_RUNS_DIR, RECORDING_FILE, RUNS_DIR_ENV, TestSummary,
@@ -283,6 +285,17 @@ pub enum RunError {
     Interrupted {
         /// The test that was running.
         test_index: usize,
+    },
+    /// Every car of a campaign on several cars left it before its tests were driven.
+    #[error(
+        "no car left to drive test {test_index} and those after it: {}",
+        cars.iter().map(|(car, reason)| format!("car {car}: {reason}")).collect::<Vec<_>>().join("; ")
+    )]
+    NoCarLeft {
+        /// The first test not driven.
+        test_index: usize,
+        /// Each car that left (its name) and why.
+        cars: Vec<(String, String)>,
     },
     /// A test could not be planned.
     #[error(transparent)]

@@ -11,8 +11,8 @@ use scenarios::Scenario;
 use super::{RunConfig, RunError};
 use campaign::coverage::CoverageBuilder;
 use campaign::files::{
-    CAMPAIGN_FORMAT, CAMPAIGN_SCHEMA_VERSION, CampaignRecord, CampaignSummary, Case, Header,
-    ScenarioRef, Session, Settings,
+    CAMPAIGN_FORMAT, CAMPAIGN_SCHEMA_VERSION, CampaignRecord, CampaignSummary, CarRun, Case,
+    Header, ScenarioRef, Session, Settings,
 };
 use campaign::oracle::Verdict;
 use campaign::safety::SafetyConfig;
@@ -131,6 +131,7 @@ impl RunDirectory {
             cases_from: config.cases.as_ref().map(|c| c.of.clone()),
             shard: config.shard,
             sessions: Vec::new(),
+            cars: Vec::new(),
         };
         Self::start(path, record, scenario)
     }
@@ -164,6 +165,7 @@ impl RunDirectory {
             ended_at: None,
             summary: None,
             sessions: Vec::new(),
+            cars: Vec::new(),
             ..record
         };
         Self::start(path, record, scenario)
@@ -184,6 +186,10 @@ impl RunDirectory {
         earlier: &[usize],
     ) -> Result<Self, RunError> {
         if record.sessions.is_empty() {
+            // The cars of a campaign on several cars drove its first session.
+            for car in &mut record.cars {
+                car.session.get_or_insert(1);
+            }
             record.sessions.push(Session {
                 started_at: record.started_at.clone(),
                 ended_at: record.ended_at.clone(),
@@ -292,11 +298,52 @@ impl RunDirectory {
         if let Some(session) = self.record.sessions.last_mut() {
             session.tests.push(test_index);
         }
+        if let Some(name) = &case.car
+            && let Some(car) = self.record.cars.iter_mut().rev().find(|c| &c.name == name)
+        {
+            car.tests.push(test_index);
+        }
         // In test order, also when a resumed campaign drives the tests it had not ended.
         let at = self.tests.partition_point(|t| t.test_index < test_index);
         self.tests.insert(at, summarise(test_index, file, &case));
         self.coverage.add(&case);
         Ok(())
+    }
+
+    /// Writes the case of a test that was cut off on a car that left a campaign on several cars
+    /// as `case-NNN.partial-K.json` (K from 1, after any partial kept before): another car
+    /// drives the test again, so it has no row.
+    pub(crate) fn write_partial(&mut self, case: &Case) -> Result<PathBuf, RunError> {
+        let test_index = case.test_index.unwrap_or(self.tests.len());
+        let k = partial_counts(&self.path)
+            .get(&test_index)
+            .copied()
+            .unwrap_or(0)
+            + 1;
+        let path = self
+            .path
+            .join(format!("case-{test_index:03}.partial-{k}.json"));
+        write(&path, &case.to_json()?)?;
+        Ok(path)
+    }
+
+    /// The cars of a campaign on several cars, as they start (added after those of the sessions
+    /// before).
+    pub(crate) fn add_cars(&mut self, cars: impl IntoIterator<Item = CarRun>) {
+        let session = (!self.record.sessions.is_empty()).then_some(self.record.sessions.len());
+        self.record
+            .cars
+            .extend(cars.into_iter().map(|car| CarRun { session, ..car }));
+    }
+
+    /// This session's car `name`: its firmware, why it left.
+    pub(crate) fn car_mut(&mut self, name: &str) -> Option<&mut CarRun> {
+        self.record.cars.iter_mut().rev().find(|c| c.name == name)
+    }
+
+    /// Writes `campaign.json` as it stands (a car left: the record says so before the end).
+    pub(crate) fn write_now(&self) -> Result<(), RunError> {
+        self.write_record()
     }
 
     /// Writes the final `campaign.json` (end time and summary) and returns the report.

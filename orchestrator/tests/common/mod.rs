@@ -144,3 +144,29 @@ pub fn documented(name: &str) -> String {
     let block = after.split("```sh\n").nth(1).unwrap();
     block.split("\n```").next().unwrap().trim().to_owned()
 }
+
+/// A `drivecheck sim` car listening on a free loopback port (its address file in `dir`, named
+/// after `name`), and its address (`tcp://127.0.0.1:PORT`). Kill the child when done.
+pub fn start_sim(dir: &Path, name: &str) -> (std::process::Child, String) {
+    let address_file = dir.join(format!("{name}.addr"));
+    let mut sim = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
+        .args(["sim", "--scenario", "parking-lot-2anchors", "--listen"])
+        .arg("127.0.0.1:0")
+        .arg("--address-file")
+        .arg(&address_file)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    for _ in 0..200 {
+        let car = std::fs::read_to_string(&address_file).unwrap_or_default();
+        if !car.trim().is_empty() {
+            let car = car.trim().to_owned();
+            assert!(car.starts_with("tcp://"), "{car:?}");
+            return (sim, car);
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let _ = (sim.kill(), sim.wait());
+    panic!("the simulated car {name} did not say its address within 10 s");
+}

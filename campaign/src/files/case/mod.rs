@@ -282,6 +282,10 @@ pub struct Case {
     /// case not yet run).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub car_profile: Option<super::CarProfileRef>,
+    /// The name of the car that drove it, in a campaign on several cars (`run --car A --car
+    /// B`); absent with one car.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub car: Option<String>,
     /// True when it ran without fault commands.
     #[serde(default)]
     pub no_faults: bool,
@@ -362,6 +366,7 @@ impl Case {
             scenario: ScenarioRef::of(scenario),
             settings: Some(settings),
             car_profile: None,
+            car: None,
             no_faults,
             commands: plan.commands.iter().map(CommandRecord::from).collect(),
             return_route: Vec::new(),

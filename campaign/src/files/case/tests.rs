@@ -138,6 +138,7 @@ fn a_campaign_record_survives_a_round_trip_through_json() {
         cases_from: None,
         shard: None,
         sessions: Vec::new(),
+        cars: Vec::new(),
     };
     let back = CampaignRecord::from_json(&record.to_json().unwrap()).unwrap();
     assert_eq!(back, record);
@@ -219,6 +220,7 @@ fn check_refuses_unusable_values() {
         },
         settings: None,
         car_profile: None,
+        car: None,
         no_faults: false,
         commands: vec![command],
         return_route: vec![],

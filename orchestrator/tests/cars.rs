@@ -1,0 +1,145 @@
+//! A campaign on several cars (`run --car A=… --car B=…`), end to end: two `drivecheck sim` cars
+//! over TCP in real time, the live view showing both, one car's simulator killed in the middle of
+//! its test: the other car drives that test again and the campaign ends with every test once and
+//! the lost car named. (That two cars take about half the time of one is measured in virtual time
+//! by `orchestrator/src/runner/lab.rs`'s tests, and in real time in docs/scaling.md.)
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::process::{Command, Stdio};
+use std::sync::mpsc;
+use std::time::Duration;
+
+use common::{path, start_sim};
+use futures::StreamExt;
+use serde_json::Value;
+use tokio_tungstenite::tungstenite::Message;
+use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+
+/// The topics the live view at `port` advertises within `within`.
+async fn advertised(port: u16, within: Duration) -> Vec<String> {
+    let mut topics = Vec::new();
+    let _ = tokio::time::timeout(within, async {
+        let mut request = format!("ws://127.0.0.1:{port}")
+            .into_client_request()
+            .unwrap();
+        request.headers_mut().insert(
+            "sec-websocket-protocol",
+            "foxglove.websocket.v1".parse().unwrap(),
+        );
+        let mut socket = loop {
+            match tokio_tungstenite::connect_async(request.clone()).await {
+                Ok((socket, _)) => break socket,
+                Err(_) => tokio::time::sleep(Duration::from_millis(100)).await,
+            }
+        };
+        while let Some(Ok(message)) = socket.next().await {
+            if let Message::Text(text) = message {
+                let json: Value = serde_json::from_str(&text).unwrap();
+                if json["op"] == "advertise" {
+                    for channel in json["channels"].as_array().unwrap() {
+                        topics.push(channel["topic"].as_str().unwrap().to_owned());
+                    }
+                }
+            }
+        }
+    })
+    .await;
+    topics
+}
+
+/// About 90 s of wall time: car A drives one test, car B is lost in the other, A drives it again.
+#[test]
+fn a_car_lost_mid_test_leaves_and_the_campaign_ends_on_the_other_with_every_test_once() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (mut sim_a, a) = start_sim(tmp.path(), "a");
+    let (mut sim_b, b) = start_sim(tmp.path(), "b");
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let out = tmp.path().join("run");
+    let mut run = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
+        .args(["run", "--seed", "3", "--tests", "2", "--out", path(&out)])
+        .args(["--car", &format!("A={a}"), "--car", &format!("B={b}")])
+        .arg("--live")
+        .arg(format!("127.0.0.1:{port}"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stderr = run.stderr.take().unwrap();
+    let (tx, rx) = mpsc::channel();
+    let reader = std::thread::spawn(move || {
+        let mut said = String::new();
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            if line.contains("started on car B") {
+                let _ = tx.send(());
+            }
+            said.push_str(&line);
+            said.push('\n');
+        }
+        said
+    });
+    let topics = tokio::runtime::Runtime::new()
+        .unwrap()
+        .block_on(advertised(port, Duration::from_secs(5)));
+    // B is in its test's reset or drive: its simulator dies.
+    rx.recv_timeout(Duration::from_secs(60))
+        .expect("car B never started a test");
+    std::thread::sleep(Duration::from_secs(8));
+    let _ = (sim_b.kill(), sim_b.wait());
+    let output = run.wait_with_output().unwrap();
+    let _ = (sim_a.kill(), sim_a.wait());
+    let said = reader.join().unwrap();
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        matches!(output.status.code(), Some(0 | 1)),
+        "{said}\n{stdout}"
+    );
+    for car in ["A", "B"] {
+        for topic in ["car/state", "foxglove/rtk", "foxglove/uwb"] {
+            let topic = format!("/{car}/{topic}");
+            assert!(topics.contains(&topic), "{topic} not in {topics:?}");
+        }
+    }
+    assert!(topics.contains(&"/foxglove/area".to_owned()), "{topics:?}");
+    assert!(said.contains("car B left the campaign"), "{said}");
+    assert!(stdout.contains("car B (tcp://"), "{stdout}");
+    assert!(
+        stdout.contains("LEFT the campaign after 0 tests"),
+        "{stdout}"
+    );
+    let record: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("campaign.json")).unwrap()).unwrap();
+    assert_eq!(record["summary"]["tests"], 2, "{record}");
+    let cars = record["cars"].as_array().unwrap();
+    assert_eq!(cars[0]["name"], "A");
+    assert_eq!(cars[0]["tests"].as_array().unwrap().len(), 2, "{record}");
+    assert!(cars[0].get("left").is_none(), "{record}");
+    assert_eq!(cars[1]["name"], "B");
+    assert!(
+        cars[1]["left"].as_str().unwrap().contains("link"),
+        "{record}"
+    );
+    let mut names: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with("case-"))
+        .collect();
+    names.sort();
+    assert_eq!(names.len(), 3, "{names:?}");
+    let partial = names.iter().find(|n| n.contains(".partial-1")).unwrap();
+    let case = |name: &str| -> Value {
+        serde_json::from_str(&std::fs::read_to_string(out.join(name)).unwrap()).unwrap()
+    };
+    assert_eq!(case(partial)["car"], "B");
+    for name in ["case-000.json", "case-001.json"] {
+        assert_eq!(case(name)["car"], "A", "{name}");
+    }
+    let recording = orchestrator::recording::Recording::read(&out.join("campaign.mcap")).unwrap();
+    assert!(recording.is_complete());
+}
