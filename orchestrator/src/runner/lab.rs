@@ -251,7 +251,8 @@ async fn drive_car<V: Vehicle>(lab: &Lab<'_>, k: usize, car: &LabCar<V>) {
     .await;
     let (ctx, mut telemetry, preflight) = match session {
         Ok(session) => session,
-        Err(error) => return lab.leave(&car.name, &error.to_string()),
+        Err(error @ RunError::Preflight(_)) => return lab.leave(&car.name, &error.to_string()),
+        Err(error) => return lab.leave(&car.name, &format!("preflight: {error}")),
     };
     lab.ready(car, &preflight.switched_off, &ctx);
     let settings = lab
@@ -534,6 +535,24 @@ mod tests {
             .filter(|n| n.contains(".partial-"))
             .collect();
         assert_eq!(partials, ["case-001.partial-1.json"]);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_car_that_fails_its_preflight_leaves_and_the_others_drive_every_test() {
+        let (dir, result, _) = lab_campaign(3, 2, Some((0, Duration::ZERO))).await;
+        let report = result.unwrap();
+        assert_eq!(report.tests.len(), 3);
+        let record = record(&dir);
+        assert!(
+            record.cars[0]
+                .left
+                .as_deref()
+                .unwrap()
+                .contains("preflight"),
+            "{record:?}"
+        );
+        assert_eq!(record.cars[0].firmware, None);
+        assert_eq!(record.cars[1].tests, [0, 1, 2]);
     }
 
     #[tokio::test(start_paused = true)]
