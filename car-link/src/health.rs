@@ -38,36 +38,37 @@ pub struct LinkHealth {
 /// Accumulates health figures; snapshots are taken with [`HealthRecorder::snapshot`].
 #[derive(Debug, Default)]
 pub(crate) struct HealthRecorder {
+    /// The window's round trips in the order they ended.
     rtts: VecDeque<Duration>,
+    /// The same round trips, sorted: the percentiles are read off it.
+    sorted: Vec<Duration>,
     pub(crate) figures: LinkHealth,
     /// When the car last sent a valid frame.
     pub(crate) last_heard: Option<Instant>,
-    /// The round-trip percentiles (p50, p99) of `rtts`, until the next round trip.
-    percentiles: Option<(Option<Duration>, Option<Duration>)>,
 }
 
 impl HealthRecorder {
     pub(crate) fn record_rtt(&mut self, rtt: Duration) {
-        if self.rtts.len() == RTT_WINDOW {
-            self.rtts.pop_front();
+        // A runner asks for a snapshot at every turn of its loop and a round trip ends at every
+        // state sample: the window is kept sorted as it slides (a binary search and a shift of at
+        // most 1024 durations), where selecting the percentiles from a copy of the window at
+        // every new round trip was a tenth of a simulated campaign's time.
+        if self.rtts.len() == RTT_WINDOW
+            && let Some(oldest) = self.rtts.pop_front()
+            && let Ok(at) = self.sorted.binary_search(&oldest)
+        {
+            self.sorted.remove(at);
         }
         self.rtts.push_back(rtt);
-        self.percentiles = None;
+        let at = self.sorted.partition_point(|d| *d <= rtt);
+        self.sorted.insert(at, rtt);
         self.figures.answered += 1;
     }
 
     pub(crate) fn snapshot(&mut self) -> LinkHealth {
-        // A runner asks for a snapshot at every turn of its loop, far more often than a round
-        // trip ends: the percentiles are computed once per new round trip (sorting the window at
-        // every snapshot was a sixth of a simulated campaign's time).
-        let rtts = &self.rtts;
-        let (rtt_p50, rtt_p99) = *self.percentiles.get_or_insert_with(|| {
-            let mut rtts: Vec<Duration> = rtts.iter().copied().collect();
-            (select(&mut rtts, 50), select(&mut rtts, 99))
-        });
         LinkHealth {
-            rtt_p50,
-            rtt_p99,
+            rtt_p50: percentile(&self.sorted, 50),
+            rtt_p99: percentile(&self.sorted, 99),
             silent_for: self.last_heard.map(|heard| heard.elapsed()),
             ..self.figures.clone()
         }
@@ -86,36 +87,32 @@ pub fn percentile(sorted: &[Duration], pct: usize) -> Option<Duration> {
     sorted.get(rank - 1).copied()
 }
 
-/// [`percentile`] of unsorted samples (reordered in place), in linear time.
-fn select(samples: &mut [Duration], pct: usize) -> Option<Duration> {
-    if samples.is_empty() {
-        return None;
-    }
-    let rank = (pct * samples.len()).div_ceil(100).clamp(1, samples.len());
-    Some(*samples.select_nth_unstable(rank - 1).1)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
-    fn selected_percentiles_are_the_sorted_ones() {
+    fn the_sliding_window_gives_the_percentiles_of_its_round_trips_sorted() {
         let mut noise = 12_345_u64;
-        let mut samples: Vec<Duration> = (0..777)
-            .map(|_| {
-                noise = noise
-                    .wrapping_mul(6_364_136_223_846_793_005)
-                    .wrapping_add(1);
-                Duration::from_micros(noise >> 52)
-            })
-            .collect();
-        let mut sorted = samples.clone();
-        sorted.sort_unstable();
-        for pct in [0, 1, 50, 99, 100] {
-            assert_eq!(select(&mut samples, pct), percentile(&sorted, pct), "{pct}");
+        let mut recorder = HealthRecorder::default();
+        let mut all = Vec::new();
+        for n in 1..=3 * RTT_WINDOW {
+            noise = noise
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1);
+            // Few distinct values: ties leave the window too.
+            let rtt = Duration::from_micros(noise >> 58);
+            recorder.record_rtt(rtt);
+            all.push(rtt);
+            if n % 97 == 0 || n == RTT_WINDOW || n == RTT_WINDOW + 1 {
+                let mut window = all[all.len().saturating_sub(RTT_WINDOW)..].to_vec();
+                window.sort_unstable();
+                let health = recorder.snapshot();
+                assert_eq!(health.rtt_p50, percentile(&window, 50), "{n}");
+                assert_eq!(health.rtt_p99, percentile(&window, 99), "{n}");
+                assert_eq!(recorder.sorted, window, "{n}");
+            }
         }
-        assert_eq!(select(&mut [], 50), None);
     }
 
     #[test]
