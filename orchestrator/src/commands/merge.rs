@@ -558,7 +558,12 @@ fn write_span(recorder: &mut Recorder, span: Span, offset_ns: &mut u64) -> Resul
     recorder.write_held(span.messages, shift)?;
     let length = span.end_ns.saturating_sub(span.start_ns);
     if let Some(test_index) = span.test_index {
-        recorder.test_span(test_index, *offset_ns, *offset_ns + length)?;
+        recorder.test_span(
+            test_index,
+            *offset_ns,
+            *offset_ns + length,
+            span.car.as_deref(),
+        )?;
     } else {
         recorder.flush()?;
     }

@@ -474,6 +474,8 @@ pub struct Span {
     pub start_ns: u64,
     /// Log time of its last message, ns.
     pub end_ns: u64,
+    /// The car that drove it, in a campaign on several cars.
+    pub car: Option<String>,
     /// Its messages, in file order.
     pub messages: Vec<super::Held>,
 }
@@ -564,6 +566,7 @@ impl<R: Read> Spans<R> {
             test_index: None,
             start_ns,
             end_ns,
+            car: None,
             messages,
         })
     }
@@ -633,6 +636,7 @@ impl<R: Read> Iterator for Spans<R> {
                         test_index: Some(test_index as usize),
                         start_ns,
                         end_ns,
+                        car: m.metadata.get("car").cloned(),
                         messages,
                     }));
                 }

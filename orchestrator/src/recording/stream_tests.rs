@@ -70,7 +70,7 @@ fn spanned_recording(path: &Path) {
         }
         let ns = |ms: u64| ms * 1_000_000;
         recorder
-            .test_span(test_index, ns(start_ms), ns(start_ms + 50))
+            .test_span(test_index, ns(start_ms), ns(start_ms + 50), None)
             .unwrap();
     }
     recorder.finish().unwrap();

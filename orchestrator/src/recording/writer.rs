@@ -442,18 +442,23 @@ impl Recorder {
 
     /// Records that test `test_index`'s messages span `start_ns..=end_ns` of log time (a
     /// `drivecheck.test.<index>` metadata record): how `drivecheck runs merge` finds each test's
-    /// messages in a shard's recording.
+    /// messages in a shard's recording. On several cars, `car` names the car that drove it
+    /// (a `car` entry).
     pub fn test_span(
         &mut self,
         test_index: usize,
         start_ns: u64,
         end_ns: u64,
+        car: Option<&str>,
     ) -> Result<(), RecordingError> {
-        let entries = [
+        let mut entries = vec![
             ("test_index", test_index.to_string()),
             ("start_ns", start_ns.to_string()),
             ("end_ns", end_ns.to_string()),
         ];
+        if let Some(car) = car {
+            entries.push(("car", car.to_owned()));
+        }
         self.metadata(&format!("{TEST_SPAN_PREFIX}{test_index}"), &entries)
     }
 

@@ -365,7 +365,7 @@ fn write_test<C: FreshCars + ?Sized>(
     if keep && !ran.held.is_empty() {
         let last = ran.held.iter().map(Held::log_time).max().unwrap_or(0);
         journal.write_held(ran.held, order.offset_ns);
-        journal.test_span(test_index, order.offset_ns, order.offset_ns + last);
+        journal.test_span(test_index, order.offset_ns, order.offset_ns + last, None);
         order.offset_ns += last + SPAN_GAP_NS;
     }
     observer.test_finished(test_index, ran.case.verdict);

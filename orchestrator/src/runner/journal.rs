@@ -164,8 +164,14 @@ impl<'a> Journal<'a> {
     }
 
     /// Records the span of log time of test `test_index`'s messages.
-    pub(crate) fn test_span(&self, test_index: usize, start_ns: u64, end_ns: u64) {
-        self.with(|r| r.test_span(test_index, start_ns, end_ns));
+    pub(crate) fn test_span(
+        &self,
+        test_index: usize,
+        start_ns: u64,
+        end_ns: u64,
+        car: Option<&str>,
+    ) {
+        self.with(|r| r.test_span(test_index, start_ns, end_ns, car));
     }
 
     /// Writes the open chunk to the file (end of a test).

@@ -346,8 +346,12 @@ impl Lab<'_> {
             let offset = state.offset_ns;
             // Shifted so that the first message is at `offset` (wrapping: the shift may be back).
             self.journal.write_held(held, offset.wrapping_sub(first));
-            self.journal
-                .test_span(test_index, offset, offset + (last - first));
+            self.journal.test_span(
+                test_index,
+                offset,
+                offset + (last - first),
+                case.car.as_deref(),
+            );
             state.offset_ns = offset + (last - first) + SPAN_GAP_NS;
         }
         drop(state);
@@ -511,10 +515,28 @@ mod tests {
                 .unwrap();
             assert_eq!(case.car.as_deref(), Some(car.name.as_str()));
         }
-        // One recording, a span per test, no two spans overlapping.
-        let recording =
-            crate::recording::Recording::read(&dir.path().join("run/campaign.mcap")).unwrap();
-        assert!(recording.is_complete());
+        // One recording, a span per test naming its car, no two spans overlapping.
+        let path = dir.path().join("run/campaign.mcap");
+        assert!(
+            crate::recording::Recording::read(&path)
+                .unwrap()
+                .is_complete()
+        );
+        let spans = crate::recording::Spans::open(&path).unwrap();
+        let mut seen = Vec::new();
+        for span in spans {
+            let span = span.unwrap();
+            let Some(test_index) = span.test_index else {
+                continue;
+            };
+            let case = two.case(&two.tests[test_index]).unwrap();
+            assert_eq!(span.car, case.car, "test {test_index}");
+            assert!(!span.messages.is_empty());
+            seen.push((span.start_ns, span.end_ns, test_index));
+        }
+        seen.sort_unstable();
+        assert_eq!(seen.len(), 6);
+        assert!(seen.windows(2).all(|w| w[0].1 < w[1].0), "{seen:?}");
     }
 
     #[tokio::test(start_paused = true)]

@@ -565,7 +565,7 @@ pub(crate) fn continue_recording(
             Some(test) if resume.kept.contains(&test) => {
                 end_ns = end_ns.max(span.end_ns);
                 recorder.write_held(span.messages, 0)?;
-                recorder.test_span(test, span.start_ns, span.end_ns)?;
+                recorder.test_span(test, span.start_ns, span.end_ns, span.car.as_deref())?;
             }
             // A test driven again, or what follows the last test of a spanned recording (a
             // test whose span was never closed).
