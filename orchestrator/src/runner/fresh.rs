@@ -28,11 +28,11 @@ use trajgen::Point;
 use super::journal::Journal;
 use super::run_dir::RunDirectory;
 use super::{
-    CampaignFailure, CampaignObserver, CampaignReport, RECORDING_FILE, RecordMode, RunConfig,
-    RunError, SimulatorView, TestEnd, TestSource, finish_campaign, open_session, plan_and_run,
+    CampaignFailure, CampaignObserver, CampaignReport, RecordMode, RunConfig, RunError,
+    SimulatorView, TestEnd, TestSource, finish_campaign, open_session, plan_and_run,
     record_test_end, reset, start_join_note, switched_off_note,
 };
-use crate::recording::{DEFAULT_CHUNK_INTERVAL, Held, Recorder, RecordingStart};
+use crate::recording::{Held, Recorder};
 use crate::vehicle::Vehicle;
 use campaign::files::{Case, Settings};
 use campaign::model::TestPlan;
@@ -150,46 +150,11 @@ pub fn run_campaign_fresh<C: FreshCars + ?Sized>(
     let settings = Settings::new(scenario, config.campaign.tests, config.policy);
     let mut dir = RunDirectory::create(config, scenario, settings.clone())
         .map_err(CampaignFailure::without_report)?;
-    let started = match (config.record, config.live.as_ref()) {
-        // Nothing kept, but a live view still gets the area (and each test its messages).
-        (RecordMode::None, Some(live)) => {
-            Recorder::live_only(origin, true, 1, live, Some(scenario)).map(Some)
-        }
-        (RecordMode::None, None) => Ok(None),
-        (RecordMode::All | RecordMode::Failing, _) => {
-            let start = RecordingStart {
-                campaign: dir.record(),
-                scenario,
-                origin,
-                simulated: true,
-                chunk_interval: DEFAULT_CHUNK_INTERVAL,
-                // The area goes out to the live view from here; the tests' messages from their
-                // own recorders.
-                live: config.live.as_ref(),
-                test_spans: true,
-                sim_profile: config.car_profile.as_ref(),
-            };
-            Recorder::create(&dir.path().join(RECORDING_FILE), &start).map(Some)
-        }
-    };
-    let mut recorder = match started {
-        Ok(recorder) => recorder,
-        Err(error) => return Err(super::recording_not_started(dir, error)),
-    };
-    // A resumed campaign's tests follow those of the sessions before in the recording.
-    let mut first_offset_ns = SPAN_GAP_NS;
-    if let (Some(resume), Some(recorder)) = (&config.resume, recorder.as_mut())
-        && config.record != RecordMode::None
-    {
-        match super::continue_recording(recorder, resume, observer) {
-            Ok(after_ns) => first_offset_ns = first_offset_ns.max(after_ns),
+    let (journal, first_offset_ns) =
+        match super::spanned_journal(config, scenario, &dir, origin, true, observer) {
+            Ok(opened) => opened,
             Err(error) => return Err(super::recording_not_started(dir, error)),
-        }
-    }
-    let journal = match recorder.take() {
-        Some(recorder) => Journal::new(recorder, None),
-        None => Journal::without_recording(None),
-    };
+        };
     let result = prepare(scenario, config, cars, cancel, settings).and_then(|shared| {
         run_tests(
             &shared,

@@ -30,11 +30,11 @@ use trajgen::Point;
 use super::journal::Journal;
 use super::run_dir::RunDirectory;
 use super::{
-    CampaignFailure, CampaignObserver, CampaignReport, RECORDING_FILE, RecordMode, RunConfig,
-    RunError, SPAN_GAP_NS, TestEnd, TestSource, finish_campaign, open_session, plan_and_run,
-    record_test_end, reset, start_join_note, switched_off_note,
+    CampaignFailure, CampaignObserver, CampaignReport, RecordMode, RunConfig, RunError,
+    SPAN_GAP_NS, TestEnd, TestSource, finish_campaign, open_session, plan_and_run, record_test_end,
+    reset, start_join_note, switched_off_note,
 };
-use crate::recording::{DEFAULT_CHUNK_INTERVAL, Held, Recorder, RecordingStart};
+use crate::recording::{Held, Recorder};
 use crate::vehicle::Vehicle;
 use campaign::files::{CarRun, Case, Settings};
 use campaign::oracle::Verdict;
@@ -136,42 +136,11 @@ pub async fn run_campaign_on_cars<V: Vehicle>(
         session: None,
         left: None,
     }));
-    let started = match (config.record, config.live.as_ref()) {
-        (RecordMode::None, Some(live)) => {
-            Recorder::live_only(origin, false, 1, live, Some(scenario)).map(Some)
-        }
-        (RecordMode::None, None) => Ok(None),
-        (RecordMode::All | RecordMode::Failing, _) => {
-            let start = RecordingStart {
-                campaign: dir.record(),
-                scenario,
-                origin,
-                simulated: false,
-                chunk_interval: DEFAULT_CHUNK_INTERVAL,
-                live: config.live.as_ref(),
-                test_spans: true,
-                sim_profile: None,
-            };
-            Recorder::create(&dir.path().join(RECORDING_FILE), &start).map(Some)
-        }
-    };
-    let mut recorder = match started {
-        Ok(recorder) => recorder,
-        Err(error) => return Err(super::recording_not_started(dir, error)),
-    };
-    let mut offset_ns = SPAN_GAP_NS;
-    if let (Some(resume), Some(recorder)) = (&config.resume, recorder.as_mut())
-        && config.record != RecordMode::None
-    {
-        match super::continue_recording(recorder, resume, observer) {
-            Ok(after_ns) => offset_ns = offset_ns.max(after_ns),
+    let (journal, offset_ns) =
+        match super::spanned_journal(config, scenario, &dir, origin, false, observer) {
+            Ok(opened) => opened,
             Err(error) => return Err(super::recording_not_started(dir, error)),
-        }
-    }
-    let journal = match recorder {
-        Some(recorder) => Journal::new(recorder, None),
-        None => Journal::without_recording(None),
-    };
+        };
     let result = match prepare(scenario, config) {
         Ok((tests, start_join)) => {
             let indices = config.test_indices();

@@ -588,6 +588,61 @@ pub(crate) fn continue_recording(
     Ok(if end_ns == 0 { 0 } else { end_ns + SPAN_GAP_NS })
 }
 
+/// The journal of a campaign whose tests are recorded in memory and written whole, one after
+/// another, each with its span (fresh simulated cars, `fresh`; several cars, `lab`): the
+/// recording as `config.record` asks (nothing but a live view's area with `--record none
+/// --live`), a resumed campaign's earlier sessions copied first. Returns it with the log time
+/// where the first test's messages go.
+pub(crate) fn spanned_journal<'a>(
+    config: &RunConfig,
+    scenario: &Scenario,
+    dir: &RunDirectory,
+    origin: tokio::time::Instant,
+    simulated: bool,
+    observer: &dyn CampaignObserver,
+) -> Result<(Journal<'a>, u64), RecordingError> {
+    let recorder = match (config.record, config.live.as_ref()) {
+        // Nothing kept, but a live view still gets the area (and each test its messages).
+        (RecordMode::None, Some(live)) => Some(Recorder::live_only(
+            origin,
+            simulated,
+            1,
+            live,
+            Some(scenario),
+        )?),
+        (RecordMode::None, None) => None,
+        (RecordMode::All | RecordMode::Failing, _) => {
+            let start = RecordingStart {
+                campaign: dir.record(),
+                scenario,
+                origin,
+                simulated,
+                chunk_interval: DEFAULT_CHUNK_INTERVAL,
+                // The area goes out to the live view from here; the tests' messages from their
+                // own recorders.
+                live: config.live.as_ref(),
+                test_spans: true,
+                sim_profile: config.car_profile.as_ref().filter(|_| simulated),
+            };
+            Some(Recorder::create(&dir.path().join(RECORDING_FILE), &start)?)
+        }
+    };
+    let mut first_offset_ns = SPAN_GAP_NS;
+    Ok(match recorder {
+        Some(mut recorder) => {
+            // A resumed campaign's tests follow those of the sessions before.
+            if let Some(resume) = &config.resume
+                && config.record != RecordMode::None
+            {
+                first_offset_ns =
+                    first_offset_ns.max(continue_recording(&mut recorder, resume, observer)?);
+            }
+            (Journal::new(recorder, None), first_offset_ns)
+        }
+        None => (Journal::without_recording(None), first_offset_ns),
+    })
+}
+
 /// Does the recording `spans` reads give a span per test (the embedded simulator's)?
 fn spans_claim_tests<R: std::io::Read>(spans: &crate::recording::Spans<R>) -> bool {
     spans
