@@ -280,33 +280,8 @@ fn the_kubernetes_and_slurm_examples_run_as_shell_and_merge() {
 #[test]
 fn two_simulated_cars_on_one_machine_take_a_free_port_each_and_say_which() {
     let dir = tempfile::tempdir().unwrap();
-    let start = |name: &str| {
-        let file = dir.path().join(name);
-        let child = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
-            .args(["sim", "--scenario", "parking-lot-2anchors", "--listen"])
-            .arg("127.0.0.1:0")
-            .arg("--address-file")
-            .arg(&file)
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .unwrap();
-        (child, file)
-    };
-    let (mut a, file_a) = start("a.addr");
-    let (mut b, file_b) = start("b.addr");
-    let read = |file: &Path| {
-        for _ in 0..200 {
-            if let Ok(text) = std::fs::read_to_string(file)
-                && !text.is_empty()
-            {
-                return text.trim().to_owned();
-            }
-            std::thread::sleep(std::time::Duration::from_millis(50));
-        }
-        panic!("{} was not written", file.display());
-    };
-    let (addr_a, addr_b) = (read(&file_a), read(&file_b));
+    let (mut a, addr_a) = common::start_sim(dir.path(), "a");
+    let (mut b, addr_b) = common::start_sim(dir.path(), "b");
     let _ = (a.kill(), b.kill(), a.wait(), b.wait());
     assert!(addr_a.starts_with("tcp://127.0.0.1:"), "{addr_a}");
     assert!(addr_b.starts_with("tcp://127.0.0.1:"), "{addr_b}");
