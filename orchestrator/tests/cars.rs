@@ -112,6 +112,8 @@ fn a_car_lost_mid_test_leaves_and_the_campaign_ends_on_the_other_with_every_test
         stdout.contains("LEFT the campaign after 0 tests"),
         "{stdout}"
     );
+    assert!(stdout.contains("| test | car | verdict |"), "{stdout}");
+    assert!(stdout.contains("| 0 | A | "), "{stdout}");
     let record: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("campaign.json")).unwrap()).unwrap();
     assert_eq!(record["summary"]["tests"], 2, "{record}");

@@ -570,11 +570,21 @@ pub(super) fn print_report_json(
 
 /// The table of `tests`.
 fn print_table(tests: &[&crate::runner::TestSummary]) {
-    println!("| test | verdict | worst deviation | starvations | smallest margin | reason |");
-    println!("|---|---|---|---|---|---|");
+    // On several cars, which car drove each test.
+    let cars = tests.iter().any(|t| t.car.is_some());
+    let (car_head, car_rule) = if cars { (" car |", "---|") } else { ("", "") };
+    println!(
+        "| test |{car_head} verdict | worst deviation | starvations | smallest margin | reason |"
+    );
+    println!("|---|{car_rule}---|---|---|---|---|");
     for t in tests {
+        let car = if cars {
+            format!(" {} |", t.car.as_deref().unwrap_or("-"))
+        } else {
+            String::new()
+        };
         println!(
-            "| {} | {} | {} | {} | {} | {} |",
+            "| {} |{car} {} | {} | {} | {} | {} |",
             t.test_index,
             t.verdict.map_or("not run", Verdict::as_str),
             metres(t.worst_deviation_m),

@@ -40,6 +40,9 @@ pub struct TestSummary {
     pub starvations: usize,
     /// The smallest margin left at an append, seconds.
     pub smallest_margin_s: Option<f64>,
+    /// The car that drove it, in a campaign on several cars.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub car: Option<String>,
     /// It was cut off (aborted `interrupted` or `link lost`): `run --resume` drives it again.
     #[serde(skip)]
     pub cut_off: bool,
@@ -435,6 +438,7 @@ fn summarise(test_index: usize, file: String, case: &Case) -> TestSummary {
             .max_by(f64::total_cmp),
         starvations: streaming.map_or(0, |s| s.starvations_ms.len()),
         smallest_margin_s: streaming.and_then(|s| s.smallest_margin_s),
+        car: case.car.clone(),
         cut_off: is_cut_off(case),
     }
 }
