@@ -62,7 +62,16 @@ fn a_car_lost_mid_test_leaves_and_the_campaign_ends_on_the_other_with_every_test
         .port();
     let out = tmp.path().join("run");
     let mut run = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
-        .args(["run", "--seed", "3", "--tests", "2", "--out", path(&out)])
+        .args([
+            "run",
+            "--seed",
+            "3",
+            "--tests",
+            "2",
+            "--report",
+            "--out",
+            path(&out),
+        ])
         .args(["--car", &format!("A={a}"), "--car", &format!("B={b}")])
         .arg("--live")
         .arg(format!("127.0.0.1:{port}"))
@@ -142,6 +151,11 @@ fn a_car_lost_mid_test_leaves_and_the_campaign_ends_on_the_other_with_every_test
     for name in ["case-000.json", "case-001.json"] {
         assert_eq!(case(name)["car"], "A", "{name}");
     }
+    let report = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(
+        report.contains("<b>left the campaign</b>: test "),
+        "the report names the lost car"
+    );
     let recording = orchestrator::recording::Recording::read(&out.join("campaign.mcap")).unwrap();
     assert!(recording.is_complete());
 }

@@ -679,6 +679,27 @@ pub(crate) fn campaign_top(
             escape(record.car_firmware_version.as_deref().unwrap_or("unknown"))
         ),
     );
+    // On several cars, each car: its tests, and why it left if it did.
+    for car in &record.cars {
+        fact(
+            out,
+            &match car.session {
+                Some(session) => format!("car {} (session {session})", car.name),
+                None => format!("car {}", car.name),
+            },
+            &format!(
+                "{}, firmware {}: {} test{}{}",
+                escape(&car.address),
+                escape(car.firmware.as_deref().unwrap_or("unknown")),
+                car.tests.len(),
+                if car.tests.len() == 1 { "" } else { "s" },
+                car.left
+                    .as_deref()
+                    .map(|why| format!("; <b>left the campaign</b>: {}", escape(why)))
+                    .unwrap_or_default()
+            ),
+        );
+    }
     if let Some(of) = &record.replay_of {
         fact(out, "replay of", &escape(&of.case));
     }
