@@ -159,3 +159,40 @@ fn a_car_lost_mid_test_leaves_and_the_campaign_ends_on_the_other_with_every_test
     let recording = orchestrator::recording::Recording::read(&out.join("campaign.mcap")).unwrap();
     assert!(recording.is_complete());
 }
+
+/// Cars that cannot drive one campaign together are refused before anything connects, naming
+/// the `--car` at fault; nothing is written.
+#[test]
+fn cars_that_cannot_share_a_campaign_are_refused_by_name() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("run");
+    let refused = |cars: &[&str], extra: &[&str], says: &str| {
+        let mut args = vec!["run", "--tests", "1", "--out", path(&out)];
+        for car in cars {
+            args.extend(["--car", car]);
+        }
+        args.extend(extra);
+        let ran = common::drivecheck(&args);
+        assert_eq!(ran.status.code(), Some(2), "{}", common::text(&ran));
+        assert!(common::text(&ran).contains(says), "{}", common::text(&ran));
+        assert!(!out.exists());
+    };
+    let (a, b) = ("tcp://127.0.0.1:9", "tcp://127.0.0.1:10");
+    refused(
+        &["sim", b],
+        &[],
+        "--car sim: the embedded simulated car gives every test a fresh car already",
+    );
+    refused(
+        &[&format!("x={a}"), &format!("x={b}")],
+        &[],
+        "the name x is already the car at",
+    );
+    refused(&[a, a], &[], "is already car car1");
+    refused(
+        &[a, b],
+        &["--jobs", "2"],
+        "several cars drive their tests at once already",
+    );
+    refused(&["a b=tcp://x:1", b], &[], "--car a b=tcp://x:1");
+}

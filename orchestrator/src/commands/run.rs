@@ -282,7 +282,12 @@ fn dry_run(
         crate::output::print_json("run --dry-run", &found)?;
     } else {
         println!(
-            "dry run passed: the car at {} is ready (nothing was driven, nothing written)",
+            "dry run passed: {}the car at {} is ready (nothing was driven, nothing written)",
+            if args.car.len() > 1 {
+                format!("car {}, ", car.name)
+            } else {
+                String::new()
+            },
             car.given
         );
         println!("  firmware {}", found.firmware);
@@ -506,6 +511,12 @@ fn shrink_failed(
 /// (one with a live view, which shows one car); a real car drives one test at a time.
 fn jobs(args: &RunArgs, embedded: bool, car_label: &str) -> Result<usize> {
     let cores = std::thread::available_parallelism().map_or(1, usize::from);
+    if let Some(n) = args.jobs.filter(|&n| n > 1 && args.car.len() > 1) {
+        anyhow::bail!(
+            "--jobs {n}: several cars drive their tests at once already, one test per car \
+             ({car_label}); leave --jobs out"
+        );
+    }
     match (args.jobs, embedded, args.live) {
         (Some(n), false, _) if n > 1 => anyhow::bail!(
             "--jobs {n}: a real car (--car {car_label}) drives one test at a time; give several \
