@@ -75,6 +75,8 @@ pub(super) fn cancel_on_ctrl_c() -> CancellationToken {
 pub(super) struct Interrupt {
     cancel: CancellationToken,
     car: Slot,
+    /// How many cars the second signal brakes (several: the first signal's message says so).
+    cars: Arc<std::sync::atomic::AtomicUsize>,
 }
 
 /// The registered car's brake: a clone of the car, braking with the current given.
@@ -113,12 +115,17 @@ impl Interrupt {
         let interrupt = Self {
             cancel: CancellationToken::new(),
             car: Arc::new(Mutex::new(None)),
+            cars: Arc::default(),
         };
         let listener = interrupt.clone();
         tokio::spawn(async move {
             let mut signals = Signals::new();
             let first = signals.next().await;
-            eprintln!("{first}: stopping the car safely (send it again to brake at once and exit)");
+            let cars = match listener.cars.load(std::sync::atomic::Ordering::SeqCst) {
+                0 | 1 => "the car",
+                _ => "every car",
+            };
+            eprintln!("{first}: stopping {cars} safely (send it again to brake at once and exit)");
             listener.cancel.cancel();
             let second = signals.next().await;
             eprintln!("{second} again: braking at once and exiting");
@@ -147,6 +154,8 @@ impl Interrupt {
     /// [`Interrupt::brake_on_second`] for every car of a campaign on several cars, braked at
     /// once.
     pub(super) fn brake_all_on_second<V: Vehicle>(&self, cars: &[V]) -> BrakeOnSecond {
+        self.cars
+            .store(cars.len(), std::sync::atomic::Ordering::SeqCst);
         let cars = cars.to_vec();
         let brake: Brake = Box::new(move |current_a| {
             let cars = cars.clone();
@@ -889,6 +898,7 @@ mod tests {
         let interrupt = Interrupt {
             cancel: CancellationToken::new(),
             car: Arc::new(Mutex::new(None)),
+            cars: Arc::default(),
         };
         let guard = interrupt.brake_on_second(&car);
         if brake {
