@@ -199,7 +199,9 @@ fn row(entry: &Entry) -> String {
                 0 | 1 => kind,
                 n => format!("{kind}, {n} sessions"),
             };
-            let kind = match r.cars.len() {
+            let cars: std::collections::BTreeSet<&str> =
+                r.cars.iter().map(|c| c.name.as_str()).collect();
+            let kind = match cars.len() {
                 0 | 1 => kind,
                 n => format!("{kind}, {n} cars"),
             };
@@ -467,7 +469,9 @@ fn show_campaign(dir: &Path, record: CampaignRecord, coverage: bool) -> Result<(
         }
     }
     if !record.cars.is_empty() {
-        println!("on {} cars:", record.cars.len());
+        let names: std::collections::BTreeSet<&str> =
+            record.cars.iter().map(|c| c.name.as_str()).collect();
+        println!("on {} cars:", names.len());
         for line in super::shared::cars_lines(&record.cars) {
             println!("  {line}");
         }
