@@ -258,6 +258,13 @@ async fn drive_car<V: Vehicle>(lab: &Lab<'_>, k: usize, car: &LabCar<V>) {
                 return;
             }
             end => {
+                // The last car failed: the campaign ends with it, and the record says so.
+                if let TestEnd::Stop(error) = &end
+                    && is_car_failure(error)
+                    && let Some(record) = lab.state.borrow_mut().dir.car_mut(&car.name)
+                {
+                    record.left = Some(error.to_string());
+                }
                 let held = match config.record {
                     RecordMode::Failing if case.verdict == Some(Verdict::Passed) => {
                         journal.drop_held();
@@ -556,6 +563,11 @@ mod tests {
             failure.error
         );
         assert!(dir.path().join("run/case-000.json").exists());
+        let record = record(&dir);
+        assert_eq!(
+            record.cars[0].left.as_deref(),
+            Some("test 0: the link to the car was lost")
+        );
     }
 
     #[test]
