@@ -515,3 +515,32 @@ fn a_scenario_gives_the_world_and_the_start_pose() {
     let heading = (start[1] - start[0]).heading();
     assert!((placement.heading - heading).abs() < 1e-12);
 }
+
+/// The simulation does not wake for every tick: it runs the ticks due when a payload comes in
+/// or goes out, and at the latest every few ticks. Whoever reads the truth sees time go on
+/// without any request, and a reply reaches the client only after every tick before it (a
+/// recording's `/sim/truth`, read as each state sample arrives, is the car's at that moment).
+#[tokio::test(start_paused = true)]
+async fn the_truth_keeps_time_between_requests_and_is_current_at_every_reply() {
+    use crate::car::TICK_MS;
+    use crate::server::HEARTBEAT_TICKS;
+    use tokio::time::Instant;
+
+    let start = Instant::now();
+    let (stream, sim) = spawn_in_process(&SimConfig::default());
+    let car = LinkCar::over_stream(stream, link_config())
+        .await
+        .expect("handshake");
+    let last_tick = || (start.elapsed().as_millis() as u64 / TICK_MS) * TICK_MS;
+    for wait_ms in [1_000, 3, 17, 250, 1, 2_000] {
+        tokio::time::sleep(Duration::from_millis(wait_ms)).await;
+        let idle = sim.truth().time_ms;
+        assert!(
+            idle <= last_tick() && last_tick() - idle < u64::from(HEARTBEAT_TICKS) * TICK_MS,
+            "{idle} ms simulated at {} ms",
+            last_tick()
+        );
+        car.state().await.expect("state");
+        assert_eq!(sim.truth().time_ms, last_tick(), "after {wait_ms} ms");
+    }
+}

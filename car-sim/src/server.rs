@@ -263,6 +263,9 @@ impl ImpairedQueue {
     }
 }
 
+/// Ticks run at the latest together when nothing is due in between ([`Core::run`]).
+pub(crate) const HEARTBEAT_TICKS: u32 = 10;
+
 /// The simulation task: the board, the clock and the impaired link.
 struct Core {
     board: Board,
@@ -303,10 +306,14 @@ impl Core {
         let mut next_tick = Instant::now() + tick;
         let mut rx_open = true;
         loop {
+            // The board's ticks are run when something is due (a payload in or out) or at the
+            // latest every `HEARTBEAT_TICKS` ticks, in order, not one wake per tick: whoever reads
+            // the car sees every tick up to then (a reply is flushed after the ticks before it).
+            let heartbeat = next_tick + tick * (HEARTBEAT_TICKS - 1);
             let wake = [self.inbound.next_due(), self.outbound.next_due()]
                 .into_iter()
                 .flatten()
-                .fold(next_tick, Instant::min);
+                .fold(heartbeat, Instant::min);
             tokio::select! {
                 biased;
                 msg = rx.recv(), if rx_open => match msg {
