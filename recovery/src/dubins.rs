@@ -9,7 +9,7 @@
 
 use dubins_paths::PathType;
 use dubins_paths::f64::{DubinsPath, Intermediate, PosRot};
-use trajgen::{Constraints, Point, Pose};
+use trajgen::{Area, Constraints, Point, Pose};
 
 use crate::connect::{Connect, Scene};
 use crate::join::Target;
@@ -84,23 +84,58 @@ impl Discretiser {
         })
     }
 
-    /// The polyline of `path` (points after its start, ending exactly at `end`), or `None` when
-    /// the path is too short for any step that fits.
-    pub fn points(&self, path: &DubinsPath, end: Point) -> Option<Vec<Point>> {
+    /// The points of `path`'s polyline after its start and before its end, or `None` when the
+    /// path is too short for any step that fits.
+    fn samples(&self, path: &DubinsPath) -> Option<impl Iterator<Item = Point>> {
         let total = path.length();
         let steps = (total / self.step_max).ceil().max(1.0);
         let step = total / steps;
         if step < self.step_min {
             return None;
         }
-        let steps = steps as usize;
-        let mut points: Vec<Point> = (1..steps)
-            .map(|i| path.sample(step * i as f64))
-            .map(|q| Point::new(q.x(), q.y()))
-            .collect();
+        let path = *path;
+        Some((1..steps as usize).map(move |i| {
+            let q = path.sample(step * i as f64);
+            Point::new(q.x(), q.y())
+        }))
+    }
+
+    /// The polyline of `path` (points after its start, ending exactly at `end`), or `None` when
+    /// the path is too short for any step that fits.
+    #[cfg(test)]
+    pub fn points(&self, path: &DubinsPath, end: Point) -> Option<Vec<Point>> {
+        let mut points: Vec<Point> = self.samples(path)?.collect();
         points.push(end);
         Some(points)
     }
+
+    /// The polyline of `path` as [`Self::points`] gives it, sampled one point at a time and
+    /// given up at the first point outside `area` (such a piece is never valid:
+    /// [`trajgen::check_route`] checks every point), which spares sampling the rest of a path
+    /// that leaves the area early.
+    fn points_within(&self, path: &DubinsPath, end: Point, area: &Area) -> Sampled {
+        let Some(samples) = self.samples(path) else {
+            return Sampled::TooShort;
+        };
+        let mut points = Vec::new();
+        for p in samples.chain(std::iter::once(end)) {
+            if !area.contains_point(p) {
+                return Sampled::Leaves;
+            }
+            points.push(p);
+        }
+        Sampled::Points(points)
+    }
+}
+
+/// A Dubins path sampled by [`Discretiser::points_within`].
+enum Sampled {
+    /// Too short for any step that fits.
+    TooShort,
+    /// A point of it is outside the area.
+    Leaves,
+    /// Its polyline, inside the area point by point.
+    Points(Vec<Point>),
 }
 
 /// Connects poses by discretised Dubins paths of several radii, shortest first.
@@ -162,8 +197,13 @@ impl Connect for DubinsConnector {
             if path.length() * CHORD_FACTOR >= max_length {
                 return None;
             }
-            let Some(points) = discretiser.points(&path, to.point) else {
-                continue;
+            let points = match discretiser.points_within(&path, to.point, scene.area) {
+                Sampled::TooShort => continue,
+                Sampled::Leaves => {
+                    *checks += 1;
+                    continue;
+                }
+                Sampled::Points(points) => points,
             };
             let piece_length = distance(from.position, points[0]) + length(&points);
             if piece_length >= max_length {

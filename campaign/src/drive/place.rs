@@ -70,6 +70,12 @@ const MIN_WHEEL_TRAVEL_M: f64 = 0.2;
 /// autopilot to be run forward (see [`Placer::pursue`]), seconds: the last samples before it is
 /// sent.
 const PURSUIT_WINDOW_S: f64 = 0.5;
+/// How much further than the pursuit window (after the round trip) a prediction is integrated
+/// finely, seconds ([`Placer::travel_s`]): every prediction that can make a command due, or be
+/// pursued, within a second of the next samples is exact.
+const FINE_MARGIN_S: f64 = 1.0;
+/// Fine steps in each coarse step of [`Placer::travel_s`].
+const COARSE_STEPS: usize = 25;
 /// The slowest speed a prediction assumes, m/s (a standing car's place is never predicted).
 const MIN_SPEED_MPS: f64 = 0.05;
 
@@ -234,6 +240,8 @@ pub struct Placer {
     unresolved: Vec<usize>,
     history: VecDeque<Fix>,
     round_trips: VecDeque<Duration>,
+    /// The median of `round_trips` (zero before the first).
+    median_round_trip: Duration,
     seen: Option<Seen>,
     /// How the car steers, to run its autopilot forward (see [`Steering`]); without it the
     /// prediction follows the route's speeds only.
@@ -281,6 +289,7 @@ impl Placer {
             unresolved: Vec::new(),
             history: VecDeque::new(),
             round_trips: VecDeque::new(),
+            median_round_trip: Duration::ZERO,
             seen: None,
             steering,
             predicted: Cell::new(None),
@@ -339,6 +348,13 @@ impl Placer {
         if self.round_trips.len() > ROUND_TRIPS {
             self.round_trips.pop_front();
         }
+        let mut sorted = [Duration::ZERO; ROUND_TRIPS];
+        let sorted = &mut sorted[..self.round_trips.len()];
+        for (slot, &rtt) in sorted.iter_mut().zip(&self.round_trips) {
+            *slot = rtt;
+        }
+        sorted.sort_unstable();
+        self.median_round_trip = sorted[sorted.len() / 2];
         let Some(s) = self.along(position, progress) else {
             return;
         };
@@ -617,7 +633,7 @@ impl Placer {
         {
             return seconds;
         }
-        let by_speeds = self.travel_s(seen, target);
+        let by_speeds = self.travel_s(seen, target, round_trip + PURSUIT_WINDOW_S + FINE_MARGIN_S);
         let seconds = if by_speeds - round_trip <= PURSUIT_WINDOW_S
             && let Some(t) = self.pursue(seen, target)
         {
@@ -641,7 +657,11 @@ impl Placer {
     /// measured (1 for a car that keeps its route's speeds; a car that does not, or a link that
     /// shifts the samples' times, keeps its own ratio). Where the route gives no speed, the
     /// measured speed.
-    fn travel_s(&self, seen: &Seen, target: f64) -> f64 {
+    ///
+    /// Integrated in 2 cm steps up to `fine_s` seconds of way, beyond in steps [`COARSE_STEPS`]
+    /// times longer: a place that far ahead is only "not yet" (the drive asks again at every
+    /// sample), and a long way in fine steps was a tenth of a simulated test's time.
+    fn travel_s(&self, seen: &Seen, target: f64, fine_s: f64) -> f64 {
         const STEP_M: f64 = 0.02;
         let way = (target - seen.s).max(0.0);
         let steps = (way / STEP_M).ceil() as usize;
@@ -653,24 +673,51 @@ impl Placer {
             .map(|asked| seen.speed / asked)
             .filter(|r| r.is_finite() && *r > 0.0);
         let ds = way / steps as f64;
-        (0..steps)
-            .map(|k| {
-                let at = seen.s + (k as f64 + 0.5) * ds;
-                let speed = match (ratio, self.route_speed(at + seen.radius)) {
-                    (Some(ratio), Some(asked)) => ratio * asked,
-                    _ => seen.speed,
-                };
-                ds / speed.max(MIN_SPEED_MPS)
-            })
-            .sum()
+        // The goals only move forward: the stretch is found by walking, not searched each step.
+        let mut stretch = 0;
+        let mut seconds_at = |at: f64, length: f64| {
+            let speed = match (ratio, self.route_speed_from(&mut stretch, at + seen.radius)) {
+                (Some(ratio), Some(asked)) => ratio * asked,
+                _ => seen.speed,
+            };
+            length / speed.max(MIN_SPEED_MPS)
+        };
+        let mut seconds = 0.0;
+        let mut k = 0;
+        while k < steps && seconds < fine_s {
+            seconds += seconds_at(seen.s + (k as f64 + 0.5) * ds, ds);
+            k += 1;
+        }
+        while k < steps {
+            let n = COARSE_STEPS.min(steps - k);
+            seconds += seconds_at(seen.s + (k as f64 + n as f64 / 2.0) * ds, n as f64 * ds);
+            k += n;
+        }
+        seconds
     }
 
     /// The speed the autopilot sets with its goal at `s` along the route: the speeds of the
     /// stretch's two points interpolated by the goal's distance from them (the last point's
     /// beyond the end). `None` where the route gives no positive speed.
     fn route_speed(&self, s: f64) -> Option<f64> {
+        self.speed_before(self.route_s.partition_point(|&x| x <= s), s)
+    }
+
+    /// [`Self::route_speed`] for an `s` no smaller than at the previous call with `stretch`
+    /// (start it at 0): the index of the first route point beyond `s` (the distances along the
+    /// route only grow) is found by walking on from `stretch`, which it updates.
+    fn route_speed_from(&self, stretch: &mut usize, s: f64) -> Option<f64> {
+        let mut i = (*stretch).min(self.route_s.len());
+        while self.route_s.get(i).is_some_and(|&x| x <= s) {
+            i += 1;
+        }
+        *stretch = i;
+        self.speed_before(i, s)
+    }
+
+    /// [`Self::route_speed`] at `s`, `i` the index of the first route point beyond it.
+    fn speed_before(&self, i: usize, s: f64) -> Option<f64> {
         let last = self.route.len().checked_sub(1)?;
-        let i = self.route_s.partition_point(|&x| x <= s);
         let speed = if i == 0 {
             self.route[0].speed
         } else if i > last {
@@ -694,9 +741,7 @@ impl Placer {
     }
 
     fn median_round_trip(&self) -> Duration {
-        let mut sorted: Vec<Duration> = self.round_trips.iter().copied().collect();
-        sorted.sort();
-        sorted.get(sorted.len() / 2).copied().unwrap_or_default()
+        self.median_round_trip
     }
 
     /// Finds where the car was when each unresolved fault was added: between the samples seen
@@ -852,14 +897,46 @@ mod tests {
         assert!((seen.s - 8.0).abs() < 1e-9 && (seen.speed - 1.0).abs() < 1e-9);
         // To x = 11: 1 s to x = 9 (goal at 10), then ∫₀² du / (1 + 0.2 u) = 5 ln 1.4 s.
         let expected = 1.0 + 5.0 * 1.4f64.ln();
-        let predicted = placer.travel_s(&seen, 11.0);
+        let predicted = placer.travel_s(&seen, 11.0, f64::INFINITY);
         assert!(
             (predicted - expected).abs() < 0.01,
             "{predicted} instead of {expected}"
         );
         // A car driving at twice its route's speeds keeps doing so.
         let fast = Seen { speed: 2.0, ..seen };
-        assert!((placer.travel_s(&fast, 11.0) - expected / 2.0).abs() < 0.01);
+        assert!((placer.travel_s(&fast, 11.0, f64::INFINITY) - expected / 2.0).abs() < 0.01);
+    }
+
+    /// Up to `fine_s` seconds of way the prediction is the fine integral itself; beyond, it
+    /// stays beyond and within a percent of it.
+    #[test]
+    fn a_far_place_is_predicted_coarsely_and_a_near_one_exactly() {
+        let placer = placer_along_x(&[(0.0, 1.0), (10.0, 0.5), (30.0, 3.0), (60.0, 1.0)]);
+        for (s, speed, radius) in [(0.0, 1.0, 1.0), (4.2, 0.8, 1.5), (12.0, 0.6, 1.1)] {
+            let seen = Seen {
+                car_time: 1.0,
+                position: Point::new(s, 0.0),
+                heading: Some(0.0),
+                stretch: 0,
+                wheel: speed,
+                version: car_link::firmware::FirmwareVersion::V10_1,
+                s,
+                speed,
+                radius,
+            };
+            for target in [s + 0.3, s + 1.7, s + 9.0, 59.0, 75.0] {
+                let exact = placer.travel_s(&seen, target, f64::INFINITY);
+                for fine_s in [0.5, 2.0, 5.0] {
+                    let quick = placer.travel_s(&seen, target, fine_s);
+                    if exact < fine_s {
+                        assert_eq!(quick.to_bits(), exact.to_bits(), "{s} → {target}");
+                    } else {
+                        assert!(quick >= fine_s, "{quick} < {fine_s}");
+                        assert!((quick - exact).abs() <= 0.01 * exact, "{quick} vs {exact}");
+                    }
+                }
+            }
+        }
     }
 
     /// A placer on a straight 1 m/s route along x, fed samples of a car at `x(t)` with wheel
@@ -926,5 +1003,45 @@ mod tests {
             placer.along(Point::new(f64::NAN, 0.0), hint(&route, p, 0)),
             None
         );
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig {
+            failure_persistence: None,
+            ..proptest::prelude::ProptestConfig::with_cases(200)
+        })]
+        /// Walking on from the last stretch finds the speed the search over the whole route
+        /// finds, for any rising distances (before the start, on the route, beyond its end),
+        /// on a route with repeated points and changing speeds.
+        #[test]
+        fn the_walked_route_speed_is_the_searched_one(
+            legs in proptest::collection::vec((0.0..3.0f64, 0.1..4.0f64), 1..12),
+            steps in proptest::collection::vec(0.0..2.0f64, 1..40),
+            from in -2.0..2.0f64,
+        ) {
+            let mut at = Point::new(0.0, 0.0);
+            let mut waypoints = vec![Waypoint::new(at, 1.0)];
+            for (i, &(length, speed)) in legs.iter().enumerate() {
+                at = at + Point::from_heading(i as f64) * length;
+                waypoints.push(Waypoint::new(at, speed));
+            }
+            let points: Vec<Point> = waypoints.iter().map(|w| w.position).collect();
+            let plan = TestPlan {
+                test_index: 0,
+                start_tail: trajgen::RouteTail::from_points(&[Point::new(-1.0, 0.0), points[0]]).unwrap(),
+                commands: Vec::new(),
+            };
+            let placer = Placer::new(&plan, &waypoints, None);
+            let mut stretch = 0;
+            let mut s = from;
+            for step in steps {
+                proptest::prop_assert_eq!(
+                    placer.route_speed_from(&mut stretch, s),
+                    placer.route_speed(s),
+                    "at {}", s
+                );
+                s += step;
+            }
+        }
     }
 }

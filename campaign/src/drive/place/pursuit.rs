@@ -277,6 +277,6 @@ mod tests {
         let t = placer.pursue(&seen, 2.4).unwrap();
         assert!(t < 1.2 * 0.93, "{t}");
         // The route's speeds alone say 1.2 s.
-        assert!((placer.travel_s(&seen, 2.4) - 1.2).abs() < 0.01);
+        assert!((placer.travel_s(&seen, 2.4, f64::INFINITY) - 1.2).abs() < 0.01);
     }
 }
