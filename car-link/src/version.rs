@@ -19,8 +19,13 @@ macro_rules! commands {
 
             /// The wire id in `version`; `None` if the command does not exist there.
             pub fn code(self, version: FirmwareVersion) -> Option<u8> {
+                self.code_in(version.new_command_ids())
+            }
+
+            /// The wire id in the new numbering (`new_ids`) or the old one.
+            const fn code_in(self, new_ids: bool) -> Option<u8> {
                 match self {
-                    $( CommandId::$name => if version.new_command_ids() { $new } else { $old }, )*
+                    $( CommandId::$name => if new_ids { $new } else { $old }, )*
                 }
             }
 
@@ -150,16 +155,57 @@ commands! {
 impl CommandId {
     /// The command with wire id `code` in `version`, if any.
     pub fn from_code(code: u8, version: FirmwareVersion) -> Option<CommandId> {
-        CommandId::ALL
-            .iter()
-            .copied()
-            .find(|c| c.code(version) == Some(code))
+        BY_CODE[usize::from(version.new_command_ids())][usize::from(code)]
     }
+}
+
+/// [`CommandId::from_code`]'s tables, old numbering then new: the first command in table order
+/// with each id (a search of the table for every message decoded was a percent of a simulated
+/// test).
+static BY_CODE: [[Option<CommandId>; 256]; 2] = [by_code(false), by_code(true)];
+
+const fn by_code(new_ids: bool) -> [Option<CommandId>; 256] {
+    let mut table = [None; 256];
+    let mut i = CommandId::ALL.len();
+    // Backwards, so that the first command with an id is the one left.
+    while i > 0 {
+        i -= 1;
+        if let Some(code) = CommandId::ALL[i].code_in(new_ids) {
+            table[code as usize] = Some(CommandId::ALL[i]);
+        }
+    }
+    table
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The tables give what a search of the command table gives, for every id and version.
+    #[test]
+    fn the_id_tables_are_the_command_table_searched() {
+        for version in [
+            FirmwareVersion::V10_1,
+            FirmwareVersion::V10_2,
+            FirmwareVersion::V11_0,
+            FirmwareVersion::V12_0,
+            FirmwareVersion::V12_1,
+            FirmwareVersion::V12_3,
+            FirmwareVersion::new(13, 0),
+        ] {
+            for code in 0..=255u8 {
+                let searched = CommandId::ALL
+                    .iter()
+                    .copied()
+                    .find(|c| c.code(version) == Some(code));
+                assert_eq!(
+                    CommandId::from_code(code, version),
+                    searched,
+                    "{code} in {version}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn ids_76_to_89_change_at_12_1() {
