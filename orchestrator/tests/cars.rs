@@ -11,7 +11,7 @@ use std::process::{Command, Stdio};
 use std::sync::mpsc;
 use std::time::Duration;
 
-use common::{path, start_sim};
+use common::{drivecheck, path, start_sim, text};
 use futures::StreamExt;
 use serde_json::Value;
 use tokio_tungstenite::tungstenite::Message;
@@ -172,9 +172,9 @@ fn cars_that_cannot_share_a_campaign_are_refused_by_name() {
             args.extend(["--car", car]);
         }
         args.extend(extra);
-        let ran = common::drivecheck(&args);
-        assert_eq!(ran.status.code(), Some(2), "{}", common::text(&ran));
-        assert!(common::text(&ran).contains(says), "{}", common::text(&ran));
+        let ran = drivecheck(&args);
+        assert_eq!(ran.status.code(), Some(2), "{}", text(&ran));
+        assert!(text(&ran).contains(says), "{}", text(&ran));
         assert!(!out.exists());
     };
     let (a, b) = ("tcp://127.0.0.1:9", "tcp://127.0.0.1:10");
@@ -195,4 +195,40 @@ fn cars_that_cannot_share_a_campaign_are_refused_by_name() {
         "several cars drive their tests at once already",
     );
     refused(&["a b=tcp://x:1", b], &[], "--car a b=tcp://x:1");
+}
+
+/// `run --dry-run --json` with several cars checks each and prints one document naming them.
+#[test]
+fn a_dry_run_of_several_cars_is_one_json_document() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (mut sim_a, a) = start_sim(tmp.path(), "a");
+    let (mut sim_b, b) = start_sim(tmp.path(), "b");
+    let output = drivecheck(&[
+        "run",
+        "--dry-run",
+        "--json",
+        "--car",
+        &format!("A={a}"),
+        "--car",
+        &format!("B={b}"),
+    ]);
+    for sim in [&mut sim_a, &mut sim_b] {
+        let _ = (sim.kill(), sim.wait());
+    }
+    assert_eq!(output.status.code(), Some(0), "{}", text(&output));
+    let document: Value =
+        serde_json::from_slice(&output.stdout).unwrap_or_else(|e| panic!("{e}: {}", text(&output)));
+    assert_eq!(document["command"], "run --dry-run");
+    let cars = document["cars"].as_array().expect("cars");
+    let named: Vec<(&str, &str)> = cars
+        .iter()
+        .map(|c| (c["name"].as_str().unwrap(), c["address"].as_str().unwrap()))
+        .collect();
+    assert_eq!(named, [("A", a.as_str()), ("B", b.as_str())]);
+    for car in cars {
+        assert!(
+            car["firmware"].is_string() && car["route_points"].as_u64() > Some(0),
+            "{car}"
+        );
+    }
 }

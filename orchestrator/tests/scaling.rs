@@ -453,3 +453,77 @@ fn bench_scale_measures_every_reader_of_a_campaign() {
         );
     }
 }
+
+/// Shards driven on several cars (`run --shard K/N --car A=… --car B=…`) merge into one list
+/// of cars: each car once with every test it drove in any shard, and why it left a shard named
+/// by the shard. (The shards here ran on the embedded car; their `cars` are written in as a lab
+/// campaign writes them.)
+#[test]
+fn merged_shards_keep_every_cars_tests_and_why_it_left() {
+    let dir = tempfile::tempdir().unwrap();
+    let shards: Vec<PathBuf> = (1..=2)
+        .map(|k| {
+            let out = dir.path().join(format!("shard-{k}"));
+            run(
+                5,
+                6,
+                &["--shard", &format!("{k}/2"), "--record", "none"],
+                &out,
+            );
+            out
+        })
+        .collect();
+    let car = |name: &str, tests: &[usize], left: Option<&str>| {
+        let mut car = serde_json::json!({
+            "name": name,
+            "address": format!("tcp://{name}:8300"),
+            "firmware": "12.3",
+            "tests": tests,
+        });
+        if let Some(why) = left {
+            car["left"] = why.into();
+        }
+        car
+    };
+    for (shard, cars) in shards.iter().zip([
+        vec![
+            car("A", &[0, 4], None),
+            car("B", &[2], Some("the link was lost")),
+        ],
+        vec![car("A", &[1, 3, 5], None)],
+    ]) {
+        let file = shard.join("campaign.json");
+        let mut record: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+        record["cars"] = cars.into();
+        std::fs::write(&file, record.to_string()).unwrap();
+    }
+    let merged = dir.path().join("merged");
+    let out = drivecheck(&[
+        "runs",
+        "merge",
+        path(&shards[0]),
+        path(&shards[1]),
+        "--out",
+        path(&merged),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(merged.join("campaign.json")).unwrap())
+            .unwrap();
+    assert_eq!(
+        record["cars"],
+        serde_json::json!([
+            {"name": "A", "address": "tcp://A:8300", "firmware": "12.3", "tests": [0, 1, 3, 4, 5]},
+            {"name": "B", "address": "tcp://B:8300", "firmware": "12.3", "tests": [2],
+             "left": "shard 1/2: the link was lost"},
+        ]),
+        "{record:#}"
+    );
+    let shown = drivecheck(&["runs", "show", path(&merged)]);
+    assert!(
+        String::from_utf8_lossy(&shown.stdout).contains("shard 1/2: the link was lost"),
+        "{}",
+        text(&shown)
+    );
+}

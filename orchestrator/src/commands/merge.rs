@@ -28,6 +28,44 @@ struct ShardDir {
     shard: Shard,
 }
 
+/// The cars of the shards (shards run on several cars): one entry per car (name and address)
+/// with every test it drove in any shard; why it left a shard, named by the shard. A shard's
+/// sessions are not kept in the merged campaign, so neither is a car's session.
+fn merged_cars(shards: &[ShardDir]) -> Vec<campaign::files::CarRun> {
+    let mut cars: Vec<campaign::files::CarRun> = Vec::new();
+    for shard in shards {
+        for car in &shard.record.cars {
+            let left = car
+                .left
+                .as_ref()
+                .map(|why| format!("shard {}: {why}", shard.shard));
+            match cars
+                .iter_mut()
+                .find(|c| c.name == car.name && c.address == car.address)
+            {
+                Some(known) => {
+                    known.tests.extend(&car.tests);
+                    known.firmware = known.firmware.take().or_else(|| car.firmware.clone());
+                    known.left = match (known.left.take(), left) {
+                        (Some(a), Some(b)) => Some(format!("{a}; {b}")),
+                        (a, b) => a.or(b),
+                    };
+                }
+                None => cars.push(campaign::files::CarRun {
+                    session: None,
+                    left,
+                    ..car.clone()
+                }),
+            }
+        }
+    }
+    for car in &mut cars {
+        car.tests.sort_unstable();
+        car.tests.dedup();
+    }
+    cars
+}
+
 /// Merges the shards in `dirs` into `out` (see the module doc) and prints what it wrote.
 pub fn merge(
     dirs: &[PathBuf],
@@ -83,6 +121,7 @@ pub fn merge(
     // at `out` that `drivecheck runs` would take for a campaign.
     let staged = Staged::beside(out)?;
     let mut dir = RunDirectory::merged(staged.dir().to_owned(), record, &scenario)?;
+    dir.add_cars(merged_cars(&shards));
     let verdicts = write_cases(&shards, tests, &mut dir)?;
     let mut report = dir.finish_at(ended_at)?;
     if recorded[0] {

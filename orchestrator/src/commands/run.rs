@@ -109,10 +109,43 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         );
     }
     if args.dry_run {
+        let mut found = Vec::new();
         for car in &cars {
-            let exit = dry_run(args, car, &scenario, &sim, campaign, cases.clone())?;
-            if exit != Exit::Success {
-                return Ok(exit);
+            found.push(dry_run(
+                args,
+                car,
+                &scenario,
+                &sim,
+                campaign,
+                cases.clone(),
+            )?);
+        }
+        if args.json {
+            // One document: a car's findings, or with several cars each car's by name.
+            match found.as_slice() {
+                [one] => crate::output::print_json("run --dry-run", one)?,
+                _ => {
+                    #[derive(serde::Serialize)]
+                    struct CarFound<'a> {
+                        name: &'a str,
+                        address: &'a str,
+                        #[serde(flatten)]
+                        found: &'a crate::runner::DryRun,
+                    }
+                    let cars: Vec<CarFound<'_>> = cars
+                        .iter()
+                        .zip(&found)
+                        .map(|(car, found)| CarFound {
+                            name: &car.name,
+                            address: &car.given,
+                            found,
+                        })
+                        .collect();
+                    crate::output::print_json(
+                        "run --dry-run",
+                        &serde_json::json!({ "cars": cars }),
+                    )?;
+                }
             }
         }
         return Ok(Exit::Success);
@@ -258,7 +291,7 @@ fn dry_run(
     sim: &car_sim::SimConfig,
     campaign: Campaign,
     cases: Option<(CasesSource, FailurePolicy)>,
-) -> Result<Exit> {
+) -> Result<crate::runner::DryRun> {
     let address = &car.address;
     let mut config = RunConfig::new(campaign, std::path::PathBuf::new(), car.given.clone());
     config.safety.stale_after = args.stale_after;
@@ -278,9 +311,7 @@ fn dry_run(
             .await
             .map_err(anyhow::Error::from)
     })?;
-    if args.json {
-        crate::output::print_json("run --dry-run", &found)?;
-    } else {
+    if !args.json {
         println!(
             "dry run passed: {}the car at {} is ready (nothing was driven, nothing written)",
             if args.car.len() > 1 {
@@ -307,7 +338,7 @@ fn dry_run(
             found.faults_uploaded, found.faults_listed
         );
     }
-    Ok(Exit::Success)
+    Ok(found)
 }
 
 /// Explains every failing segment from the recording (`drivecheck explain`), writes each case's
