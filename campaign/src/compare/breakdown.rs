@@ -37,8 +37,11 @@ impl BreakdownRow {
 }
 
 /// The breakdowns of a comparison, each sorted so the row that explains most of the regression
-/// comes first: by [`BreakdownRow::regression_score`], then the larger median change, then more
-/// segments, then the key.
+/// comes first: by how much its [`BreakdownRow::regression_score`] exceeds its segments' share of
+/// the whole comparison's (the score of every paired segment, each counted once), then the larger
+/// median change, then more segments, then the key. A row is blamed for what is peculiar to it,
+/// not for its size: a fault that acted on many segments, beside the one whose segments all got
+/// worse, does not come first for the share of them it was present at.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Breakdowns {
     /// By the probe and kind of each fault acting while the segment was driven (in either run; a
@@ -114,8 +117,13 @@ fn rows(
     keys: impl Fn(&PairedSegment) -> Vec<String>,
 ) -> Vec<BreakdownRow> {
     let mut groups: BTreeMap<String, Group> = BTreeMap::new();
+    // The whole comparison's regression score and its segments, each segment once.
+    let (mut total_score, mut total_segments) = (0i64, 0usize);
     for s in paired.segments() {
         let change = s.change_m();
+        total_segments += 1;
+        total_score += i64::from(s.regressed()) - i64::from(s.fixed())
+            + change.map_or(0, |c| i64::from(c > noise) - i64::from(c < -noise));
         for key in keys(s) {
             let g = groups.entry(key).or_default();
             g.segments += 1;
@@ -140,9 +148,15 @@ fn rows(
             fixed: g.fixed,
         })
         .collect();
+    let per_segment = if total_segments == 0 {
+        0.0
+    } else {
+        total_score as f64 / total_segments as f64
+    };
+    let excess = |r: &BreakdownRow| r.regression_score() as f64 - r.segments as f64 * per_segment;
     rows.sort_by(|a, b| {
-        b.regression_score()
-            .cmp(&a.regression_score())
+        excess(b)
+            .total_cmp(&excess(a))
             .then_with(|| {
                 let m = |r: &BreakdownRow| r.median_change_m.unwrap_or(f64::NEG_INFINITY);
                 m(b).total_cmp(&m(a))

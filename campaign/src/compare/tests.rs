@@ -443,3 +443,44 @@ proptest! {
         }
     }
 }
+
+/// A fault present at the culprit's segments (and at many unchanged ones of its own) is not
+/// blamed before the culprits: rows are ranked by what is peculiar to them, not by their size.
+/// Here a yaw fault acted on every segment the two range faults made worse, and on three
+/// unchanged ones of its own in every test: its row holds the most worse segments, yet the
+/// range rows come first.
+#[test]
+fn a_fault_that_only_accompanied_the_culprits_is_not_blamed_first() {
+    const RANGE_50: FaultKey = FaultKey {
+        probe: Probe::UwbRange(50),
+        kind: FaultKind::Amplification,
+    };
+    let rows: Vec<Vec<(f64, f64, &[FaultKey])>> = (0..30)
+        .map(|t| {
+            let wobble = 0.01 * ((t % 3) as f64 - 1.0);
+            vec![
+                (0.4, 0.4 + wobble, &[][..]),
+                (0.5, 1.3, &[RANGE_OFFSET, YAW_OFFSET][..]),
+                (0.6, 1.4, &[RANGE_50, YAW_OFFSET][..]),
+                (0.3, 0.3 - wobble, &[YAW_OFFSET][..]),
+                (0.5, 0.5 + wobble, &[YAW_OFFSET][..]),
+                (0.2, 0.2, &[YAW_OFFSET][..]),
+            ]
+        })
+        .collect();
+    let report = compare(&paired(&rows), &Options::with_noise(0.2)).unwrap();
+    let by_fault = &report.breakdowns.by_fault;
+    let yaw = by_fault
+        .iter()
+        .position(|r| r.key == "uwb_yaw offset")
+        .unwrap();
+    assert_eq!(by_fault[yaw].worse, 60, "{by_fault:#?}");
+    assert!(by_fault[yaw].regression_score() > by_fault[0].regression_score());
+    assert_eq!(yaw, 2, "{by_fault:#?}");
+    let culprits: Vec<&str> = by_fault[..2].iter().map(|r| r.key.as_str()).collect();
+    assert_eq!(
+        culprits,
+        ["uwb_range_234 offset", "uwb_range_50 amplification"],
+        "{by_fault:#?}"
+    );
+}
