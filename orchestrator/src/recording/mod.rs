@@ -28,6 +28,7 @@
 
 pub mod foxglove;
 pub mod live;
+mod mcap_out;
 mod proto;
 mod reader;
 mod records;
@@ -108,7 +109,7 @@ pub enum RecordingError {
     },
     /// Writing failed (disk full, closed file, …); the recorder refuses further writes.
     #[error("cannot write the recording: {0}")]
-    Write(#[source] mcap::McapError),
+    Write(#[source] std::io::Error),
     /// The final flush or sync of the file failed.
     #[error("cannot complete the recording: {0}")]
     Complete(#[source] std::io::Error),
@@ -130,7 +131,7 @@ pub enum RecordingError {
     /// The file is not a drivecheck recording this build reads (its `drivecheck.recording`
     /// metadata record is absent or names another format or version).
     #[error(
-        "not a drivecheck recording of version 1, 2 or 3 \
+        "not a drivecheck recording of version 1, 2, 3 or 4 \
          (format {format:?}, schema_version {version:?})"
     )]
     UnsupportedFormat {

@@ -13,13 +13,11 @@ use std::time::Duration;
 
 use car_link::StateSample;
 use car_sim::{DebugEvent, Truth};
-use mcap::records::{MessageHeader, Metadata};
-use mcap::write::NoSeek;
-use mcap::{WriteOptions, Writer};
 use scenarios::Scenario;
 use tokio::time::Instant;
 
 use super::live::LiveView;
+use super::mcap_out::McapOut;
 use super::records::{
     AckOutcome, CarCommand, CarStateRecord, CommandAck, CommandSent, SimRecord, TruthRecord,
     nanos_since,
@@ -36,9 +34,12 @@ pub const DEFAULT_CHUNK_INTERVAL: Duration = Duration::from_secs(1);
 pub const TEST_SPAN_PREFIX: &str = "drivecheck.test.";
 
 /// Chunks are also closed when they reach this many bytes.
-const CHUNK_BYTES: u64 = 256 * 1024;
+const CHUNK_BYTES: usize = 256 * 1024;
 
-type Sink = NoSeek<BufWriter<File>>;
+/// The chunks' zstd level (`docs/recording.md`, *Size and speed*).
+const ZSTD_LEVEL: i32 = 1;
+
+type Sink = BufWriter<File>;
 
 /// The name of the metadata record that holds a simulated car's profile (the simulator's truth,
 /// like the `/sim/*` channels: `drivecheck calibrate` never reads it).
@@ -196,7 +197,7 @@ impl Pending {
 /// completes the file as well, ignoring errors.
 pub struct Recorder {
     /// The file; `None` for a recorder in memory.
-    writer: Option<Writer<Sink>>,
+    writer: Option<McapOut<Sink>>,
     channels: HashMap<Topic, u16>,
     /// Messages recorded while held ([`Recorder::hold`]), or always for a recorder in memory;
     /// encoded when written or taken.
@@ -212,6 +213,16 @@ pub struct Recorder {
     sim_offset_ns: Option<i128>,
     /// The live view's channels (`run --live`), by topic.
     live: HashMap<Topic, super::live::LiveChannel>,
+}
+
+impl Drop for Recorder {
+    /// Completes the file (see [`Recorder`]); an error is ignored, as the file is then cut
+    /// short, which readers say.
+    fn drop(&mut self) {
+        if let Some(writer) = self.writer.take() {
+            let _ = writer.finish();
+        }
+    }
 }
 
 impl std::fmt::Debug for Recorder {
@@ -231,16 +242,13 @@ impl Recorder {
             path: path.to_owned(),
             source,
         })?;
-        let options = WriteOptions::new()
-            .compression(Some(mcap::Compression::Zstd))
-            .compression_threads(0)
-            .compression_level(1)
-            .chunk_size(Some(CHUNK_BYTES))
-            .disable_seeking(true)
-            .library(format!("drivecheck {} (mcap-rs)", tool_version()));
-        let writer = options
-            .create(NoSeek::new(BufWriter::new(file)))
-            .map_err(RecordingError::Write)?;
+        let writer = McapOut::new(
+            BufWriter::with_capacity(1 << 16, file),
+            &format!("drivecheck {}", tool_version()),
+            CHUNK_BYTES,
+            ZSTD_LEVEL,
+        )
+        .map_err(RecordingError::Write)?;
         let mut recorder = Self {
             writer: Some(writer),
             channels: HashMap::new(),
@@ -375,12 +383,7 @@ impl Recorder {
                 .add_schema(topic.schema_name(), schema.encoding, &schema.data)
                 .map_err(RecordingError::Write)?;
             let channel = writer
-                .add_channel(
-                    schema_id,
-                    topic.name(),
-                    topic.encoding().name(),
-                    &BTreeMap::new(),
-                )
+                .add_channel(schema_id, topic.name(), topic.encoding().name())
                 .map_err(RecordingError::Write)?;
             self.channels.insert(topic, channel);
         }
@@ -464,16 +467,9 @@ impl Recorder {
 
     /// Writes a metadata record (which closes the open chunk) and flushes.
     fn metadata(&mut self, name: &str, entries: &[(&str, String)]) -> Result<(), RecordingError> {
-        let metadata = Metadata {
-            name: name.to_owned(),
-            metadata: entries
-                .iter()
-                .map(|(k, v)| ((*k).to_owned(), v.clone()))
-                .collect(),
-        };
         if let Some(writer) = &mut self.writer {
             writer
-                .write_metadata(&metadata)
+                .write_metadata(name, entries)
                 .map_err(RecordingError::Write)?;
         }
         self.flush()
@@ -570,15 +566,9 @@ impl Recorder {
         };
         let sequence = self.sequences.entry(topic).or_insert(0);
         *sequence = sequence.wrapping_add(1);
-        let header = MessageHeader {
-            channel_id,
-            sequence: *sequence,
-            log_time,
-            publish_time: log_time,
-        };
         if let Some(writer) = &mut self.writer {
             writer
-                .write_to_known_channel(&header, data)
+                .write_message(channel_id, *sequence, log_time, data)
                 .map_err(RecordingError::Write)?;
         }
         self.chunk_opened_at.get_or_insert(log_time);
@@ -696,23 +686,20 @@ impl Recorder {
     /// and syncs it to disk.
     pub fn finish(mut self) -> Result<FinishedRecording, RecordingError> {
         self.release(true)?;
-        let Some(mut writer) = self.writer.take() else {
+        let Some(writer) = self.writer.take() else {
             return Ok(FinishedRecording {
                 messages: 0,
                 chunks: 0,
             });
         };
-        let summary = writer.finish().map_err(RecordingError::Write)?;
-        let stats = summary.stats.unwrap_or_default();
-        let file = writer
-            .into_inner()
-            .into_inner()
+        let (file, written) = writer.finish().map_err(RecordingError::Write)?;
+        let file = file
             .into_inner()
             .map_err(|e| RecordingError::Complete(e.into_error()))?;
         file.sync_all().map_err(RecordingError::Complete)?;
         Ok(FinishedRecording {
-            messages: stats.message_count,
-            chunks: stats.chunk_count,
+            messages: written.messages,
+            chunks: written.chunks,
         })
     }
 }
