@@ -13,25 +13,9 @@
 
 use std::io::{self, Write};
 
-/// The MCAP magic, at the start and the end of a file.
-const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
-
-/// The opcodes written.
-mod op {
-    pub const HEADER: u8 = 0x01;
-    pub const FOOTER: u8 = 0x02;
-    pub const SCHEMA: u8 = 0x03;
-    pub const CHANNEL: u8 = 0x04;
-    pub const MESSAGE: u8 = 0x05;
-    pub const CHUNK: u8 = 0x06;
-    pub const MESSAGE_INDEX: u8 = 0x07;
-    pub const CHUNK_INDEX: u8 = 0x08;
-    pub const STATISTICS: u8 = 0x0B;
-    pub const METADATA: u8 = 0x0C;
-    pub const METADATA_INDEX: u8 = 0x0D;
-    pub const SUMMARY_OFFSET: u8 = 0x0E;
-    pub const DATA_END: u8 = 0x0F;
-}
+// The magic and the opcodes are the `mcap` crate's (it reads the files).
+use mcap::MAGIC;
+use mcap::records::op;
 
 /// A message record's header: opcode, length, channel, sequence, log and publish time.
 const MESSAGE_HEADER_LEN: usize = 1 + 8 + 2 + 4 + 8 + 8;
