@@ -4,6 +4,7 @@
 
 mod common;
 
+use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
@@ -20,22 +21,40 @@ async fn watch(
     join_after: Duration,
     extra: &[&str],
 ) -> (serde_json::Value, serde_json::Value) {
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("run");
+    // Port 0: the campaign binds a free port and says which; a port chosen here and freed
+    // before the campaign binds it could be taken by another test's server in between.
     let mut child = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
         .args(["run", "--tests", "2", "--seed", "1", "--out", path(&out)])
         .args(extra)
-        .arg("--live")
-        .arg(format!("127.0.0.1:{port}"))
+        .args(["--live", "127.0.0.1:0"])
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
+    let (port_tx, port_rx) = std::sync::mpsc::channel();
+    let stderr = child.stderr.take().unwrap();
+    let stderr = std::thread::spawn(move || {
+        let mut all = String::new();
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            if let Some(port) = line
+                .strip_prefix("live view: ws://127.0.0.1:")
+                .and_then(|rest| rest.split_whitespace().next())
+                .and_then(|port| port.parse::<u16>().ok())
+            {
+                let _ = port_tx.send(port);
+            }
+            all.push_str(&line);
+            all.push('\n');
+        }
+        all
+    });
+    let Ok(port) = port_rx.recv_timeout(Duration::from_secs(60)) else {
+        let _ = child.kill();
+        let _ = child.wait();
+        panic!("no live view: {}", stderr.join().unwrap());
+    };
     tokio::time::sleep(join_after).await;
     let received = tokio::time::timeout(Duration::from_secs(60), async {
         let mut request = format!("ws://127.0.0.1:{port}")
@@ -60,7 +79,8 @@ async fn watch(
         };
         let (mut area, mut pose) = (None, None);
         while let Some(message) = socket.next().await {
-            match message.unwrap() {
+            let message = message.map_err(|e| format!("the live view failed: {e}"))?;
+            match message {
                 Message::Text(text) => {
                     let json: serde_json::Value = serde_json::from_str(&text).unwrap();
                     if json["op"] != "advertise" {
@@ -100,21 +120,29 @@ async fn watch(
                         other => panic!("subscription {other}"),
                     }
                     if let (Some(area), Some(pose)) = (&area, &pose) {
-                        return (area.clone(), pose.clone());
+                        return Ok((area.clone(), pose.clone()));
                     }
                 }
                 _ => {}
             }
         }
-        panic!("the live view closed before the area and a pose came");
+        Err("the live view closed before the area and a pose came".to_owned())
     })
-    .await;
+    .await
+    .unwrap_or_else(|_| Err("no area and pose within 60 s".to_owned()));
+    // Whether the campaign had already ended, for the message.
+    let ended = child.try_wait().unwrap();
     let _ = child.kill();
-    let output = child.wait_with_output().unwrap();
-    received.unwrap_or_else(|_| {
+    let _ = child.wait();
+    let stderr = stderr.join().unwrap();
+    received.unwrap_or_else(|why| {
         panic!(
-            "no area and pose within 60 s: {}",
-            String::from_utf8_lossy(&output.stderr)
+            "{why} (the campaign {}): {}",
+            match ended {
+                Some(status) => format!("had ended, {status}"),
+                None => "was still running".to_owned(),
+            },
+            stderr
         )
     })
 }

@@ -56,13 +56,16 @@ impl LiveChannel {
     /// Serves `data` to every subscriber (and keeps it for those that subscribe later, if the
     /// topic is latched).
     pub(super) fn log(&self, data: &[u8]) {
+        let Some(latched) = &self.latched else {
+            self.raw.log(data);
+            return;
+        };
+        // Sent and kept under one lock, the lock [`LateJoiner`] sends under: a viewer that
+        // subscribes at this very moment gets the message either as a subscriber or as a late
+        // joiner, never neither (the area is sent once a test).
+        let mut latched = latched.lock().unwrap_or_else(|e| e.into_inner());
         self.raw.log(data);
-        if let Some(latched) = &self.latched {
-            latched
-                .lock()
-                .unwrap_or_else(|e| e.into_inner())
-                .insert(self.raw.id(), (Arc::clone(&self.raw), data.to_vec()));
-        }
+        latched.insert(self.raw.id(), (Arc::clone(&self.raw), data.to_vec()));
     }
 }
 
@@ -73,14 +76,12 @@ struct LateJoiner {
 
 impl ServerListener for LateJoiner {
     fn on_subscribe(&self, client: Client, channel: ChannelView) {
-        let last = self
-            .latched
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .get(&channel.id())
-            .cloned();
-        if let Some((raw, data)) = last {
-            raw.log_to_sink(&data, client.sink_id());
+        // The server has made the client a subscriber before it calls this: a message logged
+        // from now on reaches it; one logged before is the one kept here (see
+        // [`LiveChannel::log`]).
+        let latched = self.latched.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((raw, data)) = latched.get(&channel.id()) {
+            raw.log_to_sink(data, client.sink_id());
         }
     }
 }
