@@ -392,6 +392,12 @@ impl Polygon {
         }
         let mut inside = false;
         for (a, b) in self.edges() {
+            // An edge wholly above or below p neither crosses the horizontal line through p
+            // nor holds p: no orientation needed (most edges, and the robust predicate is
+            // what this test costs).
+            if (p.y < a.y && p.y < b.y) || (p.y > a.y && p.y > b.y) {
+                continue;
+            }
             let o = orient(a, b, p);
             if o == 0.0 && on_segment(a, b, p) {
                 return true;
@@ -751,7 +757,58 @@ mod tests {
         None
     }
 
+    /// The crossing-number test over every edge, each with its orientation: what
+    /// [`Polygon::contains`], which skips the edges above or below the point, must agree with.
+    fn contains_by_every_edge(polygon: &Polygon, p: Point) -> bool {
+        let mut inside = false;
+        for (a, b) in polygon.edges() {
+            let o = orient(a, b, p);
+            if o == 0.0 && on_segment(a, b, p) {
+                return true;
+            }
+            if (a.y > p.y) != (b.y > p.y) && (o > 0.0) == (b.y > a.y) {
+                inside = !inside;
+            }
+        }
+        inside
+    }
+
     proptest! {
+        /// `contains` agrees with the test over every edge on star-shaped polygons on a grid,
+        /// for points anywhere, on vertices, on edges and level with vertices.
+        #[test]
+        fn contains_agrees_with_the_test_over_every_edge(
+            n in 3usize..40,
+            radii in proptest::collection::vec(1i32..10, 40),
+            points in proptest::collection::vec((-12i32..12, -12i32..12), 50),
+            halves in proptest::collection::vec((0usize..40, 0u8..3), 20),
+        ) {
+            let vertices: Vec<Point> = (0..n)
+                .map(|k| {
+                    let t = std::f64::consts::TAU * k as f64 / n as f64;
+                    let r = f64::from(radii[k]);
+                    Point::new((r * t.cos()).round(), (r * t.sin()).round())
+                })
+                .collect();
+            let Ok(polygon) = Polygon::new(vertices) else {
+                return Ok(());
+            };
+            let v = polygon.vertices();
+            let mut probes: Vec<Point> =
+                points.iter().map(|&(x, y)| Point::new(f64::from(x), f64::from(y))).collect();
+            for &(k, at) in &halves {
+                let (a, b) = (v[k % v.len()], v[(k + 1) % v.len()]);
+                probes.push(match at {
+                    0 => a,
+                    1 => Point::new((a.x + b.x) / 2.0, (a.y + b.y) / 2.0),
+                    _ => Point::new(a.x + 0.25, a.y),
+                });
+            }
+            for p in probes {
+                prop_assert_eq!(polygon.contains(p), contains_by_every_edge(&polygon, p), "{:?}", p);
+            }
+        }
+
         /// The grid finds the same first pair as comparing every pair: on star-shaped polygons
         /// (simple, or not when a spike crosses) and on random vertices (crossing everywhere).
         #[test]
