@@ -233,6 +233,19 @@ impl From<Source> for SourceRecord {
     }
 }
 
+/// A case file's cause source, read back.
+impl From<SourceRecord> for Source {
+    fn from(source: SourceRecord) -> Self {
+        match source {
+            SourceRecord::Fault { command_index } => Source::Fault { command_index },
+            SourceRecord::Anchor { anchor_id } => Source::Anchor { anchor_id },
+            SourceRecord::Odometry => Source::Odometry,
+            SourceRecord::Heading => Source::Heading,
+            SourceRecord::Unexplained => Source::Unexplained,
+        }
+    }
+}
+
 impl From<&Cause> for CauseRecord {
     fn from(cause: &Cause) -> Self {
         Self {

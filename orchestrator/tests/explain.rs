@@ -88,6 +88,32 @@ fn a_run_with_faults_is_explained_by_them_and_cannot_be_calibrated_on() {
         .collect();
     assert!(!explained.is_empty());
     assert!(explained.iter().all(|c| !c.explanation.is_empty()));
+    // The workers explained each failed test from the messages it recorded, before writing
+    // them: the very explanation `drivecheck explain` finds in the recording.
+    let out = drivecheck(&["explain", path(&run), "--json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let from_recording: Vec<(usize, Vec<campaign::files::SegmentExplanationRecord>)> =
+        json["cases"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|c| !c["segments"].as_array().unwrap().is_empty())
+            .map(|c| {
+                let segments: Vec<campaign::explain::SegmentExplanation> =
+                    serde_json::from_value(c["segments"].clone()).unwrap();
+                (
+                    c["test_index"].as_u64().unwrap() as usize,
+                    segments.iter().map(Into::into).collect(),
+                )
+            })
+            .collect();
+    let mut in_run: Vec<(usize, Vec<campaign::files::SegmentExplanationRecord>)> = explained
+        .iter()
+        .map(|c| (c.test_index.unwrap(), c.explanation.clone()))
+        .collect();
+    in_run.sort_by_key(|(index, _)| *index);
+    assert_eq!(in_run, from_recording);
     let out = drivecheck(&["explain", path(&run), "--score", "--json"]);
     assert_eq!(out.status.code(), Some(0), "{}", text(&out));
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();

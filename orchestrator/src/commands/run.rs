@@ -194,6 +194,8 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     if embedded {
         config.car_profile = Some(profile.clone());
     }
+    // Each failing test explained as it ends, in its worker (the embedded simulated car).
+    config.explain = Some(crate::report::explain::explain_held);
     let jobs = jobs(args, embedded, &car_label)?;
     // A live view is for watching: a virtual-time campaign would be over before anyone looks.
     let virtual_time = embedded && !args.realtime && args.live.is_none();
@@ -341,18 +343,116 @@ fn dry_run(
     Ok(found)
 }
 
-/// Explains every failing segment from the recording (`drivecheck explain`), writes each case's
-/// `explanation` into its case file and prints the first cause per segment (with `print`; else
-/// the causes are only in the case files). What cannot be explained (no recording) is a
-/// warning: the campaign's results stand without it.
+/// Explains every failing segment and prints the first cause per segment (with `print`; else the
+/// causes are only in the case files). A campaign on fresh simulated cars explained each failing
+/// test as it ended ([`crate::runner::ExplainHeld`]): its case files are read, a test at a time.
+/// Otherwise (a real car, a resumed campaign's earlier tests) the recording is read
+/// (`drivecheck explain`) and each case's `explanation` written. What cannot be explained (no
+/// recording) is a warning: the campaign's results stand without it.
 fn explain_failed(report: &CampaignReport, scenario: &Scenario, print: bool) {
-    if !report
+    let failing: Vec<&crate::runner::TestSummary> = report
         .tests
         .iter()
-        .any(|t| t.verdict == Some(Verdict::Failed))
-    {
+        .filter(|t| t.verdict == Some(Verdict::Failed))
+        .collect();
+    if failing.is_empty() {
         return;
     }
+    // Every explanation is in its case file; a summary's share is printed.
+    let shown = if print && crate::output::chatty() {
+        super::shared::listed_at_most()
+    } else {
+        0
+    };
+    let mut lines = Lines {
+        shown,
+        printed: Vec::new(),
+        explained: 0,
+    };
+    let mut explained_as_run = true;
+    for test in &failing {
+        match report.case(test) {
+            Ok(case) if !case.explanation.is_empty() => lines.add_records(&case),
+            _ => {
+                explained_as_run = false;
+                break;
+            }
+        }
+    }
+    if !explained_as_run {
+        lines = Lines {
+            shown,
+            printed: Vec::new(),
+            explained: 0,
+        };
+        explain_from_recording(report, scenario, &mut lines);
+    }
+    lines.print();
+}
+
+/// The lines `run` prints of the failing segments' first causes: the first `shown`, and how many
+/// more there are.
+struct Lines {
+    shown: usize,
+    printed: Vec<String>,
+    explained: usize,
+}
+
+impl Lines {
+    fn add(
+        &mut self,
+        test_index: usize,
+        segment_index: usize,
+        cause: String,
+        share: f64,
+        more: bool,
+    ) {
+        self.explained += 1;
+        if self.printed.len() < self.shown {
+            self.printed.push(format!(
+                "why test {test_index:03} segment {segment_index} failed: {cause} ({:.0} % of the growth{})",
+                share * 100.0,
+                if more {
+                    "; drivecheck explain for the rest"
+                } else {
+                    ""
+                }
+            ));
+        }
+    }
+
+    /// The segments of a case file's `explanation`.
+    fn add_records(&mut self, case: &Case) {
+        for segment in &case.explanation {
+            let Some(top) = segment.causes.first() else {
+                continue;
+            };
+            self.add(
+                case.test_index.unwrap_or_default(),
+                segment.segment_index,
+                describe(&top.source.into(), Some(case)),
+                top.share,
+                segment.causes.len() > 1,
+            );
+        }
+    }
+
+    fn print(&self) {
+        for line in &self.printed {
+            println!("{line}");
+        }
+        if self.explained > self.printed.len() && self.shown > 0 {
+            println!(
+                "… and {} more failing segments explained in their case files (drivecheck explain DIR; -v prints them all)",
+                self.explained - self.printed.len()
+            );
+        }
+    }
+}
+
+/// Explains the failing segments from the recording (`drivecheck explain`) and writes each
+/// case's `explanation` into its case file.
+fn explain_from_recording(report: &CampaignReport, scenario: &Scenario, lines: &mut Lines) {
     let explained = match explain_run(
         &report.dir,
         None,
@@ -365,13 +465,6 @@ fn explain_failed(report: &CampaignReport, scenario: &Scenario, print: bool) {
             return;
         }
     };
-    // Every explanation is written into its case file; a summary's share is printed.
-    let shown = if print && crate::output::chatty() {
-        super::shared::listed_at_most()
-    } else {
-        0
-    };
-    let mut printed = 0;
     for case in explained.cases.iter().filter(|c| !c.segments.is_empty()) {
         let written = std::fs::read_to_string(&case.case)
             .map_err(anyhow::Error::from)
@@ -395,29 +488,14 @@ fn explain_failed(report: &CampaignReport, scenario: &Scenario, print: bool) {
             let Some(top) = segment.causes.first() else {
                 continue;
             };
-            printed += 1;
-            if printed > shown {
-                continue;
-            }
-            println!(
-                "why test {:03} segment {} failed: {} ({:.0} % of the growth{})",
+            lines.add(
                 case.test_index,
                 segment.segment_index,
                 describe(&top.source, on_disk.as_ref()),
-                top.share * 100.0,
-                if segment.causes.len() > 1 {
-                    "; drivecheck explain for the rest"
-                } else {
-                    ""
-                }
+                top.share,
+                segment.causes.len() > 1,
             );
         }
-    }
-    if printed > shown && shown > 0 {
-        println!(
-            "… and {} more failing segments explained in their case files (drivecheck explain DIR; -v prints them all)",
-            printed - shown
-        );
     }
 }
 

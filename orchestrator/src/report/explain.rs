@@ -11,8 +11,9 @@ use scenarios::Scenario;
 use serde::{Deserialize, Serialize};
 
 use super::ReportError;
-use super::data::{TestData, Tracks, each_test, read_campaign, read_record, scenario_for};
+use super::data::{TestData, Track, Tracks, each_test, read_campaign, read_record, scenario_for};
 use super::route::boundaries;
+use crate::recording::{Held, Recording};
 use campaign::case::{Case, CommandRecord};
 use campaign::explain::calibrate::{Calibration, CalibrationError};
 use campaign::explain::score::{
@@ -22,6 +23,7 @@ use campaign::explain::{
     ExplainAnchor, ExplainConfig, ExplainFault, ExplainSample, ExplainSegment, SegmentExplanation,
     Source, explain_segment,
 };
+use campaign::files::SegmentExplanationRecord;
 use campaign::oracle::SegmentVerdict;
 
 /// Every explained case of a run.
@@ -120,19 +122,37 @@ fn explain_test(
     Ok(CaseExplanation {
         case: dir.join(&test.file),
         test_index: test.index,
-        segments: explain_segments(test, scenario, options)?,
+        segments: explain_segments(&test.case, test.track.as_ref(), scenario, options)?,
     })
+}
+
+/// The failing segments of test `test_index` (`case`) explained from its messages as the worker
+/// that ran it holds them (`held`, before they are written to the recording), as its case file
+/// keeps them: what `drivecheck explain` finds in the recording, without reading it back (`run`
+/// gives it to the runner, [`crate::runner::ExplainHeld`]). `None` when the messages hold no
+/// samples of the test.
+pub(crate) fn explain_held(
+    held: &[Held],
+    test_index: usize,
+    case: &Case,
+    scenario: &Scenario,
+) -> Option<Vec<SegmentExplanationRecord>> {
+    let recording = Recording::from_held(held.to_vec());
+    let track = Tracks::split(&recording).ok()?.track(test_index);
+    let segments =
+        explain_segments(case, track.as_ref(), scenario, &ExplainOptions::default()).ok()?;
+    Some(segments.iter().map(Into::into).collect())
 }
 
 /// The explained segments of one test (the failing ones; every judged one with
 /// `options.all_segments`); an error when the recording has no samples of it.
 pub(crate) fn explain_segments(
-    test: &TestData,
+    case: &Case,
+    track: Option<&Track>,
     scenario: &Scenario,
     options: &ExplainOptions,
 ) -> Result<Vec<SegmentExplanation>, NotExplained> {
-    let case = &test.case;
-    let track = test.track.as_ref().ok_or(NotExplained::NoSamples)?;
+    let track = track.ok_or(NotExplained::NoSamples)?;
     let samples: Vec<ExplainSample> = track
         .samples
         .iter()
@@ -402,7 +422,7 @@ pub fn score_run(
 fn score_case(
     case: &CaseExplanation,
     on_disk: &Case,
-    track: &super::data::Track,
+    track: &Track,
     faults: &[crate::recording::Stamped<crate::recording::SimFault>],
     ranges: &[crate::recording::Stamped<crate::recording::SimRange>],
 ) -> Vec<Scored> {

@@ -592,7 +592,12 @@ pub(crate) fn test_section(
             .any(|s| s.oracle.verdict == SegmentVerdict::Failed)
     {
         out.push_str("<h3>Why it failed</h3>\n");
-        match explain_segments(test, scenario, &ExplainOptions::default()) {
+        match explain_segments(
+            &test.case,
+            test.track.as_ref(),
+            scenario,
+            &ExplainOptions::default(),
+        ) {
             Ok(explained) => causes_table(out, case, &explained),
             Err(why) => {
                 let _ = writeln!(

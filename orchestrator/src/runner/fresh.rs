@@ -418,6 +418,17 @@ async fn fresh_test<C: FreshCars + ?Sized>(
         (TestEnd::Continue, Err(error)) => TestEnd::Stop(error),
         (end, _) => end,
     };
+    // A failing test is explained here, in parallel with the other workers, from the messages
+    // it recorded; `run` then has nothing to read back for it (`drivecheck explain` finds the
+    // same in the recording).
+    let mut case = case;
+    if case.verdict == Some(Verdict::Failed)
+        && !held.is_empty()
+        && let Some(explain) = config.explain
+        && let Some(explanation) = explain(&held, test_index, &case, scenario)
+    {
+        case.explanation = explanation;
+    }
     Ok(Ran {
         held,
         end,

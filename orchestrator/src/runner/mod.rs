@@ -101,7 +101,7 @@ use campaign::drive::{BRAKE_TIMEOUT, SAFE_STOP_SPEED_MPS, STOPPED_SPEED_MPS};
 const BRAKE_CURRENT_A: f64 = 50.0;
 
 /// How a campaign runs.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct RunConfig {
     /// Seed, number of tests, faults or not.
     pub campaign: Campaign,
@@ -133,7 +133,21 @@ pub struct RunConfig {
     pub live: Option<crate::recording::live::LiveView>,
     /// An interrupted campaign continued in its run directory (`run --resume`).
     pub resume: Option<ResumeSource>,
+    /// How a campaign on fresh simulated cars explains a failing test as it ends, in the worker
+    /// that ran it, from the messages it recorded (`run`; `None`: the case files are written
+    /// without explanations, and `run` explains from the recording at the end).
+    pub explain: Option<ExplainHeld>,
 }
+
+/// Explains test `test_index`'s failing segments (`case`) from the messages a worker recorded of
+/// it, as its case file keeps them; `None` when they hold no samples of it. `run` gives the
+/// report's (`report::explain::explain_held`): the runner does not depend on the report.
+pub type ExplainHeld = fn(
+    &[crate::recording::Held],
+    usize,
+    &Case,
+    &Scenario,
+) -> Option<Vec<campaign::files::SegmentExplanationRecord>>;
 
 /// An interrupted campaign continued (`run --resume`): its run directory is `out_dir`; the tests
 /// whose case files stay are not driven again.
@@ -227,6 +241,7 @@ impl RunConfig {
             shard: None,
             live: None,
             resume: None,
+            explain: None,
         }
     }
 
