@@ -10,7 +10,7 @@ use trajgen::Point;
 use super::ReportError;
 use crate::recording::{
     AckOutcome, CarCommand, CarStateRecord, CommandAck, CommandSent, Recording, Stamped, TestEvent,
-    TestEventKind,
+    TestEventKind, Topic,
 };
 use crate::runner::RECORDING_FILE;
 use campaign::case::{CampaignRecord, Case, TestTiming};
@@ -525,6 +525,17 @@ pub(crate) struct Tracks {
     states: Vec<Stamped<CarStateRecord>>,
     starts: Vec<u64>,
 }
+
+/// The topics [`Tracks::split`] reads: the test events, the commands and their
+/// acknowledgements, the state samples and the poses joined with them.
+pub(crate) const TRACK_TOPICS: [Topic; 6] = [
+    Topic::Tests,
+    Topic::Commands,
+    Topic::Acks,
+    Topic::CarState,
+    Topic::FoxgloveRtk,
+    Topic::FoxgloveUwb,
+];
 
 impl Tracks {
     /// Reads the test events, the autopilot acknowledgements and the state samples of

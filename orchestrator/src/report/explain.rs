@@ -11,7 +11,9 @@ use scenarios::Scenario;
 use serde::{Deserialize, Serialize};
 
 use super::ReportError;
-use super::data::{TestData, Track, Tracks, each_test, read_campaign, read_record, scenario_for};
+use super::data::{
+    TRACK_TOPICS, TestData, Track, Tracks, each_test, read_campaign, read_record, scenario_for,
+};
 use super::route::boundaries;
 use crate::recording::{Held, Recording};
 use campaign::case::{Case, CommandRecord};
@@ -137,7 +139,14 @@ pub(crate) fn explain_held(
     case: &Case,
     scenario: &Scenario,
 ) -> Option<Vec<SegmentExplanationRecord>> {
-    let recording = Recording::from_held(held.to_vec());
+    // Only what the track is made of: a test's other messages (the simulator's truth and
+    // ranges, …) are most of them.
+    let recording = Recording::from_held(
+        held.iter()
+            .filter(|m| TRACK_TOPICS.contains(&m.topic()))
+            .cloned()
+            .collect(),
+    );
     let track = Tracks::split(&recording).ok()?.track(test_index);
     let segments =
         explain_segments(case, track.as_ref(), scenario, &ExplainOptions::default()).ok()?;
