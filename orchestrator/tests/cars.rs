@@ -55,11 +55,6 @@ fn a_car_lost_mid_test_leaves_and_the_campaign_ends_on_the_other_with_every_test
     let tmp = tempfile::tempdir().unwrap();
     let (mut sim_a, a) = start_sim(tmp.path(), "a");
     let (mut sim_b, b) = start_sim(tmp.path(), "b");
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
     let out = tmp.path().join("run");
     let mut run = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
         .args([
@@ -73,25 +68,37 @@ fn a_car_lost_mid_test_leaves_and_the_campaign_ends_on_the_other_with_every_test
             path(&out),
         ])
         .args(["--car", &format!("A={a}"), "--car", &format!("B={b}")])
-        .arg("--live")
-        .arg(format!("127.0.0.1:{port}"))
+        // Port 0: the campaign binds a free port and says which (a port chosen here and freed
+        // could be taken by another test's server before the campaign binds it).
+        .args(["--live", "127.0.0.1:0"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
     let stderr = run.stderr.take().unwrap();
     let (tx, rx) = mpsc::channel();
+    let (port_tx, port_rx) = mpsc::channel();
     let reader = std::thread::spawn(move || {
         let mut said = String::new();
         for line in BufReader::new(stderr).lines().map_while(Result::ok) {
             if line.contains("started on car B") {
                 let _ = tx.send(());
             }
+            if let Some(port) = line
+                .strip_prefix("live view: ws://127.0.0.1:")
+                .and_then(|rest| rest.split_whitespace().next())
+                .and_then(|port| port.parse::<u16>().ok())
+            {
+                let _ = port_tx.send(port);
+            }
             said.push_str(&line);
             said.push('\n');
         }
         said
     });
+    let port = port_rx
+        .recv_timeout(Duration::from_secs(60))
+        .expect("the campaign never said its live view's port");
     let topics = tokio::runtime::Runtime::new()
         .unwrap()
         .block_on(advertised(port, Duration::from_secs(5)));
