@@ -84,11 +84,7 @@ fn a_car_lost_mid_test_leaves_and_the_campaign_ends_on_the_other_with_every_test
             if line.contains("started on car B") {
                 let _ = tx.send(());
             }
-            if let Some(port) = line
-                .strip_prefix("live view: ws://127.0.0.1:")
-                .and_then(|rest| rest.split_whitespace().next())
-                .and_then(|port| port.parse::<u16>().ok())
-            {
+            if let Some(port) = common::live_port(&line) {
                 let _ = port_tx.send(port);
             }
             said.push_str(&line);

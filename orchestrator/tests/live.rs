@@ -38,11 +38,7 @@ async fn watch(
     let stderr = std::thread::spawn(move || {
         let mut all = String::new();
         for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-            if let Some(port) = line
-                .strip_prefix("live view: ws://127.0.0.1:")
-                .and_then(|rest| rest.split_whitespace().next())
-                .and_then(|port| port.parse::<u16>().ok())
-            {
+            if let Some(port) = common::live_port(&line) {
                 let _ = port_tx.send(port);
             }
             all.push_str(&line);

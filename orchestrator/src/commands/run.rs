@@ -364,11 +364,7 @@ fn explain_failed(report: &CampaignReport, scenario: &Scenario, print: bool) {
     } else {
         0
     };
-    let mut lines = Lines {
-        shown,
-        printed: Vec::new(),
-        explained: 0,
-    };
+    let mut lines = Lines::new(shown);
     let mut explained_as_run = true;
     for test in &failing {
         match report.case(test) {
@@ -380,11 +376,7 @@ fn explain_failed(report: &CampaignReport, scenario: &Scenario, print: bool) {
         }
     }
     if !explained_as_run {
-        lines = Lines {
-            shown,
-            printed: Vec::new(),
-            explained: 0,
-        };
+        lines = Lines::new(shown);
         explain_from_recording(report, scenario, &mut lines);
     }
     lines.print();
@@ -399,6 +391,14 @@ struct Lines {
 }
 
 impl Lines {
+    fn new(shown: usize) -> Self {
+        Self {
+            shown,
+            printed: Vec::new(),
+            explained: 0,
+        }
+    }
+
     fn add(
         &mut self,
         test_index: usize,

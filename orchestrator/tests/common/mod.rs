@@ -170,3 +170,11 @@ pub fn start_sim(dir: &Path, name: &str) -> (std::process::Child, String) {
     let _ = (sim.kill(), sim.wait());
     panic!("the simulated car {name} did not say its address within 10 s");
 }
+
+/// The port of the live view a campaign says it serves, from its line `live view:
+/// ws://127.0.0.1:PORT …` on standard error (a campaign given `--live 127.0.0.1:0`).
+pub fn live_port(line: &str) -> Option<u16> {
+    line.strip_prefix("live view: ws://127.0.0.1:")
+        .and_then(|rest| rest.split_whitespace().next())
+        .and_then(|port| port.parse().ok())
+}
