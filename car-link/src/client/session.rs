@@ -777,11 +777,14 @@ pub(super) async fn supervise(
     address: Option<CarAddress>,
     cancel: CancellationToken,
 ) {
+    // Made once, not at every payload: each would take a waiter slot and give it back.
+    let cancelled = cancel.cancelled();
+    tokio::pin!(cancelled);
     loop {
         shared.link_up(link.sender());
         let reason = loop {
             let incoming = tokio::select! {
-                _ = cancel.cancelled() => return,
+                () = &mut cancelled => return,
                 incoming = link.recv() => incoming,
             };
             match incoming {

@@ -138,6 +138,12 @@ async fn run<V: Vehicle>(
     let mut ticker = tokio::time::interval(ctx.config.state_period);
     ticker.set_missed_tick_behavior(MissedTickBehavior::Delay);
     telemetry.drain(ctx.journal);
+    // Made once, not at every wake: each would take a waiter slot or a timer and give it back.
+    let hard_stopped = super::hard_stop().cancelled();
+    let interrupted = ctx.cancel.cancelled();
+    let fault_due = tokio::time::sleep_until(t0);
+    tokio::pin!(hard_stopped, interrupted, fault_due);
+    let mut fault_due_at = None;
     while !machine.is_done() {
         if op.is_none() {
             let health = ctx.car.health();
@@ -158,13 +164,19 @@ async fn run<V: Vehicle>(
             fault_ops.push(start(ctx, test_index, operation));
         }
         let due = machine.fault_due().map(|due| t0 + due);
+        if let Some(at) = due
+            && fault_due_at != due
+        {
+            fault_due.as_mut().reset(at);
+        }
+        fault_due_at = due;
         let woke = tokio::select! {
             biased;
-            () = super::hard_stop().cancelled() => Woke::HardStop,
-            () = ctx.cancel.cancelled(), if machine.interruptible() => Woke::Interrupt,
+            () = &mut hard_stopped => Woke::HardStop,
+            () = &mut interrupted, if machine.interruptible() => Woke::Interrupt,
             (recorded, result) = wait_op(&mut op) => Woke::Op(recorded, result),
             (recorded, result) = wait_any(&mut fault_ops) => Woke::Fault(recorded, result),
-            () = sleep_until(due) => Woke::FaultDue,
+            () = &mut fault_due, if due.is_some() => Woke::FaultDue,
             sample = telemetry.next(ctx.journal) => Woke::Sample(sample),
             _ = ticker.tick() => Woke::Tick,
         };
@@ -210,14 +222,6 @@ fn reply(result: OpResult) -> Reply {
         Ok(_) => Reply::Done,
         Err(CarError::LinkLost) => Reply::LinkLost,
         Err(error) => Reply::Failed(error.to_string()),
-    }
-}
-
-/// Sleeps until `deadline`; never completes without one.
-async fn sleep_until(deadline: Option<Instant>) {
-    match deadline {
-        Some(deadline) => tokio::time::sleep_until(deadline).await,
-        None => std::future::pending().await,
     }
 }
 

@@ -341,11 +341,15 @@ async fn watch_until_end<V: Vehicle>(
     let mut ticker = tokio::time::interval(ctx.config.state_period);
     ticker.set_missed_tick_behavior(MissedTickBehavior::Delay);
     telemetry.drain(ctx.journal);
+    // Made once, not at every sample: each would take a waiter slot and a timer and give them back.
+    let cancelled = ctx.cancel.cancelled();
+    let timed_out = sleep_until(deadline);
+    tokio::pin!(cancelled, timed_out);
     loop {
         let now = t0.elapsed();
         tokio::select! {
             biased;
-            () = ctx.cancel.cancelled() => {
+            () = &mut cancelled => {
                 return Err(safety.stop(AbortReason::Interrupted, now));
             }
             sample = telemetry.next(ctx.journal) => {
@@ -371,7 +375,7 @@ async fn watch_until_end<V: Vehicle>(
                     return Err(abort);
                 }
             }
-            () = sleep_until(deadline) => return Ok(false),
+            () = &mut timed_out => return Ok(false),
         }
     }
 }
@@ -394,6 +398,9 @@ pub(crate) async fn brake_until_stopped<V: Vehicle>(
     let deadline = Instant::now() + BRAKE_TIMEOUT;
     let journal = ctx.journal;
     telemetry.drain(journal);
+    let hard_stopped = super::hard_stop().cancelled();
+    let timed_out = sleep_until(deadline);
+    tokio::pin!(hard_stopped, timed_out);
     loop {
         let brake = CarCommand::Brake {
             current_a: BRAKE_CURRENT_A,
@@ -404,7 +411,7 @@ pub(crate) async fn brake_until_stopped<V: Vehicle>(
         }
         tokio::select! {
             biased;
-            () = super::hard_stop().cancelled() => return BrakeEnd::HardStopped,
+            () = &mut hard_stopped => return BrakeEnd::HardStopped,
             sample = telemetry.next(journal) => match sample {
                 Sample::LinkLost => return BrakeEnd::LinkLost,
                 Sample::State(s) if s.state.speed.abs() < STOPPED_SPEED_MPS => {
@@ -412,7 +419,7 @@ pub(crate) async fn brake_until_stopped<V: Vehicle>(
                 }
                 Sample::State(_) => {}
             },
-            () = sleep_until(deadline) => return BrakeEnd::TimedOut,
+            () = &mut timed_out => return BrakeEnd::TimedOut,
         }
     }
 }
