@@ -152,22 +152,45 @@ fn remaining_stretches(route: &[Waypoint], progress: Progress) -> Vec<(f64, f64)
         .collect()
 }
 
-/// The nearest-rank 99th percentile of `values`; `None` for none.
-pub fn p99(values: &VecDeque<Duration>) -> Option<Duration> {
-    let mut sorted: Vec<Duration> = values.iter().copied().collect();
-    sorted.sort_unstable();
-    trajgen::stats::nearest_rank(&sorted, 0.99)
+/// The most recent `len` measurements of one kind, kept in arrival order and sorted: a
+/// percentile is read at every state sample, so it is an index, not a sort of the window.
+#[derive(Debug, Clone, PartialEq, Default)]
+struct Window {
+    arrived: VecDeque<Duration>,
+    sorted: Vec<Duration>,
+}
+
+impl Window {
+    /// Adds `d`; the oldest measurement leaves once there are more than `len`.
+    fn push(&mut self, d: Duration, len: usize) {
+        self.arrived.push_back(d);
+        let at = self.sorted.partition_point(|&x| x < d);
+        self.sorted.insert(at, d);
+        while self.arrived.len() > len {
+            if let Some(old) = self.arrived.pop_front() {
+                // Present: every value in `arrived` is in `sorted` once per arrival.
+                if let Ok(at) = self.sorted.binary_search(&old) {
+                    self.sorted.remove(at);
+                }
+            }
+        }
+    }
+
+    /// The nearest-rank 99th percentile; `None` before any measurement.
+    fn p99(&self) -> Option<Duration> {
+        trajgen::stats::nearest_rank(&self.sorted, 0.99)
+    }
 }
 
 /// Measured link round trips, append confirmation delays and generation times (the most recent
 /// `window` of each).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Delays {
-    round_trips: VecDeque<Duration>,
+    round_trips: Window,
     /// From deciding an append to the car's confirmation: on a lossy link the retries of the
     /// upload, which a state sample's round trip does not show.
-    appends: VecDeque<Duration>,
-    generations: VecDeque<Duration>,
+    appends: Window,
+    generations: Window,
     window: usize,
 }
 
@@ -175,26 +198,26 @@ impl Delays {
     /// No measurements yet; keeps the most recent `window` of each kind (at least 1).
     pub fn new(window: usize) -> Self {
         Self {
-            round_trips: VecDeque::new(),
-            appends: VecDeque::new(),
-            generations: VecDeque::new(),
+            round_trips: Window::default(),
+            appends: Window::default(),
+            generations: Window::default(),
             window: window.max(1),
         }
     }
 
     /// One measured request-to-reply time.
     pub fn round_trip(&mut self, d: Duration) {
-        push_bounded(&mut self.round_trips, d, self.window);
+        self.round_trips.push(d, self.window);
     }
 
     /// One append's delay from decision to the car's confirmation.
     pub fn append(&mut self, d: Duration) {
-        push_bounded(&mut self.appends, d, self.window);
+        self.appends.push(d, self.window);
     }
 
     /// One measured segment generation time.
     pub fn generation(&mut self, d: Duration) {
-        push_bounded(&mut self.generations, d, self.window);
+        self.generations.push(d, self.window);
     }
 
     /// The lead time: the larger of the p99 round trip and the p99 append confirmation delay, +
@@ -202,20 +225,13 @@ impl Delays {
     /// upload needs retries: its confirmation delay, not a state sample's round trip, is what the
     /// car's remaining route must cover.
     pub fn lead_time(&self, config: &StreamingConfig) -> Duration {
-        let round_trip = p99(&self.round_trips)
+        let round_trip = (self.round_trips.p99())
             .unwrap_or(config.initial_round_trip)
-            .max(p99(&self.appends).unwrap_or_default());
-        let generation = p99(&self.generations).unwrap_or(config.initial_generation);
+            .max(self.appends.p99().unwrap_or_default());
+        let generation = (self.generations.p99()).unwrap_or(config.initial_generation);
         round_trip
             .saturating_add(generation)
             .saturating_add(config.margin)
-    }
-}
-
-fn push_bounded(values: &mut VecDeque<Duration>, d: Duration, window: usize) {
-    values.push_back(d);
-    while values.len() > window {
-        values.pop_front();
     }
 }
 
@@ -436,10 +452,16 @@ mod tests {
 
     #[test]
     fn p99_is_the_nearest_rank() {
-        let values: VecDeque<Duration> = (1..=200).map(ms).collect();
-        assert_eq!(p99(&values), Some(ms(198)));
-        assert_eq!(p99(&VecDeque::new()), None);
-        assert_eq!(p99(&[ms(7)].into_iter().collect()), Some(ms(7)));
+        let mut window = Window::default();
+        assert_eq!(window.p99(), None);
+        window.push(ms(7), 200);
+        assert_eq!(window.p99(), Some(ms(7)));
+        // Arriving in any order, the 200 values 1..=200 ms: the 198th.
+        let mut window = Window::default();
+        for k in 0..200 {
+            window.push(ms(1 + (k * 37) % 200), 200);
+        }
+        assert_eq!(window.p99(), Some(ms(198)));
     }
 
     #[test]
@@ -535,6 +557,22 @@ mod tests {
                 let now = time_to_end(&route, progress, 0.1);
                 proptest::prop_assert!(now <= before);
                 before = now;
+            }
+        }
+
+        #[test]
+        fn the_windows_p99_is_that_of_its_last_values_sorted(
+            values in proptest::collection::vec(0u64..50, 1..120),
+            len in 1usize..40,
+        ) {
+            let mut window = Window::default();
+            for (k, &v) in values.iter().enumerate() {
+                window.push(ms(v), len);
+                let mut last: Vec<Duration> =
+                    values[(k + 1).saturating_sub(len)..=k].iter().map(|&v| ms(v)).collect();
+                last.sort_unstable();
+                proptest::prop_assert_eq!(&window.sorted, &last);
+                proptest::prop_assert_eq!(window.p99(), trajgen::stats::nearest_rank(&last, 0.99));
             }
         }
     }

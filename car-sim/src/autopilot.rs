@@ -564,17 +564,25 @@ impl Autopilot {
     }
 
     fn window(&self, len: usize) -> impl Iterator<Item = Segment> + '_ {
+        self.window_indices(len).map(|i| self.segment(i))
+    }
+
+    /// The unwrapped indices of the scan window's segments (see [`Self::segment`]).
+    fn window_indices(&self, len: usize) -> std::ops::Range<usize> {
         let cap = if self.firmware.scan_stops_before_last_point {
             len - 1
         } else {
             len
         };
         let k = self.look_ahead.min(cap);
-        let start = self.point_now;
-        (start..start + k).map(|i| Segment {
+        self.point_now..self.point_now + k
+    }
+
+    fn segment(&self, i: usize) -> Segment {
+        Segment {
             start: self.wrap(i),
             end: self.wrap(i + 1),
-        })
+        }
     }
 
     fn scan(&mut self, cfg: &FirmwareConfig, len: usize, car: FwPose, radius: f32) -> Scan {
@@ -584,8 +592,9 @@ impl Autopilot {
         let mut hit_segment = None;
         let mut last_point_reached = false;
         let mut zero_length = false;
-        let window: Vec<Segment> = self.window(len).collect();
-        for seg in window {
+        // By index: the loop writes a point's time, which a borrowing iterator would not allow.
+        for i in self.window_indices(len) {
+            let seg = self.segment(i);
             let (p1, p2) = (self.route[seg.start], self.route[seg.end]);
             if repeat && time_before(p2.time, p1.time) {
                 let mut t = p2.time.wrapping_add(cfg.ap_time_add_repeat_ms);
