@@ -231,6 +231,10 @@ pub struct Placer {
     /// metres.
     route: Vec<Waypoint>,
     route_s: Vec<f64>,
+    /// The unit normal of the miter at each route point ([`Self::compute_miter`]), kept as the
+    /// route grows: a sample's place is found on three stretches, and the pursuit does so at
+    /// every tick.
+    miters: Vec<Option<Point>>,
     /// The car's route index of each appended segment's first point.
     segment_first: Vec<usize>,
     pending: Vec<Pending>,
@@ -282,6 +286,7 @@ impl Placer {
         let mut placer = Self {
             route: Vec::new(),
             route_s: Vec::new(),
+            miters: Vec::new(),
             segment_first: Vec::new(),
             pending,
             in_flight: Vec::new(),
@@ -309,6 +314,13 @@ impl Placer {
             };
             self.route.push(w);
             self.route_s.push(s);
+        }
+        // The old last point's miter turns with the new stretch after it.
+        let from = self.miters.len().saturating_sub(1);
+        self.miters.truncate(from);
+        for i in from..self.route.len() {
+            let miter = self.compute_miter(i);
+            self.miters.push(miter);
         }
     }
 
@@ -602,9 +614,14 @@ impl Placer {
         Some((self.route_s[i] + lambda * length, p.dist(a + d * lambda)))
     }
 
+    /// The unit normal of the miter at route point `i` (kept, see [`Self::compute_miter`]).
+    fn miter(&self, i: usize) -> Option<Point> {
+        self.miters.get(i).copied().flatten()
+    }
+
     /// The unit normal of the miter at route point `i`: the bisector of the turn there (the
     /// stretch's own direction at the route's ends and at a U-turn).
-    fn miter(&self, i: usize) -> Option<Point> {
+    fn compute_miter(&self, i: usize) -> Option<Point> {
         let unit = |from: usize, to: usize| {
             let d = self.route.get(to)?.position - self.route.get(from)?.position;
             let n = d.norm();
@@ -802,6 +819,27 @@ mod tests {
     fn hint(route: &[Point], p: Point, from: usize) -> Progress {
         let route: Vec<Waypoint> = route.iter().map(|&q| Waypoint::new(q, 1.0)).collect();
         locate(&route, p, from).unwrap()
+    }
+
+    #[test]
+    fn the_kept_miters_are_those_of_the_grown_route() {
+        let (mut placer, _) = placer();
+        // A point at a time, two at once, and one on top of the last (no stretch, no miter).
+        let more = [(8.0, 8.0), (4.0, 10.0), (0.0, 9.0), (0.0, 9.0), (-3.0, 5.0)];
+        let waypoints: Vec<Waypoint> = more
+            .iter()
+            .map(|&(x, y)| Waypoint::new(Point::new(x, y), 1.0))
+            .collect();
+        placer.extend(&waypoints[..1]);
+        placer.extend(&waypoints[1..3]);
+        placer.extend(&waypoints[3..]);
+        assert_eq!(placer.miters.len(), placer.route.len());
+        for i in 0..placer.route.len() {
+            assert_eq!(placer.miter(i), placer.compute_miter(i), "point {i}");
+        }
+        // The corner at (8, 4) turned left by 90°: its miter is the bisector, not the old end's.
+        let m = placer.miter(3).unwrap();
+        assert!((m.x - 0.5f64.sqrt()).abs() < 1e-12 && (m.y - 0.5f64.sqrt()).abs() < 1e-12);
     }
 
     #[test]
