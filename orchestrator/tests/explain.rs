@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{campaign, drivecheck, path, text};
+use common::{campaign, drivecheck, path, summary, text};
 
 #[test]
 fn the_rock_lots_failures_are_explained_by_anchor_234s_reflected_range() {
@@ -206,5 +206,31 @@ fn a_replay_directory_is_explained_run_by_run() {
     assert!(
         cases[0].contains("run-1") && cases[1].contains("run-2"),
         "{cases:?}"
+    );
+}
+
+/// A run recorded with `--record failing` has no samples of its passing tests: `explain` says
+/// nothing of them, and `--all-segments` says it once, not a line per test.
+#[test]
+fn the_passing_tests_of_a_run_recorded_failing_need_no_note() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = campaign(dir.path(), 1, 8, &["--record", "failing"], 1);
+    let notes = |extra: &[&str]| {
+        let mut args = vec!["explain", path(&run), "--json"];
+        args.extend_from_slice(extra);
+        let out = drivecheck(&args);
+        assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        json["notes"].as_array().cloned().unwrap_or_default()
+    };
+    assert!(notes(&[]).is_empty());
+    let passing = summary(&run)["passed"].as_u64().unwrap();
+    assert!(passing > 3, "{passing} passing tests");
+    let all = notes(&["--all-segments"]);
+    assert_eq!(all.len(), 1, "{all:?}");
+    let note = all[0].as_str().unwrap();
+    assert!(
+        note.starts_with(&format!("{passing} tests have no samples in the recording")),
+        "{note}"
     );
 }

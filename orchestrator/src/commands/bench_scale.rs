@@ -271,6 +271,7 @@ fn print_rows(rows: &[SizeRow]) {
     println!();
     println!(
         "×rec: the campaign's time with --record failing over its time with --record none; \
-         MB/test: campaign.mcap over the tests"
+         MB/test: campaign.mcap (with --record failing, only the tests that did not pass are \
+         in it) over all the tests"
     );
 }

@@ -242,12 +242,13 @@ fn text(explanations: &Explanations) -> String {
             for (k, cause) in segment.causes.iter().enumerate() {
                 let _ = writeln!(
                     out,
-                    "  {}. {} — {:.0} % of the growth ({:.2} m, {} steps){}",
+                    "  {}. {} — {:.0} % of the growth ({:.2} m, {} step{}){}",
                     k + 1,
                     describe(&cause.source, commands.as_ref()),
                     cause.share * 100.0,
                     cause.growth_m,
                     cause.steps,
+                    if cause.steps == 1 { "" } else { "s" },
                     ambiguity(cause, commands.as_ref())
                 );
             }

@@ -645,8 +645,14 @@ fn print_summary(report: &CampaignReport, wall: Option<Duration>) {
         println!("  {}", report.dir.join(file).display());
     }
     if s.failing_cases.len() > shown {
+        // `-q` and `-v` do not go together: under `-q` the way to them is the run directory.
+        let hint = if crate::output::verbosity() == crate::output::Verbosity::Quiet {
+            "runs show -v lists them all"
+        } else {
+            "-v lists them all"
+        };
         println!(
-            "  … and {} more failing cases in the run directory (-v lists them all)",
+            "  … and {} more failing cases in the run directory ({hint})",
             s.failing_cases.len() - shown
         );
     }

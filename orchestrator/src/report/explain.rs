@@ -16,7 +16,7 @@ use super::data::{
 };
 use super::route::boundaries;
 use crate::recording::{Held, Recording};
-use campaign::case::{Case, CommandRecord};
+use campaign::case::{Case, CommandRecord, SegmentResult};
 use campaign::explain::calibrate::{Calibration, CalibrationError};
 use campaign::explain::score::{
     AppliedFault, RangeTruth, SegmentScore, SimTruth, TRUTH_SLACK_S, score_segments,
@@ -77,7 +77,7 @@ pub fn explain_run(
 ) -> Result<Explanations, ReportError> {
     let wanted = only.and_then(|p| p.file_name()).and_then(|n| n.to_str());
     let mut cases = Vec::new();
-    let mut not_explained: Vec<(usize, String)> = Vec::new();
+    let mut not_explained: Vec<(usize, String, NotExplained)> = Vec::new();
     let mut found = false;
     // A test at a time: its case and samples are dropped once it is explained.
     let read = each_test(
@@ -91,7 +91,7 @@ pub fn explain_run(
             };
             match explain_test(dir, &test, scenario, options) {
                 Ok(explained) => cases.push(explained),
-                Err(why) => not_explained.push((test.index, format!("{}: {why}", test.file))),
+                Err(why) => not_explained.push((test.index, test.file.clone(), why)),
             }
             Ok(())
         },
@@ -105,14 +105,44 @@ pub fn explain_run(
         });
     }
     cases.sort_by_key(|c| c.test_index);
-    not_explained.sort();
-    notes.extend(not_explained.into_iter().map(|(_, note)| note));
+    not_explained.sort_by_key(|(index, _, _)| *index);
+    notes.extend(not_explained_notes(&not_explained));
     if let Some(w) = wanted
         && !found
     {
         notes.push(format!("{w} is not a case file of {}", dir.display()));
     }
     Ok(Explanations { cases, notes })
+}
+
+/// Most tests named in a note before the rest are counted.
+const NAMED_TESTS: usize = 3;
+
+/// A note per test that could not be explained; one for all the tests without samples when
+/// there are more than [`NAMED_TESTS`] (`explain --all` on a run recorded with `--record failing`
+/// would otherwise print a line per passing test).
+fn not_explained_notes(not_explained: &[(usize, String, NotExplained)]) -> Vec<String> {
+    let no_samples: Vec<&str> = not_explained
+        .iter()
+        .filter(|(_, _, why)| *why == NotExplained::NoSamples)
+        .map(|(_, file, _)| file.as_str())
+        .collect();
+    let summed = no_samples.len() > NAMED_TESTS;
+    let mut notes: Vec<String> = not_explained
+        .iter()
+        .filter(|(_, _, why)| !(summed && *why == NotExplained::NoSamples))
+        .map(|(_, file, why)| format!("{file}: {why}"))
+        .collect();
+    if summed {
+        let named = no_samples[..NAMED_TESTS].join(", ");
+        let more = no_samples.len() - NAMED_TESTS;
+        notes.push(format!(
+            "{} tests have no samples in the recording (recorded with --record failing or none, \
+             or cut short): {named} and {more} more",
+            no_samples.len()
+        ));
+    }
+    notes
 }
 
 fn explain_test(
@@ -161,6 +191,14 @@ pub(crate) fn explain_segments(
     scenario: &Scenario,
     options: &ExplainOptions,
 ) -> Result<Vec<SegmentExplanation>, NotExplained> {
+    let wanted = |result: &&SegmentResult| {
+        options.all_segments || result.oracle.verdict == SegmentVerdict::Failed
+    };
+    // A test with nothing to explain needs no samples: `--record failing` records none of a
+    // passing test.
+    if !case.segments.iter().any(|r| wanted(&r)) {
+        return Ok(Vec::new());
+    }
     let track = track.ok_or(NotExplained::NoSamples)?;
     let samples: Vec<ExplainSample> = track
         .samples
@@ -182,11 +220,7 @@ pub(crate) fn explain_segments(
         .collect();
     let faults = faults_of(case);
     let mut segments = Vec::new();
-    for result in &case.segments {
-        let failed = result.oracle.verdict == SegmentVerdict::Failed;
-        if !failed && !options.all_segments {
-            continue;
-        }
+    for result in case.segments.iter().filter(wanted) {
         let k = result.segment_index;
         let at = |label: &str| bounds.iter().find(|b| b.label == label).map(|b| b.t_s);
         let from_s = at(&format!("s{k}"));
@@ -200,7 +234,7 @@ pub(crate) fn explain_segments(
             segment_index: k,
             from_s,
             to_s,
-            failed,
+            failed: result.oracle.verdict == SegmentVerdict::Failed,
         };
         let config = ExplainConfig {
             threshold_m: result.oracle.threshold_m,
@@ -525,4 +559,34 @@ pub fn calibrate(
         CalibrationError::Explain(error) => error,
         refused => invalid(dir, refused),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn missing(indices: std::ops::Range<usize>) -> Vec<(usize, String, NotExplained)> {
+        indices
+            .map(|i| (i, format!("case-{i:03}.json"), NotExplained::NoSamples))
+            .collect()
+    }
+
+    #[test]
+    fn a_few_tests_without_samples_get_a_note_each_and_many_one_note() {
+        assert_eq!(
+            not_explained_notes(&missing(1..3)),
+            [
+                "case-001.json: the recording has no samples of this test",
+                "case-002.json: the recording has no samples of this test"
+            ]
+        );
+        assert_eq!(
+            not_explained_notes(&missing(0..582)),
+            [
+                "582 tests have no samples in the recording (recorded with --record failing or \
+              none, or cut short): case-000.json, case-001.json, case-002.json and 579 more"
+            ]
+        );
+        assert!(not_explained_notes(&[]).is_empty());
+    }
 }
