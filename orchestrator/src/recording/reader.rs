@@ -337,6 +337,47 @@ const FOOTER_AND_MAGIC: u64 = 1 + 8 + 8 + 8 + 4 + 8;
 /// The data end record, just before the summary section: opcode, length, data section CRC.
 const DATA_END: u64 = 1 + 8 + 4;
 
+/// The records of a finished file's summary section, from its data end record on (its CRC
+/// checked); `None` when the file has no summary section or its footer does not say where it is.
+/// The records come as the file is read: an error of the section is one of them.
+fn summary_section(
+    file: &mut File,
+) -> std::io::Result<Option<Records<BufReader<std::io::Take<&mut File>>>>> {
+    let length = file.metadata()?.len();
+    if length < mcap::MAGIC.len() as u64 + DATA_END + FOOTER_AND_MAGIC {
+        return Ok(None);
+    }
+    file.seek(SeekFrom::Start(0))?;
+    let mut magic = [0; 8];
+    file.read_exact(&mut magic)?;
+    if magic.as_slice() != mcap::MAGIC {
+        return Ok(None);
+    }
+    let footer_at = length - FOOTER_AND_MAGIC;
+    file.seek(SeekFrom::Start(footer_at))?;
+    let mut footer = [0; FOOTER_AND_MAGIC as usize];
+    file.read_exact(&mut footer)?;
+    let field = |at: usize| u64::from_le_bytes(footer[at..at + 8].try_into().unwrap_or([0; 8]));
+    let summary_start = field(9);
+    if footer[0] != mcap::records::op::FOOTER
+        || field(1) != 20
+        || &footer[29..] != mcap::MAGIC
+        || summary_start < mcap::MAGIC.len() as u64 + DATA_END
+        || summary_start > footer_at
+    {
+        return Ok(None);
+    }
+    // From the data end record on: the reader checks the summary's CRC from there.
+    let from = summary_start - DATA_END;
+    file.seek(SeekFrom::Start(from))?;
+    let input = BufReader::new(Read::take(file, length - from));
+    let mut records = Records::summary(input);
+    if !matches!(records.next(), Some(Ok(McapRecord::DataEnd(_)))) {
+        return Ok(None);
+    }
+    Ok(Some(records))
+}
+
 impl Summary {
     /// The summary of the recording at `path`. A finished file's is read from its summary section
     /// (its statistics record, the summary's CRC checked), a few kilobytes at its end, not from
@@ -399,37 +440,9 @@ impl Summary {
     /// The summary from the statistics record of a finished file's summary section; `None` when
     /// the file has no such section, or it does not read whole with its CRC.
     fn from_summary_section(file: &mut File) -> std::io::Result<Option<Self>> {
-        let length = file.metadata()?.len();
-        if length < mcap::MAGIC.len() as u64 + DATA_END + FOOTER_AND_MAGIC {
+        let Some(records) = summary_section(file)? else {
             return Ok(None);
-        }
-        let mut magic = [0; 8];
-        file.read_exact(&mut magic)?;
-        if magic.as_slice() != mcap::MAGIC {
-            return Ok(None);
-        }
-        let footer_at = length - FOOTER_AND_MAGIC;
-        file.seek(SeekFrom::Start(footer_at))?;
-        let mut footer = [0; FOOTER_AND_MAGIC as usize];
-        file.read_exact(&mut footer)?;
-        let field = |at: usize| u64::from_le_bytes(footer[at..at + 8].try_into().unwrap_or([0; 8]));
-        let summary_start = field(9);
-        if footer[0] != mcap::records::op::FOOTER
-            || field(1) != 20
-            || &footer[29..] != mcap::MAGIC
-            || summary_start < mcap::MAGIC.len() as u64 + DATA_END
-            || summary_start > footer_at
-        {
-            return Ok(None);
-        }
-        // From the data end record on: the reader checks the summary's CRC from there.
-        let from = summary_start - DATA_END;
-        file.seek(SeekFrom::Start(from))?;
-        let input = BufReader::new(Read::take(&mut *file, length - from));
-        let mut records = Records::summary(input);
-        if !matches!(records.next(), Some(Ok(McapRecord::DataEnd(_)))) {
-            return Ok(None);
-        }
+        };
         let mut messages = None;
         let mut footer_read = false;
         for record in records {
@@ -501,6 +514,8 @@ pub struct Spans<R> {
     spanned: bool,
     /// The metadata records read so far, but the spans'.
     metadata: BTreeMap<String, BTreeMap<String, String>>,
+    /// The test whose span is the last read ([`Spans::open_test`]).
+    until: Option<usize>,
 }
 
 impl<'a> Spans<&'a [u8]> {
@@ -521,6 +536,112 @@ impl Spans<BufReader<File>> {
         spans.path = Some(path.to_owned());
         Ok(spans)
     }
+
+    /// The span of test `test_index` alone, found by the summary section's metadata index
+    /// (seek and read): the file is read from the end of the span record before it to its own,
+    /// so one test of a large recording costs its own chunks, not the file's. The channels
+    /// come from the summary section and the campaign's metadata records from their places.
+    /// `None` (read the file from its start then) when the file has no summary section (a
+    /// campaign that did not finish), no span record of the test, or none before it.
+    pub fn open_test(path: &Path, test_index: usize) -> Result<Option<Self>, RecordingError> {
+        let read = |source| RecordingError::Read {
+            path: path.to_owned(),
+            source,
+        };
+        let mut file = File::open(path).map_err(read)?;
+        let Some(records) = summary_section(&mut file).map_err(read)? else {
+            return Ok(None);
+        };
+        let mut channels = BTreeMap::new();
+        let mut places: Vec<(u64, u64, String)> = Vec::new();
+        for record in records {
+            match record {
+                Ok(McapRecord::Channel(channel)) => {
+                    if let (Some(topic), Some(encoding)) = (
+                        Topic::from_name(&channel.topic),
+                        Encoding::from_name(&channel.message_encoding),
+                    ) {
+                        channels.insert(channel.id, (topic, encoding));
+                    }
+                }
+                Ok(McapRecord::MetadataIndex(index)) => {
+                    places.push((index.offset, index.length, index.name));
+                }
+                Ok(_) => {}
+                Err(mcap::McapError::Io(source)) => return Err(read(source)),
+                Err(_) => return Ok(None),
+            }
+        }
+        let is_span = |name: &str| name.starts_with(super::TEST_SPAN_PREFIX);
+        let name = format!("{}{test_index}", super::TEST_SPAN_PREFIX);
+        let Some(&(end, _, _)) = places.iter().find(|(_, _, n)| *n == name) else {
+            return Ok(None);
+        };
+        let Some((before, before_length)) = places
+            .iter()
+            .filter(|(offset, _, n)| is_span(n) && *offset < end)
+            .map(|&(offset, length, _)| (offset, length))
+            .max()
+        else {
+            return Ok(None);
+        };
+        let mut metadata = BTreeMap::new();
+        for (offset, length, _) in places.iter().filter(|(_, _, n)| !is_span(n)) {
+            match metadata_at(&mut file, *offset, *length).map_err(read)? {
+                Some(m) => metadata.insert(m.name, m.metadata),
+                None => return Ok(None),
+            };
+        }
+        let spanned = metadata
+            .get("drivecheck.recording")
+            .and_then(|m| m.get("test_spans"))
+            .is_some_and(|v| v == "true");
+        file.seek(SeekFrom::Start(before.saturating_add(before_length)))
+            .map_err(read)?;
+        // From inside the data section: its CRC cannot be checked, every chunk's is.
+        let options = mcap::sans_io::LinearReaderOptions::default()
+            .with_skip_start_magic(true)
+            .with_validate_chunk_crcs(true)
+            .with_record_length_limit(RECORD_LIMIT);
+        Ok(Some(Self {
+            records: Records::with_options(BufReader::new(file), options),
+            path: Some(path.to_owned()),
+            channels,
+            pending: Vec::new(),
+            done: false,
+            error: None,
+            spanned,
+            metadata,
+            until: Some(test_index),
+        }))
+    }
+}
+
+/// The metadata record of `length` bytes (opcode and length included, as a metadata index
+/// gives it) at `offset` in `file`; `None` when it is not one.
+fn metadata_at(
+    file: &mut File,
+    offset: u64,
+    length: u64,
+) -> std::io::Result<Option<mcap::records::Metadata>> {
+    const HEAD: usize = 1 + 8;
+    let Some(length) = usize::try_from(length)
+        .ok()
+        .filter(|&l| (HEAD..=RECORD_LIMIT).contains(&l))
+    else {
+        return Ok(None);
+    };
+    file.seek(SeekFrom::Start(offset))?;
+    let mut bytes = vec![0; length];
+    file.read_exact(&mut bytes)?;
+    let declared = u64::from_le_bytes(bytes[1..HEAD].try_into().unwrap_or([0; 8]));
+    if declared != (length - HEAD) as u64 {
+        return Ok(None);
+    }
+    Ok(match mcap::parse_record(bytes[0], &bytes[HEAD..]) {
+        Ok(McapRecord::Metadata(m)) => Some(m),
+        _ => None,
+    })
 }
 
 impl<R: Read> Spans<R> {
@@ -535,6 +656,7 @@ impl<R: Read> Spans<R> {
             error: None,
             spanned: false,
             metadata: BTreeMap::new(),
+            until: None,
         }
     }
 
@@ -632,6 +754,9 @@ impl<R: Read> Iterator for Spans<R> {
                     // area at log time 0).
                     let mut messages = std::mem::take(&mut self.pending);
                     messages.retain(|m| m.log_time() >= start_ns);
+                    if self.until == Some(test_index as usize) {
+                        self.done = true;
+                    }
                     return Some(Ok(Span {
                         test_index: Some(test_index as usize),
                         start_ns,

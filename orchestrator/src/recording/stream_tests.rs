@@ -109,6 +109,45 @@ async fn spans_read_from_the_file_are_the_spans_of_its_bytes() {
 }
 
 #[tokio::test(start_paused = true)]
+async fn one_tests_span_is_read_from_its_place_as_reading_the_whole_file_gives_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("campaign.mcap");
+    spanned_recording(&path);
+    let whole = taken(Spans::open(&path).unwrap());
+    // The first test has no span record before it: read from the start.
+    assert!(Spans::open_test(&path, 0).unwrap().is_none());
+    assert!(Spans::open_test(&path, TESTS).unwrap().is_none());
+    for (test, span) in whole.iter().enumerate().skip(1) {
+        let spans = Spans::open_test(&path, test).unwrap().expect("indexed");
+        assert_eq!(
+            spans.metadata("drivecheck.campaign").unwrap()["seed"],
+            "42",
+            "test {test}"
+        );
+        assert_eq!(taken(spans), std::slice::from_ref(span), "test {test}");
+    }
+    // A file without its summary section (a campaign that did not finish) is read whole.
+    let bytes = std::fs::read(&path).unwrap();
+    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+    let last = summary.chunk_indexes.last().unwrap();
+    let data_end = usize::try_from(last.chunk_start_offset + last.chunk_length).unwrap();
+    let cut = dir.path().join("cut.mcap");
+    std::fs::write(&cut, &bytes[..data_end]).unwrap();
+    assert!(Spans::open_test(&cut, 5).unwrap().is_none());
+    // A metadata index that points elsewhere than at a metadata record is not followed.
+    let mut moved = bytes.clone();
+    let campaign_at = summary
+        .metadata_indexes
+        .iter()
+        .find(|m| m.name == "drivecheck.campaign")
+        .map(|m| usize::try_from(m.offset).unwrap())
+        .unwrap();
+    moved[campaign_at] ^= 0xff;
+    std::fs::write(&cut, &moved).unwrap();
+    assert!(Spans::open_test(&cut, 5).unwrap().is_none());
+}
+
+#[tokio::test(start_paused = true)]
 async fn a_file_cut_short_gives_the_spans_before_the_damage_then_the_error() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("campaign.mcap");

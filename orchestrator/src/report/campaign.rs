@@ -96,7 +96,7 @@ pub(crate) fn write(
         )?;
         spill.put(index, &html)
     };
-    let recorded = read_spans(dir, &mut notes, |test, recording, recorded, notes| {
+    let recorded = read_spans(dir, None, &mut notes, |test, recording, recorded, notes| {
         let (scenario, _) = chosen.get_or_insert_with(|| pick(recorded));
         // A test's span gives its track; one no test claims (a car recorded for the whole
         // campaign) any test's it holds.

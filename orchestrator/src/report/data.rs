@@ -282,6 +282,7 @@ pub(crate) fn read_rows(dir: &Path, mut each: impl FnMut(&Case)) -> Result<Vec<R
 /// span is dropped. What is missing or damaged is a note. The recording's copy of the scenario.
 pub(crate) fn read_spans(
     dir: &Path,
+    only: Option<usize>,
     notes: &mut Vec<String>,
     mut each: impl FnMut(
         Option<usize>,
@@ -298,7 +299,14 @@ pub(crate) fn read_spans(
         ));
         return Ok(None);
     }
-    let mut spans = match crate::recording::Spans::open(&path) {
+    // One test: from its place in a finished file's index, else read from the start (to it).
+    let opened = match only {
+        Some(test) => crate::recording::Spans::open_test(&path, test)
+            .transpose()
+            .unwrap_or_else(|| crate::recording::Spans::open(&path)),
+        None => crate::recording::Spans::open(&path),
+    };
+    let mut spans = match opened {
         Ok(spans) => spans,
         Err(e) => {
             notes.push(format!("{e}; no tracks or plots"));
@@ -326,8 +334,12 @@ pub(crate) fn read_spans(
         if recorded.is_none() {
             recorded = scenario(&spans);
         }
+        let test = span.test_index;
         let recording = Recording::from_held(span.messages);
-        each(span.test_index, recording, recorded.as_deref(), notes)?;
+        each(test, recording, recorded.as_deref(), notes)?;
+        if only.is_some() && test == only {
+            break;
+        }
     }
     Ok(scenario(&spans).or(recorded))
 }
@@ -368,7 +380,12 @@ pub(crate) fn each_test(
     };
     let mut notes = Vec::new();
     let path = dir.join(RECORDING_FILE);
-    read_spans(dir, &mut notes, |test, recording, recorded, notes| {
+    // A single test is read from its place in the recording.
+    let only = match (files.len(), files.keys().next()) {
+        (1, Some(&test)) => Some(test),
+        _ => None,
+    };
+    read_spans(dir, only, &mut notes, |test, recording, recorded, notes| {
         let (scenario, _) = chosen.get_or_insert_with(|| choose(recorded));
         // A test's span gives its track; one no test claims (a car recorded for the whole
         // campaign) any test's it holds.
@@ -431,7 +448,7 @@ fn read_tracks(dir: &Path, tests: &mut [TestData], notes: &mut Vec<String>) -> O
         .enumerate()
         .map(|(i, t)| (t.index, i))
         .collect();
-    let read = read_spans(dir, notes, |test, recording, _, notes| {
+    let read = read_spans(dir, None, notes, |test, recording, _, notes| {
         let mine = match test.and_then(|t| by_index.get(&t)) {
             Some(&i) => std::slice::from_mut(&mut tests[i]),
             None => &mut tests[..],
