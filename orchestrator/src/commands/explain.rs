@@ -239,6 +239,11 @@ fn text(explanations: &Explanations) -> String {
                     ""
                 }
             );
+            // A passing segment (`--all-segments`) whose error was largest before it grew.
+            if segment.causes.iter().all(|c| c.steps == 0) {
+                out.push_str("  no growth to explain: the error did not grow up to its largest\n");
+                continue;
+            }
             for (k, cause) in segment.causes.iter().enumerate() {
                 let _ = writeln!(
                     out,
