@@ -38,6 +38,10 @@ fn a_small_campaign_prints_a_line_per_test_and_no_bundled_warnings() {
         "a bundled scenario's drawing warnings are for -v and scenario check: {err}"
     );
     assert!(
+        !err.contains("preflight:"),
+        "the simulator's factory configuration is the same on every run: {err}"
+    );
+    assert!(
         stdout(&out).contains("| test | verdict |"),
         "{}",
         text(&out)
@@ -82,6 +86,11 @@ fn quiet_prints_only_the_summary_and_verbose_the_warnings_too() {
     ]);
     assert!(
         stderr(&verbose).contains("warning: bundled:"),
+        "{}",
+        text(&verbose)
+    );
+    assert!(
+        stderr(&verbose).contains("preflight: switched off ApRepeatRoutes (was 1)"),
         "{}",
         text(&verbose)
     );

@@ -424,6 +424,12 @@ impl CampaignObserver for Progress {
         }
     }
 
+    fn detail(&self, text: &str) {
+        if crate::output::verbosity() == crate::output::Verbosity::Verbose {
+            self.line(text);
+        }
+    }
+
     fn tests_planned(&self, tests: usize) {
         self.bar.set_length(tests as u64);
         if let Ok(mut tally) = self.state.lock() {

@@ -15,6 +15,12 @@ use campaign::oracle::Verdict;
 pub trait CampaignObserver: Sync {
     /// Something the operator should know that is not an error (`preflight: switched off …`).
     fn note(&self, text: &str);
+    /// What is true of every run and worth saying only when asked (`-v`): the embedded
+    /// simulator's fresh cars start from the firmware's factory configuration, so preflight
+    /// switches off the same fields on every run.
+    fn detail(&self, text: &str) {
+        let _ = text;
+    }
     /// The campaign will run `tests` tests (after preflight).
     fn tests_planned(&self, tests: usize);
     /// Test `test_index` starts (its reset, then its drive).

@@ -312,7 +312,7 @@ fn write_test<C: FreshCars + ?Sized>(
     let ran = ran?;
     if std::mem::take(&mut order.first) {
         if !ran.switched_off.is_empty() {
-            observer.note(&switched_off_note(&ran.switched_off));
+            observer.detail(&switched_off_note(&ran.switched_off));
         }
         if ran.start_join > 0 {
             observer.note(&start_join_note(&shared.start_join));
