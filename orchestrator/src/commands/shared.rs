@@ -491,6 +491,8 @@ impl CampaignObserver for Progress {
         }
         let word = verdict.map_or("not run".to_owned(), |v| format!("{}{on}", v.as_str()));
         let word = word.as_str();
+        // The bar names the test until the next starts: at the end, the last one's verdict.
+        self.bar.set_message(format!("test {test_index}: {word}"));
         if self.every_test || !passed {
             if self.lines && self.every_test {
                 self.line(&format!(
