@@ -74,8 +74,23 @@ async fn watch(
             }
         };
         let (mut area, mut pose) = (None, None);
+        // What the view said, for a failure's message.
+        let mut advertised: Vec<String> = Vec::new();
+        let mut subscribed: Vec<u32> = Vec::new();
+        let seen = |advertised: &[String], subscribed: &[u32], area: bool, pose: bool| {
+            format!(
+                "advertised {advertised:?}, subscribed {subscribed:?}, an area {}, a pose {}",
+                if area { "came" } else { "did not come" },
+                if pose { "came" } else { "did not come" },
+            )
+        };
         while let Some(message) = socket.next().await {
-            let message = message.map_err(|e| format!("the live view failed: {e}"))?;
+            let message = message.map_err(|e| {
+                format!(
+                    "the live view failed: {e}; {}",
+                    seen(&advertised, &subscribed, area.is_some(), pose.is_some())
+                )
+            })?;
             match message {
                 Message::Text(text) => {
                     let json: serde_json::Value = serde_json::from_str(&text).unwrap();
@@ -83,6 +98,7 @@ async fn watch(
                         continue;
                     }
                     for channel in json["channels"].as_array().unwrap() {
+                        advertised.push(channel["topic"].as_str().unwrap_or("?").to_owned());
                         let id = match channel["topic"].as_str() {
                             Some("/foxglove/area") => 1,
                             Some("/foxglove/rtk") => {
@@ -93,6 +109,7 @@ async fn watch(
                             }
                             _ => continue,
                         };
+                        subscribed.push(id);
                         let subscribe = serde_json::json!({
                             "op": "subscribe",
                             "subscriptions": [{"id": id, "channelId": channel["id"]}],
@@ -122,7 +139,10 @@ async fn watch(
                 _ => {}
             }
         }
-        Err("the live view closed before the area and a pose came".to_owned())
+        Err(format!(
+            "the live view closed before the area and a pose came; {}",
+            seen(&advertised, &subscribed, area.is_some(), pose.is_some())
+        ))
     })
     .await
     .unwrap_or_else(|_| Err("no area and pose within 60 s".to_owned()));
