@@ -225,10 +225,12 @@ impl Delays {
     /// upload needs retries: its confirmation delay, not a state sample's round trip, is what the
     /// car's remaining route must cover.
     pub fn lead_time(&self, config: &StreamingConfig) -> Duration {
-        let round_trip = (self.round_trips.p99())
+        let round_trip = self
+            .round_trips
+            .p99()
             .unwrap_or(config.initial_round_trip)
             .max(self.appends.p99().unwrap_or_default());
-        let generation = (self.generations.p99()).unwrap_or(config.initial_generation);
+        let generation = self.generations.p99().unwrap_or(config.initial_generation);
         round_trip
             .saturating_add(generation)
             .saturating_add(config.margin)

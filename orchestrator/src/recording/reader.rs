@@ -557,11 +557,8 @@ impl Spans<BufReader<File>> {
         for record in records {
             match record {
                 Ok(McapRecord::Channel(channel)) => {
-                    if let (Some(topic), Some(encoding)) = (
-                        Topic::from_name(&channel.topic),
-                        Encoding::from_name(&channel.message_encoding),
-                    ) {
-                        channels.insert(channel.id, (topic, encoding));
+                    if let Some(known) = known_channel(&channel) {
+                        channels.insert(channel.id, known);
                     }
                 }
                 Ok(McapRecord::MetadataIndex(index)) => {
@@ -594,8 +591,7 @@ impl Spans<BufReader<File>> {
         }
         let spanned = metadata
             .get("drivecheck.recording")
-            .and_then(|m| m.get("test_spans"))
-            .is_some_and(|v| v == "true");
+            .is_some_and(says_test_spans);
         file.seek(SeekFrom::Start(before.saturating_add(before_length)))
             .map_err(read)?;
         // From inside the data section: its CRC cannot be checked, every chunk's is.
@@ -615,6 +611,19 @@ impl Spans<BufReader<File>> {
             until: Some(test_index),
         }))
     }
+}
+
+/// The topic and encoding of a channel record, when drivecheck knows both.
+fn known_channel(channel: &mcap::records::Channel) -> Option<(Topic, Encoding)> {
+    Some((
+        Topic::from_name(&channel.topic)?,
+        Encoding::from_name(&channel.message_encoding)?,
+    ))
+}
+
+/// Whether the `drivecheck.recording` metadata says every test's messages have a span.
+fn says_test_spans(recording: &BTreeMap<String, String>) -> bool {
+    recording.get("test_spans").is_some_and(|v| v == "true")
 }
 
 /// The metadata record of `length` bytes (opcode and length included, as a metadata index
@@ -720,11 +729,8 @@ impl<R: Read> Iterator for Spans<R> {
             };
             match record {
                 McapRecord::Channel(channel) => {
-                    if let (Some(topic), Some(encoding)) = (
-                        Topic::from_name(&channel.topic),
-                        Encoding::from_name(&channel.message_encoding),
-                    ) {
-                        self.channels.insert(channel.id, (topic, encoding));
+                    if let Some(known) = known_channel(&channel) {
+                        self.channels.insert(channel.id, known);
                     }
                 }
                 McapRecord::Message { header, data } => {
@@ -739,7 +745,7 @@ impl<R: Read> Iterator for Spans<R> {
                 }
                 McapRecord::Metadata(m) if !m.name.starts_with(super::TEST_SPAN_PREFIX) => {
                     if m.name == "drivecheck.recording" {
-                        self.spanned = m.metadata.get("test_spans").is_some_and(|v| v == "true");
+                        self.spanned = says_test_spans(&m.metadata);
                     }
                     self.metadata.insert(m.name, m.metadata);
                 }
