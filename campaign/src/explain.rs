@@ -619,7 +619,10 @@ fn fault_direction(
     directions: &[(Direction, Point)],
 ) -> Option<(Direction, Point)> {
     let &(direction, u) = directions.iter().find(|(d, _)| d.moved_by(fault.probe))?;
-    if direction != Direction::Yaw || fault.kind != FaultKind::Offset || !fault.param.is_finite() {
+    if direction != Direction::Yaw
+        || !fault.kind.spec().turns_heading_by_param
+        || !fault.param.is_finite()
+    {
         return Some((direction, u));
     }
     let (sin, cos) = (-fault.param.to_radians() / 2.0).sin_cos();

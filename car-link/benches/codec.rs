@@ -9,7 +9,7 @@ use car_link::frame::{FrameDecoder, FrameEncoder};
 use car_link::message::{Dialect, Reply, Request, RoutePoint};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 
-#[path = "../tests/support/mod.rs"]
+#[path = "../tests/link/support/mod.rs"]
 mod support;
 
 use support::sample_state;

@@ -64,7 +64,7 @@ pub struct GnssModel {
 /// The default noise is fitted to the real car driving the published circle route (the firmware
 /// repository vedderb/rise_sdvp, commit 8b9c36a0003023ef53d7f8d0e5fb2c0728fa609a,
 /// `Misc/Test Data/paper_2018-06/`: `plot_data/diff_circle.xml` and `plot_data/ap_circle.xml`,
-/// bundled in `orchestrator/data/real-car/`), by `drivecheck bench fidelity --fit-gnss
+/// bundled in `devtools/data/real-car/`), by `drivecheck-dev bench fidelity --fit-gnss
 /// --route-runs 10` over σ 0.6–2.0 cm and correlation times 0–5 s: **σ 1.0 cm per axis,
 /// correlation time 0.4 s**. The real car's figures (fix vs fused history p50 / p95, distance to
 /// the route p50 / p95, its mean change per 100 ms, its correlation time) 1.19 / 2.33 cm,

@@ -2,7 +2,7 @@
 //! round and round (`ap_repeat_routes`, the factory default), recording what the real car prints
 //! with `pos_gnss_corr_info 1` (at every GNSS correction, the distance between the pose history's
 //! point closest to the fix time and the fix) and `ap_print_closest n` (every n-th autopilot
-//! iteration, the distance from the car to the route). `drivecheck bench fidelity` compares them
+//! iteration, the distance from the car to the route). `drivecheck-dev bench fidelity` compares them
 //! with the real car's published recordings (`docs/fidelity.md#route-following`).
 //!
 //! Like the rest of the crate: no I/O, no clock, the same options give the same printouts.

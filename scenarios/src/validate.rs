@@ -317,9 +317,12 @@ fn check_faults(c: &CampaignSettings) -> Check {
         fault_kinds(&f.kinds, &field)?;
         let shared = f.shares_param(target);
         for kind in FaultKind::drawable() {
-            let key = match (shared, kind) {
-                (true, FaultKind::Offset | FaultKind::Amplification) => SHARED_PARAM_KEY.into(),
-                _ => target.key(kind).unwrap_or_default(),
+            // The first form's one `param` was shared by the method's range faults: the kinds
+            // drawn on a range by default (offset and amplification).
+            let key = if shared && kind.drawn_by_default(Quantity::Range) {
+                SHARED_PARAM_KEY.into()
+            } else {
+                target.key(kind).unwrap_or_default()
             };
             let field = format!("{field}.{key}");
             let range = f.range(kind);

@@ -2,7 +2,7 @@
 //! points with the ahead margin (both strategies), and a 100 km area validation.
 //!
 //! `cargo bench -p drivecheck-tests --bench generator`. For percentiles (p50/p99/max) and failure
-//! counts side by side, see `drivecheck bench generator`.
+//! counts side by side, see `drivecheck-dev bench generator`.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use rand::SeedableRng;

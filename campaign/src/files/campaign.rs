@@ -2,6 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::Case;
 use super::{
     CAMPAIGN_FAULT_SECTIONS_SINCE, CAMPAIGN_FORMAT, CAMPAIGN_READABLE, CaseError, Header,
     ScenarioRef, Settings, check_header, parse,
@@ -183,6 +184,107 @@ impl CampaignRecord {
     /// The record as pretty-printed JSON.
     pub fn to_json(&self) -> Result<String, CaseError> {
         super::to_json(self)
+    }
+
+    /// What makes `other` the record of another campaign than this one (another seed, scenario,
+    /// tool version, shard count, car, settings or source of tests), if anything: what `runs merge`
+    /// refuses in a shard and `run --resume` in a run directory.
+    pub fn difference(&self, other: &CampaignRecord) -> Option<String> {
+        let (a, b) = (self, other);
+        let differs =
+            |what: &str, x: String, y: String| (x != y).then(|| format!("{what} {x} and {y}"));
+        let shard_count = |r: &CampaignRecord| r.shard.map_or(0, |s| s.count).to_string();
+        let without_runtime = |s: &Settings| Settings {
+            safety: None,
+            streaming: None,
+            ..s.clone()
+        };
+        differs("seed", a.seed.to_string(), b.seed.to_string())
+            .or_else(|| {
+                differs(
+                    "scenario",
+                    format!(
+                        "{} ({})",
+                        a.scenario.name,
+                        a.scenario.hash.as_deref().unwrap_or("-")
+                    ),
+                    format!(
+                        "{} ({})",
+                        b.scenario.name,
+                        b.scenario.hash.as_deref().unwrap_or("-")
+                    ),
+                )
+            })
+            .or_else(|| {
+                differs(
+                    "tool version",
+                    a.header.tool().to_owned(),
+                    b.header.tool().to_owned(),
+                )
+            })
+            .or_else(|| differs("shard count", shard_count(a), shard_count(b)))
+            .or_else(|| {
+                differs(
+                    "--no-faults",
+                    a.no_faults.to_string(),
+                    b.no_faults.to_string(),
+                )
+            })
+            .or_else(|| differs("car", a.car.clone(), b.car.clone()))
+            .or_else(|| {
+                (without_runtime(&a.settings) != without_runtime(&b.settings)).then(|| {
+                    "the campaign settings differ (tests, sizes, speeds, faults or policy)"
+                        .to_owned()
+                })
+            })
+            .or_else(|| {
+                (a.replay_of != b.replay_of).then(|| "they replay different cases".to_owned())
+            })
+            .or_else(|| {
+                (a.cases_from != b.cases_from)
+                    .then(|| "they drive the cases of different runs (--cases-from)".to_owned())
+            })
+    }
+
+    /// What makes `case` a case of another campaign than this one (its seed, scenario, faults or
+    /// settings), if anything.
+    pub fn foreign(&self, case: &Case) -> Option<String> {
+        let record = self;
+        let runtime_free = |s: &Settings| Settings {
+            safety: None,
+            streaming: None,
+            ..s.clone()
+        };
+        if case.campaign_seed != Some(record.seed) {
+            return Some(format!(
+                "campaign seed {}, the campaign's is {}",
+                case.campaign_seed
+                    .map_or_else(|| "none".to_owned(), |s| s.to_string()),
+                record.seed
+            ));
+        }
+        if case.scenario != record.scenario {
+            return Some(format!(
+                "scenario {} ({}), the campaign's is {} ({})",
+                case.scenario.name,
+                case.scenario.hash.as_deref().unwrap_or("-"),
+                record.scenario.name,
+                record.scenario.hash.as_deref().unwrap_or("-")
+            ));
+        }
+        if case.no_faults != record.no_faults {
+            return Some(format!(
+                "--no-faults {}, the campaign's {}",
+                case.no_faults, record.no_faults
+            ));
+        }
+        match &case.settings {
+            Some(settings) if runtime_free(settings) != runtime_free(&record.settings) => Some(
+                "its settings are not the campaign's (tests, sizes, speeds, faults, threshold or policy)"
+                    .to_owned(),
+            ),
+            _ => None,
+        }
     }
 }
 

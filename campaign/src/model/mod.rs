@@ -14,8 +14,8 @@
 //!
 //! Generation is separate from execution: a test is planned completely before the car drives
 //! it, because a car cannot be asked to re-run a prefix. The plan is built with
-//! `proptest-state-machine`'s `Sequential` strategy (its `ReferenceStateMachine` half only, copied
-//! into `model::sequential`, which says why), but constructed with `Sequential::new` and closures
+//! `proptest-state-machine`'s `Sequential` strategy (the generation of its `ReferenceStateMachine`
+//! half only, copied into `model::sequential`, which says why), but constructed with `Sequential::new` and closures
 //! rather than through the trait: the trait's `init_state()` and `transitions()` take no arguments, and the scenario,
 //! the start tail and the settings would have to come from global state. Its
 //! `StateMachineTest` half (which executes while it generates) is not used: executing is the
@@ -39,16 +39,9 @@
 //!
 //! # Shrinking
 //!
-//! Off on hardware (`docs/method.md#replay-and-shrinking`): [`TestPlanner::plan_test`] takes the
-//! first value of the strategy and never shrinks. For simulation, [`TestPlanner::plan_tree`]
-//! returns the proptest value tree ([`PlanTree`]): after a failing run call [`PlanTree::simplify`]
-//! with the number of commands that ran (the ones after the failure are dropped first) and run
-//! [`PlanTree::current`] again; call [`PlanTree::complicate`] when the simpler test passed. The
-//! `Sequential` tree then deletes commands from the back and shrinks single commands (a segment's
-//! intent shrinks towards fewer points and lower speeds and its points are regenerated from the
-//! tail it was planned on). A change is kept only when every later command's precondition still
-//! holds, so removing or changing a segment that later segments continue from is refused: the
-//! geometry stays drivable. Fault commands can always be dropped.
+//! Not here, and never through proptest: [`TestPlanner::plan_test`] takes the strategy's first
+//! value. A failing case is shrunk by `crate::shrink`, which edits the recorded case and drives
+//! each candidate on the simulated car (`docs/method.md#replay-and-shrinking`).
 
 mod command;
 mod generate;
@@ -58,7 +51,7 @@ mod timing;
 
 use std::sync::{Arc, Mutex};
 
-use proptest::strategy::{BoxedStrategy, Just, Strategy as _, ValueTree};
+use proptest::strategy::{BoxedStrategy, Just, Strategy as _};
 use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
 use scenarios::{CampaignSettings, FaultTarget, Interval, Scenario};
 use thiserror::Error;
@@ -203,76 +196,6 @@ pub struct TestPlanner {
 
 type PlanStrategy =
     Sequential<ReferenceState, Command, BoxedStrategy<ReferenceState>, BoxedStrategy<Command>>;
-type PlanValueTree = <PlanStrategy as proptest::strategy::Strategy>::Tree;
-
-/// A planned test that can still be shrunk (simulation only; see the module doc).
-pub struct PlanTree {
-    tree: PlanValueTree,
-    test_index: usize,
-    start_tail: RouteTail,
-    no_faults: bool,
-}
-
-impl std::fmt::Debug for PlanTree {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("PlanTree")
-            .field("test_index", &self.test_index)
-            .field("commands", &self.current().commands.len())
-            .finish()
-    }
-}
-
-impl PlanTree {
-    /// The test as it currently stands.
-    pub fn current(&self) -> TestPlan {
-        let (_, commands, _) = self.tree.current();
-        let commands = commands
-            .into_iter()
-            .filter(|c| !(self.no_faults && c.fault().is_some()))
-            .collect();
-        TestPlan {
-            test_index: self.test_index,
-            start_tail: self.start_tail,
-            commands,
-        }
-    }
-
-    /// Tries a simpler test after the current one failed; `executed` is how many of
-    /// [`Self::current`]'s commands ran, the failing one included (the commands after it are
-    /// dropped first). False when nothing simpler is left.
-    pub fn simplify(&mut self, executed: usize) -> bool {
-        let (_, commands, seen) = self.tree.current();
-        if let Some(seen) = seen {
-            let in_tree = self.tree_count(&commands, executed);
-            seen.store(in_tree, std::sync::atomic::Ordering::SeqCst);
-        }
-        self.tree.simplify()
-    }
-
-    /// How many of the tree's commands the first `executed` commands of the plan cover (the
-    /// plan omits the fault commands when planned without faults).
-    fn tree_count(&self, commands: &[Command], executed: usize) -> usize {
-        if executed == 0 {
-            return 0;
-        }
-        let mut seen = 0;
-        for (i, command) in commands.iter().enumerate() {
-            if !(self.no_faults && command.fault().is_some()) {
-                seen += 1;
-            }
-            if seen == executed {
-                return i + 1;
-            }
-        }
-        commands.len()
-    }
-
-    /// Undoes part of the last simplification (after the simpler test passed).
-    pub fn complicate(&mut self) -> bool {
-        self.tree.complicate()
-    }
-}
-
 impl TestPlanner {
     /// A planner for `scenario`, with its generator (wedge strategy) and campaign settings.
     pub fn new(scenario: &Scenario) -> Result<Self, ModelError> {
@@ -308,18 +231,6 @@ impl TestPlanner {
         test_index: usize,
         start_tail: RouteTail,
     ) -> Result<TestPlan, ModelError> {
-        self.plan_tree(campaign, test_index, start_tail)
-            .map(|tree| tree.current())
-    }
-
-    /// Plans test `test_index` like [`Self::plan_test`] and keeps proptest's value tree for
-    /// shrinking in simulation.
-    pub fn plan_tree(
-        &self,
-        campaign: &Campaign,
-        test_index: usize,
-        start_tail: RouteTail,
-    ) -> Result<PlanTree, ModelError> {
         if !self.preconditions.area.contains_point(start_tail.end) {
             return Err(ModelError::StartTail(GenerationError::TailOutside {
                 at: start_tail.end,
@@ -334,20 +245,24 @@ impl TestPlanner {
         let size = test_size(self.settings.test_size, test_index, campaign.tests);
         let strategy = sequential(&ctx, start_tail, size);
         let mut runner = runner(campaign.seed, test_index);
-        let tree = strategy
-            .new_tree(&mut runner)
-            .map_err(|reason| match ctx.take_failure() {
-                Some(source) => ModelError::Generation { test_index, source },
-                None => ModelError::Planning {
-                    test_index,
-                    reason: reason.to_string(),
-                },
-            })?;
-        Ok(PlanTree {
-            tree,
+        let (_, commands) =
+            strategy
+                .generate(&mut runner)
+                .map_err(|reason| match ctx.take_failure() {
+                    Some(source) => ModelError::Generation { test_index, source },
+                    None => ModelError::Planning {
+                        test_index,
+                        reason: reason.to_string(),
+                    },
+                })?;
+        let commands = commands
+            .into_iter()
+            .filter(|c| !(campaign.no_faults && c.fault().is_some()))
+            .collect();
+        Ok(TestPlan {
             test_index,
             start_tail,
-            no_faults: campaign.no_faults,
+            commands,
         })
     }
 }

@@ -310,40 +310,6 @@ fn a_route_facing_the_fence_up_close_is_a_generation_error() {
     );
 }
 
-#[test]
-fn shrinking_keeps_every_simpler_test_drivable() {
-    let s = parking_lot();
-    let planner = TestPlanner::new(&s).unwrap();
-    let tail = start_tail(&s).unwrap();
-    let mut tree = planner.plan_tree(&campaign(4), 9, tail).unwrap();
-    let full = tree.current().commands.len();
-    let mut steps = 0;
-    // As if the test failed at its last command every time.
-    while steps < 40 && tree.simplify(tree.current().commands.len()) {
-        let plan = tree.current();
-        assert_drivable(&s, &plan);
-        assert_slots_respected(&plan);
-        steps += 1;
-    }
-    assert!(steps > 0);
-    assert!(tree.current().commands.len() < full);
-}
-
-#[test]
-fn shrinking_first_drops_the_commands_that_never_ran() {
-    let s = parking_lot();
-    let planner = TestPlanner::new(&s).unwrap();
-    let tail = start_tail(&s).unwrap();
-    let mut tree = planner.plan_tree(&campaign(4), 9, tail).unwrap();
-    let before = tree.current();
-    assert!(tree.simplify(6));
-    let after = tree.current();
-    assert!(after.commands.len() < 6);
-    // What is left is taken, in order, from the six commands that ran.
-    let mut ran = before.commands[..6].iter();
-    assert!(after.commands.iter().all(|c| ran.any(|r| r == c)));
-}
-
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(6))]
 

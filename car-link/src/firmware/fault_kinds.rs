@@ -121,6 +121,10 @@ pub struct KindSpec {
     /// method's faults: offset and amplification on ranges, amplification on odometry, offset on
     /// the yaw).
     pub drawn_by_default: &'static [Quantity],
+    /// Whether a fault of this kind on the yaw turns the dead-reckoned heading by its parameter
+    /// (degrees) whatever the yaw is: a kind that adds its parameter (`x += param`). Explaining a
+    /// segment turns the direction such a fault moves the estimate in (`campaign::explain`).
+    pub turns_heading_by_param: bool,
 }
 
 /// The bits a generated `bitflip` flips by default: the top of the mantissa (18–22: the value
@@ -144,6 +148,7 @@ pub const KINDS: [KindSpec; 5] = [
             yaw: (-20.0, 20.0),
         },
         drawn_by_default: &[Quantity::Range, Quantity::Yaw],
+        turns_heading_by_param: true,
     },
     KindSpec {
         kind: FaultKind::Amplification,
@@ -159,6 +164,7 @@ pub const KINDS: [KindSpec; 5] = [
             yaw: (0.5, 1.5),
         },
         drawn_by_default: &[Quantity::Range, Quantity::Travel],
+        turns_heading_by_param: false,
     },
     KindSpec {
         kind: FaultKind::SetTo,
@@ -174,6 +180,7 @@ pub const KINDS: [KindSpec; 5] = [
             yaw: (-180.0, 180.0),
         },
         drawn_by_default: &[],
+        turns_heading_by_param: false,
     },
     KindSpec {
         kind: FaultKind::Bitflip,
@@ -191,6 +198,7 @@ pub const KINDS: [KindSpec; 5] = [
             yaw: BITFLIP_BITS,
         },
         drawn_by_default: &[],
+        turns_heading_by_param: false,
     },
     KindSpec {
         kind: FaultKind::None,
@@ -206,6 +214,7 @@ pub const KINDS: [KindSpec; 5] = [
             yaw: (0.0, 0.0),
         },
         drawn_by_default: &[],
+        turns_heading_by_param: false,
     },
 ];
 

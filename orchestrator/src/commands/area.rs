@@ -11,7 +11,7 @@ use crate::cli::ValidateArgs;
 use crate::exit::Exit;
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::{choose_seed, rng};
-use crate::svg::area_picture;
+use report::svg::area_picture;
 
 /// Points per extension during validation (`docs/method.md#validating-an-area`).
 const VALIDATION_EXTENSION_POINTS: usize = 5;
@@ -88,7 +88,7 @@ pub fn validate(args: &ValidateArgs) -> Result<Exit> {
     bar.finish_and_clear();
 
     if let Some(path) = &args.svg {
-        crate::atomic::write(path, area_picture(scenario, &report))
+        runner::atomic::write(path, area_picture(scenario, &report))
             .with_context(|| format!("cannot write {}", path.display()))?;
         eprintln!("wrote {}", path.display());
     }

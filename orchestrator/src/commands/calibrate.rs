@@ -12,17 +12,18 @@ use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use tokio_util::sync::CancellationToken;
 
-use super::shared::{cancel_on_ctrl_c, check_hash, runtime, scenario_of};
-use super::simdrive::{SimDriver, SimSettings};
+use super::case_input::{check_hash, scenario_of};
+use super::signals::{cancel_on_ctrl_c, runtime};
 use crate::cli::CalibrateArgs;
 use crate::exit::Exit;
 use crate::profile_arg::LoadedProfile;
-use crate::report::explain::{TestErrors, error_series};
 use campaign::calibrate::{Fit, Fitted, Parameter, Signature, fit};
 use campaign::model::TestPlan;
 use campaign::seed::{Purpose, derive};
 use car_sim::CarProfile;
 use car_sim::profile::AnchorProfile;
+use report::explain::{TestErrors, error_series};
+use runner::simdrive::{SimDriver, SimSettings};
 
 /// What a fitted parameter is: where its value goes in a profile.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -247,11 +248,11 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Exit> {
     let mut recorded = Vec::new();
     let mut scenario = None;
     for dir in &args.runs {
-        let files = super::shared::case_files(dir)?;
+        let files = super::case_input::case_files(dir)?;
         let Some(first) = files.first() else {
             bail!("{}: no case files", dir.display());
         };
-        let first_case = super::shared::read_case(first)?;
+        let first_case = super::case_input::read_case(first)?;
         let s = match &scenario {
             Some(s) => s,
             None => scenario.insert(scenario_of(args.scenario.as_deref(), first, &first_case)?),
@@ -274,7 +275,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Exit> {
     let Some(scenario) = scenario else {
         bail!("give at least one run directory");
     };
-    let start = LoadedProfile::load(args.from.as_deref())?;
+    let start = crate::profile_arg::load(args.from.as_deref())?;
     let start_sim = start.sim_config(&scenario)?;
     let interrupt_runtime = runtime(false)?;
     let cancel = interrupt_runtime.block_on(async { cancel_on_ctrl_c() });
@@ -374,7 +375,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Exit> {
         header(&fit, args, started.elapsed()),
         profile.to_toml()
     );
-    crate::atomic::write(&args.out, text)?;
+    runner::atomic::write(&args.out, text)?;
     print!("{}", table(&fit));
     println!(
         "written: {} ({} candidates, {} descent(s) of {} iterations in all, {:.0} s{})",

@@ -6,11 +6,11 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use scenarios::Scenario;
 
-use crate::report::data::{case_files, read_record};
-use crate::runner::CasesSource;
 use campaign::files::{CampaignRecord, CasesFrom};
 use campaign::model::{Campaign, TestPlanner};
 use campaign::oracle::FailurePolicy;
+use report::data::{case_files, read_record};
+use runner::CasesSource;
 
 /// An earlier run directory whose cases are to be driven.
 #[derive(Debug)]
@@ -72,7 +72,7 @@ impl CasesRun {
 
     /// The scenario to load when none is given: the bundled one the run names.
     pub(super) fn scenario_name(&self) -> Result<String> {
-        super::shared::bundled_scenario("--cases-from", &self.dir, &self.record.scenario.name)
+        super::case_input::bundled_scenario("--cases-from", &self.dir, &self.record.scenario.name)
     }
 
     /// Checks every case against `scenario` (the run's, by hash) and plans it as the campaign

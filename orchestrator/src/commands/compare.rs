@@ -14,12 +14,13 @@ use serde::Serialize;
 
 use crate::cli::{CompareArgs, FailOn};
 use crate::exit::Exit;
-use crate::report::data::{case_files, read_case, read_record};
 use campaign::compare::{
     BreakdownRow, Options, Paired, Report, Significance, TestRow, compare as compare_runs, p_words,
     pair,
 };
 use campaign::files::ScenarioRef;
+use report::compare::{Compared, NoiseSource, noise_words, signed};
+use report::data::{case_files, read_case, read_record};
 
 /// The noise when neither `--noise` nor `--noise-from` is given, metres: a replay counts as the
 /// same test when every segment's largest deviation is within 0.2 m of the other run's and its
@@ -32,40 +33,6 @@ pub const COMPARE_REPORT_FILE: &str = "compare.html";
 
 /// Breakdown rows the summary shows per breakdown (the JSON and the page have every row).
 const TOP_ROWS: usize = 5;
-
-/// Where the noise came from.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-#[serde(tag = "from", rename_all = "snake_case")]
-pub enum NoiseSource {
-    /// `DEFAULT_NOISE_M`.
-    Default,
-    /// `--noise M`.
-    Given,
-    /// `--noise-from DIR`: the 95th percentile of |change| between BASE and DIR.
-    Rerun {
-        /// The rerun's directory.
-        dir: PathBuf,
-        /// Its segments paired with BASE's and measured in both.
-        segments: usize,
-    },
-}
-
-/// Two runs compared: the pairs (for the page) and the comparison.
-#[derive(Debug, Clone)]
-pub struct Compared {
-    /// BASE's run directory.
-    pub base: PathBuf,
-    /// The scenario BASE ran in (`campaign.json`), for the page's map.
-    pub scenario: ScenarioRef,
-    /// NEW's.
-    pub new: PathBuf,
-    /// Where the noise came from.
-    pub noise_source: NoiseSource,
-    /// The tests and segments of both, paired.
-    pub paired: Paired,
-    /// The comparison.
-    pub report: Report,
-}
 
 /// `drivecheck compare --json`'s document after `command` and `schema_version` (docs/json.md).
 #[derive(Debug, Serialize)]
@@ -172,7 +139,7 @@ pub fn compare(args: &CompareArgs) -> Result<Exit> {
         let out = file
             .clone()
             .unwrap_or_else(|| args.new.join(COMPARE_REPORT_FILE));
-        crate::report::compare::write(&compared, &out)
+        report::compare::write(&compared, &out)
             .with_context(|| format!("cannot write {}", out.display()))?;
         if crate::output::chatty() {
             eprintln!("wrote {}", out.display());
@@ -206,25 +173,6 @@ fn percent(part: usize, whole: usize) -> String {
         "–".to_owned()
     } else {
         format!("{:.1} %", 100.0 * part as f64 / whole as f64)
-    }
-}
-
-/// A signed length in metres, or `–`.
-pub(crate) fn signed(m: Option<f64>) -> String {
-    m.map_or_else(|| "–".to_owned(), |m| format!("{m:+.3}"))
-}
-
-/// Where the noise came from, in words.
-pub(crate) fn noise_words(compared: &Compared) -> String {
-    let noise = compared.report.noise_m;
-    match &compared.noise_source {
-        NoiseSource::Default => format!("{noise:.3} m (the default: the replay rule's 0.2 m)"),
-        NoiseSource::Given => format!("{noise:.3} m (--noise)"),
-        NoiseSource::Rerun { dir, segments } => format!(
-            "{noise:.3} m (95th percentile of |change| over {segments} segments of BASE and its \
-             rerun {})",
-            dir.display()
-        ),
     }
 }
 

@@ -50,7 +50,7 @@ fn write_pages(command: &clap::Command, name: &str, dir: &Path) -> Result<usize>
     let mut page = Vec::new();
     clap_mangen::Man::new(command.clone()).render(&mut page)?;
     let file = dir.join(format!("{name}.1"));
-    crate::atomic::write(&file, page)
+    runner::atomic::write(&file, page)
         .with_context(|| format!("cannot write {}", file.display()))?;
     let mut written = 1;
     for sub in command.get_subcommands().filter(|s| s.get_name() != "help") {

@@ -1,4 +1,4 @@
-//! `drivecheck explain CASE.json|RUN_DIR`: why segments failed ([`crate::report::explain`],
+//! `drivecheck explain CASE.json|RUN_DIR`: why segments failed ([`report::explain`],
 //! the method in `campaign::explain`); with `--score`, how right that is against the simulated
 //! car's hidden truth.
 
@@ -8,20 +8,21 @@ use std::path::Path;
 
 use anyhow::{Context, Result, bail};
 
-use super::shared::{cancel_on_ctrl_c, read_case as read_case_file, runtime};
-use super::simdrive::{SimDriver, SimSettings};
+use super::case_input::read_case as read_case_file;
+use super::signals::{cancel_on_ctrl_c, runtime};
 use crate::cli::ExplainArgs;
 use crate::exit::Exit;
 use crate::profile_arg::LoadedProfile;
-use crate::report::explain::{
-    CaseExplanation, ExplainOptions, Explanations, Scored, calibrate, describe, explain_run,
-    score_run,
-};
 use crate::scenario_arg::optional_scenario;
 use campaign::case::Case;
 use campaign::explain::counterfactual::settle;
 use campaign::explain::score::SegmentScore;
 use campaign::explain::{Cause, Source};
+use report::explain::{
+    CaseExplanation, ExplainOptions, Explanations, Scored, calibrate, describe, explain_run,
+    score_run,
+};
+use runner::simdrive::{SimDriver, SimSettings};
 
 /// Explains the target's failing segments (see the module doc). Exit status 0, or 2 on an error.
 pub fn explain(args: &ExplainArgs) -> Result<Exit> {
@@ -92,7 +93,7 @@ pub fn explain(args: &ExplainArgs) -> Result<Exit> {
             cases: Vec::new(),
             notes: Vec::new(),
         };
-        let profile = LoadedProfile::load(args.profile.as_deref())?;
+        let profile = crate::profile_arg::load(args.profile.as_deref())?;
         let mut scored = Vec::new();
         for run in run_dirs(&dir) {
             let (e, mut s, recorded_in) = score_run(&run, scenario.as_ref(), &options)
@@ -208,9 +209,7 @@ fn run_dirs(dir: &Path) -> Vec<std::path::PathBuf> {
                 .strip_prefix("run-")?
                 .parse()
                 .ok()?;
-            p.join(crate::runner::CAMPAIGN_FILE)
-                .is_file()
-                .then_some((n, p))
+            p.join(runner::CAMPAIGN_FILE).is_file().then_some((n, p))
         })
         .collect();
     runs.sort();

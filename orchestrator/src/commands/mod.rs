@@ -1,19 +1,14 @@
 //! One module per subcommand; [`run`] dispatches.
 
 mod area;
-mod bench;
-mod bench_compare;
-mod bench_fidelity;
-mod bench_fidelity_route;
-mod bench_placement;
-mod bench_recovery;
-pub mod bench_scale;
 mod calibrate;
+mod case_input;
 mod cases_from;
-pub(crate) mod compare;
+pub mod compare;
 mod completions;
 mod explain;
 mod merge;
+mod progress;
 mod replay;
 mod report;
 mod resume;
@@ -22,18 +17,17 @@ mod route_return;
 mod run;
 mod runs;
 mod scenario;
-mod shared;
+pub mod scratch;
 mod shrink;
+pub mod signals;
 mod sim;
-mod simdrive;
 mod sweep;
+mod table;
 mod twin;
 
 use anyhow::Result;
 
-use crate::cli::{
-    AreaCommand, BenchCommand, Cli, Command, RouteCommand, ScenarioCommand, TwinCommand,
-};
+use crate::cli::{AreaCommand, Cli, Command, RouteCommand, ScenarioCommand, TwinCommand};
 use crate::exit::Exit;
 
 /// Runs a parsed command line and returns the process's exit status.
@@ -57,12 +51,6 @@ pub fn run(cli: Cli) -> Result<Exit> {
         Command::Scenario(ScenarioCommand::Check(args)) => scenario::check(&args),
         Command::Scenario(ScenarioCommand::Export(args)) => scenario::export(&args),
         Command::Scenario(ScenarioCommand::List(args)) => scenario::list(&args),
-        Command::Bench(BenchCommand::Generator(args)) => bench::generator(&args),
-        Command::Bench(BenchCommand::Recovery(args)) => bench_recovery::run(&args),
-        Command::Bench(BenchCommand::Fidelity(args)) => bench_fidelity::run(&args),
-        Command::Bench(BenchCommand::Placement(args)) => bench_placement::run(&args),
-        Command::Bench(BenchCommand::Scale(args)) => bench_scale::run(&args),
-        Command::Bench(BenchCommand::Compare(args)) => bench_compare::run(&args),
         Command::Completions(args) => completions::completions(&args),
         Command::Man(args) => completions::man(&args),
     }

@@ -17,18 +17,13 @@ use car_sim::SimHandle;
 use scenarios::Scenario;
 use trajgen::{Generator, Strategy};
 
-use super::shared::{
-    CampaignFailed, Interrupt, check_hash, metres, read_case, runtime, scenario_of, sim_view,
-};
+use super::case_input::{check_hash, read_case, scenario_of};
+use super::signals::{Interrupt, runtime, sim_view};
+use super::table::{CampaignFailed, metres};
 use crate::cli::ReplayArgs;
 use crate::exit::Exit;
 use crate::profile_arg::LoadedProfile;
-use crate::report::REPORT_FILE;
-use crate::runner::{
-    ReplaySource, RunConfig, Silent, TestSummary, rfc3339_now, run_campaign, run_dir_name,
-};
 use crate::seed::choose_seed;
-use crate::vehicle::{ConnectError, Vehicle, connect};
 use campaign::drive::EARLIER_TOOL_POINTS_LEFT;
 use campaign::files::{CASE_FAULT_PLACES_SINCE, CommandRecord};
 use campaign::files::{Case, ReplayOf, ScenarioRef};
@@ -36,6 +31,11 @@ use campaign::model::{Campaign, TestPlan};
 use campaign::oracle::Verdict;
 use campaign::replay::{Comparison, REPLAY_FILE, ReplayRun};
 use campaign::seed::{Purpose, derive};
+use report::REPORT_FILE;
+use runner::vehicle::{ConnectError, Vehicle, connect};
+use runner::{
+    ReplaySource, RunConfig, Silent, TestSummary, Tests, rfc3339_now, run_campaign, run_dir_name,
+};
 
 /// Replays the case and prints the comparison. Exit status: 0 every run passed, 1 a run failed
 /// or was aborted, 2 an error (the case refused, the link lost, interrupted, …).
@@ -85,7 +85,7 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
             args.car
         );
     }
-    let profile = LoadedProfile::load(args.profile.as_deref())?;
+    let profile = crate::profile_arg::load(args.profile.as_deref())?;
     let sim = profile.sim_config(&scenario)?;
     if embedded {
         warn_other_profile(&case, path, &profile);
@@ -93,7 +93,7 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
     let made = args.out.is_none();
     let out = match &args.out {
         Some(out) => out.clone(),
-        None => crate::runner::claim_default_run_dir(&run_dir_name(
+        None => runner::claim_default_run_dir(&run_dir_name(
             &format!("replay-{}", scenario.name),
             seed,
         ))?,
@@ -121,9 +121,9 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
         if args.vary_seed { " + run − 1" } else { "" },
         out.display()
     );
-    let _claim = crate::runner::claim_out_dir(&out, made)?;
+    let _claim = runner::claim_out_dir(&out, made)?;
     if let Some(file) = &args.junit {
-        super::shared::check_output_file("--junit", file, &out)?;
+        super::case_input::check_output_file("--junit", file, &out)?;
     }
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
     let started = Instant::now();
@@ -143,7 +143,7 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
     let (runs, error) = runtime(virtual_time)?.block_on(job.run_all());
     // Nothing driven (the car could not be reached): nothing to compare or keep.
     let nothing_driven = runs.iter().all(|(r, case)| {
-        case.is_none() && r.verdict.is_none() && !crate::runner::is_used(&out.join(&r.dir))
+        case.is_none() && r.verdict.is_none() && !runner::is_used(&out.join(&r.dir))
     });
     let error = match error {
         Some(error) if nothing_driven => return Err(error),
@@ -151,13 +151,13 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
     };
     let comparison = Comparison::new(&case, of.clone(), ScenarioRef::of(&scenario), &runs);
     let file = out.join(REPLAY_FILE);
-    crate::atomic::write(&file, format!("{}\n", comparison.to_json()?))
+    runner::atomic::write(&file, format!("{}\n", comparison.to_json()?))
         .with_context(|| format!("cannot write {}", file.display()))?;
     if let Some(junit_file) = &args.junit {
         let clock = if virtual_time {
-            crate::junit::Clock::Simulated
+            runner::junit::Clock::Simulated
         } else {
-            crate::junit::Clock::Wall
+            runner::junit::Clock::Wall
         };
         let timing = (started_at.as_str(), started.elapsed().as_secs_f64(), clock);
         write_junit(&runs, &of, &scenario, &out, timing, junit_file)?;
@@ -167,7 +167,7 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
             &out,
             &out.join(REPORT_FILE),
             Some(&scenario),
-            &crate::report::ReportOptions::default(),
+            &report::ReportOptions::default(),
         )?;
     }
     if args.json {
@@ -301,7 +301,7 @@ impl Job<'_> {
             self.args.car.clone(),
         );
         config.car_profile = self.profile.clone();
-        config.replay = Some(ReplaySource {
+        config.tests = Tests::Replay(ReplaySource {
             plan: self.plan.clone(),
             of: self.of.clone(),
         });
@@ -370,7 +370,7 @@ fn write_junit(
     of: &ReplayOf,
     scenario: &Scenario,
     out: &Path,
-    (started_at, wall_s, clock): (&str, f64, crate::junit::Clock),
+    (started_at, wall_s, clock): (&str, f64, runner::junit::Clock),
     file: &Path,
 ) -> Result<()> {
     // The case replayed, as the campaign named it (`seed-7/test-003`), or its file's name.
@@ -383,7 +383,7 @@ fn write_junit(
     let cases = runs
         .iter()
         .filter_map(|(run, case)| {
-            case.as_ref().map(|case| crate::junit::TestCase {
+            case.as_ref().map(|case| runner::junit::TestCase {
                 name: format!("{replayed}/{}", run.dir),
                 case: case.into(),
                 file: out
@@ -394,7 +394,7 @@ fn write_junit(
             })
         })
         .collect();
-    let suite = crate::junit::Suite {
+    let suite = runner::junit::Suite {
         name: format!("replay of {} on {}", of.case, scenario.name),
         classname: format!("drivecheck.{}", scenario.name),
         timestamp: started_at.to_owned(),
@@ -413,8 +413,8 @@ fn write_junit(
         clock,
         wall_s: Some(wall_s),
     };
-    let xml = crate::junit::to_xml(&[suite]).context("cannot write the JUnit XML")?;
-    crate::atomic::write(file, xml).with_context(|| format!("cannot write {}", file.display()))?;
+    let xml = runner::junit::to_xml(&[suite]).context("cannot write the JUnit XML")?;
+    runner::atomic::write(file, xml).with_context(|| format!("cannot write {}", file.display()))?;
     eprintln!("JUnit XML: {}", file.display());
     Ok(())
 }

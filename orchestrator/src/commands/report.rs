@@ -1,5 +1,5 @@
 //! `drivecheck report RUN_DIR`: the self-contained HTML page of a run, replay or shrink
-//! directory ([`crate::report`]); also what `run --report` and `replay --report` call at the end.
+//! directory ([`report`]); also what `run --report` and `replay --report` call at the end.
 
 use std::path::Path;
 
@@ -7,8 +7,8 @@ use anyhow::Result;
 
 use crate::cli::ReportArgs;
 use crate::exit::Exit;
-use crate::report::{self, REPORT_FILE, ReportKind, ReportOptions};
 use crate::scenario_arg::optional_scenario;
+use report::{self, REPORT_FILE, ReportKind, ReportOptions};
 
 /// Writes the report. Exit status 0, or 2 on an error (not a run directory, a file that cannot
 /// be read or written).

@@ -6,7 +6,7 @@
 //! cut-off test's case is kept beside it as `case-NNN.partial-K.json` (K from 1, the first name
 //! free) and the test is driven again from its start. The recording of the sessions before is
 //! moved aside to `campaign.mcap.resumed` and copied into the new `campaign.mcap` by the runner
-//! ([`crate::runner::ResumeSource`]); a `campaign.mcap.resumed` already there is one a resume
+//! ([`runner::ResumeSource`]); a `campaign.mcap.resumed` already there is one a resume
 //! that died did not finish copying, and it is the one used.
 
 use std::collections::BTreeSet;
@@ -17,13 +17,11 @@ use scenarios::Scenario;
 
 use crate::cli::{OnFailure, RunArgs};
 use crate::profile_arg::LoadedProfile;
-use crate::report::data::{case_files, read_case, read_record};
-use crate::runner::{RECORDING_FILE, ResumeSource, is_cut_off};
 use campaign::files::CampaignRecord;
 use campaign::oracle::FailurePolicy;
-
-/// Where the recording of the sessions before waits to be copied.
-pub(super) const PRIOR_RECORDING: &str = "campaign.mcap.resumed";
+use report::data::{case_files, read_case, read_record};
+use runner::store::RunStore;
+use runner::{ResumeSource, is_cut_off};
 
 /// An interrupted campaign's run directory as read.
 #[derive(Debug)]
@@ -94,7 +92,7 @@ impl Resumed {
 
     /// The scenario to load when none is given: the bundled one the campaign names.
     pub(super) fn scenario_name(&self) -> Result<String> {
-        super::shared::bundled_scenario("--resume", &self.dir, &self.record.scenario.name)
+        super::case_input::bundled_scenario("--resume", &self.dir, &self.record.scenario.name)
     }
 
     /// Refuses a setting given on the command line that differs from the campaign's, naming it:
@@ -218,22 +216,23 @@ impl Resumed {
     /// none`, `campaign.mcap` stays as the sessions before left it), and gives what the runner
     /// continues from. Nothing is driven yet.
     pub(super) fn prepare(self, records: bool) -> Result<ResumeSource> {
+        let store = RunStore::new(&self.dir);
         let mut earlier: Vec<usize> = self.kept.iter().copied().collect();
         for &test in &self.cut_off {
-            let from = self.dir.join(format!("case-{test:03}.json"));
+            let from = store.case(test);
             let mut k = 1;
-            let mut to = self.dir.join(format!("case-{test:03}.partial-{k}.json"));
+            let mut to = store.partial(test, k);
             while to.exists() {
                 k += 1;
-                to = self.dir.join(format!("case-{test:03}.partial-{k}.json"));
+                to = store.partial(test, k);
             }
             std::fs::rename(&from, &to)
                 .with_context(|| format!("cannot keep {} as {}", from.display(), to.display()))?;
             earlier.push(test);
         }
         earlier.sort_unstable();
-        let recording = self.dir.join(RECORDING_FILE);
-        let prior = self.dir.join(PRIOR_RECORDING);
+        let recording = store.recording();
+        let prior = store.prior_recording();
         let prior_recording = if !records {
             None
         } else if prior.exists() {

@@ -9,28 +9,30 @@ use car_link::firmware::{MAX_STALE_LIMIT, WATCHDOG};
 use scenarios::Scenario;
 
 use super::cases_from::CasesRun;
+use super::progress::Progress;
 use super::resume::Resumed;
-use super::shared::{CampaignFailed, Interrupt, Progress, print_report, runtime, sim_view};
 use super::shrink;
+use super::signals::{Interrupt, runtime, sim_view};
+use super::table::{CampaignFailed, print_report};
 use crate::cli::{OnFailure, RecordArg, RunArgs};
 use crate::exit::Exit;
-use crate::junit;
 use crate::profile_arg::LoadedProfile;
-use crate::recording::live::LiveView;
-use crate::report::REPORT_FILE;
-use crate::report::explain::{ExplainOptions, describe, explain_run};
-use crate::runner::{
-    CampaignReport, CasesSource, RecordMode, RunConfig, run_campaign, run_campaign_fresh,
-    run_dir_name,
-};
 use crate::scenario_arg::{load_scenario, print_warnings_of_use};
 use crate::seed::choose_seed;
-use crate::vehicle::{EmbeddedSims, connect};
 use campaign::files::Case;
 use campaign::model::Campaign;
 use campaign::oracle::FailurePolicy;
 use campaign::oracle::Verdict;
 use campaign::shrink::MINIMAL_FILE;
+use recording::live::LiveView;
+use report::REPORT_FILE;
+use report::explain::{ExplainOptions, describe, explain_run};
+use runner::junit;
+use runner::vehicle::{EmbeddedSims, connect};
+use runner::{
+    CampaignReport, CasesSource, RecordMode, RunConfig, Tests, run_campaign, run_campaign_fresh,
+    run_dir_name,
+};
 
 /// The scenario of a campaign when none is given.
 const DEFAULT_SCENARIO: &str = "parking-lot-2anchors";
@@ -75,7 +77,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
             "--profile describes the embedded simulated car (--car sim), not the car at {car_label}"
         );
     }
-    let profile = LoadedProfile::load(args.profile.as_deref())?;
+    let profile = crate::profile_arg::load(args.profile.as_deref())?;
     let sim = profile.sim_config(&scenario)?;
     if let Some(resumed) = &resumed {
         resumed.check(args, &scenario, &profile)?;
@@ -130,7 +132,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
                         name: &'a str,
                         address: &'a str,
                         #[serde(flatten)]
-                        found: &'a crate::runner::DryRun,
+                        found: &'a runner::DryRun,
                     }
                     let cars: Vec<CarFound<'_>> = cars
                         .iter()
@@ -156,7 +158,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         (Some(out), None) => out.clone(),
         (None, None) => {
             let name = run_dir_name(&scenario.name, seed);
-            crate::runner::claim_default_run_dir(&match args.shard {
+            runner::claim_default_run_dir(&match args.shard {
                 Some(shard) => format!("{name}-shard{}of{}", shard.index, shard.count),
                 None => name,
             })?
@@ -164,11 +166,11 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     };
     // A resumed campaign's directory is claimed again: not while another process writes it.
     let _claim = match &resumed {
-        Some(_) => crate::runner::claim_run_dir_again(&out)?,
-        None => crate::runner::claim_out_dir(&out, made)?,
+        Some(_) => runner::claim_run_dir_again(&out)?,
+        None => runner::claim_out_dir(&out, made)?,
     };
     if let Some(file) = &args.junit {
-        super::shared::check_output_file("--junit", file, &out)?;
+        super::case_input::check_output_file("--junit", file, &out)?;
     }
     let mut config = RunConfig::new(campaign, out, car_label.clone());
     config.safety.stale_after = args.stale_after;
@@ -181,7 +183,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         (None, Some((_, policy))) => *policy,
         (None, None) => FailurePolicy::default(),
     };
-    config.cases = cases.map(|(cases, _)| cases);
+    config.tests = cases.map_or(Tests::Generated, |(cases, _)| Tests::Cases(cases));
     config.shard = match &resumed {
         Some(resumed) => resumed.record.shard,
         None => args.shard,
@@ -195,7 +197,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         config.car_profile = Some(profile.clone());
     }
     // Each failing test explained as it ends, in its worker (the embedded simulated car).
-    config.explain = Some(crate::report::explain::explain_held);
+    config.explain = Some(report::explain::explain_held);
     let jobs = jobs(args, embedded, &car_label)?;
     // A live view is for watching: a virtual-time campaign would be over before anyone looks.
     let virtual_time = embedded && !args.realtime && args.live.is_none();
@@ -260,7 +262,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         shrink_failed(&report, &scenario, &sim, args.shrink_budget, !args.json)?;
     }
     if args.report {
-        let options = crate::report::ReportOptions {
+        let options = report::ReportOptions {
             all_tests: args.report_all_tests,
         };
         super::report::write(
@@ -271,7 +273,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         )?;
     }
     if args.json {
-        super::shared::print_report_json("run", &report, Some(wall))?;
+        super::table::print_report_json("run", &report, Some(wall))?;
     }
     let summary = report.record.summary.as_ref();
     // A shard may hold no test (more shards than tests): it ran all of its tests.
@@ -293,12 +295,12 @@ fn dry_run(
     sim: &car_sim::SimConfig,
     campaign: Campaign,
     cases: Option<(CasesSource, FailurePolicy)>,
-) -> Result<crate::runner::DryRun> {
+) -> Result<runner::DryRun> {
     let address = &car.address;
     let mut config = RunConfig::new(campaign, std::path::PathBuf::new(), car.given.clone());
     config.safety.stale_after = args.stale_after;
     config.shard = args.shard;
-    config.cases = cases.map(|(cases, _)| cases);
+    config.tests = cases.map_or(Tests::Generated, |(cases, _)| Tests::Cases(cases));
     let found = runtime(false)?.block_on(async {
         let (connected, _sim) = connect(address, sim, campaign.seed).await?;
         if crate::output::chatty() {
@@ -306,10 +308,10 @@ fn dry_run(
                 "connected to {} (firmware {}); preflight, then the first test's route and faults \
                  uploaded and read back, with the autopilot off",
                 car.given,
-                crate::vehicle::Vehicle::version(&connected)
+                runner::vehicle::Vehicle::version(&connected)
             );
         }
-        crate::runner::dry_run(&connected, scenario, &config)
+        runner::dry_run(&connected, scenario, &config)
             .await
             .map_err(anyhow::Error::from)
     })?;
@@ -345,12 +347,12 @@ fn dry_run(
 
 /// Explains every failing segment and prints the first cause per segment (with `print`; else the
 /// causes are only in the case files). A campaign on fresh simulated cars explained each failing
-/// test as it ended ([`crate::runner::ExplainHeld`]): its case files are read, a test at a time.
+/// test as it ended ([`runner::ExplainHeld`]): its case files are read, a test at a time.
 /// Otherwise (a real car, a resumed campaign's earlier tests) the recording is read
 /// (`drivecheck explain`) and each case's `explanation` written. What cannot be explained (no
 /// recording) is a warning: the campaign's results stand without it.
 fn explain_failed(report: &CampaignReport, scenario: &Scenario, print: bool) {
-    let failing: Vec<&crate::runner::TestSummary> = report
+    let failing: Vec<&runner::TestSummary> = report
         .tests
         .iter()
         .filter(|t| t.verdict == Some(Verdict::Failed))
@@ -360,7 +362,7 @@ fn explain_failed(report: &CampaignReport, scenario: &Scenario, print: bool) {
     }
     // Every explanation is in its case file; a summary's share is printed.
     let shown = if print && crate::output::chatty() {
-        super::shared::listed_at_most()
+        super::progress::listed_at_most()
     } else {
         0
     };
@@ -471,7 +473,7 @@ fn explain_from_recording(report: &CampaignReport, scenario: &Scenario, lines: &
             .and_then(|text| Ok(Case::from_json(&text)?))
             .and_then(|mut on_disk| {
                 on_disk.explanation = case.segments.iter().map(Into::into).collect();
-                crate::atomic::write(&case.case, format!("{}\n", on_disk.to_json()?))?;
+                runner::atomic::write(&case.case, format!("{}\n", on_disk.to_json()?))?;
                 Ok(on_disk)
             });
         let on_disk = match written {
@@ -519,7 +521,7 @@ pub(super) fn write_junit(
                 file: report.dir.join(&test.file).display().to_string(),
             })
         })
-        .collect::<Result<Vec<_>, crate::runner::RunError>>()?;
+        .collect::<Result<Vec<_>, runner::RunError>>()?;
     let mut properties = vec![
         ("seed".to_owned(), record.seed.to_string()),
         ("scenario".to_owned(), record.scenario.name.clone()),
@@ -544,7 +546,7 @@ pub(super) fn write_junit(
         wall_s,
     };
     let xml = junit::to_xml(&[suite]).context("cannot write the JUnit XML")?;
-    crate::atomic::write(file, xml).with_context(|| format!("cannot write {}", file.display()))?;
+    runner::atomic::write(file, xml).with_context(|| format!("cannot write {}", file.display()))?;
     eprintln!("JUnit XML: {}", file.display());
     Ok(())
 }
@@ -645,7 +647,7 @@ fn jobs(args: &RunArgs, embedded: bool, car_label: &str) -> Result<usize> {
 async fn start_live(
     live: Option<std::net::SocketAddr>,
     config: &mut RunConfig,
-) -> Result<Option<crate::recording::live::LiveServer>> {
+) -> Result<Option<recording::live::LiveServer>> {
     let Some(addr) = live else {
         return Ok(None);
     };
@@ -811,7 +813,7 @@ async fn campaign_on_cars(
     let mut unreachable = Vec::new();
     for (car, result) in futures::future::join_all(connecting).await {
         match result {
-            Ok((vehicle, _)) => connected.push(crate::runner::LabCar {
+            Ok((vehicle, _)) => connected.push(runner::LabCar {
                 name: car.name.clone(),
                 address: car.given.clone(),
                 car: vehicle,
@@ -831,14 +833,9 @@ async fn campaign_on_cars(
     let vehicles: Vec<_> = connected.iter().map(|c| c.car.clone()).collect();
     let _brake = interrupt.brake_all_on_second(&vehicles);
     let progress = Progress::new(config.test_indices().len());
-    let result = crate::runner::run_campaign_on_cars(
-        &connected,
-        scenario,
-        config,
-        interrupt.token(),
-        &progress,
-    )
-    .await;
+    let result =
+        runner::run_campaign_on_cars(&connected, scenario, config, interrupt.token(), &progress)
+            .await;
     progress.finish();
     result
         .map_err(|failure| anyhow::Error::new(CampaignFailed::new(failure.error, &config.out_dir)))

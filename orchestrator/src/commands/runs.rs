@@ -6,17 +6,17 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 
-use super::shared::{metres, print_report};
+use super::table::{metres, print_report};
 use crate::cli::{RunsArgs, RunsCommand};
 use crate::exit::Exit;
-use crate::runner::{CampaignReport, TestSummary};
 use campaign::coverage::CoverageBuilder;
 use campaign::coverage::CoverageStats;
 use campaign::files::{CampaignRecord, Case, CoverageRecord};
 use campaign::replay::{Comparison, REPLAY_FILE};
+use runner::{CampaignReport, TestSummary};
 use serde::Serialize;
 
-use crate::runner::CAMPAIGN_FILE;
+use runner::CAMPAIGN_FILE;
 
 /// Lists or shows run directories. Exit status 0, or 2 when the directory cannot be read.
 pub fn runs(args: &RunsArgs) -> Result<Exit> {
@@ -351,11 +351,11 @@ struct RecordingJson {
 impl RecordingJson {
     /// The recording of run directory `dir`, if it has one.
     fn of(dir: &Path) -> Option<Self> {
-        let file = dir.join(crate::runner::RECORDING_FILE);
+        let file = dir.join(runner::RECORDING_FILE);
         if !file.exists() {
             return None;
         }
-        Some(match crate::recording::Summary::read(&file) {
+        Some(match recording::Summary::read(&file) {
             Ok(recording) => RecordingJson {
                 complete: Some(recording.is_complete()),
                 messages: Some(recording.messages),
@@ -394,8 +394,8 @@ fn show_campaign_json(dir: &Path, record: CampaignRecord, coverage: bool) -> Res
 /// read one at a time (each case given to `each`, then dropped).
 fn read_tests(dir: &Path, mut each: impl FnMut(&Case)) -> Result<Vec<TestSummary>> {
     let mut tests = Vec::new();
-    for (index, file) in crate::report::data::case_files(dir)? {
-        let case = crate::report::data::read_case(dir, &file)?;
+    for (index, file) in report::data::case_files(dir)? {
+        let case = report::data::read_case(dir, &file)?;
         each(&case);
         tests.push(TestSummary::of(
             case.test_index.unwrap_or(index),
@@ -472,7 +472,7 @@ fn show_campaign(dir: &Path, record: CampaignRecord, coverage: bool) -> Result<(
         let names: std::collections::BTreeSet<&str> =
             record.cars.iter().map(|c| c.name.as_str()).collect();
         println!("on {} cars:", names.len());
-        for line in super::shared::cars_lines(&record.cars) {
+        for line in super::table::cars_lines(&record.cars) {
             println!("  {line}");
         }
     }
@@ -513,11 +513,11 @@ fn show_campaign(dir: &Path, record: CampaignRecord, coverage: bool) -> Result<(
 /// finished (kill -9, a power cut), how to read it: drivecheck's reader, Foxglove and `mcap
 /// recover` read an unfinished file up to its last complete chunk.
 fn describe_recording(dir: &Path) {
-    let file = dir.join(crate::runner::RECORDING_FILE);
+    let file = dir.join(runner::RECORDING_FILE);
     if !file.exists() {
         return;
     }
-    match crate::recording::Summary::read(&file) {
+    match recording::Summary::read(&file) {
         Ok(recording) if recording.is_complete() => {}
         Ok(recording) => println!(
             "recording {}: unfinished (the process was killed before it ended{}); {} messages \

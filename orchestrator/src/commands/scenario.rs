@@ -85,7 +85,7 @@ fn write_or_print<'a>(out: Option<&'a Path>, force: bool, text: &str) -> Result<
             );
         }
         Some(path) => {
-            crate::atomic::write(path, text)
+            runner::atomic::write(path, text)
                 .with_context(|| format!("cannot write {}", path.display()))?;
             Ok(Some(path))
         }

@@ -17,17 +17,18 @@ use indicatif::{ProgressBar, ProgressStyle};
 use scenarios::Scenario;
 use tokio::runtime::Runtime;
 
-use super::shared::{cancel_on_ctrl_c, check_hash, read_case, runtime, scenario_of};
-use super::simdrive::{SimDriver, SimSettings};
+use super::case_input::{check_hash, read_case, scenario_of};
+use super::signals::{cancel_on_ctrl_c, runtime};
 use crate::cli::ShrinkArgs;
 use crate::exit::Exit;
 use crate::profile_arg::LoadedProfile;
-use crate::runner::run_dir_name;
 use crate::seed::choose_seed;
 use campaign::files::{Case, Header, SHRINK_FORMAT, SHRINK_SCHEMA_VERSION, ScenarioRef};
 use campaign::shrink::{
     Drive, Ended, MINIMAL_FILE, Progress, SHRINK_FILE, Settings, ShrinkFailure, ShrinkReport,
 };
+use runner::run_dir_name;
+use runner::simdrive::{SimDriver, SimSettings};
 
 /// `--margin`'s default (and `run --shrink`'s margin), metres.
 pub(super) const DEFAULT_MARGIN_M: f64 = 0.1;
@@ -76,11 +77,11 @@ pub fn shrink(args: &ShrinkArgs) -> Result<Exit> {
         .seed
         .or(case.campaign_seed)
         .unwrap_or_else(|| choose_seed(None));
-    let profile = LoadedProfile::load(args.profile.as_deref())?;
+    let profile = crate::profile_arg::load(args.profile.as_deref())?;
     let sim = profile.sim_config(&scenario)?;
     let out = match &args.out {
         Some(out) => out.clone(),
-        None => crate::runner::claim_default_run_dir(&run_dir_name(
+        None => runner::claim_default_run_dir(&run_dir_name(
             &format!("shrink-{}", scenario.name),
             seed,
         ))?,
@@ -219,7 +220,7 @@ pub(super) fn shrink_case(
     let started = Instant::now();
     let cancel = runtime.block_on(async { cancel_on_ctrl_c() });
     // Claimed for the whole shrink: another process given the same --out is refused.
-    let _claim = crate::runner::claim_out_dir(out, false)?;
+    let _claim = runner::claim_out_dir(out, false)?;
     let sim = SimDriver::new(
         (scenario, options.sim.clone()),
         path,
@@ -255,7 +256,7 @@ pub(super) fn shrink_case(
         }
     })?;
     let minimal_file = out.join(MINIMAL_FILE);
-    crate::atomic::write(&minimal_file, format!("{}\n", shrunk.minimal.to_json()?))
+    runner::atomic::write(&minimal_file, format!("{}\n", shrunk.minimal.to_json()?))
         .with_context(|| format!("cannot write {}", minimal_file.display()))?;
     let report = ShrinkReport {
         header: Header::current(SHRINK_FORMAT, SHRINK_SCHEMA_VERSION),
@@ -278,7 +279,7 @@ pub(super) fn shrink_case(
         ),
     };
     let file = out.join(SHRINK_FILE);
-    crate::atomic::write(&file, format!("{}\n", report.to_json()?))
+    runner::atomic::write(&file, format!("{}\n", report.to_json()?))
         .with_context(|| format!("cannot write {}", file.display()))?;
     Ok(report)
 }
@@ -299,8 +300,9 @@ impl Drive for SimRuns<'_> {
 
     fn drive(&mut self, case: &Case, seed: u64) -> Result<Case> {
         let plan = self.sim.plan(case)?;
-        self.runtime
-            .block_on(self.sim.drive_once(&plan, seed, &SimSettings::default()))
+        Ok(self
+            .runtime
+            .block_on(self.sim.drive_once(&plan, seed, &SimSettings::default()))?)
     }
 
     fn stop(&mut self) -> Option<Ended> {

@@ -25,7 +25,7 @@ pub fn serve(args: &SimArgs) -> Result<Exit> {
 }
 
 fn sim_config(args: &SimArgs, scenario: &scenarios::Scenario) -> Result<SimConfig> {
-    let profile = LoadedProfile::load(args.profile.as_deref())?;
+    let profile = crate::profile_arg::load(args.profile.as_deref())?;
     let car = profile.sim_config(scenario)?;
     let firmware: FirmwareVersion = match &args.firmware {
         Some(text) => {
@@ -64,7 +64,7 @@ async fn serve_until_ctrl_c(args: &SimArgs, config: &SimConfig) -> Result<()> {
     let scheme = if args.udp { "udp" } else { "tcp" };
     let address = sim.local_addr().unwrap_or(args.listen);
     if let Some(file) = &args.address_file {
-        crate::atomic::write(file, format!("{scheme}://{address}\n"))
+        runner::atomic::write(file, format!("{scheme}://{address}\n"))
             .with_context(|| format!("cannot write {}", file.display()))?;
     }
     eprintln!(

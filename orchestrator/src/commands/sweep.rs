@@ -5,14 +5,15 @@
 
 use anyhow::{Context, Result};
 
-use super::shared::{cancel_on_ctrl_c, check_hash, read_case, runtime, scenario_of};
-use super::simdrive::{SimDriver, SimSettings};
+use super::case_input::{check_hash, read_case, scenario_of};
+use super::signals::{cancel_on_ctrl_c, runtime};
 use crate::cli::SweepArgs;
 use crate::exit::Exit;
 use crate::profile_arg::LoadedProfile;
 use crate::seed::choose_seed;
 use campaign::files::{Header, SWEEP_FORMAT, SWEEP_SCHEMA_VERSION, ScenarioRef};
 use campaign::sweep::{Axis, Parameter, Point, SimSetting, SweepReport, grid, with_fault_values};
+use runner::simdrive::{SimDriver, SimSettings};
 
 /// Runs the sweep and prints its table (or JSON). Exit status 0 when it ran, 2 on an error.
 pub fn sweep(args: &SweepArgs) -> Result<Exit> {
@@ -29,7 +30,7 @@ pub fn sweep(args: &SweepArgs) -> Result<Exit> {
         .seed
         .or(case.campaign_seed)
         .unwrap_or_else(|| choose_seed(None));
-    let profile = LoadedProfile::load(args.profile.as_deref())?;
+    let profile = crate::profile_arg::load(args.profile.as_deref())?;
     let sim = profile.sim_config(&scenario)?;
     campaign::sweep::grid_size(&axes)?;
     let points = grid(&axes);

@@ -7,21 +7,22 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::shared::{cancel_on_ctrl_c, check_hash, read_case, runtime, scenario_of};
-use super::simdrive::{SimDriver, SimSettings};
+use super::case_input::{check_hash, read_case, scenario_of};
+use super::signals::{cancel_on_ctrl_c, runtime};
 use crate::cli::TwinCheckArgs;
 use crate::exit::Exit;
 use crate::profile_arg::LoadedProfile;
-use crate::runner::CAMPAIGN_FILE;
 use campaign::files::{
     CampaignRecord, Case, Header, ScenarioRef, TWIN_FORMAT, TWIN_SCHEMA_VERSION, TwinCheck,
     TwinProfileResult, TwinRepeat, TwinSummary,
 };
 use campaign::twin::{TWIN_FILE, compare_case, summarise};
+use runner::CAMPAIGN_FILE;
+use runner::simdrive::{SimDriver, SimSettings};
 
 /// The recorded case files of a run directory, in test order, with their cases (those that ran).
 fn recorded_cases(dir: &Path) -> Result<Vec<(PathBuf, Case)>> {
-    let files = super::shared::case_files(dir)?;
+    let files = super::case_input::case_files(dir)?;
     let mut cases = Vec::new();
     for file in files {
         let case = read_case(&file)?;
@@ -176,7 +177,7 @@ pub fn check(args: &TwinCheckArgs) -> Result<Exit> {
     };
     let scenario = scenario_of(args.scenario.as_deref(), first_path, first)?;
     check_hash(first, &scenario, args.ignore_scenario_hash)?;
-    let profile = LoadedProfile::load(args.profile.as_deref())?;
+    let profile = crate::profile_arg::load(args.profile.as_deref())?;
     let mut profiles = vec![profile.clone()];
     if profile.profile.hash() != LoadedProfile::default().profile.hash() {
         profiles.push(LoadedProfile::default());
@@ -211,7 +212,7 @@ pub fn check(args: &TwinCheckArgs) -> Result<Exit> {
         repeatability,
     };
     let json = check.to_json()?;
-    crate::atomic::write(&dir.join(TWIN_FILE), format!("{json}\n"))?;
+    runner::atomic::write(&dir.join(TWIN_FILE), format!("{json}\n"))?;
     if args.json {
         println!("{json}");
     } else {

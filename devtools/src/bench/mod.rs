@@ -1,0 +1,9 @@
+//! The benchmarks, one module each (`drivecheck-dev bench …`).
+
+pub mod compare;
+pub mod fidelity;
+mod fidelity_route;
+pub mod generator;
+pub mod placement;
+pub mod recovery;
+pub mod scale;

@@ -1,0 +1,131 @@
+//! Reading what a command is given of an earlier run: its case files (bounded in size), the
+//! scenario they were recorded in and whether its hash still matches, and where a command may
+//! write beside them.
+
+use std::future::Future;
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::pin::Pin;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use car_sim::SimHandle;
+use indicatif::{ProgressBar, ProgressStyle};
+use runner::store::RunStore;
+use scenarios::Scenario;
+use tokio_util::sync::CancellationToken;
+
+use crate::scenario_arg::{load_scenario, print_warnings_of_use};
+use anyhow::bail;
+use campaign::files::Case;
+use campaign::oracle::Verdict;
+use car_link::CarError;
+use runner::vehicle::SimulatorView;
+use runner::vehicle::Vehicle;
+use runner::{CampaignObserver, CampaignReport, RunError};
+
+/// The scenario `name` a run directory `dir` (given with `flag`) names, to load when no
+/// `--scenario` is given: it must be bundled.
+pub(super) fn bundled_scenario(flag: &str, dir: &Path, name: &str) -> Result<String> {
+    if scenarios::bundled::text(name).is_none() {
+        bail!(
+            "{flag} {}: its scenario `{name}` is not bundled; give its file with --scenario",
+            dir.display()
+        );
+    }
+    Ok(name.to_owned())
+}
+
+/// The case files (`case-NNN.json`) of run directory `dir`, in test order.
+pub(super) fn case_files(dir: &Path) -> Result<Vec<PathBuf>> {
+    Ok(RunStore::new(dir)
+        .case_files()?
+        .into_iter()
+        .map(|(_, path)| path)
+        .collect())
+}
+
+/// Refuses, before anything is driven, an output file a command writes only at its end
+/// (`--junit`): its directory must exist, and it must not lie in the run directory `run_dir`,
+/// where it could replace a recorded file.
+pub(super) fn check_output_file(flag: &str, file: &Path, run_dir: &Path) -> Result<()> {
+    let absolute = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_owned());
+    let (file_abs, dir_abs) = (absolute(file), absolute(run_dir));
+    if file_abs.starts_with(&dir_abs) {
+        bail!(
+            "{flag} {}: inside the run directory {}, where it could replace a recorded file; \
+             write it elsewhere",
+            file.display(),
+            run_dir.display()
+        );
+    }
+    let parent = file_abs.parent().unwrap_or(Path::new("/"));
+    if !parent.is_dir() {
+        bail!(
+            "{flag} {}: the directory {} does not exist",
+            file.display(),
+            parent.display()
+        );
+    }
+    Ok(())
+}
+
+/// The case file at `path`, read and parsed; errors name the file (and the field). Only a regular
+/// file of at most `runner::store::MAX_CASE_BYTES` is read: a FIFO or a device would block or never end.
+pub(super) fn read_case(path: &Path) -> Result<Case> {
+    Ok(RunStore::read_case(path)?)
+}
+
+/// The scenario a case is driven in: `--scenario`, or the bundled one the case names.
+pub(super) fn scenario_of(
+    scenario: Option<&str>,
+    case_path: &Path,
+    case: &Case,
+) -> Result<Scenario> {
+    let arg = scenario.unwrap_or(&case.scenario.name);
+    let loaded = match scenario {
+        Some(arg) => load_scenario(arg)?,
+        None => {
+            let name = &case.scenario.name;
+            if scenarios::bundled::text(name).is_none() {
+                bail!(
+                    "{}: scenario.name `{name}` is not a bundled scenario; give its file with \
+                     --scenario",
+                    case_path.display()
+                );
+            }
+            load_scenario(name)?
+        }
+    };
+    print_warnings_of_use(arg, &loaded);
+    Ok(loaded.scenario)
+}
+
+/// Refuses a case recorded in another scenario (or without a hash) unless told to proceed.
+pub(super) fn check_hash(case: &Case, scenario: &Scenario, ignore: bool) -> Result<()> {
+    let hash = scenario.hash();
+    let problem = match &case.scenario.hash {
+        Some(recorded) if *recorded == hash => return Ok(()),
+        Some(recorded) => format!(
+            "the case was recorded in scenario `{}` with hash {}, but scenario `{}` hashes to {}",
+            case.scenario.name,
+            short(recorded),
+            scenario.name,
+            short(&hash)
+        ),
+        None => format!(
+            "the case names no scenario hash, so it cannot be checked against scenario `{}`",
+            scenario.name
+        ),
+    };
+    if ignore {
+        eprintln!("warning: {problem}; replaying anyway (--ignore-scenario-hash)");
+        return Ok(());
+    }
+    bail!("{problem}; pass --ignore-scenario-hash to replay it anyway")
+}
+
+fn short(hash: &str) -> &str {
+    hash.get(..12).unwrap_or(hash)
+}

@@ -1,0 +1,322 @@
+//! The async runtime and the signals of a command that drives a car: the first SIGINT (Ctrl-C)
+//! or SIGTERM cancels the campaign (the runner ends the test with its safe stop), the second
+//! brakes every registered car at once; the embedded simulator's debug view the runner records.
+
+use std::future::Future;
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::pin::Pin;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use car_sim::SimHandle;
+use indicatif::{ProgressBar, ProgressStyle};
+use scenarios::Scenario;
+use tokio_util::sync::CancellationToken;
+
+use crate::scenario_arg::{load_scenario, print_warnings_of_use};
+use anyhow::bail;
+use campaign::files::Case;
+use campaign::oracle::Verdict;
+use car_link::CarError;
+use runner::vehicle::SimulatorView;
+use runner::vehicle::Vehicle;
+use runner::{CampaignObserver, CampaignReport, RunError};
+
+/// The async runtime: on one thread with a paused clock (virtual time, the embedded simulated
+/// car) or on two threads against the wall clock.
+pub fn runtime(virtual_time: bool) -> Result<tokio::runtime::Runtime> {
+    let runtime = if virtual_time {
+        tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .start_paused(true)
+            .build()
+    } else {
+        tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .enable_all()
+            .build()
+    };
+    runtime.context("cannot start the async runtime")
+}
+
+/// The debug view of `sim`, if the car is the embedded simulator.
+pub(super) fn sim_view(sim: &Option<SimHandle>) -> Option<&dyn SimulatorView> {
+    sim.as_ref().map(|sim| sim as &dyn SimulatorView)
+}
+
+/// A token cancelled at the first SIGINT (Ctrl-C), SIGTERM (`timeout`, systemd, a cancelled CI
+/// job) or SIGHUP (a closed terminal): the runner then stops the car safely, records the running
+/// test as aborted (`interrupted`), completes the run directory and the recording, and the command
+/// exits with status 2. A second signal brakes the car registered with
+/// [`Interrupt::brake_on_second`] at once, ends the test in flight there (aborted, the hard brake
+/// named in its case) and the process with status 2 within half a second. Call it inside the
+/// runtime.
+pub(super) fn cancel_on_ctrl_c() -> CancellationToken {
+    Interrupt::listen().cancel
+}
+
+/// The interrupt path of a command that drives (see [`cancel_on_ctrl_c`]): the token the first
+/// signal cancels, and the car the second signal brakes.
+#[derive(Clone)]
+pub(super) struct Interrupt {
+    cancel: CancellationToken,
+    car: Slot,
+    /// How many cars the second signal brakes (several: the first signal's message says so).
+    cars: Arc<std::sync::atomic::AtomicUsize>,
+}
+
+/// The registered car's brake: a clone of the car, braking with the current given.
+type Brake = Box<dyn Fn(f64) -> Pin<Box<dyn Future<Output = Result<(), CarError>> + Send>> + Send>;
+
+/// Where the car the second signal brakes is registered.
+type Slot = Arc<Mutex<Option<Brake>>>;
+
+impl std::fmt::Debug for Interrupt {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Interrupt")
+            .field("cancel", &self.cancel)
+            .field("registered", &lock(&self.car).is_some())
+            .finish()
+    }
+}
+
+/// The brake the second signal sends, as the runner's safe stop does.
+const SECOND_SIGNAL_BRAKE_A: f64 = 50.0;
+
+/// How long the process lives after the second signal's brake was queued, so that the link's
+/// writer sends it (a brake has no reply; RC_CONTROL is fire and forget).
+const BRAKE_FLUSH: Duration = Duration::from_millis(100);
+
+/// How long the process lives after the second signal's brake for the runner to write the test
+/// in flight and complete the run directory.
+const HARD_STOP_GRACE: Duration = Duration::from_millis(500);
+
+/// At most this long for the brake to find room in the link's send queue; the car's 2 s watchdog
+/// brakes it in any case once the process is gone.
+const BRAKE_SEND_LIMIT: Duration = Duration::from_millis(500);
+
+impl Interrupt {
+    /// Listens for SIGINT, SIGTERM and SIGHUP from now on. Call it inside the runtime.
+    pub(super) fn listen() -> Self {
+        let interrupt = Self {
+            cancel: CancellationToken::new(),
+            car: Arc::new(Mutex::new(None)),
+            cars: Arc::default(),
+        };
+        let listener = interrupt.clone();
+        tokio::spawn(async move {
+            let mut signals = Signals::new();
+            let first = signals.next().await;
+            let cars = match listener.cars.load(std::sync::atomic::Ordering::SeqCst) {
+                0 | 1 => "the car",
+                _ => "every car",
+            };
+            eprintln!("{first}: stopping {cars} safely (send it again to brake at once and exit)");
+            listener.cancel.cancel();
+            let second = signals.next().await;
+            eprintln!("{second} again: braking at once and exiting");
+            listener.brake_now().await;
+            // The test in flight ends at once, aborted; its case, campaign.json and the recording
+            // are written in the half second the process still lives (a command that completes
+            // sooner exits sooner).
+            runner::hard_stop().cancel();
+            tokio::time::sleep(HARD_STOP_GRACE).await;
+            crate::exit::Exit::Error.exit();
+        });
+        interrupt
+    }
+
+    /// The token the first signal cancels.
+    pub(super) fn token(&self) -> &CancellationToken {
+        &self.cancel
+    }
+
+    /// Registers `car` as the one the second signal brakes, until the returned guard is dropped
+    /// (a registered car keeps its link, and so its keepalive, alive).
+    pub(super) fn brake_on_second<V: Vehicle>(&self, car: &V) -> BrakeOnSecond {
+        self.brake_all_on_second(std::slice::from_ref(car))
+    }
+
+    /// [`Interrupt::brake_on_second`] for every car of a campaign on several cars, braked at
+    /// once.
+    pub(super) fn brake_all_on_second<V: Vehicle>(&self, cars: &[V]) -> BrakeOnSecond {
+        self.cars
+            .store(cars.len(), std::sync::atomic::Ordering::SeqCst);
+        let cars = cars.to_vec();
+        let brake: Brake = Box::new(move |current_a| {
+            let cars = cars.clone();
+            Box::pin(async move {
+                let braked =
+                    futures::future::join_all(cars.iter().map(|car| car.brake(current_a))).await;
+                braked
+                    .into_iter()
+                    .collect::<Result<Vec<()>, CarError>>()
+                    .map(drop)
+            })
+        });
+        *lock(&self.car) = Some(brake);
+        BrakeOnSecond {
+            car: Arc::clone(&self.car),
+        }
+    }
+
+    /// Brakes the registered car, if any, and gives the link a moment to send the command.
+    async fn brake_now(&self) {
+        let Some(braking) = lock(&self.car)
+            .as_ref()
+            .map(|brake| brake(SECOND_SIGNAL_BRAKE_A))
+        else {
+            return;
+        };
+        match tokio::time::timeout(BRAKE_SEND_LIMIT, braking).await {
+            Ok(Ok(())) => tokio::time::sleep(BRAKE_FLUSH).await,
+            Ok(Err(error)) => eprintln!("cannot brake: {error}"),
+            Err(_) => eprintln!("cannot brake: the link's send queue stayed full"),
+        }
+    }
+}
+
+/// While it lives, the second signal brakes the car registered with
+/// [`Interrupt::brake_on_second`].
+pub(super) struct BrakeOnSecond {
+    car: Slot,
+}
+
+impl std::fmt::Debug for BrakeOnSecond {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BrakeOnSecond").finish_non_exhaustive()
+    }
+}
+
+impl Drop for BrakeOnSecond {
+    fn drop(&mut self) {
+        *lock(&self.car) = None;
+    }
+}
+
+/// The slot's car, whether or not a thread panicked while holding it.
+fn lock(slot: &Mutex<Option<Brake>>) -> std::sync::MutexGuard<'_, Option<Brake>> {
+    slot.lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// The signals that stop a command: SIGINT, and on Unix SIGTERM and SIGHUP.
+struct Signals {
+    #[cfg(unix)]
+    term: Option<tokio::signal::unix::Signal>,
+    #[cfg(unix)]
+    hup: Option<tokio::signal::unix::Signal>,
+}
+
+impl Signals {
+    fn new() -> Self {
+        #[cfg(unix)]
+        {
+            use tokio::signal::unix::{SignalKind, signal};
+            Self {
+                term: signal(SignalKind::terminate()).ok(),
+                hup: signal(SignalKind::hangup()).ok(),
+            }
+        }
+        #[cfg(not(unix))]
+        {
+            Self {}
+        }
+    }
+
+    /// Waits for the next signal; its name.
+    async fn next(&mut self) -> &'static str {
+        #[cfg(unix)]
+        {
+            async fn on(signal: &mut Option<tokio::signal::unix::Signal>) {
+                match signal {
+                    Some(signal) => {
+                        signal.recv().await;
+                    }
+                    None => std::future::pending().await,
+                }
+            }
+            tokio::select! {
+                () = ctrl_c() => "interrupted (SIGINT)",
+                () = on(&mut self.term) => "terminated (SIGTERM)",
+                () = on(&mut self.hup) => "hung up (SIGHUP)",
+            }
+        }
+        #[cfg(not(unix))]
+        {
+            ctrl_c().await;
+            "interrupted"
+        }
+    }
+}
+
+/// Ctrl-C; never, if its handler cannot be installed.
+async fn ctrl_c() {
+    if tokio::signal::ctrl_c().await.is_err() {
+        std::future::pending::<()>().await;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use car_link::RoutePoint;
+    use runner::vehicle::connect_sim;
+
+    /// Drives the embedded simulated car on its autopilot at 1.5 m/s for 3 s (a straight route
+    /// onward from where it stands, along the scenario's start route), then, when `brake`,
+    /// registers it with an interrupt and brakes as the second signal does; the car's speed 0.5 s
+    /// later.
+    async fn speed_after(brake: bool) -> f64 {
+        let scenario = scenarios::bundled::load("parking-lot-2anchors")
+            .expect("bundled")
+            .scenario;
+        let (car, sim) = connect_sim(&car_sim::SimConfig::from_scenario(&scenario))
+            .await
+            .expect("the simulated car");
+        let start = scenario.start_route.positions();
+        let (from, to) = (start[0], start[1]);
+        let (dx, dy) = (to.x - from.x, to.y - from.y);
+        let step = 2.0 / dx.hypot(dy);
+        let route: Vec<RoutePoint> = (1..=15)
+            .map(|k| {
+                let k = f64::from(k) * step;
+                RoutePoint::at(from.x + k * dx, from.y + k * dy, 1.5)
+            })
+            .collect();
+        car.clear_route().await.expect("cleared");
+        car.add_points(&route).await.expect("uploaded");
+        car.set_autopilot(true, false).await.expect("started");
+        tokio::time::sleep(Duration::from_secs(3)).await;
+        assert!(sim.truth().speed > 1.0, "the car drives: {:?}", sim.truth());
+        let interrupt = Interrupt {
+            cancel: CancellationToken::new(),
+            car: Arc::new(Mutex::new(None)),
+            cars: Arc::default(),
+        };
+        let guard = interrupt.brake_on_second(&car);
+        if brake {
+            interrupt.brake_now().await;
+        }
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        drop(guard);
+        assert!(
+            lock(&interrupt.car).is_none(),
+            "the guard unregisters the car"
+        );
+        sim.truth().speed
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn the_second_signal_brakes_the_registered_car() {
+        let coasting = speed_after(false).await;
+        let braked = speed_after(true).await;
+        assert!(
+            coasting > 1.0,
+            "without the brake it still drives: {coasting}"
+        );
+        assert!(braked < 0.3, "the brake stops it: {braked}");
+    }
+}

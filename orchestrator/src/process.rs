@@ -1,0 +1,105 @@
+//! The process around a command: how `drivecheck` starts (standard output closing, `RUST_LOG`,
+//! the command line parsed, the verbosity set) and ends (its status, an error printed). The
+//! `drivecheck` binary is [`main`] and nothing else; the development tools (`drivecheck-dev exec`)
+//! run a command through the same function.
+
+use std::ffi::OsString;
+use std::io::IsTerminal;
+
+use clap::Parser;
+
+use crate::cli::Cli;
+use crate::exit::Exit;
+
+/// Runs the command line `args` (the program's name first) as the `drivecheck` binary does and
+/// returns its exit status: a command line that does not parse prints clap's message (`--help`
+/// and `--version` are not errors), an error prints `error: …` with its causes.
+pub fn main<I, T>(args: I) -> Exit
+where
+    I: IntoIterator<Item = T>,
+    T: Into<OsString> + Clone,
+{
+    exit_quietly_when_stdout_closes();
+    log_as_rust_log_says();
+    let cli = match Cli::try_parse_from(args) {
+        Ok(cli) => cli,
+        Err(error) => {
+            let _ = error.print();
+            return if error.use_stderr() {
+                Exit::Error
+            } else {
+                Exit::Success
+            };
+        }
+    };
+    crate::output::set(if cli.quiet {
+        crate::output::Verbosity::Quiet
+    } else if cli.verbose {
+        crate::output::Verbosity::Verbose
+    } else {
+        crate::output::Verbosity::Normal
+    });
+    match crate::commands::run(cli) {
+        Ok(exit) => exit,
+        Err(error) => {
+            eprintln!("error: {}", crate::output::describe(&error));
+            Exit::Error
+        }
+    }
+}
+
+/// Diagnostics (`tracing`: the car link's events, the runner's steps) go to standard error as
+/// `RUST_LOG` selects them (`RUST_LOG=debug`, `RUST_LOG=orchestrator=debug,car_link=info`). Without
+/// it nothing is logged, so what drivecheck prints is what its commands print.
+fn log_as_rust_log_says() {
+    use tracing_subscriber::layer::SubscriberExt;
+    use tracing_subscriber::util::SubscriberInitExt;
+    const RUST_LOG: &str = "RUST_LOG";
+    let Some(value) = std::env::var_os(RUST_LOG).filter(|v| !v.is_empty()) else {
+        return;
+    };
+    let filter = match value
+        .to_str()
+        .map(str::parse::<tracing_subscriber::filter::Targets>)
+    {
+        Some(Ok(filter)) => filter,
+        Some(Err(error)) => {
+            eprintln!("warning: {RUST_LOG} ignored: {error}");
+            return;
+        }
+        None => {
+            eprintln!("warning: {RUST_LOG} ignored: it is not UTF-8");
+            return;
+        }
+    };
+    let format = tracing_subscriber::fmt::layer()
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal());
+    // The only subscriber of the process, set before anything logs: this cannot fail.
+    let _ = tracing_subscriber::registry()
+        .with(format)
+        .with(filter)
+        .try_init();
+}
+
+/// `drivecheck runs | head`: when the reader of standard output goes away, ends the process as a
+/// Unix tool ends then, quietly with status 141 ([`Exit::ClosedStdout`]), instead of with a panic
+/// message. Rust ignores
+/// SIGPIPE, so `println!` panics with "Broken pipe" instead. Nothing is cut short by exiting: the
+/// commands write to standard output only after their work is done (a campaign prints its table
+/// after the car has stopped and the run directory is complete).
+fn exit_quietly_when_stdout_closes() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let payload = info.payload();
+        let message = payload
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| payload.downcast_ref::<&str>().copied())
+            .unwrap_or_default();
+        if message.starts_with("failed printing to stdout") && message.contains("Broken pipe") {
+            Exit::ClosedStdout.exit();
+        }
+        default(info);
+    }));
+}

@@ -1,0 +1,371 @@
+//! `--json` on every command that prints a result: one JSON document on standard output that
+//! `python3 -m json.tool` reads, with the keys docs/json.md names. The test walks the command
+//! line's own definition, so a command that gains `--json` without being tried here fails it, as
+//! does a command tried here that lost it.
+
+use crate::common;
+
+use std::collections::BTreeSet;
+use std::io::Write;
+use std::path::Path;
+use std::process::{Command, Output, Stdio};
+
+use clap::CommandFactory;
+use common::{drivecheck, path, text};
+use orchestrator::cli::Cli;
+
+/// The commands (as typed, `runs show`) whose definition has a `--json` option.
+fn commands_with_json() -> BTreeSet<String> {
+    fn walk(command: &clap::Command, name: &str, found: &mut BTreeSet<String>) {
+        if command
+            .get_arguments()
+            .any(|a| a.get_long() == Some("json"))
+        {
+            found.insert(name.trim().to_owned());
+        }
+        for sub in command.get_subcommands() {
+            walk(sub, &format!("{name} {}", sub.get_name()), found);
+        }
+    }
+    let mut cli = Cli::command();
+    // Propagates the global options (`runs --json`) to the subcommands.
+    cli.build();
+    let mut found = BTreeSet::new();
+    walk(&cli, "", &mut found);
+    found
+}
+
+/// What python3's own JSON reader says of `stdout` (`None` when there is no python3 here).
+fn python_reads(stdout: &[u8]) -> Option<Result<(), String>> {
+    let mut child = Command::new("python3")
+        .args(["-m", "json.tool"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .ok()?;
+    child.stdin.take()?.write_all(stdout).ok()?;
+    let out = child.wait_with_output().ok()?;
+    Some(if out.status.success() {
+        Ok(())
+    } else {
+        Err(String::from_utf8_lossy(&out.stderr).into_owned())
+    })
+}
+
+/// Runs `drivecheck args`, expects one of `codes`, checks that standard output is one JSON
+/// document (for serde and for python3) and returns it.
+fn json_of(args: &[&str], codes: &[i32]) -> serde_json::Value {
+    let out: Output = drivecheck(args);
+    assert!(
+        out.status.code().is_some_and(|c| codes.contains(&c)),
+        "drivecheck {}: exit {:?}\n{}",
+        args.join(" "),
+        out.status.code(),
+        text(&out)
+    );
+    let value: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!(
+            "drivecheck {}: stdout is not one JSON document ({e})\n{}",
+            args.join(" "),
+            text(&out)
+        )
+    });
+    if let Some(read) = python_reads(&out.stdout) {
+        read.unwrap_or_else(|e| panic!("python3 -m json.tool refused it: {e}"));
+    }
+    value
+}
+
+/// `value` has every key of `keys`.
+fn has_keys(value: &serde_json::Value, keys: &[&str], what: &str) {
+    for key in keys {
+        assert!(value.get(key).is_some(), "{what}: no `{key}` in {value:#}");
+    }
+}
+
+/// The documents of the campaign commands (`run`, `runs merge`) name their command and version.
+fn is_campaign_document(value: &serde_json::Value, command: &str, tests: usize) {
+    assert_eq!(value["command"], command);
+    assert_eq!(value["schema_version"], 1);
+    has_keys(value, &["dir", "campaign", "tests"], command);
+    assert_eq!(
+        value["tests"].as_array().map(Vec::len),
+        Some(tests),
+        "{value:#}"
+    );
+    assert_eq!(value["campaign"]["format"], "drivecheck-campaign");
+}
+
+#[test]
+fn every_command_that_prints_a_result_prints_one_json_document() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = |name: &str| dir.path().join(name);
+    let mut tried = BTreeSet::new();
+    let mut try_it = |command: &str, args: &[&str], codes: &[i32]| {
+        tried.insert(command.to_owned());
+        json_of(args, codes)
+    };
+
+    let run_dir = d("runs/campaign");
+    let run = try_it(
+        "run",
+        &[
+            "run",
+            "--seed",
+            "7",
+            "--tests",
+            "3",
+            "--out",
+            path(&run_dir),
+            "--json",
+        ],
+        &[0, 1],
+    );
+    is_campaign_document(&run, "run", 3);
+    let case = run_dir.join("case-000.json");
+
+    let listed = try_it("runs", &["runs", "--dir", path(&d("runs")), "--json"], &[0]);
+    assert_eq!(listed["command"], "runs");
+    let runs = listed["runs"].as_array().expect("runs is a list");
+    assert_eq!(runs.len(), 1, "{listed:#}");
+    assert_eq!(runs[0]["kind"], "campaign");
+
+    let shown = try_it(
+        "runs show",
+        &["runs", "show", path(&run_dir), "--json"],
+        &[0],
+    );
+    assert_eq!(shown["kind"], "campaign");
+    has_keys(&shown, &["campaign", "tests", "recording"], "runs show");
+    assert_eq!(shown["recording"]["complete"], true);
+
+    for k in ["1/2", "2/2"] {
+        let shard = d(&format!("shard{}", &k[..1]));
+        let out = drivecheck(&[
+            "run",
+            "--seed",
+            "7",
+            "--tests",
+            "3",
+            "--shard",
+            k,
+            "--out",
+            path(&shard),
+        ]);
+        assert!(matches!(out.status.code(), Some(0 | 1)), "{}", text(&out));
+    }
+    let merged = try_it(
+        "runs merge",
+        &[
+            "runs",
+            "merge",
+            path(&d("shard1")),
+            path(&d("shard2")),
+            "--out",
+            path(&d("merged")),
+            "--json",
+        ],
+        &[0],
+    );
+    is_campaign_document(&merged, "runs merge", 3);
+    assert_eq!(
+        merged["dir"],
+        path(&d("merged")),
+        "the merged directory, not its staging"
+    );
+
+    let replay = try_it(
+        "replay",
+        &[
+            "replay",
+            path(&case),
+            "--times",
+            "1",
+            "--out",
+            path(&d("replay")),
+            "--json",
+        ],
+        &[0, 1],
+    );
+    assert_eq!(replay["command"], "replay");
+    assert_eq!(replay["replay"]["format"], "drivecheck-replay");
+
+    let shrink = try_it(
+        "shrink",
+        &[
+            "shrink",
+            path(&case),
+            "--runs",
+            "1",
+            "--budget",
+            "3s",
+            "--out",
+            path(&d("shrink")),
+            "--json",
+        ],
+        &[0, 1],
+    );
+    assert_eq!(shrink["command"], "shrink");
+    assert!(shrink["shrunk"].is_boolean(), "{shrink:#}");
+
+    let sweep = try_it(
+        "sweep",
+        &[
+            "sweep",
+            path(&case),
+            "--set",
+            "sim.range_sigma_m=0.05,0.1",
+            "--runs",
+            "1",
+            "--json",
+        ],
+        &[0],
+    );
+    assert_eq!(sweep["format"], "drivecheck-sweep");
+
+    let explained = try_it("explain", &["explain", path(&run_dir), "--json"], &[0]);
+    has_keys(&explained, &["cases"], "explain");
+
+    let twin = try_it(
+        "twin check",
+        &["twin", "check", path(&run_dir), "--runs", "1", "--json"],
+        &[0],
+    );
+    assert_eq!(twin["format"], "drivecheck-twin");
+
+    let area = try_it(
+        "area validate",
+        &[
+            "area",
+            "validate",
+            "--scenario",
+            "courtyard",
+            "--km",
+            "0.2",
+            "--seed",
+            "1",
+            "--json",
+        ],
+        &[0, 1],
+    );
+    has_keys(&area, &["verdict", "km"], "area validate");
+
+    let route = try_it(
+        "route generate",
+        &[
+            "route",
+            "generate",
+            "courtyard",
+            "--points",
+            "8",
+            "--seed",
+            "1",
+            "--json",
+        ],
+        &[0],
+    );
+    assert!(route.is_object() || route.is_array(), "{route:#}");
+    let back = try_it(
+        "route return",
+        &[
+            "route",
+            "return",
+            "--scenario",
+            "parking-lot-rock",
+            "--from",
+            "-21,-110,0",
+            "--json",
+        ],
+        &[0, 1],
+    );
+    assert!(back.is_object(), "{back:#}");
+
+    let compared = try_it(
+        "compare",
+        &["compare", path(&run_dir), path(&run_dir), "--json"],
+        &[0],
+    );
+    assert_eq!(compared["command"], "compare");
+    assert_eq!(compared["comparison"]["significance"], "no_difference");
+
+    let list = try_it("scenario list", &["scenario", "list", "--json"], &[0]);
+    assert_eq!(list["command"], "scenario list");
+    let check = try_it(
+        "scenario check",
+        &["scenario", "check", "courtyard", "--json"],
+        &[0],
+    );
+    assert_eq!(check["command"], "scenario check");
+
+    assert_eq!(
+        tried,
+        commands_with_json(),
+        "the commands tried here and the commands with --json differ"
+    );
+}
+
+#[test]
+fn the_runs_directory_comes_from_the_environment() {
+    let dir = tempfile::tempdir().unwrap();
+    let runs = dir.path().join("elsewhere");
+    let out = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
+        .args(["run", "--seed", "3", "--tests", "1", "--json"])
+        .env("DRIVECHECK_RUNS_DIR", &runs)
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert!(matches!(out.status.code(), Some(0 | 1)), "{}", text(&out));
+    let result: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let run_dir = Path::new(result["dir"].as_str().unwrap());
+    assert!(
+        run_dir.starts_with(&runs),
+        "{} not in {}",
+        run_dir.display(),
+        runs.display()
+    );
+    assert!(!dir.path().join("runs").exists(), "nothing in ./runs");
+    let listed = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
+        .args(["runs", "--json"])
+        .env("DRIVECHECK_RUNS_DIR", &runs)
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    let listed: serde_json::Value = serde_json::from_slice(&listed.stdout).unwrap();
+    assert_eq!(
+        listed["runs"].as_array().map(Vec::len),
+        Some(1),
+        "{listed:#}"
+    );
+}
+
+#[test]
+fn completions_and_manual_pages_come_from_the_command_line() {
+    for shell in ["bash", "zsh", "fish"] {
+        let out = drivecheck(&["completions", shell]);
+        assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+        let script = String::from_utf8_lossy(&out.stdout);
+        let options = if shell == "fish" {
+            ["-l scenario", "-l json"]
+        } else {
+            ["--scenario", "--json"]
+        };
+        for word in ["replay", "dry-run"].into_iter().chain(options) {
+            assert!(script.contains(word), "{shell}: no {word}");
+        }
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = drivecheck(&["man", "--out", path(dir.path())]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let main = std::fs::read_to_string(dir.path().join("drivecheck.1")).unwrap();
+    assert!(
+        main.starts_with(".ie") || main.contains(".TH drivecheck"),
+        "{main}"
+    );
+    let run = std::fs::read_to_string(dir.path().join("drivecheck-run.1")).unwrap();
+    assert!(
+        run.contains("stale\\-after"),
+        "the run page names its options: {run}"
+    );
+    assert!(dir.path().join("drivecheck-runs-show.1").exists());
+}
