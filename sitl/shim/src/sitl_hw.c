@@ -134,6 +134,10 @@ float servo_simple_get_pos_now(void) { return servo_pos; }
 /* ---- the IMU: samples at its rate, the values the host last gave (sample and hold) ---- */
 
 static float imu_acc[3], imu_gyro[3], imu_mag[3];
+/* the sample being delivered: the held values plus the sensor noise, if the host asked for it */
+static float smp_acc[3], smp_gyro[3], smp_mag[3];
+static float noise_acc_sd, noise_gyro_sd;
+static uint64_t noise_state = 1;
 static int imu_rate_hz = 1000; /* the MPU-9150 driver's 1 kHz; the BMI160's is set by init */
 static bool imu_started;
 #if SITL_IMU_CB_NOARGS
@@ -146,6 +150,35 @@ void sitl_hw_imu_set(const float accel[3], const float gyro[3], const float mag[
   memcpy(imu_acc, accel, sizeof imu_acc);
   memcpy(imu_gyro, gyro, sizeof imu_gyro);
   memcpy(imu_mag, mag, sizeof imu_mag);
+}
+
+/* Deterministic white noise: xorshift64*, four uniforms summed (unit variance, near Gaussian).
+ * A real IMU is never noise-free; perfectly constant data make the firmware's Madgwick filter
+ * normalise a zero gradient (0/0) and its attitude NaN. */
+void sitl_hw_imu_noise(float accel_sd, float gyro_sd, uint64_t seed) {
+  noise_acc_sd = accel_sd;
+  noise_gyro_sd = gyro_sd;
+  noise_state = seed ? seed : 1;
+}
+
+static float unit_noise(void) {
+  float sum = 0.0f;
+  for (int i = 0; i < 4; i++) {
+    noise_state ^= noise_state >> 12;
+    noise_state ^= noise_state << 25;
+    noise_state ^= noise_state >> 27;
+    uint64_t r = noise_state * 0x2545F4914F6CDD1DULL;
+    sum += (float)(r >> 40) / 16777216.0f - 0.5f;
+  }
+  return sum * 1.7320508f;
+}
+
+static void take_sample(void) {
+  for (int i = 0; i < 3; i++) {
+    smp_acc[i] = imu_acc[i] + (noise_acc_sd > 0.0f ? noise_acc_sd * unit_noise() : 0.0f);
+    smp_gyro[i] = imu_gyro[i] + (noise_gyro_sd > 0.0f ? noise_gyro_sd * unit_noise() : 0.0f);
+    smp_mag[i] = imu_mag[i];
+  }
 }
 
 static THD_FUNCTION(imu_thread, arg) {
@@ -162,15 +195,16 @@ static THD_FUNCTION(imu_thread, arg) {
       uint64_t d_ticks = ((due - now) * CH_CFG_ST_FREQUENCY + 999999ULL) / 1000000ULL;
       chThdSleep((systime_t)(d_ticks ? d_ticks : 1));
     }
+    take_sample();
 #if SITL_IMU_CB_NOARGS
     if (imu_cb_noargs) imu_cb_noargs();
 #endif
     if (imu_cb) {
       /* copies: the firmware scales the arrays in place */
       float a[3], g[3], m[3];
-      memcpy(a, imu_acc, sizeof a);
-      memcpy(g, imu_gyro, sizeof g);
-      memcpy(m, imu_mag, sizeof m);
+      memcpy(a, smp_acc, sizeof a);
+      memcpy(g, smp_gyro, sizeof g);
+      memcpy(m, smp_mag, sizeof m);
       imu_cb(a, g, m);
     }
   }
@@ -186,9 +220,9 @@ void mpu9150_init(void) {}
 bool mpu9150_is_mpu9250(void) { return false; }
 void mpu9150_sample_gyro_offsets(uint32_t iterations) { (void)iterations; }
 void mpu9150_get_accel_gyro_mag(float *accel, float *gyro, float *mag) {
-  memcpy(accel, imu_acc, sizeof imu_acc);
-  memcpy(gyro, imu_gyro, sizeof imu_gyro);
-  memcpy(mag, imu_mag, sizeof imu_mag);
+  memcpy(accel, smp_acc, sizeof smp_acc);
+  memcpy(gyro, smp_gyro, sizeof smp_gyro);
+  memcpy(mag, smp_mag, sizeof smp_mag);
 }
 #if SITL_IMU_CB_NOARGS
 void mpu9150_set_read_callback(void (*func)(void)) {

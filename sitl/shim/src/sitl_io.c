@@ -26,6 +26,7 @@ enum {
   H_NMEA = 0x05,
   H_UWB_RANGE = 0x06,
   H_STATS = 0x07,
+  H_IMU_NOISE = 0x08,
   H_QUIT = 0x0F,
   S_HELLO = 0x80,
   S_ADVANCED = 0x81,
@@ -187,6 +188,10 @@ int main(void) {
       case H_UWB_RANGE:
         if (len != 6) bad_frame("UWB_RANGE wants 6 bytes", type, len);
         sitl_hw_uwb_range(buf[0], buf[1], get_f32(buf + 2));
+        break;
+      case H_IMU_NOISE:
+        if (len != 16) bad_frame("IMU_NOISE wants 16 bytes", type, len);
+        sitl_hw_imu_noise(get_f32(buf), get_f32(buf + 4), get_u64(buf + 8));
         break;
       case H_STATS:
         frame_head(S_STATS, 16);
