@@ -79,6 +79,7 @@ const C_FLAGS: &[&str] = &[
     "-fsingle-precision-constant",
     "-DMAIN_MODE=0",
 ];
+const LINK_FLAGS: &[&str] = &["-lm"];
 const EXECUTABLE: &str = "sitl-firmware";
 const MANIFEST: &str = "manifest.txt";
 const CACHE_FORMAT: &str = "drivecheck-sitl-cache 1";
@@ -622,10 +623,13 @@ pub fn build(tree: &Path, cache: &Path) -> Result<Build, BuildError> {
     }
     key.update(tool_name(&cc).as_bytes());
     key.update(&cc_version.stdout);
+    // everything on the compiler's and the linker's command lines
     for f in C_FLAGS
         .iter()
         .copied()
         .chain(defines.iter().map(String::as_str))
+        .chain(WRAPPED.iter().copied())
+        .chain(LINK_FLAGS.iter().copied())
     {
         key.update(f.as_bytes());
         key.update([0]);
@@ -740,7 +744,7 @@ fn build_in(
     for w in WRAPPED {
         link.arg(format!("-Wl,--wrap={w}"));
     }
-    link.arg("-lm");
+    link.args(LINK_FLAGS);
     let out = link.output().map_err(|source| BuildError::Tool {
         tool: tool_name(cc),
         source,

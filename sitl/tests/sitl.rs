@@ -7,9 +7,10 @@
 
 use std::path::{Path, PathBuf};
 
+use car_link::fault;
 use car_link::frame::{FrameDecoder, FrameEncoder};
 use car_link::message::{Anchor, Dialect, RcControl, RcMode};
-use car_link::{CarState, FirmwareVersion, Reply, Request};
+use car_link::{CarState, FaultKind, FirmwareVersion, Probe, Reply, Request};
 use sitl::protocol::{Imu, MotorCommand, MotorValues, SitlFrame};
 use sitl::{Build, SitlProcess};
 
@@ -392,5 +393,81 @@ fn uwb_ranges_are_requested_and_answered_asynchronously() {
             s.px_uwb
         );
         assert!(s.py_uwb.abs() < 0.5, "{}: UWB y {}", tree.var, s.py_uwb);
+    }
+}
+
+fn gga(lat_min: f64, lon_min: f64) -> String {
+    // 57° N, 11° E plus minutes, RTK fixed (quality 4)
+    let body = format!(
+        "GPGGA,120000.00,57{lat_min:010.7},N,011{lon_min:010.7},E,4,12,0.8,30.0,M,0.0,M,1.0,0000"
+    );
+    let sum = body.bytes().fold(0u8, |a, b| a ^ b);
+    format!("${body}*{sum:02X}")
+}
+
+#[test]
+fn nmea_fixes_reach_the_gnss_position() {
+    for tree in trees() {
+        let b = built(&tree);
+        let mut p = started(&b);
+        // the first fix sets the local frame, the next is 10 m north of it (1852 m a minute)
+        p.send_nmea(&gga(42.0, 58.0)).unwrap();
+        p.advance_to(p.now_us() + 100_000).unwrap();
+        p.send_nmea(&gga(42.0 + 10.0 / 1852.0, 58.0)).unwrap();
+        p.advance_to(p.now_us() + 100_000).unwrap();
+        let (_, s) = get_state(&mut p, &b);
+        assert!(
+            (s.py_gps - 10.0).abs() < 0.2 && s.px_gps.abs() < 0.2,
+            "{}: GNSS ({}, {})",
+            tree.var,
+            s.px_gps,
+            s.py_gps
+        );
+    }
+}
+
+#[test]
+fn the_state_saturates_as_the_board_converts() {
+    // The `px` probe sets the fused x packed into GET_STATE. On the board the float-to-int
+    // conversion saturates and gives 0 for NaN; a plain x86 conversion gives INT_MIN for both.
+    for tree in trees() {
+        let b = built(&tree);
+        let mut p = started(&b);
+        let printf = |p: &mut SitlProcess, cmd: String| {
+            request(p, &b, &Request::TerminalCmd(cmd));
+            let out = p.advance_to(p.now_us() + 20_000).unwrap();
+            replies(&b, &out)
+                .into_iter()
+                .filter_map(|(_, r)| {
+                    if let Reply::Printf(t) = r {
+                        Some(t)
+                    } else {
+                        None
+                    }
+                })
+                .collect::<Vec<_>>()
+        };
+        printf(&mut p, fault::set_enabled_command(true));
+        let added = printf(
+            &mut p,
+            fault::add_fault_command(&Probe::Px, FaultKind::SetTo, 1e9, 0, 0),
+        );
+        assert!(
+            added
+                .iter()
+                .any(|l| fault::is_add_fault_reply(l, &Probe::Px)),
+            "{}: {added:?}",
+            tree.var
+        );
+        let (_, s) = get_state(&mut p, &b);
+        assert_eq!(s.px, 214_748.3647, "{}", tree.var);
+        printf(&mut p, fault::CLEAR_FAULTS_COMMAND.to_string());
+        printf(&mut p, fault::set_enabled_command(true));
+        printf(
+            &mut p,
+            fault::add_fault_command(&Probe::Px, FaultKind::SetTo, f32::NAN, 0, 0),
+        );
+        let (_, s) = get_state(&mut p, &b);
+        assert_eq!(s.px, 0.0, "{}", tree.var);
     }
 }
