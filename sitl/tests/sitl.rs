@@ -460,7 +460,7 @@ fn the_state_saturates_as_the_board_converts() {
             tree.var
         );
         let (_, s) = get_state(&mut p, &b);
-        assert_eq!(s.px, 214_748.3647, "{}", tree.var);
+        assert_eq!(s.px, f64::from(i32::MAX) / 1e4, "{}", tree.var);
         printf(&mut p, fault::CLEAR_FAULTS_COMMAND.to_string());
         printf(&mut p, fault::set_enabled_command(true));
         printf(
