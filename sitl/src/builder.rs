@@ -997,4 +997,55 @@ mod tests {
             .collect();
         assert_eq!(c.len(), 5);
     }
+
+    /// The kernel subset alone (`shim/test/rt_test.c`): wake-up order, mutex hand-over and
+    /// priority, tick-aligned delays, virtual timers, events and semaphores with time-outs, a
+    /// periodic thread, and the self-deadlock report.
+    #[test]
+    fn the_shim_kernel_behaves() {
+        let t = tempfile::tempdir().unwrap();
+        for (name, text) in shim_sources() {
+            let p = t.path().join(name);
+            std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+            std::fs::write(p, text).unwrap();
+        }
+        let test = t.path().join("rt_test.c");
+        std::fs::write(&test, include_str!("../shim/test/rt_test.c")).unwrap();
+        let exe = t.path().join("rt_test");
+        let cc = tool_command("CC", "cc");
+        let out = command(&cc)
+            .args([
+                "-std=gnu99",
+                "-O2",
+                "-Wall",
+                "-Wextra",
+                "-Werror",
+                "-Wno-unused-parameter",
+            ])
+            .arg("-I")
+            .arg(t.path().join("include"))
+            .arg("-I")
+            .arg(t.path().join("src"))
+            .arg(&test)
+            .arg(t.path().join("src/sitl_rt.c"))
+            .arg("-o")
+            .arg(&exe)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let run = Command::new(&exe).output().unwrap();
+        let stdout = String::from_utf8_lossy(&run.stdout);
+        assert!(run.status.success() && stdout.ends_with("ok\n"), "{stdout}");
+        let run = Command::new(&exe).arg("deadlock").output().unwrap();
+        let stdout = String::from_utf8_lossy(&run.stdout);
+        assert_eq!(run.status.code(), Some(3), "{stdout}");
+        assert!(
+            stdout.contains("locks a mutex it already holds"),
+            "{stdout}"
+        );
+    }
 }

@@ -55,8 +55,13 @@ static uint64_t switches;
 uint64_t sitl_rt_now_us(void) { return now_us; }
 uint64_t sitl_rt_switches(void) { return switches; }
 
-static uint64_t ticks_to_us(systime_t t) {
-  return ((uint64_t)t * 1000000ULL) / (uint64_t)CH_CFG_ST_FREQUENCY;
+/* When a delay of `n` ticks started now ends: at the n-th tick interrupt from now, as with the
+ * kernel's periodic tick (the current, partly elapsed tick counts as the first). At least one tick. */
+static uint64_t deadline(systime_t n) {
+  uint64_t ticks_now = (now_us * (uint64_t)CH_CFG_ST_FREQUENCY) / 1000000ULL;
+  uint64_t k = ticks_now + (n ? n : 1);
+  uint64_t d = (k * 1000000ULL + (uint64_t)CH_CFG_ST_FREQUENCY - 1ULL) / (uint64_t)CH_CFG_ST_FREQUENCY;
+  return d > now_us ? d : now_us + 1;
 }
 
 systime_t chVTGetSystemTimeX(void) {
@@ -210,10 +215,7 @@ void chThdSleep(systime_t time) {
   thread_t *self = current;
   self->priv->wait = W_SLEEP;
   self->p_state = CH_STATE_SLEEPING;
-  /* at least one tick, as the kernel's timer does */
-  uint64_t d = ticks_to_us(time);
-  if (d == 0) d = 1;
-  timed_insert(self, now_us + d);
+  timed_insert(self, deadline(time));
   block_current();
 }
 
@@ -291,9 +293,7 @@ void chVTDoResetI(virtual_timer_t *vtp) {
 
 void chVTDoSetI(virtual_timer_t *vtp, systime_t delay, vtfunc_t vtfunc, void *par) {
   if (vtp->armed) chVTDoResetI(vtp);
-  uint64_t d = ticks_to_us(delay);
-  if (d == 0) d = 1;
-  vtp->due_us = now_us + d;
+  vtp->due_us = deadline(delay);
   vtp->seq = ++seq_counter;
   vtp->func = vtfunc;
   vtp->par = par;
@@ -373,7 +373,7 @@ msg_t chSemWaitTimeout(semaphore_t *sp, systime_t time) {
   self->p_state = CH_STATE_WTSEM;
   self->priv->rdymsg = MSG_TIMEOUT;
   waitq_push(&sp->waiters, self);
-  if (time != TIME_INFINITE) timed_insert(self, now_us + (ticks_to_us(time) ? ticks_to_us(time) : 1));
+  if (time != TIME_INFINITE) timed_insert(self, deadline(time));
   block_current();
   if (self->priv->rdymsg == MSG_TIMEOUT) waitq_remove(sp->waiters, self);
   return self->priv->rdymsg;
@@ -442,7 +442,7 @@ eventmask_t chEvtWaitAnyTimeout(eventmask_t events, systime_t time) {
     self->priv->ewait = events;
     self->priv->wait = W_EVT;
     self->p_state = CH_STATE_WTOREVT;
-    if (time != TIME_INFINITE) timed_insert(self, now_us + (ticks_to_us(time) ? ticks_to_us(time) : 1));
+    if (time != TIME_INFINITE) timed_insert(self, deadline(time));
     block_current();
     m = self->priv->epending & events;
   }
