@@ -135,10 +135,88 @@ fn get_state(p: &mut SitlProcess, b: &Build) -> (u64, CarState) {
     states.remove(0)
 }
 
+fn listing(dir: &Path) -> Vec<(String, u64)> {
+    let mut v: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .flatten()
+        .map(|e| {
+            (
+                e.file_name().to_string_lossy().into_owned(),
+                e.metadata().map(|m| m.len()).unwrap_or(0),
+            )
+        })
+        .collect();
+    v.sort();
+    v
+}
+
+/// A copy of a tree's files (top folder, `imu/`, `cc1120/`; not ChibiOS) to break on purpose.
+fn copy_tree(tree: &Path, to: &Path) {
+    for sub in ["", "imu", "imu/BMI160_driver", "cc1120"] {
+        let (from, dest) = (tree.join(sub), to.join(sub));
+        let Ok(entries) = std::fs::read_dir(&from) else {
+            continue;
+        };
+        std::fs::create_dir_all(&dest).unwrap();
+        for e in entries.flatten() {
+            if e.path().is_file() {
+                std::fs::copy(e.path(), dest.join(e.file_name())).unwrap();
+            }
+        }
+    }
+}
+
+fn append(path: &Path, text: &str) {
+    let mut s = std::fs::read_to_string(path).unwrap();
+    s.push_str(text);
+    std::fs::write(path, s).unwrap();
+}
+
+#[test]
+fn build_errors_name_the_file_and_the_symbol() {
+    for tree in trees() {
+        let t = tempfile::tempdir().unwrap();
+        let copy = t.path().join("tree");
+        copy_tree(&tree.path, &copy);
+        append(
+            &copy.join("pos.c"),
+            "\nvoid sitl_test_missing_symbol(void);\nvoid sitl_test_caller(void) { sitl_test_missing_symbol(); }\n",
+        );
+        match sitl::build(&copy, &t.path().join("cache")) {
+            Err(sitl::BuildError::Undefined { symbol, file, .. }) => {
+                assert_eq!(symbol, "sitl_test_missing_symbol", "{}", tree.var);
+                assert_eq!(file.as_deref(), Some("pos.c"), "{}", tree.var);
+            }
+            other => panic!("{}: expected an undefined symbol, got {other:?}", tree.var),
+        }
+        append(&copy.join("commands.c"), "\n#error sitl test error\n");
+        match sitl::build(&copy, &t.path().join("cache")) {
+            Err(sitl::BuildError::Compile {
+                file, first_error, ..
+            }) => {
+                assert_eq!(file, "commands.c", "{}", tree.var);
+                assert!(
+                    first_error.contains("sitl test error"),
+                    "{}: {first_error}",
+                    tree.var
+                );
+            }
+            other => panic!("{}: expected a compile error, got {other:?}", tree.var),
+        }
+    }
+}
+
 #[test]
 fn builds_once_then_from_the_cache() {
     for tree in trees() {
+        let before = listing(&tree.path);
         let b = built(&tree);
+        assert_eq!(
+            listing(&tree.path),
+            before,
+            "{}: the build wrote into the tree",
+            tree.var
+        );
         for f in ["pos.c", "pos_uwb.c", "commands.c", "packet.c", "buffer.c"] {
             assert!(
                 b.compiled.iter().any(|c| c == f),
