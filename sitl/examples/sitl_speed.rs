@@ -39,6 +39,27 @@ fn get_state_frame() -> Vec<u8> {
     ]
 }
 
+/// The process's CPU time (user + system) in seconds, from /proc (Linux), if readable.
+fn cpu_seconds(pid: u32) -> Option<f64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // the fields after the command name in parentheses; utime and stime are the 12th and 13th
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks: f64 = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
+}
+
+fn report(what: &str, seconds: u64, wall: f64, cpu: Option<f64>) {
+    match cpu {
+        Some(cpu) if cpu > 0.0 => println!(
+            "{what}: {:.0} virtual s per wall s, {:.0} per CPU s of the executable",
+            seconds as f64 / wall,
+            seconds as f64 / cpu
+        ),
+        _ => println!("{what}: {:.0} virtual s per wall s", seconds as f64 / wall),
+    }
+}
+
 fn start(exe: &std::path::Path) -> Result<SitlProcess, Box<dyn std::error::Error>> {
     let mut p = SitlProcess::start(exe)?;
     p.set_imu(Imu {
@@ -83,35 +104,32 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let span = seconds * 1_000_000;
     // idle, one ADVANCE
     let mut p = start(&b.executable)?;
-    let t0 = p.now_us();
+    let (t0, c0) = (p.now_us(), cpu_seconds(p.id()));
     let t = Instant::now();
     p.advance_to(t0 + span)?;
     let wall = t.elapsed().as_secs_f64();
+    let cpu = cpu_seconds(p.id()).zip(c0).map(|(c1, c0)| c1 - c0);
     let (_, switches) = p.stats()?;
-    println!(
-        "idle, one advance: {:.0} virtual s per wall s ({switches} thread switches)",
-        seconds as f64 / wall
-    );
+    report("idle, one advance", seconds, wall, cpu);
+    println!("  ({switches} thread switches since start)");
     p.quit()?;
 
     // idle, lockstep in 10 ms steps
     let mut p = start(&b.executable)?;
-    let t0 = p.now_us();
+    let (t0, c0) = (p.now_us(), cpu_seconds(p.id()));
     let t = Instant::now();
     for k in 1..=span / 10_000 {
         p.advance_to(t0 + k * 10_000)?;
     }
     let wall = t.elapsed().as_secs_f64();
-    println!(
-        "idle, 10 ms steps: {:.0} virtual s per wall s",
-        seconds as f64 / wall
-    );
+    let cpu = cpu_seconds(p.id()).zip(c0).map(|(c1, c0)| c1 - c0);
+    report("idle, 10 ms steps", seconds, wall, cpu);
     p.quit()?;
 
     // a GET_STATE every 50 ms
     let mut p = start(&b.executable)?;
     let frame = get_state_frame();
-    let t0 = p.now_us();
+    let (t0, c0) = (p.now_us(), cpu_seconds(p.id()));
     let t = Instant::now();
     let mut replies = 0usize;
     for k in 1..=span / 50_000 {
@@ -123,11 +141,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .count();
     }
     let wall = t.elapsed().as_secs_f64();
-    println!(
-        "GET_STATE every 50 ms: {:.0} virtual s per wall s ({replies} replies to {} requests)",
-        seconds as f64 / wall,
-        span / 50_000
-    );
+    let cpu = cpu_seconds(p.id()).zip(c0).map(|(c1, c0)| c1 - c0);
+    report("GET_STATE every 50 ms", seconds, wall, cpu);
+    println!("  ({replies} replies to {} requests)", span / 50_000);
     p.quit()?;
     Ok(())
 }

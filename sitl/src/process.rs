@@ -114,6 +114,11 @@ impl SitlProcess {
         Ok(p)
     }
 
+    /// The executable's process id.
+    pub fn id(&self) -> u32 {
+        self.child.id()
+    }
+
     /// The firmware version the executable was built from.
     pub fn firmware_version(&self) -> (u8, u8) {
         self.firmware
