@@ -248,3 +248,97 @@ impl Drop for SitlProcess {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::os::unix::fs::PermissionsExt;
+
+    /// A stand-in executable: a shell script writing these bytes (octal escapes for printf), then
+    /// reading its stdin until it ends.
+    fn script(dir: &Path, name: &str, printf: &str) -> std::path::PathBuf {
+        let p = dir.join(name);
+        std::fs::write(
+            &p,
+            format!("#!/bin/sh\nprintf '{printf}'\ncat >/dev/null\n"),
+        )
+        .unwrap();
+        std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o755)).unwrap();
+        p
+    }
+
+    // HELLO: type 0x80, length 10, protocol (u32 LE), 10, 1, tick 10000 (u32 LE)
+    const HELLO_V1: &str =
+        "\\200\\012\\000\\000\\000\\001\\000\\000\\000\\012\\001\\020\\047\\000\\000";
+
+    #[test]
+    fn refuses_another_protocol_version() {
+        let t = tempfile::tempdir().unwrap();
+        let exe = script(
+            t.path(),
+            "v2",
+            "\\200\\012\\000\\000\\000\\002\\000\\000\\000\\012\\001\\020\\047\\000\\000",
+        );
+        match SitlProcess::start(&exe) {
+            Err(SitlError::Version {
+                expected: 1,
+                found: 2,
+            }) => {}
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn reads_hello_then_reports_the_firmware_error() {
+        let t = tempfile::tempdir().unwrap();
+        // HELLO, then ERROR "dead" (type 0x8F, length 4)
+        let exe = script(
+            t.path(),
+            "err",
+            &format!("{HELLO_V1}\\217\\004\\000\\000\\000dead"),
+        );
+        let mut p = SitlProcess::start(&exe).unwrap();
+        assert_eq!((p.firmware_version(), p.tick_hz()), ((10, 1), 10_000));
+        match p.advance_to(1000) {
+            Err(SitlError::Firmware(text)) => assert_eq!(text, "dead"),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn an_executable_that_ends_is_a_link_error() {
+        let t = tempfile::tempdir().unwrap();
+        let p = t.path().join("quits");
+        std::fs::write(&p, format!("#!/bin/sh\nprintf '{HELLO_V1}'\nexit 5\n")).unwrap();
+        std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o755)).unwrap();
+        let mut s = SitlProcess::start(&p).unwrap();
+        match s.advance_to(1000) {
+            Err(SitlError::Link { .. }) => {}
+            other => panic!("{other:?}"),
+        }
+        let missing = t.path().join("missing");
+        assert!(matches!(
+            SitlProcess::start(&missing),
+            Err(SitlError::Start { .. })
+        ));
+    }
+
+    #[test]
+    fn garbage_instead_of_hello() {
+        let t = tempfile::tempdir().unwrap();
+        let exe = script(t.path(), "garbage", "\\042\\000\\000\\000\\000");
+        assert!(matches!(
+            SitlProcess::start(&exe),
+            Err(SitlError::Protocol(DecodeError::UnknownType(0x22)))
+        ));
+        let exe = script(
+            t.path(),
+            "advanced",
+            "\\201\\010\\000\\000\\000\\000\\000\\000\\000\\000\\000\\000\\000",
+        );
+        assert!(matches!(
+            SitlProcess::start(&exe),
+            Err(SitlError::NoHello(_))
+        ));
+    }
+}
