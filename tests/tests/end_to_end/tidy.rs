@@ -116,6 +116,8 @@ const LAYERS: &[(&str, &[&str])] = &[
         &["trajgen", "recovery", "scenarios", "car-link"],
     ),
     ("car-sim", &["car-link", "scenarios"]),
+    // builds the car's own firmware for the host and runs it as a process of its own
+    ("sitl", &[]),
     (
         "recording",
         &["trajgen", "scenarios", "car-link", "car-sim", "campaign"],
