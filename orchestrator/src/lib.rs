@@ -17,5 +17,5 @@ pub mod exit;
 pub mod output;
 pub mod process;
 pub mod profile_arg;
-mod scenario_arg;
+pub mod scenario_arg;
 pub mod seed;

@@ -440,7 +440,7 @@ mod tests {
 
     #[test]
     fn a_recovery_route_ending_far_from_the_start_route_gets_a_drivable_planned_join() {
-        let text = include_str!("../../tests/fixtures/short-recovery.toml");
+        let text = include_str!("../../orchestrator/tests/fixtures/short-recovery.toml");
         let scenario = scenarios::from_toml_str(text, "short-recovery.toml")
             .unwrap()
             .scenario;

@@ -195,7 +195,7 @@ pub fn run(args: &BenchFidelityArgs) -> Result<Exit> {
         super::fidelity_route::fit(&route_seeds)?;
         return Ok(Exit::Success);
     }
-    let august = crate::scenario_arg::load_scenario(&args.scenario)?.scenario;
+    let august = orchestrator::scenario_arg::load_scenario(&args.scenario)?.scenario;
     let profile = orchestrator::profile_arg::load(args.profile.as_deref())?;
     let august_sim = profile.sim_config(&august)?;
     let runtime_guard = runtime(false)?;

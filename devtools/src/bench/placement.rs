@@ -58,7 +58,7 @@ impl Errors {
 
 /// Runs the benchmark and prints its table.
 pub fn run(args: &BenchPlacementArgs) -> Result<Exit> {
-    let loaded = crate::scenario_arg::load_scenario(&args.scenario)?;
+    let loaded = orchestrator::scenario_arg::load_scenario(&args.scenario)?;
     let scenario = loaded.scenario;
     let firmwares: Vec<FirmwareVersion> = match args.firmware.as_str() {
         "both" => FirmwareVersion::SIMULATED.to_vec(),

@@ -1,5 +1,7 @@
 //! `drivecheck-dev bench compare` on a small run.
 
+use serde_json::Value;
+
 use crate::common::{drivecheck, path, text};
 
 #[test]

@@ -2,28 +2,15 @@
 //! scenario they were recorded in and whether its hash still matches, and where a command may
 //! write beside them.
 
-use std::future::Future;
-use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
-use std::pin::Pin;
-use std::sync::{Arc, Mutex};
-use std::time::Duration;
 
-use anyhow::{Context, Result};
-use car_sim::SimHandle;
-use indicatif::{ProgressBar, ProgressStyle};
+use anyhow::Result;
 use runner::store::RunStore;
 use scenarios::Scenario;
-use tokio_util::sync::CancellationToken;
 
 use crate::scenario_arg::{load_scenario, print_warnings_of_use};
 use anyhow::bail;
 use campaign::files::Case;
-use campaign::oracle::Verdict;
-use car_link::CarError;
-use runner::vehicle::SimulatorView;
-use runner::vehicle::Vehicle;
-use runner::{CampaignObserver, CampaignReport, RunError};
 
 /// The scenario `name` a run directory `dir` (given with `flag`) names, to load when no
 /// `--scenario` is given: it must be bundled.

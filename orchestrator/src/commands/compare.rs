@@ -7,7 +7,7 @@
 //! and the HTML page (`report::compare`) are written from the pairs and the comparison.
 
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use anyhow::{Context, Result, bail};
 use serde::Serialize;
@@ -18,7 +18,6 @@ use campaign::compare::{
     BreakdownRow, Options, Paired, Report, Significance, TestRow, compare as compare_runs, p_words,
     pair,
 };
-use campaign::files::ScenarioRef;
 use report::compare::{Compared, NoiseSource, noise_words, signed};
 use report::data::{case_files, read_case, read_record};
 
@@ -306,6 +305,7 @@ mod tests {
     use campaign::files::ScenarioRef;
     use campaign::model::{FaultKind, Probe};
     use campaign::oracle::{SegmentVerdict, Verdict};
+    use std::path::PathBuf;
 
     /// 24 tests; NEW is worse on segments under a range offset on anchor 50.
     fn example() -> Compared {

@@ -8,17 +8,17 @@
 //! count), a shard given twice, missing shards (named), a shard that did not end or lacks a case
 //! file, and shards of which only some have a recording.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 
 use crate::exit::Exit;
-use campaign::files::{CampaignRecord, Case, Settings};
+use campaign::files::{CampaignRecord, Case};
 use campaign::oracle::Verdict;
 use campaign::shard::Shard;
 use runner::merge::{ShardRun, merge_recordings};
-use runner::{CAMPAIGN_FILE, RECORDING_FILE, RunDirectory, SPAN_GAP_NS, Staged, is_used};
+use runner::{CAMPAIGN_FILE, RECORDING_FILE, RunDirectory, Staged, is_used};
 
 /// One shard's run directory, read.
 struct ShardDir {

@@ -1,27 +1,14 @@
 //! The progress of a campaign on standard error: a bar on a terminal, plain lines elsewhere,
 //! nothing with `-q` (the runner's `CampaignObserver`).
 
-use std::future::Future;
 use std::io::IsTerminal;
-use std::path::{Path, PathBuf};
-use std::pin::Pin;
-use std::sync::{Arc, Mutex};
+use std::sync::Mutex;
 use std::time::Duration;
 
-use anyhow::{Context, Result};
-use car_sim::SimHandle;
 use indicatif::{ProgressBar, ProgressStyle};
-use scenarios::Scenario;
-use tokio_util::sync::CancellationToken;
 
-use crate::scenario_arg::{load_scenario, print_warnings_of_use};
-use anyhow::bail;
-use campaign::files::Case;
 use campaign::oracle::Verdict;
-use car_link::CarError;
-use runner::vehicle::SimulatorView;
-use runner::vehicle::Vehicle;
-use runner::{CampaignObserver, CampaignReport, RunError};
+use runner::CampaignObserver;
 
 /// A campaign's progress where it is read (`docs/scaling.md`):
 /// - on a terminal, a bar of the tests run and the test running, with a line above it for each

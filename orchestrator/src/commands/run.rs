@@ -16,7 +16,6 @@ use super::signals::{Interrupt, runtime, sim_view};
 use super::table::{CampaignFailed, print_report};
 use crate::cli::{OnFailure, RecordArg, RunArgs};
 use crate::exit::Exit;
-use crate::profile_arg::LoadedProfile;
 use crate::scenario_arg::{load_scenario, print_warnings_of_use};
 use crate::seed::choose_seed;
 use campaign::files::Case;

@@ -1,26 +1,8 @@
 //! Scratch directories of this process, removed when dropped.
 
-use std::future::Future;
-use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
-use std::pin::Pin;
-use std::sync::{Arc, Mutex};
-use std::time::Duration;
 
 use anyhow::{Context, Result};
-use car_sim::SimHandle;
-use indicatif::{ProgressBar, ProgressStyle};
-use scenarios::Scenario;
-use tokio_util::sync::CancellationToken;
-
-use crate::scenario_arg::{load_scenario, print_warnings_of_use};
-use anyhow::bail;
-use campaign::files::Case;
-use campaign::oracle::Verdict;
-use car_link::CarError;
-use runner::vehicle::SimulatorView;
-use runner::vehicle::Vehicle;
-use runner::{CampaignObserver, CampaignReport, RunError};
 
 /// A scratch directory of this process (`drivecheck-<kind>-<pid>-<name>` in the system's
 /// temporary directory), removed when dropped: for runs whose case files are read from the
@@ -49,6 +31,8 @@ impl Scratch {
         }
     }
 
+    /// A new, empty scratch directory `drivecheck-<kind>-<pid>-<name>` (one left by an earlier
+    /// process of the same pid is removed first).
     pub fn new(kind: &str, name: &str) -> Result<Self> {
         let path =
             std::env::temp_dir().join(format!("drivecheck-{kind}-{}-{name}", std::process::id()));

@@ -21,7 +21,6 @@ use super::case_input::{check_hash, read_case, scenario_of};
 use super::signals::{cancel_on_ctrl_c, runtime};
 use crate::cli::ShrinkArgs;
 use crate::exit::Exit;
-use crate::profile_arg::LoadedProfile;
 use crate::seed::choose_seed;
 use campaign::files::{Case, Header, SHRINK_FORMAT, SHRINK_SCHEMA_VERSION, ScenarioRef};
 use campaign::shrink::{

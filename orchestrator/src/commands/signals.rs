@@ -3,26 +3,17 @@
 //! brakes every registered car at once; the embedded simulator's debug view the runner records.
 
 use std::future::Future;
-use std::io::IsTerminal;
-use std::path::{Path, PathBuf};
 use std::pin::Pin;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use anyhow::{Context, Result};
 use car_sim::SimHandle;
-use indicatif::{ProgressBar, ProgressStyle};
-use scenarios::Scenario;
 use tokio_util::sync::CancellationToken;
 
-use crate::scenario_arg::{load_scenario, print_warnings_of_use};
-use anyhow::bail;
-use campaign::files::Case;
-use campaign::oracle::Verdict;
 use car_link::CarError;
 use runner::vehicle::SimulatorView;
 use runner::vehicle::Vehicle;
-use runner::{CampaignObserver, CampaignReport, RunError};
 
 /// The async runtime: on one thread with a paused clock (virtual time, the embedded simulated
 /// car) or on two threads against the wall clock.

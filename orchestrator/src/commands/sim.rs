@@ -7,7 +7,6 @@ use car_sim::{LinkImpairment, SimConfig};
 
 use crate::cli::SimArgs;
 use crate::exit::Exit;
-use crate::profile_arg::LoadedProfile;
 use crate::scenario_arg::{load_scenario, print_warnings_of_use};
 
 /// Serves the simulated car until Ctrl-C.

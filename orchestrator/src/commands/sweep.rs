@@ -9,7 +9,6 @@ use super::case_input::{check_hash, read_case, scenario_of};
 use super::signals::{cancel_on_ctrl_c, runtime};
 use crate::cli::SweepArgs;
 use crate::exit::Exit;
-use crate::profile_arg::LoadedProfile;
 use crate::seed::choose_seed;
 use campaign::files::{Header, SWEEP_FORMAT, SWEEP_SCHEMA_VERSION, ScenarioRef};
 use campaign::sweep::{Axis, Parameter, Point, SimSetting, SweepReport, grid, with_fault_values};

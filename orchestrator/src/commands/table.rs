@@ -1,29 +1,15 @@
 //! The table of a campaign's tests and its summary, as `run`, `runs show` and a failed campaign
 //! print them (and `--json`'s document of them).
 
-use std::future::Future;
-use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
-use std::pin::Pin;
-use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 
 use super::progress::{every_test, listed_at_most};
-use car_sim::SimHandle;
-use indicatif::{ProgressBar, ProgressStyle};
-use scenarios::Scenario;
-use tokio_util::sync::CancellationToken;
 
-use crate::scenario_arg::{load_scenario, print_warnings_of_use};
-use anyhow::bail;
-use campaign::files::Case;
 use campaign::oracle::Verdict;
-use car_link::CarError;
-use runner::vehicle::SimulatorView;
-use runner::vehicle::Vehicle;
-use runner::{CampaignObserver, CampaignReport, RunError};
+use runner::{CampaignReport, RunError};
 
 /// A campaign that did not run to its end, with where its record is.
 #[derive(Debug, thiserror::Error)]

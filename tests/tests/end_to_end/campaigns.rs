@@ -14,7 +14,8 @@ use campaign::model::Campaign;
 use campaign::oracle::{SegmentVerdict, Verdict};
 use car_link::Car;
 use car_sim::{SimConfig, SimHandle};
-use runner::{CampaignReport, RunConfig, RunError, Silent, SimulatorView, run_campaign};
+use runner::vehicle::SimulatorView;
+use runner::{CampaignReport, RunConfig, RunError, Silent, run_campaign};
 use scenarios::Scenario;
 use tokio_util::sync::CancellationToken;
 

@@ -258,13 +258,14 @@ fn every_cited_docs_page_and_anchor_exists() {
 }
 
 /// Our crates by the name code uses, with their directories.
-const CRATES: [(&str, &str); 10] = [
+const CRATES: [(&str, &str); 11] = [
     ("trajgen", "trajgen"),
     ("recovery", "recovery"),
     ("scenarios", "scenarios"),
     ("car_link", "car-link"),
     ("car_sim", "car-sim"),
     ("campaign", "campaign"),
+    ("sitl", "sitl"),
     ("recording", "recording"),
     ("runner", "runner"),
     ("report", "report"),

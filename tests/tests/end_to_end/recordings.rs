@@ -16,7 +16,8 @@ use recording::{
     AckOutcome, CarCommand, CarStateRecord, CommandAck, CommandSent, FaultRecord, FaultStatus,
     OracleRecord, Recording, TestEvent, TestEventKind, Topic, TruthRecord,
 };
-use runner::{RECORDING_FILE, RunConfig, RunError, Silent, SimulatorView, run_campaign};
+use runner::vehicle::SimulatorView;
+use runner::{RECORDING_FILE, RunConfig, RunError, Silent, run_campaign};
 use tokio::time::Instant;
 use tokio_util::sync::CancellationToken;
 

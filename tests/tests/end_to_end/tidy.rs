@@ -49,7 +49,10 @@ fn rust_files(dir: &str) -> Vec<(String, String)> {
 /// Whether `file` holds only tests (a `tests.rs`, a `*_tests.rs`, an integration test).
 fn is_test_file(file: &str) -> bool {
     let name = file.rsplit('/').next().unwrap_or(file);
-    name == "tests.rs" || name.ends_with("_tests.rs") || file.contains("/tests/")
+    name == "tests.rs"
+        || name == "proptests.rs"
+        || name.ends_with("_tests.rs")
+        || file.contains("/tests/")
 }
 
 /// The code lines of `text` with their numbers: comments and the `#[cfg(test)]` module at the
@@ -654,6 +657,40 @@ fn campaigns_top_level_modules_have_no_cycle() {
     }
 }
 
+/// One integration-test binary per crate: a crate's `tests/` holds one `.rs` file or one folder
+/// with a `main.rs` (its modules beside it), never several binaries each linking the whole graph.
+#[test]
+fn one_integration_test_binary_per_crate() {
+    let root = workspace();
+    let manifest: toml::Table = fs::read_to_string(root.join("Cargo.toml"))
+        .expect("the workspace manifest")
+        .parse()
+        .expect("TOML");
+    let mut problems = Vec::new();
+    for member in manifest["workspace"]["members"]
+        .as_array()
+        .expect("members")
+    {
+        let member = member.as_str().expect("a member");
+        let Ok(entries) = fs::read_dir(root.join(member).join("tests")) else {
+            continue;
+        };
+        let binaries: Vec<String> = entries
+            .filter_map(Result::ok)
+            .map(|e| e.path())
+            .filter(|p| p.extension().is_some_and(|e| e == "rs") || p.join("main.rs").is_file())
+            .map(|p| p.display().to_string())
+            .collect();
+        if binaries.len() > 1 {
+            problems.push(format!(
+                "{member}: {} test binaries: {binaries:?}",
+                binaries.len()
+            ));
+        }
+    }
+    assert!(problems.is_empty(), "{}", problems.join("\n"));
+}
+
 // ---------------------------------------------------------------------------------------------
 // Every bold invariant is checked
 
@@ -822,6 +859,10 @@ const CHECKED_BY: &[(&str, &[&str])] = &[
             "what_a_file_leaves_out_is_the_default_car",
             "the_documented_default_profile_is_the_default_car_in_canonical_form",
         ],
+    ),
+    (
+        "One integration-test binary per crate",
+        &["one_integration_test_binary_per_crate"],
     ),
     (
         "campaign's top-level modules have no dependency cycle",

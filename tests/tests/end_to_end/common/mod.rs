@@ -7,7 +7,8 @@ use std::time::Duration;
 
 use car_link::{Car, LinkConfig};
 use car_sim::{SimConfig, SimHandle};
-use runner::{CampaignFailure, CampaignReport, RunConfig, Silent, SimulatorView, run_campaign};
+use runner::vehicle::SimulatorView;
+use runner::{CampaignFailure, CampaignReport, RunConfig, Silent, run_campaign};
 use scenarios::Scenario;
 use tokio_util::sync::CancellationToken;
 
