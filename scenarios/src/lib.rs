@@ -30,6 +30,8 @@ pub mod geojson;
 pub mod model;
 pub mod settings;
 
+#[cfg(test)]
+mod fuzz;
 mod locate;
 mod raw;
 mod validate;
