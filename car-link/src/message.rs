@@ -38,7 +38,8 @@ use crate::version::CommandId;
 
 /// Broadcast id (`ID_ALL`): every car processes it and replies with its own id.
 pub const ID_ALL: u8 = 255;
-/// "Bridge only" id (`ID_CAR_CLIENT`): the car replies with 254, which the bridge does not forward.
+/// "Bridge only" id (`ID_CAR_CLIENT`): the car stamps its acks and data replies to it with 254, which
+/// the bridge does not forward; PRINTF replies always carry the car's own id.
 pub const ID_CAR_CLIENT: u8 = 254;
 /// A payload starting with this byte is taken by the firmware as an RTCM3 stream, so car id 211 is unusable.
 pub const RTCM_PREAMBLE: u8 = 0xD3;

@@ -5,7 +5,7 @@
 //! Each link runs a reader and a writer task on the current tokio runtime; dropping the [`Link`] stops both.
 
 use std::io;
-use std::net::SocketAddr;
+use std::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -154,8 +154,13 @@ impl Link {
     }
 
     /// Talks to the bridge over UDP: datagrams go to `host:port`, replies are received on local port
-    /// `reply_port` (the bridge sends them to the sender's address at `port + 1`, so pass `port + 1` unless a
-    /// test says otherwise). Only datagrams from the car's IP address are accepted.
+    /// `reply_port` (the bridge sends them from `port` to the sender's address at `port + 1`, so pass
+    /// `port + 1` unless a test says otherwise).
+    ///
+    /// The reply port is bound on the local address that reaches the car (the loopback address for a
+    /// car on loopback, else the address of the interface the system routes the car's address
+    /// through), never on every interface; and only datagrams from the car's address *and* port are
+    /// accepted: anyone else's, another program's on the car's host included, is ignored.
     ///
     /// Timeout: name resolution and binding are not timed. Cancellation: dropping the future is harmless.
     pub async fn udp(host: &str, port: u16, reply_port: u16) -> io::Result<Link> {
@@ -165,11 +170,7 @@ impl Link {
             .ok_or_else(|| {
                 io::Error::new(io::ErrorKind::NotFound, format!("no address for {host}"))
             })?;
-        let local: SocketAddr = if car.is_ipv4() {
-            (std::net::Ipv4Addr::UNSPECIFIED, reply_port).into()
-        } else {
-            (std::net::Ipv6Addr::UNSPECIFIED, reply_port).into()
-        };
+        let local = SocketAddr::new(local_ip_towards(car).await?, reply_port);
         let socket = Arc::new(UdpSocket::bind(local).await?);
         let (out_tx, out_rx) = mpsc::channel(SEND_QUEUE);
         let (in_tx, in_rx) = mpsc::channel(SEND_QUEUE);
@@ -314,6 +315,30 @@ async fn deliver(
     Ok(())
 }
 
+/// The local address a datagram to `car` leaves from: loopback for a car on loopback, else the
+/// address of the interface the system routes `car` through (asked by connecting an unbound UDP
+/// socket, which sends nothing).
+async fn local_ip_towards(car: SocketAddr) -> io::Result<IpAddr> {
+    if car.ip().is_loopback() {
+        return Ok(car.ip());
+    }
+    let any: SocketAddr = if car.is_ipv4() {
+        (Ipv4Addr::UNSPECIFIED, 0).into()
+    } else {
+        (Ipv6Addr::UNSPECIFIED, 0).into()
+    };
+    let probe = UdpSocket::bind(any).await?;
+    probe.connect(car).await?;
+    let ip = probe.local_addr()?.ip();
+    if ip.is_unspecified() {
+        return Err(io::Error::new(
+            io::ErrorKind::AddrNotAvailable,
+            format!("no local address routes to the car at {car}"),
+        ));
+    }
+    Ok(ip)
+}
+
 async fn send_datagrams(
     socket: Arc<UdpSocket>,
     car: SocketAddr,
@@ -338,7 +363,7 @@ async fn receive_datagrams(
     let mut datagram = vec![0u8; MAX_DATAGRAM];
     loop {
         match socket.recv_from(&mut datagram).await {
-            Ok((n, from)) if from.ip() == car.ip() && n > 0 => {
+            Ok((n, from)) if from == car && n > 0 => {
                 let payload = Bytes::copy_from_slice(&datagram[..n]);
                 if incoming.send(Incoming::Payload(payload)).await.is_err() {
                     return;

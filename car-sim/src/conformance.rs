@@ -269,6 +269,28 @@ async fn udp_carries_one_bare_payload_per_datagram_and_replies_to_port_plus_one(
     assert_eq!(&buf[..4], &[0x01, 0x78, 10, 1]);
 }
 
+#[tokio::test]
+async fn car_links_udp_client_talks_to_the_simulated_bridge() {
+    // The client binds port + 1 on loopback and accepts replies from the simulator's port only:
+    // the simulator (like the bridge) replies from the port it serves.
+    for _ in 0..20 {
+        let sim = serve_udp(loopback(), &SimConfig::default())
+            .await
+            .expect("bind");
+        let port = sim.local_addr().expect("bound").port();
+        let address = format!("udp://127.0.0.1:{port}").parse().expect("address");
+        let car = match LinkCar::connect(&address, link_config()).await {
+            Ok(car) => car,
+            // Port + 1 taken by another program: try another port.
+            Err(car_link::CarError::Connect { .. }) => continue,
+            Err(error) => panic!("{error}"),
+        };
+        assert!(car.state().await.is_ok());
+        return;
+    }
+    panic!("no port p with p + 1 free");
+}
+
 fn link_config() -> LinkConfig {
     LinkConfig {
         car_id: 1,

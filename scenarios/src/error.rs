@@ -231,7 +231,7 @@ pub enum Problem {
     #[error("must not be negative, found {0}")]
     Negative(f64),
     /// A value outside its allowed range.
-    #[error("{value} is outside {low}..={high}")]
+    #[error("{} is outside {low}..={high}", number(*value))]
     OutOfRange {
         /// The value.
         value: f64,

@@ -30,6 +30,8 @@ pub mod geojson;
 pub mod model;
 pub mod settings;
 
+#[cfg(test)]
+mod fuzz;
 mod locate;
 mod raw;
 mod validate;
@@ -47,7 +49,7 @@ pub use settings::{
 /// The area geometry of [`trajgen`], re-exported for crates that see scenarios but not the generator.
 pub use trajgen::geometry;
 pub use trajgen::{Area, Constraints, Point, Polygon, Waypoint};
-pub use validate::{MAX_ANCHORS, MAX_SPEED_KMH, needs_planned_join};
+pub use validate::{MAX_ANCHORS, MAX_SPEED_KMH, check_fault_param, needs_planned_join};
 pub use write::to_toml;
 
 /// A validated scenario with its warnings and where it came from.
@@ -182,6 +184,16 @@ pub mod limits {
     pub const MAX_FAULT_FACTOR: f64 = 1_000.0;
     /// A fault's start and duration, probe iterations.
     pub const MAX_FAULT_ITERATIONS: u32 = 1_000_000;
+    /// Every coordinate of a scenario (fence, cutouts, routes, anchors, obstacles, walls), an
+    /// anchor's height and the origin's height, metres, either sign: 100 km from the local
+    /// origin. A real test area spans tens of metres around its origin; the car's wire protocol
+    /// carries a position as a 32-bit integer of 0.1 mm (at most ±214 748 m) and an anchor's as a
+    /// binary32, so within this bound every position a campaign sends fits, and areas and
+    /// distances stay far from overflow.
+    pub const MAX_COORDINATE_M: f64 = 100_000.0;
+    /// A route point's speed (scenario route, case file), m/s: the firmware autopilot's top
+    /// speed ([`crate::MAX_SPEED_KMH`], 30 km/h).
+    pub const MAX_ROUTE_SPEED: f64 = crate::MAX_SPEED_KMH / 3.6;
 }
 
 /// Parses and validates a TOML scenario; `source_name` names it in errors (and, when the file has

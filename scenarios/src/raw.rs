@@ -1,7 +1,8 @@
 //! The file form of a scenario (what serde reads) and its conversion into the typed [`Scenario`].
 //!
-//! Conversion checks what the types need: finite numbers, anchor ids that fit a byte, simple
-//! polygons and a valid area. Everything else is checked by [`crate::validate`].
+//! Conversion checks what the types need: finite numbers, coordinates within
+//! ±[`crate::limits::MAX_COORDINATE_M`] (before any geometry is computed from them), anchor ids
+//! that fit a byte, simple polygons and a valid area. Everything else is checked by [`crate::validate`].
 
 use std::path::Path;
 
@@ -174,9 +175,15 @@ fn finite(value: f64, field: impl FnOnce() -> String) -> Result<f64, FieldProble
     }
 }
 
+/// A coordinate (or height): finite and within ±[`crate::limits::MAX_COORDINATE_M`], checked
+/// before any geometry is computed from it.
+fn coordinate(value: f64, field: impl FnOnce() -> String) -> Result<f64, FieldProblem> {
+    crate::validate::coordinate(value, &field()).map(|()| value)
+}
+
 fn point(p: &RawPoint, field: &str) -> Result<Point, FieldProblem> {
-    let x = finite(p.x, || format!("{field}.x"))?;
-    let y = finite(p.y, || format!("{field}.y"))?;
+    let x = coordinate(p.x, || format!("{field}.x"))?;
+    let y = coordinate(p.y, || format!("{field}.y"))?;
     Ok(Point::new(x, y))
 }
 
@@ -220,7 +227,7 @@ fn route(points: &[RawRoutePoint], field: &str) -> Result<Route, FieldProblem> {
         .map(|(i, p)| {
             let at = |name: &str| format!("{field}[{i}].{name}");
             Ok(Waypoint::new(
-                Point::new(finite(p.x, || at("x"))?, finite(p.y, || at("y"))?),
+                Point::new(coordinate(p.x, || at("x"))?, coordinate(p.y, || at("y"))?),
                 finite(p.speed, || at("speed"))?,
             ))
         })
@@ -237,9 +244,9 @@ fn anchors(raw: &[RawAnchor]) -> Result<Vec<Anchor>, FieldProblem> {
                 u8::try_from(a.id).map_err(|_| (at("id"), Problem::AnchorIdOutOfRange(a.id)))?;
             Ok(Anchor {
                 id,
-                x: finite(a.x, || at("x"))?,
-                y: finite(a.y, || at("y"))?,
-                height: finite(a.height, || at("height"))?,
+                x: coordinate(a.x, || at("x"))?,
+                y: coordinate(a.y, || at("y"))?,
+                height: coordinate(a.height, || at("height"))?,
             })
         })
         .collect()

@@ -10,13 +10,13 @@
 //! edge than the generator's clearance.
 
 use trajgen::geometry::turn_angle;
-use trajgen::{Area, Point, Waypoint};
+use trajgen::{Area, Point, Polygon, Waypoint};
 
 use crate::error::{BeyondLimit, Problem, ScenarioError, Warning, WarningKind};
 use crate::limits::{
-    MAX_AHEAD_MARGIN, MAX_CLEARANCE_M, MAX_FAULT_FACTOR, MAX_FAULT_ITERATIONS, MAX_FAULT_OFFSET,
-    MAX_INNER_TRIES, MAX_OUTER_TRIES, MAX_POINTS_PER_SEGMENT, MAX_SEGMENT_M, MAX_TEST_SIZE,
-    MIN_SPEED_KMH,
+    MAX_AHEAD_MARGIN, MAX_CLEARANCE_M, MAX_COORDINATE_M, MAX_FAULT_FACTOR, MAX_FAULT_ITERATIONS,
+    MAX_FAULT_OFFSET, MAX_INNER_TRIES, MAX_OUTER_TRIES, MAX_POINTS_PER_SEGMENT, MAX_ROUTE_SPEED,
+    MAX_SEGMENT_M, MAX_TEST_SIZE, MIN_SPEED_KMH,
 };
 use crate::model::{Route, Scenario};
 use crate::settings::{
@@ -47,8 +47,9 @@ fn check(s: &Scenario) -> Check {
     if let Some(origin) = &s.origin {
         within(origin.lat, -90.0, 90.0, "origin.lat")?;
         within(origin.lon, -180.0, 180.0, "origin.lon")?;
-        finite(origin.height, "origin.height")?;
+        coordinate(origin.height, "origin.height")?;
     }
+    check_coordinates(s)?;
     check_vehicle(&s.vehicle)?;
     check_generator(&s.generator)?;
     check_campaign(&s.campaign)?;
@@ -167,6 +168,73 @@ fn beyond_unless(
             why,
         })),
     ))
+}
+
+/// Why coordinates have a bound ([`MAX_COORDINATE_M`]).
+const LOCAL: &str = "coordinates are local metres around the origin; the car's protocol carries a \
+                     position of at most 214748 m";
+
+/// Why route speeds have a ceiling ([`MAX_ROUTE_SPEED`]).
+const TOP_SPEED: &str = "the firmware autopilot's top speed, 30 km/h";
+
+/// A finite coordinate or height within ±[`MAX_COORDINATE_M`].
+pub(crate) fn coordinate(value: f64, field: &str) -> Check {
+    finite(value, field)?;
+    beyond_unless(
+        value.abs() <= MAX_COORDINATE_M,
+        (value, "in magnitude at most", MAX_COORDINATE_M),
+        LOCAL,
+        field,
+    )
+}
+
+/// A route point's speed, m/s: finite, at least [`MIN_SPEED_KMH`] and at most the top speed.
+pub(crate) fn route_speed(speed: f64, field: &str) -> Check {
+    positive(speed, field)?;
+    at_least(speed, MIN_SPEED_KMH / 3.6, SLOW, field)?;
+    at_most(speed, MAX_ROUTE_SPEED, TOP_SPEED, field)
+}
+
+fn point_within(p: Point, field: &str) -> Check {
+    coordinate(p.x, &format!("{field}.x"))?;
+    coordinate(p.y, &format!("{field}.y"))
+}
+
+fn polygon_within(polygon: &Polygon, field: &str) -> Check {
+    for (i, &p) in polygon.vertices().iter().enumerate() {
+        point_within(p, &format!("{field}[{i}]"))?;
+    }
+    Ok(())
+}
+
+/// Every coordinate (and an anchor's height) within ±[`MAX_COORDINATE_M`]; a scenario read from a
+/// file was checked as it was read, a scenario built by hand is checked here.
+fn check_coordinates(s: &Scenario) -> Check {
+    polygon_within(s.area.fence(), "fence")?;
+    for (k, cutout) in s.area.cutouts().iter().enumerate() {
+        polygon_within(cutout, &format!("cutouts[{k}]"))?;
+    }
+    for (route, field) in [
+        (&s.start_route, "start_route"),
+        (&s.recovery_route, "recovery_route"),
+    ] {
+        for (i, p) in route.points.iter().enumerate() {
+            point_within(p.position, &format!("{field}[{i}]"))?;
+        }
+    }
+    for (i, a) in s.anchors.iter().enumerate() {
+        coordinate(a.x, &format!("anchors[{i}].x"))?;
+        coordinate(a.y, &format!("anchors[{i}].y"))?;
+        coordinate(a.height, &format!("anchors[{i}].height"))?;
+    }
+    for (i, o) in s.environment.obstacles.iter().enumerate() {
+        polygon_within(&o.polygon, &format!("environment.obstacles[{i}].polygon"))?;
+    }
+    for (i, w) in s.environment.walls.iter().enumerate() {
+        point_within(w.a, &format!("environment.walls[{i}].a"))?;
+        point_within(w.b, &format!("environment.walls[{i}].b"))?;
+    }
+    Ok(())
 }
 
 /// How far the limits are from any real use.
@@ -295,19 +363,6 @@ fn fault_kinds(kinds: &[FaultKind], field: &str) -> Check {
     Ok(())
 }
 
-/// The bits a `bitflip` may flip: whole numbers within 0–31 (a binary32 value's bits).
-fn bits(range: Interval<f64>, field: &str) -> Check {
-    ordered(range, field)?;
-    for (end, value) in [("min", range.min), ("max", range.max)] {
-        let field = format!("{field}.{end}");
-        if value.fract() != 0.0 {
-            return Err((field, Problem::NotWhole(value)));
-        }
-        within(value, 0.0, 31.0, &field)?;
-    }
-    Ok(())
-}
-
 /// Every fault section: its kinds, every kind's range as its parameter needs (a yaw within
 /// ±180°), start and duration.
 fn check_faults(c: &CampaignSettings) -> Check {
@@ -335,41 +390,43 @@ fn check_faults(c: &CampaignSettings) -> Check {
             {
                 return Err((field, Problem::OnlyNeutral { neutral }));
             }
-            match kind.spec().param {
-                Param::Bit => bits(range, &field)?,
-                Param::Value if target.quantity() == Quantity::Yaw => {
-                    ordered(range, &field)?;
-                    within(range.min, -180.0, 180.0, &format!("{field}.min"))?;
-                    within(range.max, -180.0, 180.0, &format!("{field}.max"))?;
-                }
-                Param::Value => {
-                    ordered(range, &field)?;
-                    for (end, v) in [("min", range.min), ("max", range.max)] {
-                        at_most(
-                            v.abs(),
-                            MAX_FAULT_OFFSET,
-                            FAR,
-                            &format!("{field}.{end} (absolute)"),
-                        )?;
-                    }
-                }
-                Param::Factor => {
-                    ordered(range, &field)?;
-                    for (end, v) in [("min", range.min), ("max", range.max)] {
-                        at_most(
-                            v.abs(),
-                            MAX_FAULT_FACTOR,
-                            FAR,
-                            &format!("{field}.{end} (absolute)"),
-                        )?;
-                    }
-                }
-                Param::Unused => ordered(range, &field)?,
+            ordered(range, &field)?;
+            let quantity = target.quantity();
+            for (end, v) in [("min", range.min), ("max", range.max)] {
+                check_fault_param(kind, quantity, v).map_err(|problem| {
+                    // A bound on the magnitude names the value it compared.
+                    let absolute = matches!(problem, Problem::BeyondLimit(_));
+                    let suffix = if absolute { " (absolute)" } else { "" };
+                    (format!("{field}.{end}{suffix}"), problem)
+                })?;
             }
         }
         probe_window(f.start, f.duration, &field)?;
     }
     Ok(())
+}
+
+/// Checks one parameter of a fault of `kind` on a probe carrying `quantity`: what a scenario's
+/// fault range may hold and what a case file's fault may send. A bit (`bitflip`) is a whole
+/// number within 0–31 (a binary32 value's bits); a yaw value (offset, set-to) within ±180°;
+/// another value within ±[`MAX_FAULT_OFFSET`] in its unit; a factor within
+/// ±[`MAX_FAULT_FACTOR`]; a kind without a parameter (`none`) takes any finite number.
+pub fn check_fault_param(kind: FaultKind, quantity: Quantity, param: f64) -> Result<(), Problem> {
+    let checked = match kind.spec().param {
+        Param::Bit if param.is_finite() && param.fract() != 0.0 => {
+            Err((String::new(), Problem::NotWhole(param)))
+        }
+        Param::Bit => within(param, 0.0, 31.0, ""),
+        Param::Value if quantity == Quantity::Yaw => within(param, -180.0, 180.0, ""),
+        Param::Value => {
+            finite(param, "").and_then(|()| at_most(param.abs(), MAX_FAULT_OFFSET, FAR, ""))
+        }
+        Param::Factor => {
+            finite(param, "").and_then(|()| at_most(param.abs(), MAX_FAULT_FACTOR, FAR, ""))
+        }
+        Param::Unused => finite(param, ""),
+    };
+    checked.map_err(|(_, problem)| problem)
 }
 
 /// Start and duration intervals of a fault, in probe iterations: ordered, duration at least 1.
@@ -400,13 +457,7 @@ fn check_route(area: &Area, route: &Route, field: &str) -> Check {
         ));
     }
     for (i, p) in route.points.iter().enumerate() {
-        positive(p.speed, &format!("{field}[{i}].speed"))?;
-        at_least(
-            p.speed,
-            MIN_SPEED_KMH / 3.6,
-            SLOW,
-            &format!("{field}[{i}].speed"),
-        )?;
+        route_speed(p.speed, &format!("{field}[{i}].speed"))?;
         if !area.contains_point(p.position) {
             return Err((
                 format!("{field}[{i}]"),
@@ -772,6 +823,122 @@ mod tests {
         assert!(matches!(error.problem, Problem::JoinLeavesArea), "{error}");
     }
 
+    /// The message of a coordinate beyond the bound.
+    fn beyond(value: &str) -> String {
+        format!(
+            "{value} is beyond drivecheck's limit: in magnitude at most 100000 (coordinates are \
+             local metres around the origin; the car's protocol carries a position of at most \
+             214748 m)"
+        )
+    }
+
+    #[test]
+    fn coordinates_beyond_the_bound_are_refused_from_every_format_naming_the_field() {
+        // TOML: a fence vertex (its area overflowed to NaN and the raster panicked), an anchor
+        // (refused only when `run` uploaded it as a binary32), an anchor's height, a route point.
+        let fence_vertex = SQUARE.replacen("{ x = 10.0, y = 0.0 }", "{ x = 1e155, y = 0.0 }", 1);
+        let anchor = |x: &str, height: &str| {
+            format!("{SQUARE}\n[[anchors]]\nid = 1\nx = {x}\ny = 0.0\nheight = {height}\n")
+        };
+        let cases = [
+            (fence_vertex, "fence[1].x", beyond("1e155")),
+            (anchor("1e308", "1.0"), "anchors[0].x", beyond("1e308")),
+            (
+                anchor("-3.0", "-1e300"),
+                "anchors[0].height",
+                beyond("-1e300"),
+            ),
+            (
+                SQUARE.replacen("x = 5.0, y = 2.0", "x = 5.0, y = -2e5", 1),
+                "start_route[2].y",
+                beyond("-200000"),
+            ),
+            (
+                format!(
+                    "{SQUARE}\n[[environment.walls]]\nname = \"w\"\na = {{ x = 0.0, y = -1.0 }}\n\
+                     b = {{ x = 1e300, y = -1.0 }}\n"
+                ),
+                "environment.walls[0].b.x",
+                beyond("1e300"),
+            ),
+        ];
+        for (text, field, message) in cases {
+            let error = from_toml_str(&text, "s.toml").unwrap_err();
+            assert_eq!(error.field(), Some(field), "{error}");
+            assert!(error.place.location.is_some(), "{error}");
+            assert!(error.to_string().ends_with(&message), "{error}");
+        }
+        // Just within the bound loads.
+        from_toml_str(&anchor("-100000.0", "100000.0"), "s.toml").unwrap();
+
+        // The reference XML.
+        let route = |id: u8, points: &[(&str, &str)]| {
+            let points: String = points
+                .iter()
+                .map(|(x, y)| format!("<point><x>{x}</x><y>{y}</y><speed>0.5</speed></point>"))
+                .collect();
+            format!("<route><id>{id}</id>{points}</route>")
+        };
+        let xml = format!(
+            "<routes>{}{}{}</routes>",
+            route(2, &[("0", "0"), ("1e155", "0"), ("10", "10"), ("0", "10")]),
+            route(0, &[("2", "2"), ("3.5", "2"), ("5", "2")]),
+            route(1, &[("2", "6"), ("2", "4.5"), ("2", "3.2")]),
+        );
+        let error = crate::from_xml_str(&xml, "s.xml", "s").unwrap_err();
+        assert_eq!(error.field(), Some("fence[1].x"), "{error}");
+        assert!(error.to_string().ends_with(&beyond("1e155")), "{error}");
+
+        // GeoJSON in local metres.
+        let line = |role: &str, points: &str| {
+            format!(
+                r#"{{"type": "Feature", "properties": {{"drivecheck": "route", "route": "{role}",
+                "speeds": [1, 1, 1]}}, "geometry": {{"type": "LineString", "coordinates": {points}}}}}"#
+            )
+        };
+        let geojson = format!(
+            r#"{{"type": "FeatureCollection", "drivecheck": {{"version": 1, "crs": "local-enu-m"}},
+            "features": [
+              {{"type": "Feature", "properties": {{"drivecheck": "fence"}}, "geometry":
+                {{"type": "Polygon", "coordinates": [[[0, 0], [1e155, 0], [10, 10], [0, 10], [0, 0]]]}}}},
+              {}, {}]}}"#,
+            line("start", "[[2, 2], [3.5, 2], [5, 2]]"),
+            line("recovery", "[[2, 6], [2, 4.5], [2, 3.2]]"),
+        );
+        let options = crate::geojson::ReadOptions::default();
+        let error =
+            crate::geojson::from_geojson_str(&geojson, "s.geojson", "s", &options).unwrap_err();
+        assert!(
+            error.field().is_some_and(|f| f.contains("fence[1].x")),
+            "{error}"
+        );
+        assert!(error.to_string().ends_with(&beyond("1e155")), "{error}");
+    }
+
+    #[test]
+    fn route_speeds_beyond_the_autopilots_top_speed_are_refused() {
+        let text = SQUARE.replacen(
+            "x = 3.5, y = 2.0, speed = 1.0",
+            "x = 3.5, y = 2.0, speed = 1e30",
+            1,
+        );
+        let error = from_toml_str(&text, "s.toml").unwrap_err();
+        assert_eq!(error.field(), Some("start_route[1].speed"));
+        assert!(
+            error.to_string().ends_with(
+                "1e30 is beyond drivecheck's limit: at most 8.333333333333334 (the firmware \
+                 autopilot's top speed, 30 km/h)"
+            ),
+            "{error}"
+        );
+        let text = SQUARE.replacen(
+            "x = 3.5, y = 2.0, speed = 1.0",
+            "x = 3.5, y = 2.0, speed = 8.3",
+            1,
+        );
+        from_toml_str(&text, "s.toml").unwrap();
+    }
+
     #[test]
     fn a_hand_built_scenario_is_checked_like_a_loaded_one() {
         let mut scenario = from_toml_str(SQUARE, "s.toml").unwrap().scenario;
@@ -789,7 +956,17 @@ mod tests {
         scenario.anchors.clear();
         scenario.start_route.points[1].position.x = f64::INFINITY;
         let error = scenario.validate("built").unwrap_err();
-        assert_eq!(error.field(), Some("start_route[1]"));
+        assert_eq!(error.field(), Some("start_route[1].x"));
+        // A fence built by hand far away: refused, where loading refuses it.
+        let far = trajgen::Polygon::new(vec![
+            crate::Point::new(0.0, 0.0),
+            crate::Point::new(1e155, 0.0),
+            crate::Point::new(0.0, 10.0),
+        ])
+        .unwrap();
+        scenario.area = trajgen::Area::new(far, vec![]).unwrap();
+        let error = scenario.validate("built").unwrap_err();
+        assert_eq!(error.field(), Some("fence[1].x"));
     }
 
     #[test]

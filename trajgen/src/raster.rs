@@ -15,13 +15,18 @@
 
 use crate::geometry::{Area, Point};
 
+/// The most cells a raster has (4 million: 4 MB of flags, and a coverage grid's 16 MB of visit
+/// counts). A fence whose bounding box would need more cells of the size asked for gets larger
+/// cells ([`Raster::cell_size`] says which); a real test area at 0.5 m has tens of thousands.
+pub const MAX_CELLS: usize = 4_000_000;
+
 /// A square grid over an area's fence bounding box, row-major (`row * cols + col`), cell (0, 0)
 /// at the lower-left corner.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Raster {
     /// Lower-left corner of cell (0, 0): the fence bounding box's.
     pub origin: Point,
-    /// Side of a cell, metres.
+    /// Side of a cell, metres: the size asked for, or larger in a huge area ([`MAX_CELLS`]).
     pub cell_size: f64,
     /// Cells along x (at least 1).
     pub cols: usize,
@@ -34,11 +39,46 @@ pub struct Raster {
 impl Raster {
     /// The raster of `area` with cells of `cell_size` metres (positive): `⌈width / cell_size⌉`
     /// columns and `⌈height / cell_size⌉` rows of the fence's bounding box, at least one each.
+    /// Where that would be more than [`MAX_CELLS`] cells (a huge area: whatever its coordinates,
+    /// the raster's size is bounded), the cells are made larger until it is not.
     pub fn new(area: &Area, cell_size: f64) -> Self {
         let bbox = area.bbox();
-        let (width, height) = bbox.size();
-        let cols = ((width / cell_size).ceil() as usize).max(1);
-        let rows = ((height / cell_size).ceil() as usize).max(1);
+        // Each extent as half the difference of halves: finite even between ±f64::MAX.
+        let cells_along = |low: f64, high: f64, cell: f64| {
+            let cells = ((high * 0.5 - low * 0.5) / (cell * 0.5)).ceil();
+            if cells.is_finite() {
+                cells.max(1.0)
+            } else {
+                f64::INFINITY
+            }
+        };
+        let mut cell_size = cell_size;
+        let fits = |cell: f64| {
+            cells_along(bbox.min.x, bbox.max.x, cell) * cells_along(bbox.min.y, bbox.max.y, cell)
+                <= MAX_CELLS as f64
+        };
+        if !fits(cell_size) {
+            // From the size that would fit were the cells' count not rounded up, grown a little
+            // at a time (a step or two); the loop ends since the extents are finite.
+            let (half_width, half_height) = (
+                bbox.max.x * 0.5 - bbox.min.x * 0.5,
+                bbox.max.y * 0.5 - bbox.min.y * 0.5,
+            );
+            let n = MAX_CELLS as f64;
+            let least = (half_width.sqrt() * half_height.sqrt() / n.sqrt() * 2.0)
+                .max(half_width / n * 2.0)
+                .max(half_height / n * 2.0);
+            if least.is_finite() && least > cell_size {
+                cell_size = least;
+            }
+            while !fits(cell_size) && cell_size < f64::MAX {
+                cell_size = (cell_size * 1.0625).min(f64::MAX);
+            }
+        }
+        // At most MAX_CELLS in all (NaN, from a NaN cell size, casts to 0: one cell).
+        let cols = (cells_along(bbox.min.x, bbox.max.x, cell_size) as usize).clamp(1, MAX_CELLS);
+        let rows =
+            (cells_along(bbox.min.y, bbox.max.y, cell_size) as usize).clamp(1, MAX_CELLS / cols);
         let mut raster = Self {
             origin: bbox.min,
             cell_size,
@@ -218,6 +258,58 @@ mod tests {
         assert_eq!(raster.index(7, 3), Some(31));
         assert_eq!(raster.index(8, 0), None);
         assert_eq!(raster.index(0, -1), None);
+    }
+
+    /// Fences far beyond any test area (`1e155`, where squares overflow and the area is NaN, up
+    /// to ±f64::MAX), built directly: a raster, a coverage grid and its traversal of any segment
+    /// stay bounded and never panic, and area validation returns.
+    #[test]
+    fn a_huge_or_far_away_area_gets_a_bounded_raster_without_panicking() {
+        use crate::validation::{CoverageGrid, ValidationConfig, validate_area};
+        let m = f64::MAX;
+        let fences: [&[[f64; 2]]; 6] = [
+            &[[0., 0.], [1e155, 0.], [10., 10.], [0., 10.]],
+            &[[0., 0.], [1e155, 0.], [1e155, 1e155], [0., 1e155]],
+            &[[-m, -m], [m, -m], [m, m], [-m, m]],
+            &[[0., 0.], [1e6, 0.], [1e6, 1e6], [0., 1e6]],
+            &[[1e300, -1e300], [1e308, 0.], [1e300, 1e300]],
+            &[[0., 0.], [1e-300, 0.], [0., 1e300]],
+        ];
+        for fence in fences {
+            let fence = polygon(fence);
+            let area = Area::new(fence.clone(), vec![]).unwrap();
+            for cell in [0.5, 1e-300, 1e300] {
+                let raster = Raster::new(&area, cell);
+                assert!(raster.cols >= 1 && raster.rows >= 1, "{fence:?}");
+                assert!(
+                    raster.cols * raster.rows <= MAX_CELLS,
+                    "{fence:?} at {cell}"
+                );
+                assert_eq!(raster.drivable.len(), raster.cols * raster.rows);
+                assert!(raster.cell_size >= cell, "{fence:?} at {cell}");
+            }
+            let mut grid = CoverageGrid::new(&area, 0.5);
+            let v = fence.vertices();
+            for (a, b) in [
+                (v[0], v[1]),
+                (v[1], v[2]),
+                (Point::new(-m, 0.0), Point::new(m, 1.0)),
+                (Point::new(-m, -m), Point::new(m, m)),
+                (Point::new(f64::NAN, 0.0), Point::new(1.0, 1.0)),
+                (Point::new(5.0, 5.0), Point::new(f64::INFINITY, 5.0)),
+            ] {
+                grid.visit_segment(a, b);
+            }
+            assert!(grid.coverage() <= 1.0);
+            let start = [
+                Point::new(2.0, 2.0),
+                Point::new(3.5, 2.0),
+                Point::new(5.0, 2.0),
+            ];
+            let config = ValidationConfig::default().with_km(0.01);
+            let mut rng = rand_pcg::Pcg64Mcg::new(7);
+            let _ = validate_area(&area, &start, &config, &mut rng, &mut |_| {});
+        }
     }
 
     proptest! {

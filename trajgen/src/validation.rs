@@ -197,20 +197,59 @@ impl CoverageGrid {
 
     fn mark(&mut self, col: i64, row: i64) {
         if let Some(i) = self.raster.index(col, row) {
-            self.visits[i] += 1;
+            self.visits[i] = self.visits[i].saturating_add(1);
         }
     }
 
+    /// The part of the segment `a → b` over the grid (Liang–Barsky clipping; an end inside the
+    /// grid is kept exactly as it is), `None` when it misses the grid or is not finite.
+    fn within_grid(&self, a: Point, b: Point) -> Option<(Point, Point)> {
+        let d = b - a;
+        if !(a.is_finite() && b.is_finite() && d.is_finite()) {
+            return None;
+        }
+        let r = &self.raster;
+        let low = r.origin;
+        let high = low + Point::new(r.cols as f64 * r.cell_size, r.rows as f64 * r.cell_size);
+        let (mut t0, mut t1) = (0.0f64, 1.0f64);
+        for (p, q) in [
+            (-d.x, a.x - low.x),
+            (d.x, high.x - a.x),
+            (-d.y, a.y - low.y),
+            (d.y, high.y - a.y),
+        ] {
+            if p == 0.0 {
+                if q < 0.0 {
+                    return None;
+                }
+            } else if p < 0.0 {
+                t0 = t0.max(q / p);
+            } else {
+                t1 = t1.min(q / p);
+            }
+        }
+        if t0 > t1 {
+            return None;
+        }
+        let from = if t0 > 0.0 { a + d * t0 } else { a };
+        let to = if t1 < 1.0 { a + d * t1 } else { b };
+        Some((from, to))
+    }
+
     /// Counts one visit in every cell the segment `a → b` passes through (Amanatides–Woo
-    /// traversal).
+    /// traversal). The segment is clipped to the grid first, so any two points (far outside, not
+    /// finite) take at most as many steps as the grid has columns and rows.
     pub fn visit_segment(&mut self, a: Point, b: Point) {
+        let Some((a, b)) = self.within_grid(a, b) else {
+            return;
+        };
         let (mut col, mut row) = self.raster.cell_of(a);
         let (end_col, end_row) = self.raster.cell_of(b);
         let (origin, cell_size) = (self.raster.origin, self.raster.cell_size);
         let d = b - a;
         let axis = |start: f64, origin: f64, index: i64, delta: f64| -> (i64, f64, f64) {
             if delta > 0.0 {
-                let boundary = origin + (index + 1) as f64 * cell_size;
+                let boundary = origin + index.saturating_add(1) as f64 * cell_size;
                 (1, (boundary - start) / delta, cell_size / delta)
             } else if delta < 0.0 {
                 let boundary = origin + index as f64 * cell_size;
@@ -222,7 +261,10 @@ impl CoverageGrid {
         let (step_x, mut t_x, dt_x) = axis(a.x, origin.x, col, d.x);
         let (step_y, mut t_y, dt_y) = axis(a.y, origin.y, row, d.y);
         self.mark(col, row);
-        let steps = (end_col - col).abs() + (end_row - row).abs();
+        let most = (self.raster.cols + self.raster.rows) as i64 + 2;
+        let steps = (end_col.saturating_sub(col).saturating_abs())
+            .saturating_add(end_row.saturating_sub(row).saturating_abs())
+            .min(most);
         for _ in 0..steps {
             if t_x < t_y {
                 col += step_x;

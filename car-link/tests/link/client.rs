@@ -659,6 +659,45 @@ async fn over_udp_replies_come_back_to_port_plus_one() {
 }
 
 #[tokio::test]
+async fn over_udp_replies_from_anyone_but_the_bridges_port_are_ignored() {
+    // A bridge that never answers, and a spoofer on the same host (loopback) that keeps sending
+    // valid replies to the client's reply port from a port of its own.
+    let bridge = tokio::net::UdpSocket::bind("127.0.0.1:0")
+        .await
+        .expect("bind");
+    let port = bridge.local_addr().expect("address").port();
+    let spoofer = tokio::net::UdpSocket::bind("127.0.0.1:0")
+        .await
+        .expect("bind");
+    assert_ne!(spoofer.local_addr().expect("address").port(), port);
+    let dialect = car_link::message::Dialect::firmware(FirmwareVersion::V12_3);
+    let reply = car_link::Reply::State(sample_state(FirmwareVersion::V12_3))
+        .encode(1, dialect)
+        .expect("a reply");
+    let spoofing = tokio::spawn(async move {
+        loop {
+            let _ = spoofer.send_to(&reply, ("127.0.0.1", port + 1)).await;
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
+    });
+    let address = format!("udp://127.0.0.1:{port}").parse().expect("address");
+    let config = LinkConfig {
+        reconnect: false,
+        ..no_keepalive()
+    };
+    let result = Car::connect(&address, config).await;
+    spoofing.abort();
+    match result {
+        Ok(car) => panic!("connected to a spoofer: firmware {}", car.version()),
+        Err(error) => assert!(
+            matches!(&error, CarError::Handshake(inner) if matches!(**inner, CarError::NoReply { .. })),
+            "{error}"
+        ),
+    }
+    drop(bridge);
+}
+
+#[tokio::test]
 async fn the_sim_address_is_left_to_the_orchestrator() {
     let result = Car::connect(&car_link::CarAddress::Sim, no_keepalive()).await;
     assert!(matches!(result, Err(CarError::Connect { .. })));

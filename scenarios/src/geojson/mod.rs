@@ -13,7 +13,8 @@
 //! ```
 //! use scenarios::geojson::{ReadOptions, WriteOptions, from_geojson_str, to_geojson};
 //! let scenario = scenarios::bundled::load("courtyard").unwrap().scenario;
-//! let text = to_geojson(&scenario, &WriteOptions::default()).unwrap();
+//! let local = WriteOptions { crs: Some(scenarios::geojson::Crs::Local), origin: None };
+//! let text = to_geojson(&scenario, &local).unwrap();
 //! let read = from_geojson_str(&text, "courtyard.geojson", "courtyard", &ReadOptions::default())
 //!     .unwrap();
 //! assert_eq!(read.loaded.scenario.hash(), scenario.hash());
@@ -37,6 +38,10 @@ pub const VERSION: u64 = 1;
 pub const CRS_LOCAL: &str = "local-enu-m";
 /// The `crs` of WGS84 longitude and latitude, degrees (RFC 7946's).
 pub const CRS_WGS84: &str = "wgs84";
+/// The name in the 2008 `crs` member of a file in local metres (`{"type": "name", "properties":
+/// {"name": …}}`): no registry names a scenario's local east-north frame, so this URN says that
+/// the coordinates are not longitude/latitude; the reader takes it for local metres.
+pub const CRS_LOCAL_NAME: &str = "urn:ogc:def:crs:drivecheck::local-enu-m";
 
 /// The kind of coordinates a GeoJSON file holds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -208,10 +213,12 @@ fn feature_of(fields: &[(String, String)], field: String) -> String {
 #[derive(Debug, Clone, PartialEq, Error)]
 #[non_exhaustive]
 pub enum GeoJsonWriteError {
-    /// Longitude/latitude asked for a scenario without an origin, and none given.
+    /// Longitude/latitude (the default) for a scenario without an origin, and none given.
     #[error(
-        "longitude/latitude need the local frame's origin on the globe: the scenario has none; \
-         give one (--origin LAT,LON[,H])"
+        "WGS84 longitude/latitude (RFC 7946's coordinates) need the local frame's origin on the \
+         globe, and the scenario has none: give one (--origin LAT,LON[,H]), or ask for local \
+         metres (--crs local), which only drivecheck and readers of the file's `crs` member take \
+         for what they are"
     )]
     NoOrigin,
     /// The settings could not be carried over (a number JSON cannot hold).

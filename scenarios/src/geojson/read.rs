@@ -325,6 +325,8 @@ fn file_crs(top: &Map<String, Value>, meta: &Meta) -> Result<Option<Crs>, FieldP
     let upper = name.to_ascii_uppercase();
     if upper.ends_with("CRS84") || upper.ends_with("EPSG::4326") || upper.ends_with("EPSG:4326") {
         Ok(Some(Crs::Wgs84))
+    } else if name == super::CRS_LOCAL_NAME {
+        Ok(Some(Crs::Local))
     } else {
         Err(schema(
             "crs.properties.name",
@@ -414,6 +416,21 @@ impl Found<'_> {
         format!("{}.properties.{key}", self.at)
     }
 
+    /// Whether the polygon was drawn clockwise (`"drawn": "clockwise"`): drivecheck's writer
+    /// then wrote its exterior ring backwards, by RFC 7946's right-hand rule.
+    fn drawn_clockwise(&self) -> Result<bool, FieldProblem> {
+        match self.property("drawn") {
+            None => Ok(false),
+            Some(Value::String(s)) if s == "clockwise" => Ok(true),
+            Some(Value::String(s)) if s == "counterclockwise" => Ok(false),
+            Some(other) => Err(wrong(
+                self.field("drawn"),
+                "\"clockwise\" or \"counterclockwise\"",
+                other,
+            )),
+        }
+    }
+
     /// The polygon's rings, or one polygon of a MultiPolygon of one.
     fn polygon(self, role: Role) -> Result<Vec<Line>, FieldProblem> {
         match self.geometry {
@@ -499,10 +516,14 @@ fn sort(gathered: &mut Gathered, role: Option<Role>, found: Found<'_>) -> Result
             if let Some((first, _)) = gathered.fence {
                 return Err(duplicate(&found, "fence", first));
             }
-            gathered.fence = Some((index, found.polygon(Role::Fence)?));
+            let clockwise = found.drawn_clockwise()?;
+            let mut rings = found.polygon(Role::Fence)?;
+            rings[0] = as_drawn(rings[0].clone(), clockwise);
+            gathered.fence = Some((index, rings));
         }
         Some(Role::Cutout) => {
-            let ring = found.simple_polygon(Role::Cutout)?;
+            let clockwise = found.drawn_clockwise()?;
+            let ring = as_drawn(found.simple_polygon(Role::Cutout)?, clockwise);
             gathered.cutouts.push((index, ring));
         }
         Some(Role::Anchor) => {
@@ -514,7 +535,8 @@ fn sort(gathered: &mut Gathered, role: Option<Role>, found: Found<'_>) -> Result
         Some(Role::Route) => route(gathered, found)?,
         Some(Role::Obstacle) => {
             let (name, illustrative) = (found.name()?, found.illustrative()?);
-            let ring = found.simple_polygon(Role::Obstacle)?;
+            let clockwise = found.drawn_clockwise()?;
+            let ring = as_drawn(found.simple_polygon(Role::Obstacle)?, clockwise);
             gathered.obstacles.push(FoundObstacle {
                 feature: index,
                 name,
@@ -753,6 +775,15 @@ fn line(value: &Value, path: String, ring: bool) -> Result<Line, FieldProblem> {
         positions.pop();
     }
     Ok(Line { path, positions })
+}
+
+/// The order a ring written by the right-hand rule was drawn in, when it was drawn clockwise:
+/// from the first vertex backwards, as the writer reversed it.
+fn as_drawn(mut ring: Line, clockwise: bool) -> Line {
+    if clockwise && ring.positions.len() > 1 {
+        ring.positions[1..].reverse();
+    }
+    ring
 }
 
 /// A polygon's rings: at least the exterior one.

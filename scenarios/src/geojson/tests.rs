@@ -36,9 +36,13 @@ fn points(s: &Scenario) -> Vec<Point> {
 
 #[test]
 fn every_bundled_scenario_reads_back_from_local_metres_with_its_hash() {
+    let local = WriteOptions {
+        crs: Some(Crs::Local),
+        origin: None,
+    };
     for name in bundled::names() {
         let scenario = bundled::load(name).unwrap().scenario;
-        let text = to_geojson(&scenario, &WriteOptions::default()).unwrap();
+        let text = to_geojson(&scenario, &local).unwrap();
         let imported = read(&text).unwrap();
         assert_eq!(imported.crs, (Crs::Local, CrsSource::File), "{name}");
         assert_eq!(imported.loaded.scenario, scenario, "{name}");
@@ -106,6 +110,114 @@ fn a_scenario_with_an_origin_is_written_in_longitude_latitude_unless_local_is_as
     };
     let text = to_geojson(&scenario, &local).unwrap();
     assert_eq!(read(&text).unwrap().loaded.scenario.hash(), scenario.hash());
+}
+
+/// Twice the signed area of a closed ring by the shoelace formula (positive: counter-clockwise).
+fn ring_orientation(ring: &[Value]) -> f64 {
+    let xy = |v: &Value| (v[0].as_f64().unwrap(), v[1].as_f64().unwrap());
+    ring.windows(2)
+        .map(|w| {
+            let ((x0, y0), (x1, y1)) = (xy(&w[0]), xy(&w[1]));
+            x0 * y1 - x1 * y0
+        })
+        .sum()
+}
+
+#[test]
+fn without_an_origin_the_default_export_is_refused_and_local_metres_say_so() {
+    let scenario = bundled::load("courtyard").unwrap().scenario;
+    assert!(scenario.origin.is_none());
+    let error = to_geojson(&scenario, &WriteOptions::default()).unwrap_err();
+    assert_eq!(error, GeoJsonWriteError::NoOrigin);
+    assert!(error.to_string().contains("--origin LAT,LON"), "{error}");
+    let local = WriteOptions {
+        crs: Some(Crs::Local),
+        origin: None,
+    };
+    let text = to_geojson(&scenario, &local).unwrap();
+    let document: Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(
+        document["crs"],
+        json!({"type": "name", "properties": {"name": CRS_LOCAL_NAME}})
+    );
+    assert_eq!(document["drivecheck"]["crs"], json!(CRS_LOCAL));
+    // The legacy member alone (a tool that kept it but not drivecheck's own) reads as local.
+    let mut legacy_only = document.clone();
+    legacy_only["drivecheck"]
+        .as_object_mut()
+        .unwrap()
+        .remove("crs");
+    let imported = read(&legacy_only.to_string()).unwrap();
+    assert_eq!(imported.crs, (Crs::Local, CrsSource::File));
+    assert_eq!(imported.loaded.scenario.hash(), scenario.hash());
+}
+
+#[test]
+fn every_ring_follows_the_right_hand_rule_and_every_position_is_longitude_latitude() {
+    let origin = EnuOrigin {
+        lat: 61.45,
+        lon: 23.85,
+        height: 120.0,
+    };
+    let options = WriteOptions {
+        crs: None,
+        origin: Some(origin),
+    };
+    let mut clockwise_seen = 0;
+    for name in bundled::names() {
+        let scenario = bundled::load(name).unwrap().scenario;
+        let text = to_geojson(&scenario, &options).unwrap();
+        let document: Value = serde_json::from_str(&text).unwrap();
+        assert!(
+            document.get("crs").is_none(),
+            "{name}: RFC 7946 has no crs member"
+        );
+        for (i, feature) in document["features"].as_array().unwrap().iter().enumerate() {
+            let geometry = &feature["geometry"];
+            let positions: Vec<&Value> = match geometry["type"].as_str().unwrap() {
+                "Polygon" => {
+                    let rings = geometry["coordinates"].as_array().unwrap();
+                    for (k, ring) in rings.iter().enumerate() {
+                        let ring = ring.as_array().unwrap();
+                        assert!(ring.len() >= 4 && ring[0] == ring[ring.len() - 1]);
+                        let area = ring_orientation(ring);
+                        // Exterior counter-clockwise, holes clockwise.
+                        assert!(
+                            if k == 0 { area > 0.0 } else { area < 0.0 },
+                            "{name}: features[{i}] ring {k}: {area}"
+                        );
+                    }
+                    if feature["properties"]["drawn"] == json!("clockwise") {
+                        clockwise_seen += 1;
+                    }
+                    rings.iter().flat_map(|r| r.as_array().unwrap()).collect()
+                }
+                "LineString" => geometry["coordinates"].as_array().unwrap().iter().collect(),
+                "Point" => vec![&geometry["coordinates"]],
+                other => panic!("{other}"),
+            };
+            for p in positions {
+                let (lon, lat) = (p[0].as_f64().unwrap(), p[1].as_f64().unwrap());
+                assert!((-180.0..=180.0).contains(&lon), "{name}: {lon}");
+                assert!((-90.0..=90.0).contains(&lat), "{name}: {lat}");
+                // Around the origin: the areas are tens of metres wide.
+                assert!((lat - 61.45).abs() < 0.01 && (lon - 23.85).abs() < 0.02);
+            }
+        }
+        // And it reads back: the clockwise rings in the order drawn.
+        let again = read(&text).unwrap().loaded.scenario;
+        assert_eq!(
+            again.area.fence().signed_area().signum(),
+            scenario.area.fence().signed_area().signum(),
+            "{name}"
+        );
+        assert_eq!(
+            again.area.fence().vertices().len(),
+            scenario.area.fence().vertices().len()
+        );
+    }
+    // courtyard's fence is drawn clockwise.
+    assert!(clockwise_seen > 0);
 }
 
 /// A QGIS-like collection in longitude/latitude around (61.45° N, 23.85° E): a 40 × 30 m

@@ -1,17 +1,18 @@
 //! Writing a scenario as a GeoJSON FeatureCollection (the schema of `docs/geojson.md`).
 
 use serde_json::{Map, Value, json};
-use trajgen::Point;
+use trajgen::{Point, Polygon};
 
-use super::{Crs, GeoJsonWriteError, VERSION};
+use super::{CRS_LOCAL_NAME, Crs, GeoJsonWriteError, VERSION};
 use crate::geodesy::enu_to_geodetic;
 use crate::model::{EnuOrigin, Route, Scenario};
 
 /// How to write a scenario as GeoJSON.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct WriteOptions {
-    /// The coordinate kind; `None`: WGS84 longitude/latitude when there is an origin (given or
-    /// the scenario's), local metres otherwise.
+    /// The coordinate kind; `None`: WGS84 longitude/latitude (RFC 7946's), which needs an origin
+    /// (given or the scenario's): without one, [`GeoJsonWriteError::NoOrigin`]. Local metres are
+    /// written only when asked for (`Some(Crs::Local)`), and then say so (see [`to_geojson`]).
     pub crs: Option<Crs>,
     /// The local frame's origin on the globe, in place of the scenario's (written as the
     /// collection's origin, so that the file reads back with it).
@@ -22,13 +23,18 @@ pub struct WriteOptions {
 /// cutouts, the start and recovery routes, the anchors, obstacles and walls. In local metres it
 /// reads back ([`super::from_geojson_str`]) to the same scenario and hash; in longitude/latitude
 /// to within a micrometre.
+///
+/// Every polygon ring follows RFC 7946's right-hand rule (an exterior ring counter-clockwise);
+/// one drawn clockwise is written from its first vertex backwards, with the property
+/// `"drawn": "clockwise"`, from which the reader restores the order drawn.
+///
+/// By default the coordinates are WGS84 longitude/latitude, which need an origin; local metres
+/// (`crs: Some(Crs::Local)`) are not RFC 7946 coordinates, so that file also carries the 2008
+/// `crs` member naming the local frame ([`CRS_LOCAL_NAME`]): a reader that honours it does not
+/// take the metres for degrees.
 pub fn to_geojson(s: &Scenario, options: &WriteOptions) -> Result<String, GeoJsonWriteError> {
     let origin = options.origin.or(s.origin);
-    let crs = options.crs.unwrap_or(if origin.is_some() {
-        Crs::Wgs84
-    } else {
-        Crs::Local
-    });
+    let crs = options.crs.unwrap_or(Crs::Wgs84);
     let place = match (crs, origin) {
         (Crs::Wgs84, None) => return Err(GeoJsonWriteError::NoOrigin),
         (Crs::Wgs84, Some(origin)) => Place::Wgs84(origin),
@@ -37,6 +43,10 @@ pub fn to_geojson(s: &Scenario, options: &WriteOptions) -> Result<String, GeoJso
     let meta = meta(s, crs, origin)?;
     let features = features(s, place);
     let mut out = String::from("{\n  \"type\": \"FeatureCollection\",\n");
+    if crs == Crs::Local {
+        let member = json!({"type": "name", "properties": {"name": CRS_LOCAL_NAME}});
+        out.push_str(&format!("  \"crs\": {member},\n"));
+    }
     out.push_str(&format!("  \"drivecheck\": {meta},\n  \"features\": [\n"));
     let lines: Vec<String> = features.iter().map(|f| format!("    {f}")).collect();
     out.push_str(&lines.join(",\n"));
@@ -62,10 +72,20 @@ impl Place {
         }
     }
 
-    /// A closed ring (its first position repeated at the end), vertices in the scenario's order.
-    fn ring(self, points: &[Point]) -> Value {
-        let closed = points.iter().chain(points.first());
-        Value::Array(closed.map(|&p| self.position(p)).collect())
+    /// A closed ring (its first position repeated at the end) by the right-hand rule: vertices in
+    /// the scenario's order when they run counter-clockwise, else from the first backwards.
+    fn ring(self, points: &[Point], clockwise: bool) -> Value {
+        let first = points.first();
+        let closed: Vec<&Point> = if clockwise {
+            first
+                .into_iter()
+                .chain(points.iter().skip(1).rev())
+                .chain(first)
+                .collect()
+        } else {
+            points.iter().chain(first).collect()
+        };
+        Value::Array(closed.into_iter().map(|&p| self.position(p)).collect())
     }
 
     fn line(self, points: impl IntoIterator<Item = Point>) -> Value {
@@ -104,17 +124,21 @@ fn feature(properties: Value, geometry: Value) -> Value {
 }
 
 fn features(s: &Scenario, place: Place) -> Vec<Value> {
-    let polygon =
-        |points: &[Point]| json!({"type": "Polygon", "coordinates": [place.ring(points)]});
-    let mut out = vec![feature(
-        json!({"drivecheck": "fence"}),
-        polygon(s.area.fence().vertices()),
-    )];
+    // A polygon feature with `properties`, its ring by the right-hand rule.
+    let polygon = |mut properties: Value, polygon: &Polygon| {
+        let clockwise = polygon.signed_area() < 0.0;
+        if clockwise {
+            properties["drawn"] = json!("clockwise");
+        }
+        let ring = place.ring(polygon.vertices(), clockwise);
+        feature(
+            properties,
+            json!({"type": "Polygon", "coordinates": [ring]}),
+        )
+    };
+    let mut out = vec![polygon(json!({"drivecheck": "fence"}), s.area.fence())];
     for cutout in s.area.cutouts() {
-        out.push(feature(
-            json!({"drivecheck": "cutout"}),
-            polygon(cutout.vertices()),
-        ));
+        out.push(polygon(json!({"drivecheck": "cutout"}), cutout));
     }
     for (which, route) in [("start", &s.start_route), ("recovery", &s.recovery_route)] {
         out.push(route_feature(which, route, place));
@@ -126,9 +150,9 @@ fn features(s: &Scenario, place: Place) -> Vec<Value> {
         ));
     }
     for o in &s.environment.obstacles {
-        out.push(feature(
+        out.push(polygon(
             json!({"drivecheck": "obstacle", "name": o.name, "illustrative": o.illustrative}),
-            polygon(o.polygon.vertices()),
+            &o.polygon,
         ));
     }
     for w in &s.environment.walls {

@@ -10,8 +10,11 @@ use crate::files::{CaseError, invalid};
 use crate::model::{Probe, start_tail};
 
 impl Case {
-    /// Checks the values: finite coordinates, positive finite speeds, non-empty segments whose
-    /// intent agrees with their points, finite fault parameters, result indices in range.
+    /// Checks the values: finite coordinates, speeds within drivecheck's floor and the
+    /// autopilot's top speed, non-empty segments whose intent agrees with their points, fault
+    /// parameters within what a scenario's ranges may hold ([`scenarios::check_fault_param`]),
+    /// fault start and duration within [`scenarios::limits::MAX_FAULT_ITERATIONS`], result
+    /// indices in range.
     pub fn check(&self) -> Result<(), CaseError> {
         let mut segments = 0;
         for (i, command) in self.commands.iter().enumerate() {
@@ -140,7 +143,9 @@ fn check_command(i: usize, command: &CommandRecord) -> Result<(), CaseError> {
     match command {
         CommandRecord::AddFault {
             probe,
+            kind,
             param,
+            start,
             duration,
             ..
         } => {
@@ -165,6 +170,23 @@ fn check_command(i: usize, command: &CommandRecord) -> Result<(), CaseError> {
             }
             if !param.is_finite() {
                 return Err(invalid(format!("{path}.param"), "must be finite"));
+            }
+            // What a scenario's fault range may hold is what a case may send (a yaw of 1e308
+            // would reach the car as an infinite binary32).
+            scenarios::check_fault_param(*kind, probe.quantity(), *param).map_err(|problem| {
+                invalid(
+                    format!("{path}.param"),
+                    format!("{problem} ({} on {probe})", kind.name()),
+                )
+            })?;
+            for (name, value) in [("start", *start), ("duration", *duration)] {
+                let most = scenarios::limits::MAX_FAULT_ITERATIONS;
+                if value > most {
+                    return Err(invalid(
+                        format!("{path}.{name}"),
+                        format!("{value} probe iterations is beyond drivecheck's limit of {most}"),
+                    ));
+                }
             }
             if *duration == 0 {
                 return Err(invalid(
@@ -248,8 +270,28 @@ fn check_route_points(path: &str, points: &[RoutePointRecord]) -> Result<(), Cas
                 ),
             ));
         }
+        let top = scenarios::limits::MAX_ROUTE_SPEED;
+        if p.speed > top {
+            return Err(invalid(
+                format!("{path}[{j}].speed"),
+                format!(
+                    "{} m/s is beyond the firmware autopilot's top speed of {top:.3} m/s ({} km/h)",
+                    readable(p.speed),
+                    scenarios::MAX_SPEED_KMH
+                ),
+            ));
+        }
     }
     Ok(())
+}
+
+/// A number as a person reads it: plain, or in exponent form when very large (`1e30`).
+fn readable(x: f64) -> String {
+    if x.abs() >= 1e9 {
+        format!("{x:e}")
+    } else {
+        x.to_string()
+    }
 }
 
 /// A segment verdict as case files write it.

@@ -309,6 +309,74 @@ fn check_refuses_unusable_values() {
 }
 
 #[test]
+fn check_refuses_speeds_and_fault_values_beyond_the_firmwares_ranges() {
+    let case = |commands: &str| -> Case {
+        parse(&format!(
+            r#"{{"format": "drivecheck-case", "schema_version": 3,
+                "scenario": {{"name": "x"}}, "commands": [{commands}]}}"#
+        ))
+        .unwrap()
+    };
+    let error = |commands: &str| case(commands).check().unwrap_err().to_string();
+    let segment = |speed: &str| {
+        format!(
+            r#"{{"command": "run_segments", "points": [{{"x": 1, "y": 2, "speed": {speed}}}]}}"#
+        )
+    };
+    let fault = |probe: &str, kind: &str, param: &str| {
+        format!(
+            r#"{{"command": "add_fault", "probe": "{probe}", "kind": "{kind}", "param": {param},
+                "start": 0, "duration": 5}}"#
+        )
+    };
+    assert_eq!(
+        error(&segment("1e30")),
+        "commands[0].points[0].speed: 1e30 m/s is beyond the firmware autopilot's top speed of \
+         8.333 m/s (30 km/h)"
+    );
+    case(&segment("8.3")).check().unwrap();
+    assert_eq!(
+        error(&fault("uwb_yaw", "offset", "1e308")),
+        "commands[0].param: 1e308 is outside -180..=180 (offset on uwb_yaw)"
+    );
+    assert_eq!(
+        error(&fault("uwb_yaw", "set_to", "-181")),
+        "commands[0].param: -181 is outside -180..=180 (set_to on uwb_yaw)"
+    );
+    assert!(
+        error(&fault("uwb_range_50", "amplification", "1e30"))
+            .starts_with("commands[0].param: 1e30 is beyond drivecheck's limit: at most 1000"),
+    );
+    assert!(
+        error(&fault("uwb_travel_dist", "offset", "-5000"))
+            .starts_with("commands[0].param: 5000 is beyond drivecheck's limit: at most 1000"),
+    );
+    assert_eq!(
+        error(&fault("uwb_range_50", "bitflip", "32")),
+        "commands[0].param: 32 is outside 0..=31 (bitflip on uwb_range_50)"
+    );
+    assert_eq!(
+        error(&fault("uwb_range_50", "bitflip", "3.5")),
+        "commands[0].param: must be a whole number, found 3.5 (bitflip on uwb_range_50)"
+    );
+    for (probe, kind, param) in [
+        ("uwb_yaw", "offset", "-180"),
+        ("uwb_yaw", "amplification", "3"),
+        ("uwb_range_50", "set_to", "999"),
+        ("uwb_range_50", "bitflip", "31"),
+        ("uwb_travel_dist", "none", "1e300"),
+    ] {
+        let commands = fault(probe, kind, param);
+        assert_eq!(case(&commands).check().map_err(|e| e.to_string()), Ok(()));
+    }
+    let late = fault("uwb_yaw", "offset", "1").replace("\"start\": 0", "\"start\": 4000000000");
+    assert_eq!(
+        error(&late),
+        "commands[0].start: 4000000000 probe iterations is beyond drivecheck's limit of 1000000"
+    );
+}
+
+#[test]
 fn a_segment_outside_the_area_is_not_drivable() {
     let (s, mut case) = run_case();
     case.commands.insert(
