@@ -806,9 +806,10 @@ pub enum ScenarioCommand {
     /// ambiguous without --crs).
     Import(ImportArgs),
     /// Write a scenario as a GeoJSON FeatureCollection for QGIS or geojson.io (docs/geojson.md):
-    /// in local metres, or in WGS84 longitude/latitude when it has an origin (its own or
-    /// --origin). Exit status: 0 written, 2 error (an unknown scenario, longitude/latitude
-    /// without an origin, a file that cannot be written).
+    /// RFC 7946, WGS84 longitude/latitude with rings by the right-hand rule, which needs an
+    /// origin (the scenario's own or --origin); local metres only with --crs local. Exit status:
+    /// 0 written, 2 error (an unknown scenario, no origin for longitude/latitude, a file that
+    /// cannot be written).
     Export(ExportArgs),
     /// Load and validate a scenario; print its warnings. Exit status: 0 valid, 2 invalid.
     Check(CheckArgs),
@@ -850,11 +851,12 @@ pub struct ExportArgs {
     /// The scenario (`SCENARIO` or `--scenario`).
     #[command(flatten)]
     pub scenario: ScenarioGiven,
-    /// Write GeoJSON (RFC 7946; the only export format).
-    #[arg(long, required = true)]
+    /// Write GeoJSON (RFC 7946), the only export format: the option may be left out.
+    #[arg(long)]
     pub geojson: bool,
-    /// The coordinates: `local` metres (reads back to the same scenario hash) or `wgs84`
-    /// longitude/latitude (default: wgs84 when there is an origin, local otherwise).
+    /// The coordinates: `wgs84` longitude/latitude (the default; it needs an origin, the
+    /// scenario's or --origin) or `local` metres (reads back to the same scenario hash; not
+    /// RFC 7946, and said so in the file).
     #[arg(long, value_enum)]
     pub crs: Option<CrsArg>,
     /// The local frame's origin on the globe, in place of the scenario's: latitude and longitude

@@ -106,12 +106,7 @@ pub fn export(args: &ExportArgs) -> Result<Exit> {
     };
     let text = scenarios::geojson::to_geojson(&loaded.scenario, &options)?;
     if let Some(path) = write_or_print(args.out.as_deref(), args.force, &text)? {
-        let origin = options.origin.or(loaded.scenario.origin);
-        let crs = options.crs.unwrap_or(if origin.is_some() {
-            Crs::Wgs84
-        } else {
-            Crs::Local
-        });
+        let crs = options.crs.unwrap_or(Crs::Wgs84);
         eprintln!(
             "wrote {} (scenario {}, {})",
             path.display(),

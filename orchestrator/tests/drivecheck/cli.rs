@@ -418,7 +418,7 @@ fn every_bundled_scenario_exported_as_geojson_imports_to_the_same_hash() {
         let geojson = dir.path().join(format!("{name}.geojson"));
         let toml = dir.path().join(format!("{name}.toml"));
         let (geojson, toml) = (geojson.to_str().unwrap(), toml.to_str().unwrap());
-        let out = drivecheck(&["scenario", "export", name, "--geojson", "-o", geojson]);
+        let out = drivecheck(&["scenario", "export", name, "--crs", "local", "-o", geojson]);
         assert_eq!(
             out.status.code(),
             Some(0),
@@ -446,7 +446,7 @@ fn every_bundled_scenario_exported_as_geojson_imports_to_the_same_hash() {
         assert_eq!(summary["valid"], true);
         assert!(summary["warnings"].is_array());
         // Standard output is the GeoJSON without --out.
-        let printed = drivecheck(&["scenario", "export", name, "--geojson"]);
+        let printed = drivecheck(&["scenario", "export", name, "--crs", "local"]);
         assert_eq!(
             String::from_utf8_lossy(&printed.stdout),
             std::fs::read_to_string(geojson).unwrap()
@@ -455,7 +455,8 @@ fn every_bundled_scenario_exported_as_geojson_imports_to_the_same_hash() {
 }
 
 /// With an origin the export is longitude/latitude (RFC 7946 positions), and its import says
-/// which origin it used; without `--geojson` or an origin for `--crs wgs84`, exit 2.
+/// which origin it used; without an origin (the default is wgs84, `--geojson` or not), exit 2
+/// with an error that says to give one.
 #[test]
 fn scenario_export_writes_longitude_latitude_around_an_origin() {
     let dir = tempfile::tempdir().unwrap();
@@ -501,4 +502,10 @@ fn scenario_export_writes_longitude_latitude_around_an_origin() {
     ] {
         assert_eq!(drivecheck(refused).status.code(), Some(2), "{refused:?}");
     }
+    let said = drivecheck(&["scenario", "export", "courtyard"]);
+    assert!(
+        String::from_utf8_lossy(&said.stderr).contains("--origin"),
+        "{}",
+        String::from_utf8_lossy(&said.stderr)
+    );
 }
