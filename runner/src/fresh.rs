@@ -417,6 +417,18 @@ async fn fresh_test<C: FreshCars + ?Sized>(
     })
 }
 
+/// `error` and its causes, joined by `: ` (as the command line prints an error).
+fn with_causes(error: &dyn std::error::Error) -> String {
+    let mut text = error.to_string();
+    let mut cause = error.source();
+    while let Some(next) = cause {
+        text.push_str(": ");
+        text.push_str(&next.to_string());
+        cause = next.source();
+    }
+    text
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -456,16 +468,4 @@ mod tests {
         assert!(first_command(0) + u64::from(u32::MAX) < first_command(1));
         assert_ne!(first_command(0), 1);
     }
-}
-
-/// `error` and its causes, joined by `: ` (as the command line prints an error).
-fn with_causes(error: &dyn std::error::Error) -> String {
-    let mut text = error.to_string();
-    let mut cause = error.source();
-    while let Some(next) = cause {
-        text.push_str(": ");
-        text.push_str(&next.to_string());
-        cause = next.source();
-    }
-    text
 }

@@ -44,7 +44,7 @@ pub enum MergeError {
         dir: PathBuf,
         /// Why.
         #[source]
-        source: RecordingError,
+        source: Box<RecordingError>,
     },
     /// A shard's recording is damaged.
     #[error("{}: {RECORDING_FILE}", dir.display())]
@@ -53,11 +53,11 @@ pub enum MergeError {
         dir: PathBuf,
         /// Why.
         #[source]
-        source: RecordingError,
+        source: Box<RecordingError>,
     },
     /// The merged recording cannot be written.
     #[error(transparent)]
-    Write(#[from] RecordingError),
+    Write(Box<RecordingError>),
     /// A span of a test the shard does not run.
     #[error("{}: {RECORDING_FILE} holds test {test}, which is not in shard {shard}", dir.display())]
     NotInShard {
@@ -106,6 +106,12 @@ pub enum MergeError {
     Profile(#[from] LoadedProfileError),
 }
 
+impl From<RecordingError> for MergeError {
+    fn from(error: RecordingError) -> Self {
+        MergeError::Write(Box::new(error))
+    }
+}
+
 /// A shard's recording as the merge reads it: a span at a time from the file, each checked
 /// against the shard's campaign as it is read (see [`ShardSpans::peek`]).
 struct ShardSpans<'a> {
@@ -122,7 +128,7 @@ impl<'a> ShardSpans<'a> {
         let spans = Spans::open(&shard.dir.join(RECORDING_FILE)).map_err(|source| {
             MergeError::Recording {
                 dir: shard.dir.to_owned(),
-                source,
+                source: Box::new(source),
             }
         })?;
         Ok(Self {
@@ -143,7 +149,7 @@ impl<'a> ShardSpans<'a> {
                 None => return Ok(None),
                 Some(span) => span.map_err(|source| MergeError::Damaged {
                     dir: dir.to_owned(),
-                    source,
+                    source: Box::new(source),
                 })?,
             };
             if let Some(test) = span.test_index {

@@ -22,27 +22,39 @@ use campaign::seed::{Purpose, derive};
 pub enum SimDriveError {
     /// The scenario's generator settings are not usable (the margins a case lacks are generated).
     #[error("the scenario's generator settings")]
-    Generator(#[source] GenerationError),
+    Generator(#[source] Box<GenerationError>),
     /// The case's commands cannot be planned in the scenario.
     #[error("the case cannot be driven")]
-    Plan(#[source] CaseError),
+    Plan(#[source] Box<CaseError>),
     /// The simulated car did not start.
     #[error(transparent)]
-    Connect(#[from] ConnectError),
+    Connect(Box<ConnectError>),
     /// The one-test campaign did not run to its end.
     #[error("{error} (run directory {})", dir.display())]
     Campaign {
         /// Why.
-        error: RunError,
+        error: Box<RunError>,
         /// Its run directory.
         dir: PathBuf,
     },
     /// The run's case file could not be read back.
     #[error(transparent)]
-    Case(#[from] RunError),
+    Case(Box<RunError>),
     /// The run wrote no case.
     #[error("the run wrote no case")]
     NoCase,
+}
+
+impl From<RunError> for SimDriveError {
+    fn from(error: RunError) -> Self {
+        SimDriveError::Case(Box::new(error))
+    }
+}
+
+impl From<ConnectError> for SimDriveError {
+    fn from(error: ConnectError) -> Self {
+        SimDriveError::Connect(Box::new(error))
+    }
 }
 
 /// Settings of the simulated car that differ from the scenario's car (simulation only).
@@ -143,9 +155,9 @@ impl<'a> SimDriver<'a> {
     /// generated from the seed of run 1, [`Purpose::Margins`]).
     pub fn plan(&self, case: &Case) -> Result<TestPlan, SimDriveError> {
         let generator = Generator::new(self.scenario.generator.generator_config(Strategy::Wedge))
-            .map_err(SimDriveError::Generator)?;
+            .map_err(|e| SimDriveError::Generator(Box::new(e)))?;
         case.replay_plan(self.scenario, &generator, self.seed, false, 0)
-            .map_err(SimDriveError::Plan)
+            .map_err(|e| SimDriveError::Plan(Box::new(e)))
     }
 
     /// Drives `case` `runs` times (run k with seed + k, [`Purpose::Run`]) with `settings`:
@@ -213,7 +225,7 @@ impl<'a> SimDriver<'a> {
             sim.shutdown();
         }
         let report = result.map_err(|failure| SimDriveError::Campaign {
-            error: failure.error,
+            error: Box::new(failure.error),
             dir: config.out_dir.clone(),
         })?;
         Ok(report.cases().next().ok_or(SimDriveError::NoCase)??)

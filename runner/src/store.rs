@@ -58,7 +58,7 @@ pub enum StoreError {
         path: PathBuf,
         /// What is wrong.
         #[source]
-        source: CaseError,
+        source: Box<CaseError>,
     },
 }
 
@@ -146,7 +146,7 @@ impl RunStore {
         let text = std::fs::read_to_string(path).map_err(read)?;
         Case::from_json(&text).map_err(|source| StoreError::Case {
             path: path.to_owned(),
-            source,
+            source: Box::new(source),
         })
     }
 }

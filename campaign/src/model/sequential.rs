@@ -10,20 +10,23 @@
 //! normal dependency tree (ARCHITECTURE.md). Why not its value tree: drivecheck does not shrink
 //! through proptest; shrinking is `crate::shrink`'s, which edits a recorded case.
 
-use std::sync::Arc;
-
 use proptest::collection::SizeRange;
 use proptest::num::sample_uniform_incl;
 use proptest::strategy::{Strategy, ValueTree};
 use proptest::test_runner::{Reason, TestRunner};
 
+/// Whether a transition may follow in a state.
+type Precondition<State, Transition> = Box<dyn Fn(&State, &Transition) -> bool + Send + Sync>;
+/// The state after a transition.
+type Next<State, Transition> = Box<dyn Fn(State, &Transition) -> State + Send + Sync>;
+
 /// A sequence of transitions of a reference state machine, and how to draw it.
 pub struct Sequential<State, Transition, StateStrategy, TransitionStrategy> {
     size: SizeRange,
-    init_state: Arc<dyn Fn() -> StateStrategy + Send + Sync>,
-    preconditions: Arc<dyn Fn(&State, &Transition) -> bool + Send + Sync>,
-    transitions: Arc<dyn Fn(&State) -> TransitionStrategy + Send + Sync>,
-    next: Arc<dyn Fn(State, &Transition) -> State + Send + Sync>,
+    init_state: Box<dyn Fn() -> StateStrategy + Send + Sync>,
+    preconditions: Precondition<State, Transition>,
+    transitions: Box<dyn Fn(&State) -> TransitionStrategy + Send + Sync>,
+    next: Next<State, Transition>,
 }
 
 impl<State, Transition, StateStrategy, TransitionStrategy>
@@ -45,10 +48,10 @@ where
     ) -> Self {
         Self {
             size,
-            init_state: Arc::new(init_state),
-            preconditions: Arc::new(preconditions),
-            transitions: Arc::new(transitions),
-            next: Arc::new(next),
+            init_state: Box::new(init_state),
+            preconditions: Box::new(preconditions),
+            transitions: Box::new(transitions),
+            next: Box::new(next),
         }
     }
 
