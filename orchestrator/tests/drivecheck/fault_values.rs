@@ -83,9 +83,39 @@ fn a_bitflip_in_the_exponent_of_the_odometry_step_fails_the_test() {
 
 #[test]
 fn a_huge_yaw_or_range_is_judged_not_aborted() {
-    // The yaw is wrapped as the firmware wraps it (no endless loop); a range far beyond any
-    // anchor moves the estimate by at most the 0.2 m correction limit per measurement.
-    replay(Probe::UwbYaw, FaultKind::SetTo, 1.0e30);
-    replay(Probe::UwbYaw, FaultKind::Amplification, f64::from(f32::MAX));
-    replay(Probe::UwbRange(50), FaultKind::SetTo, 1.0e38);
+    // A bitflip in the exponent makes the yaw and a range huge as the car runs: the yaw is
+    // wrapped as the firmware wraps it (no endless loop); a range far beyond any anchor moves
+    // the estimate by at most the 0.2 m correction limit per measurement.
+    replay(Probe::UwbYaw, FaultKind::Bitflip, 30.0);
+    replay(Probe::UwbRange(50), FaultKind::Bitflip, 30.0);
+}
+
+#[test]
+fn a_fault_value_beyond_the_firmwares_ranges_is_refused_before_driving() {
+    // A case file may not ask for a value no scenario can draw (#51): refused, naming the field.
+    for (probe, kind, param) in [
+        (Probe::UwbYaw, FaultKind::SetTo, 1.0e30),
+        (Probe::UwbYaw, FaultKind::Amplification, f64::from(f32::MAX)),
+        (Probe::UwbRange(50), FaultKind::SetTo, 1.0e38),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let fault = CommandRecord::AddFault {
+            probe,
+            kind,
+            param,
+            start: 0,
+            duration: 20,
+            at: None,
+        };
+        let file = case_with(dir.path(), fault);
+        let out = drivecheck(&[
+            "replay",
+            path(&file),
+            "--times",
+            "1",
+            "--ignore-scenario-hash",
+        ]);
+        assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+        assert!(text(&out).contains("commands[1].param"), "{}", text(&out));
+    }
 }

@@ -51,6 +51,7 @@ fn is_test_file(file: &str) -> bool {
     let name = file.rsplit('/').next().unwrap_or(file);
     name == "tests.rs"
         || name == "proptests.rs"
+        || name == "fuzz.rs"
         || name.ends_with("_tests.rs")
         || file.contains("/tests/")
 }
