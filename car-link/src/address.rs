@@ -1,4 +1,5 @@
-//! Car addresses as URLs: `tcp://host:8300`, `udp://host:8300`, `serial:///dev/ttyACM0` and `sim`.
+//! Car addresses as URLs: `tcp://host:8300`, `udp://host:8300`, `serial:///dev/ttyACM0`, `sim`
+//! and `sitl:TREE` (a firmware tree built for the host).
 
 use std::fmt;
 use std::str::FromStr;
@@ -32,6 +33,12 @@ pub enum CarAddress {
     },
     /// The embedded simulated car; the orchestrator resolves it and hands car-link a stream.
     Sim,
+    /// The car's own firmware, built from a firmware tree for the host and run in virtual time
+    /// (`docs/sitl.md`); the orchestrator builds and starts it and hands car-link a stream.
+    Sitl {
+        /// The tree's `Embedded/RC_Controller` folder, as given.
+        tree: String,
+    },
 }
 
 /// A car address that does not parse.
@@ -39,7 +46,7 @@ pub enum CarAddress {
 pub enum AddressError {
     /// Not one of the known schemes.
     #[error(
-        "car address {0:?}: expected tcp://host[:port], udp://host[:port], serial:///dev/… or sim"
+        "car address {0:?}: expected tcp://host[:port], udp://host[:port], serial:///dev/…, sim or sitl:FIRMWARE_TREE"
     )]
     Scheme(String),
     /// No host after the scheme.
@@ -56,6 +63,9 @@ pub enum AddressError {
     /// A serial address without a device path.
     #[error("car address {0:?} has no device path")]
     NoPath(String),
+    /// A `sitl:` address without a firmware tree.
+    #[error("car address {0:?} names no firmware tree (sitl:path/to/Embedded/RC_Controller)")]
+    NoTree(String),
 }
 
 fn host_port(address: &str, rest: &str, max_port: u16) -> Result<(String, u16), AddressError> {
@@ -98,6 +108,13 @@ impl FromStr for CarAddress {
             let (host, port) = host_port(address, rest, u16::MAX - 1)?;
             return Ok(CarAddress::Udp { host, port });
         }
+        if let Some(tree) = address.strip_prefix("sitl:") {
+            let tree = tree.strip_prefix("//").unwrap_or(tree);
+            if tree.is_empty() {
+                return Err(AddressError::NoTree(address.into()));
+            }
+            return Ok(CarAddress::Sitl { tree: tree.into() });
+        }
         if let Some(path) = address.strip_prefix("serial://") {
             if path.is_empty() {
                 return Err(AddressError::NoPath(address.into()));
@@ -122,6 +139,7 @@ impl fmt::Display for CarAddress {
             CarAddress::Udp { host, port } => write!(f, "udp://{}:{port}", bracket(host)),
             CarAddress::Serial { path } => write!(f, "serial://{path}"),
             CarAddress::Sim => f.write_str("sim"),
+            CarAddress::Sitl { tree } => write!(f, "sitl:{tree}"),
         }
     }
 }
@@ -164,6 +182,17 @@ mod tests {
             })
         );
         assert_eq!(parse("sim"), Ok(CarAddress::Sim));
+        assert_eq!(
+            parse("sitl:../fw/Embedded/RC_Controller"),
+            Ok(CarAddress::Sitl {
+                tree: "../fw/Embedded/RC_Controller".into()
+            })
+        );
+        assert_eq!(
+            parse("sitl:///abs/tree").map(|a| a.to_string()),
+            Ok("sitl:/abs/tree".into())
+        );
+        assert_eq!(parse("sitl:"), Err(AddressError::NoTree("sitl:".into())));
         assert_eq!(
             parse("tcp://[::1]:8300"),
             Ok(CarAddress::Tcp {

@@ -207,6 +207,10 @@ impl Link {
                 io::ErrorKind::Unsupported,
                 "the address `sim` is resolved by the orchestrator: pass the simulator's pipe to Link::over_stream",
             )),
+            CarAddress::Sitl { .. } => Err(io::Error::new(
+                io::ErrorKind::Unsupported,
+                "a `sitl:` address is resolved by the orchestrator: it builds and starts the firmware and passes its pipe to Link::over_stream",
+            )),
         }
     }
 

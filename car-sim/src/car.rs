@@ -4,20 +4,18 @@
 use std::collections::VecDeque;
 use std::f64::consts::PI;
 
-use scenarios::geometry::Point;
-
 use crate::autopilot::{ApInputs, Autopilot, FwPose, RoutePart, RoutePoint, StoreOutcome};
 use crate::config::{FirmwareConfig, VehicleParams, truncate};
 use crate::debug::{DebugEvent, Truth};
 use crate::fault::FaultInjection;
 use crate::motor::{HIL_TEMP_MOS, HIL_V_IN, Motor, MotorCommand};
 use crate::noise::Noise;
+use crate::plant::{GnssNoise, Motion, STREAM_UWB};
 use crate::positioning::{FusedPosition, GnssFix, OdometryInput, wrap180};
 use crate::servo::Servo;
 use crate::terminal::{NO_COMMAND, invalid_command, scan_i32, tokenize, truncate_printf};
 use crate::uwb::{
-    ANTENNA_OFFSET_M, AnchorList, RadioModel, RangeMeasurement, RangeResult, Schedule,
-    UwbEstimator, measure_range,
+    AnchorList, RadioModel, RangeMeasurement, RangeResult, Schedule, UwbEstimator, measure_range,
 };
 use crate::world::World;
 use car_link::firmware::{
@@ -38,9 +36,6 @@ const UWB_REPLY_DELAY_MS: u64 = 10;
 const IMU_SAMPLES_PER_ODOMETRY_TICK: u32 = 10;
 /// Milliseconds per day.
 const MS_PER_DAY: i64 = 86_400_000;
-/// Noise streams.
-const STREAM_GNSS: u64 = 1;
-const STREAM_UWB: u64 = 2;
 
 /// The simulated GNSS receiver (RTK).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -298,15 +293,13 @@ pub struct SimCar {
     now_ms: u64,
     motor: Motor,
     servo: Servo,
-    truth: TrueMotion,
+    truth: Motion,
     fused: FusedPosition,
     uwb: UwbEstimator,
     anchors: AnchorList,
     autopilot: Autopilot,
     fi: FaultInjection,
-    gnss_noise: Noise,
-    /// The GNSS noise of the last fix, m (east, north): the Gauss–Markov state.
-    gnss_error: Option<(f64, f64)>,
+    gnss_noise: GnssNoise,
     uwb_noise: Noise,
     gnss_in_flight: VecDeque<(u64, GnssFix)>,
     last_gnss_correction: Option<GnssCorrection>,
@@ -316,18 +309,6 @@ pub struct SimCar {
     ms_today_base: Option<(i64, u64)>,
     enu_ref: (f64, f64, f64),
     events: Vec<DebugEvent>,
-}
-
-/// The true motion state.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct TrueMotion {
-    x: f64,
-    y: f64,
-    heading: f64,
-    speed: f64,
-    steering: f64,
-    accel_long: f64,
-    yaw_rate: f64,
 }
 
 impl SimCar {
@@ -342,22 +323,13 @@ impl SimCar {
             now_ms: 0,
             motor: Motor::default(),
             servo: Servo::new(config.vehicle.steering_center),
-            truth: TrueMotion {
-                x: p.x,
-                y: p.y,
-                heading: p.heading,
-                speed: 0.0,
-                steering: 0.0,
-                accel_long: 0.0,
-                yaw_rate: 0.0,
-            },
+            truth: Motion::standing(p),
             fused: FusedPosition::new(fw),
             uwb: UwbEstimator::new(fw),
             anchors: AnchorList::new(fw),
             autopilot: Autopilot::new(fw),
             fi: FaultInjection::default(),
-            gnss_noise: Noise::stream(options.seed, STREAM_GNSS),
-            gnss_error: None,
+            gnss_noise: GnssNoise::new(options.seed),
             uwb_noise: Noise::stream(options.seed, STREAM_UWB),
             gnss_in_flight: VecDeque::new(),
             last_gnss_correction: None,
@@ -449,32 +421,17 @@ impl SimCar {
 
     fn move_truth(&mut self) {
         let v = &self.config.vehicle;
-        let dt = TICK_MS as f64 / 1000.0;
         let speed = f64::from(self.motor.rpm())
             * f64::from(v.speed_per_erpm())
             * self.options.sensors.odometry_scale;
-        let max = f64::from(v.steering_max_angle_rad);
-        let delta = truncate(
-            f64::from(v.angle_for_servo(self.servo.position())),
-            -max,
-            max,
+        let delta = f64::from(v.angle_for_servo(self.servo.position()));
+        self.truth.advance(
+            speed,
+            delta,
+            f64::from(v.steering_max_angle_rad),
+            f64::from(v.axis_distance),
+            TICK_MS as f64 / 1000.0,
         );
-        let d = speed * dt;
-        let curvature = delta.tan() / f64::from(v.axis_distance);
-        let t = &mut self.truth;
-        let dpsi = d * curvature;
-        if curvature.abs() < 1e-9 {
-            t.x += d * t.heading.cos();
-            t.y += d * t.heading.sin();
-        } else {
-            t.x += ((t.heading + dpsi).sin() - t.heading.sin()) / curvature;
-            t.y += (t.heading.cos() - (t.heading + dpsi).cos()) / curvature;
-        }
-        t.heading = (t.heading + dpsi + PI).rem_euclid(2.0 * PI) - PI;
-        t.accel_long = (speed - t.speed) / dt;
-        t.yaw_rate = dpsi / dt;
-        t.speed = speed;
-        t.steering = delta;
     }
 
     fn odometry_tick(&mut self) {
@@ -547,51 +504,17 @@ impl SimCar {
     }
 
     fn measure_gnss(&mut self) -> GnssFix {
-        let t = self.truth;
-        let (s, c) = t.heading.sin_cos();
-        let (ax, ay) = (
+        let antenna = self.truth.gnss_antenna(
             f64::from(self.config.gps_ant_x),
             f64::from(self.config.gps_ant_y),
         );
-        let (ex, ey) = self.gnss_noise_step();
-        let x = t.x + ax * c - ay * s + ex;
-        let y = t.y + ax * s + ay * c + ey;
+        let (ex, ey) = self.gnss_noise.next(&self.options.gnss);
         GnssFix {
-            x: x as f32,
-            y: y as f32,
+            x: (antenna.x + ex) as f32,
+            y: (antenna.y + ey) as f32,
             measured_ms: self.now_ms,
             rtk: true,
         }
-    }
-
-    /// The next fix's noise (see [`GnssModel::correlation_s`]). White noise draws exactly what
-    /// it always drew, so a model without correlation reproduces earlier runs.
-    fn gnss_noise_step(&mut self) -> (f64, f64) {
-        let model = self.options.gnss;
-        let sigma = model.sigma_m;
-        let white = (
-            self.gnss_noise.gaussian(sigma),
-            self.gnss_noise.gaussian(sigma),
-        );
-        if model.correlation_s <= 0.0 {
-            return white;
-        }
-        let next = match self.gnss_error {
-            None => white,
-            Some((ex, ey)) => {
-                let a = (-(model.period_ms as f64 / 1000.0) / model.correlation_s).exp();
-                let b = (1.0 - a * a).sqrt();
-                (a * ex + b * white.0, a * ey + b * white.1)
-            }
-        };
-        self.gnss_error = Some(next);
-        next
-    }
-
-    fn antenna_position(&self) -> Point {
-        let t = self.truth;
-        let off = f64::from(ANTENNA_OFFSET_M);
-        Point::new(t.x + off * t.heading.cos(), t.y + off * t.heading.sin())
     }
 
     fn uwb_tick(&mut self) {
@@ -620,7 +543,7 @@ impl SimCar {
             &self.options.world,
             self.anchors.find(address),
             address,
-            self.antenna_position(),
+            self.truth.uwb_antenna(),
             &self.options.radio,
             &mut self.uwb_noise,
         );
@@ -1125,7 +1048,8 @@ mod tests {
             },
             ..CarOptions::default()
         });
-        let xs: Vec<f64> = (0..40_000).map(|_| c.gnss_noise_step().0).collect();
+        let model = c.options.gnss;
+        let xs: Vec<f64> = (0..40_000).map(|_| c.gnss_noise.next(&model).0).collect();
         let n = xs.len() as f64;
         let mean = xs.iter().sum::<f64>() / n;
         let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n;

@@ -55,6 +55,7 @@ pub mod debug;
 pub mod fault;
 pub mod motor;
 pub mod noise;
+pub mod plant;
 pub mod positioning;
 pub mod profile;
 pub mod protocol;

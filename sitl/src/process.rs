@@ -197,6 +197,11 @@ impl SitlProcess {
         self.send(&HostFrame::Nmea(sentence.to_string()))
     }
 
+    /// The GNSS receiver's pulse per second, now ([`HostFrame::Pps`]).
+    pub fn pps(&mut self) -> Result<(), SitlError> {
+        self.send(&HostFrame::Pps)
+    }
+
     /// A UWB range answer to a [`SitlFrame::UwbRequest`].
     pub fn send_uwb_range(&mut self, id: u8, dest: u8, range: f32) -> Result<(), SitlError> {
         self.send(&HostFrame::UwbRange { id, dest, range })

@@ -75,6 +75,10 @@ pub enum HostFrame {
     },
     /// Ask for [`SitlFrame::Stats`].
     Stats,
+    /// The GNSS receiver's pulse per second, now (the firmware's `pos_pps_cb`, which sets its
+    /// time of day to the whole second after the last NMEA time stamp: a board with
+    /// `UBLOX_USE_PPS` keeps its clock by it, not by the NMEA time).
+    Pps,
     /// End the executable.
     Quit,
 }
@@ -225,6 +229,7 @@ impl HostFrame {
                 frame(0x06, &p)
             }
             HostFrame::Stats => frame(0x07, &[]),
+            HostFrame::Pps => frame(0x09, &[]),
             HostFrame::ImuNoise {
                 accel_sd,
                 gyro_sd,

@@ -549,3 +549,28 @@ fn the_state_saturates_as_the_board_converts() {
         assert_eq!(s.px, 0.0, "{}", tree.var);
     }
 }
+
+#[test]
+fn the_pulse_per_second_sets_the_time_of_day() {
+    // A board with UBLOX_USE_PPS keeps its time of day by the receiver's pulse, set to the whole
+    // second after the last NMEA time stamp; without the pulse it stays unknown (−1), and the
+    // firmware's GNSS latency compensation looks up its pose history at no time at all.
+    for tree in trees() {
+        let b = built(&tree);
+        let mut p = started(&b);
+        p.send_nmea(&gga(42.0, 58.0)).unwrap(); // stamped 12:00:00.00
+        p.advance_to(p.now_us() + 100_000).unwrap();
+        let (_, before) = get_state(&mut p, &b);
+        assert_eq!(before.ms_today, -1, "{}: {before:?}", tree.var);
+        p.pps().unwrap();
+        p.advance_to(p.now_us() + 100_000).unwrap();
+        let (_, after) = get_state(&mut p, &b);
+        let second = 12 * 3_600_000 + 1_000;
+        assert!(
+            (second..second + 200).contains(&after.ms_today),
+            "{}: time of day {} after the pulse",
+            tree.var,
+            after.ms_today
+        );
+    }
+}

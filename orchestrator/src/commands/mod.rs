@@ -7,6 +7,7 @@ mod cases_from;
 pub mod compare;
 mod completions;
 mod explain;
+mod firmware;
 mod merge;
 mod progress;
 mod replay;

@@ -70,10 +70,17 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     let cars = named_cars(&args.car)?;
     let car_label = cars_label(&cars);
     let address = cars[0].address.clone();
-    let embedded = address == CarAddress::Sim;
+    // A fresh car for each test: the embedded simulated car, or the car's own firmware built
+    // for the host (its physical car and world are the simulated car's).
+    let firmware = match &address {
+        CarAddress::Sitl { tree } => Some(super::firmware::build(tree)?),
+        _ => None,
+    };
+    let embedded = address == CarAddress::Sim || firmware.is_some();
     if args.profile.is_some() && !embedded {
         anyhow::bail!(
-            "--profile describes the embedded simulated car (--car sim), not the car at {car_label}"
+            "--profile describes the embedded simulated car (--car sim, or the physical car \
+             around --car sitl:TREE), not the car at {car_label}"
         );
     }
     let profile = crate::profile_arg::load(args.profile.as_deref())?;
@@ -115,6 +122,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
             found.push(dry_run(
                 args,
                 car,
+                firmware.as_ref(),
                 &scenario,
                 &sim,
                 campaign,
@@ -227,8 +235,18 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         );
     }
     let started = Instant::now();
-    let result = if embedded {
-        campaign_on_fresh_cars(&scenario, &sim, &mut config, jobs, virtual_time, args.live)
+    let result = if let Some(firmware) = &firmware {
+        let cars = runner::vehicle::sitl::SitlCars::new(
+            &firmware.executable,
+            firmware.version,
+            &sim,
+            config.campaign.seed,
+            virtual_time,
+        );
+        campaign_on_fresh_cars(&cars, &scenario, &mut config, jobs, args.live)
+    } else if embedded {
+        let cars = EmbeddedSims::new(&sim, config.campaign.seed, virtual_time);
+        campaign_on_fresh_cars(&cars, &scenario, &mut config, jobs, args.live)
     } else if cars.len() > 1 {
         let runtime = runtime(false)?;
         runtime.block_on(async {
@@ -290,6 +308,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
 fn dry_run(
     args: &RunArgs,
     car: &NamedCar,
+    firmware: Option<&super::firmware::BuiltFirmware>,
     scenario: &Scenario,
     sim: &car_sim::SimConfig,
     campaign: Campaign,
@@ -300,19 +319,38 @@ fn dry_run(
     config.safety.stale_after = args.stale_after;
     config.shard = args.shard;
     config.tests = cases.map_or(Tests::Generated, |(cases, _)| Tests::Cases(cases));
-    let found = runtime(false)?.block_on(async {
-        let (connected, _sim) = connect(address, sim, campaign.seed).await?;
+    async fn check<V: runner::vehicle::Vehicle>(
+        connected: &V,
+        given: &str,
+        scenario: &Scenario,
+        config: &RunConfig,
+    ) -> Result<runner::DryRun> {
         if crate::output::chatty() {
             eprintln!(
-                "connected to {} (firmware {}); preflight, then the first test's route and faults \
-                 uploaded and read back, with the autopilot off",
-                car.given,
-                runner::vehicle::Vehicle::version(&connected)
+                "connected to {given} (firmware {}); preflight, then the first test's route and \
+                 faults uploaded and read back, with the autopilot off",
+                connected.version()
             );
         }
-        runner::dry_run(&connected, scenario, &config)
+        runner::dry_run(connected, scenario, config)
             .await
             .map_err(anyhow::Error::from)
+    }
+    let found = runtime(false)?.block_on(async {
+        match firmware {
+            Some(firmware) => {
+                let sitl = runner::vehicle::sitl::SitlCar {
+                    executable: firmware.executable.clone(),
+                    plant: runner::vehicle::sitl::plant_options(firmware.version, sim),
+                };
+                let (connected, _running) = runner::vehicle::sitl::connect_sitl(&sitl).await?;
+                check(&connected, &car.given, scenario, &config).await
+            }
+            None => {
+                let (connected, _sim) = connect(address, sim, campaign.seed).await?;
+                check(&connected, &car.given, scenario, &config).await
+            }
+        }
     })?;
     if !args.json {
         println!(
@@ -662,12 +700,11 @@ async fn start_live(
 
 /// Runs the campaign on the embedded simulator, a fresh simulated car per test, `jobs` at once,
 /// interrupted by Ctrl-C.
-fn campaign_on_fresh_cars(
+fn campaign_on_fresh_cars<C: runner::vehicle::FreshCars>(
+    cars: &C,
     scenario: &Scenario,
-    sim: &car_sim::SimConfig,
     config: &mut RunConfig,
     jobs: usize,
-    virtual_time: bool,
     live: Option<std::net::SocketAddr>,
 ) -> Result<CampaignReport> {
     // The signals and the live view's server run on a runtime of their own; every test runs on
@@ -676,9 +713,8 @@ fn campaign_on_fresh_cars(
     let _server = runtime.block_on(start_live(live, config))?;
     let _context = runtime.enter();
     let interrupt = Interrupt::listen();
-    let cars = EmbeddedSims::new(sim, config.campaign.seed, virtual_time);
     let progress = Progress::new(config.test_indices().len());
-    let result = run_campaign_fresh(&cars, scenario, config, jobs, interrupt.token(), &progress);
+    let result = run_campaign_fresh(cars, scenario, config, jobs, interrupt.token(), &progress);
     progress.finish();
     result
         .map_err(|failure| anyhow::Error::new(CampaignFailed::new(failure.error, &config.out_dir)))
@@ -753,7 +789,7 @@ pub(super) fn named_cars(given: &[String]) -> Result<Vec<NamedCar>> {
         let address: CarAddress = address_text
             .parse()
             .with_context(|| format!("--car {text}"))?;
-        if given.len() > 1 && address == CarAddress::Sim {
+        if given.len() > 1 && matches!(address, CarAddress::Sim | CarAddress::Sitl { .. }) {
             anyhow::bail!(
                 "--car {text}: the embedded simulated car gives every test a fresh car already; \
                  run its tests at once with --jobs N, and give several --car only for cars behind \

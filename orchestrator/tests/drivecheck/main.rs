@@ -12,6 +12,7 @@ mod exit_status;
 mod explain;
 mod fault_places;
 mod fault_values;
+mod firmware_in_the_loop;
 mod json_everywhere;
 mod junit;
 mod logging;

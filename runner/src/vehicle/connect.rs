@@ -28,12 +28,15 @@ pub enum ConnectError {
     /// The embedded simulated car.
     #[error("cannot connect to the embedded simulated car")]
     Sim(#[source] CarError),
+    /// The car's own firmware built for the host.
+    #[error(transparent)]
+    Sitl(#[from] super::sitl::SitlCarError),
 }
 
 /// How the runner talks to any car: round trips on a radio link can exceed the 250 ms default,
 /// and a lossy one (30 % each way) loses about half the round trips, so an acked request gets 10
 /// tries (all lost together about once in a thousand).
-fn car_config() -> LinkConfig {
+pub(super) fn car_config() -> LinkConfig {
     LinkConfig {
         request_timeout: Duration::from_secs(1),
         terminal_timeout: Duration::from_secs(2),

@@ -25,6 +25,7 @@
 //! beside [`connect`] that implements it.
 
 mod connect;
+pub mod sitl;
 
 use std::future::Future;
 use std::pin::Pin;

@@ -24,6 +24,7 @@ void sitl_hw_imu_set(const float accel[3], const float gyro[3], const float mag[
 void sitl_hw_imu_noise(float accel_sd, float gyro_sd, uint64_t seed);
 void sitl_hw_car_bytes(const unsigned char *data, unsigned int len);
 void sitl_hw_nmea(const char *line, unsigned int len);
+void sitl_hw_pps(void);
 void sitl_hw_uwb_range(uint8_t id, uint8_t dest, float range);
 void sitl_hw_motor_values(const float values[6]);
 #endif

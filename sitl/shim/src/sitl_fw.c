@@ -51,7 +51,7 @@ void sitl_hw_set_vin(float v);
 
 /* ---- input queue: host inputs wait here for the shim's input thread ---- */
 
-enum in_kind { IN_CAR_BYTES, IN_NMEA, IN_UWB_RANGE, IN_MOTOR_VALUES_REPLY };
+enum in_kind { IN_CAR_BYTES, IN_NMEA, IN_PPS, IN_UWB_RANGE, IN_MOTOR_VALUES_REPLY };
 
 struct in_item {
   struct in_item *next;
@@ -88,6 +88,8 @@ void sitl_hw_car_bytes(const unsigned char *data, unsigned int len) {
 void sitl_hw_nmea(const char *line, unsigned int len) {
   in_push(IN_NMEA, (const unsigned char *)line, len, 0, 0, 0.0f);
 }
+/* The receiver's PPS line: on the board an EXT interrupt (channel 8) calls pos_pps_cb. */
+void sitl_hw_pps(void) { in_push(IN_PPS, NULL, 0, 0, 0, 0.0f); }
 void sitl_hw_uwb_range(uint8_t id, uint8_t dest, float range) {
   in_push(IN_UWB_RANGE, NULL, 0, id, dest, range);
 }
@@ -163,6 +165,9 @@ static THD_FUNCTION(in_thread, arg) {
         break;
       case IN_NMEA:
         pos_input_nmea((const char *)it->data);
+        break;
+      case IN_PPS:
+        pos_pps_cb(&EXTD1, 8);
         break;
       case IN_UWB_RANGE:
         sitl_hw_deliver_range(it->id, it->dest, it->range);

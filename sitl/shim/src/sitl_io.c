@@ -27,6 +27,7 @@ enum {
   H_UWB_RANGE = 0x06,
   H_STATS = 0x07,
   H_IMU_NOISE = 0x08,
+  H_PPS = 0x09,
   H_QUIT = 0x0F,
   S_HELLO = 0x80,
   S_ADVANCED = 0x81,
@@ -192,6 +193,10 @@ int main(void) {
       case H_IMU_NOISE:
         if (len != 16) bad_frame("IMU_NOISE wants 16 bytes", type, len);
         sitl_hw_imu_noise(get_f32(buf), get_f32(buf + 4), get_u64(buf + 8));
+        break;
+      case H_PPS:
+        if (len != 0) bad_frame("PPS has no payload", type, len);
+        sitl_hw_pps();
         break;
       case H_STATS:
         frame_head(S_STATS, 16);

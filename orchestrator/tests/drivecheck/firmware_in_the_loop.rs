@@ -1,0 +1,133 @@
+//! `--car sitl:TREE`: the car's own firmware built for the host and driven in virtual time, a
+//! fresh start of it per test (`docs/sitl.md#in-a-campaign`).
+//!
+//! The trees come from the environment as for the `sitl` crate's tests (`DRIVECHECK_FIRMWARE_10`,
+//! `DRIVECHECK_FIRMWARE_12`); without them each test says `skipped: no firmware tree` and passes,
+//! except under `CI=true`, where it fails.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use super::common::{cases, path, text};
+
+/// The trees given, with the firmware profile of their generation for the simulated car.
+fn trees() -> Vec<(&'static str, PathBuf)> {
+    let found: Vec<_> = [
+        ("DRIVECHECK_FIRMWARE_10", "10.1"),
+        ("DRIVECHECK_FIRMWARE_12", "12.3"),
+    ]
+    .into_iter()
+    .filter_map(|(var, version)| {
+        std::env::var_os(var)
+            .filter(|v| !v.is_empty())
+            .map(|p| (version, PathBuf::from(p)))
+    })
+    .collect();
+    if found.is_empty() {
+        assert!(
+            std::env::var("CI").as_deref() != Ok("true"),
+            "CI=true and no firmware tree: set DRIVECHECK_FIRMWARE_10 / DRIVECHECK_FIRMWARE_12"
+        );
+        println!("skipped: no firmware tree");
+    }
+    found
+}
+
+/// `drivecheck ARGS` with the build cache in the test's target folder.
+fn drivecheck(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_drivecheck"))
+        .args(args)
+        .env(
+            "DRIVECHECK_SITL_CACHE",
+            Path::new(env!("CARGO_TARGET_TMPDIR")).join("sitl-cache"),
+        )
+        .output()
+        .expect("the drivecheck binary runs")
+}
+
+/// `run -q --seed 1 --tests N ARGS --record none --out OUT`, exit 0 or 1.
+fn campaign(out: &Path, tests: usize, args: &[&str]) {
+    let tests = tests.to_string();
+    let mut all = vec!["-q", "run", "--seed", "1", "--tests", &tests];
+    all.extend_from_slice(args);
+    all.extend_from_slice(&["--record", "none", "--out", path(out)]);
+    let output = drivecheck(&all);
+    assert!(
+        matches!(output.status.code(), Some(0 | 1)),
+        "{}",
+        text(&output)
+    );
+}
+
+/// Each case's verdict.
+fn verdicts(dir: &Path) -> Vec<String> {
+    cases(dir)
+        .values()
+        .map(|text| {
+            let case: serde_json::Value = serde_json::from_str(text).unwrap();
+            case["verdict"].to_string()
+        })
+        .collect()
+}
+
+#[test]
+fn a_campaign_on_the_firmware_is_deterministic_and_agrees_with_the_simulated_car() {
+    for (version, tree) in trees() {
+        let dir = tempfile::tempdir().unwrap();
+        let car = format!("sitl:{}", tree.display());
+        let (a, b, sim) = (
+            dir.path().join("a"),
+            dir.path().join("b"),
+            dir.path().join("sim"),
+        );
+        campaign(&a, 10, &["--car", &car, "--jobs", "2"]);
+        campaign(&b, 10, &["--car", &car, "--jobs", "1"]);
+        // the same firmware, seed and plant give the same cases, whatever the jobs
+        super::common::assert_same_campaign(&a, &b);
+        let (va, summary) = (verdicts(&a), super::common::summary(&a));
+        assert_eq!(va.len(), 10, "{version}: {summary}");
+        assert_eq!(summary["aborted"], 0, "{version}: {summary}");
+        // the simulated car of that generation, the same seed: its model of the firmware
+        let profile = dir.path().join("profile.toml");
+        std::fs::write(
+            &profile,
+            format!("format = \"drivecheck-car-profile\"\nversion = 1\nfirmware = \"{version}\"\n"),
+        )
+        .unwrap();
+        campaign(&sim, 10, &["--car", "sim", "--profile", path(&profile)]);
+        let agreed = va
+            .iter()
+            .zip(verdicts(&sim))
+            .filter(|(x, y)| **x == *y)
+            .count();
+        assert!(
+            agreed >= 8,
+            "{version}: the firmware and the simulated car agree on {agreed} of 10 verdicts"
+        );
+    }
+}
+
+#[test]
+fn the_dry_run_passes_on_the_firmware() {
+    for (version, tree) in trees() {
+        let car = format!("sitl:{}", tree.display());
+        let out = drivecheck(&["run", "--dry-run", "--car", &car]);
+        assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(stdout.contains("dry run passed"), "{stdout}");
+        assert!(stdout.contains(&format!("firmware {version}")), "{stdout}");
+    }
+}
+
+#[test]
+fn a_folder_that_is_not_a_firmware_tree_is_refused_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let car = format!("sitl:{}", dir.path().display());
+    let out = drivecheck(&["run", "--tests", "1", "--car", &car]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains(&dir.path().display().to_string()) && stderr.contains("firmware"),
+        "{stderr}"
+    );
+}

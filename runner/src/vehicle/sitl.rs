@@ -1,0 +1,504 @@
+//! The car's own firmware, built for the host (`sitl`), as a car: the executable runs in
+//! lockstep with tokio's clock, its car-protocol bytes go both ways through an in-process pipe to
+//! `car-link`'s client (so the runner drives it as it drives any car), and a [`Plant`] — the
+//! physical car and its world, `car-sim`'s physics without `car-sim`'s firmware model — answers
+//! its motor and servo commands, feeds its IMU, its motor controller's values, its GNSS receiver's
+//! NMEA and its UWB module's ranges.
+//!
+//! The bridge (`docs/sitl.md#in-a-campaign`): every [`STEP`] of tokio time the firmware is
+//! advanced by the same; the plant ticks every 10 ms (the simulated car's tick); bytes from the
+//! client reach the firmware at the next advance, the firmware's replies reach the client at the
+//! end of the advance that produced them. On a paused clock that is virtual time: the campaign is
+//! as deterministic as the firmware is (the same inputs give it the same outputs, byte for byte).
+//!
+//! Before the client speaks, the bridge does what a car's operator does once: lets the firmware
+//! start up standing still, gives it the ENU reference of the test area ([`ORIGIN`]) and its
+//! pose where the plant stands (SET_ENU_REF, SET_POS). Its GNSS fixes then keep the fused
+//! position on the truth, as RTK does on the car.
+
+use std::collections::VecDeque;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use car_link::frame::{FrameDecoder, FrameEncoder};
+use car_link::message::{Dialect, EnuRef, Pose};
+use car_link::{Car, CarError, FirmwareVersion, Reply, Request};
+use car_sim::motor::MotorCommand as PlantMotor;
+use car_sim::plant::{GeodeticOrigin, GnssMeasurement, Plant, PlantOptions};
+use car_sim::{DebugEvent, FwPose, Placement, RangeResult, Truth};
+use sitl::protocol::{Imu, MotorCommand, MotorValues, SitlFrame};
+use sitl::{SitlError, SitlProcess};
+use thiserror::Error;
+use tokio::io::{AsyncReadExt, AsyncWriteExt, DuplexStream};
+use tokio::task::JoinHandle;
+use tokio::time::Instant;
+
+use super::connect::car_config;
+use super::{Connecting, FreshCars, SimulatorView, StartPose};
+use campaign::seed::Purpose;
+
+/// How often the firmware is advanced (and the longest a byte waits to reach it).
+pub const STEP: Duration = Duration::from_millis(5);
+/// The plant's tick.
+const PLANT_TICK_US: u64 = 10_000;
+/// How long the firmware runs standing still before the client speaks: past 10.x's 1 s gyro
+/// calibration in `pos_init`.
+const START_UP: Duration = Duration::from_millis(1_500);
+/// The delay between a range request and its answer (the exchanges take a few ms; the
+/// simulated car's figure).
+const RANGE_REPLY_US: u64 = 10_000;
+/// The IMU's white noise (g, °/s): a perfectly constant IMU makes the firmware's Madgwick filter
+/// divide by zero (`docs/sitl.md#traps`).
+const IMU_NOISE: (f32, f32) = (0.002, 0.05);
+/// The geodetic place of the local frame's origin: the test areas are local metres, and the
+/// firmware needs a reference to turn its receiver's fixes into them (any place works; this is
+/// Borås, where the firmware was written).
+pub const ORIGIN: GeodeticOrigin = GeodeticOrigin {
+    lat: 57.7210,
+    lon: 12.9401,
+    height: 150.0,
+};
+/// UTC time of day when the executable starts, ms (the simulated car's default).
+const UTC_AT_START_MS: u64 = 12 * 3_600_000;
+
+/// Why a firmware car could not be started.
+#[derive(Debug, Error)]
+pub enum SitlCarError {
+    /// The executable did not start or its link failed during the start-up.
+    #[error("the firmware built for the host ({executable}) did not start")]
+    Start {
+        /// The executable.
+        executable: PathBuf,
+        /// Why.
+        #[source]
+        source: SitlError,
+    },
+    /// The firmware is a version `car-link` does not speak.
+    #[error("the firmware built for the host is {0}.{1}, which drivecheck does not speak")]
+    Version(u8, u8),
+    /// The client could not connect over the pipe.
+    #[error("cannot connect to the firmware built for the host")]
+    Connect(#[source] CarError),
+}
+
+/// The firmware executable of a build, and the physical car it drives.
+#[derive(Debug, Clone)]
+pub struct SitlCar {
+    /// The executable (`sitl::Build::executable`).
+    pub executable: PathBuf,
+    /// The physical car, its world and its noise streams' seed.
+    pub plant: PlantOptions,
+}
+
+/// What the bridge shares with its handle.
+#[derive(Debug)]
+struct Shared {
+    truth: Truth,
+    events: Vec<DebugEvent>,
+    /// Why the bridge stopped, when it stopped on an error.
+    ended: Option<String>,
+}
+
+/// A running firmware car. Dropping it stops the bridge and the executable.
+#[derive(Debug)]
+pub struct SitlHandle {
+    shared: Arc<Mutex<Shared>>,
+    task: JoinHandle<()>,
+}
+
+impl SitlHandle {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Shared> {
+        self.shared.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Why the bridge stopped, when the firmware or its link failed (the client then sees a lost
+    /// link).
+    pub fn ended(&self) -> Option<String> {
+        self.lock().ended.clone()
+    }
+}
+
+impl Drop for SitlHandle {
+    fn drop(&mut self) {
+        self.task.abort();
+    }
+}
+
+impl SimulatorView for SitlHandle {
+    fn truth(&self) -> Truth {
+        self.lock().truth
+    }
+
+    fn take_events(&self) -> Vec<DebugEvent> {
+        std::mem::take(&mut self.lock().events)
+    }
+}
+
+/// Starts the firmware of `car` standing where its plant stands, runs its start-up, and
+/// connects `car-link`'s client to it. Must be called inside a tokio runtime (on a paused clock
+/// it runs in virtual time).
+///
+/// Timeout: the start-up is [`START_UP`] of the firmware's time; then the client's connection
+/// handshake.
+pub async fn connect_sitl(car: &SitlCar) -> Result<(Car, SitlHandle), SitlCarError> {
+    let start = |source| SitlCarError::Start {
+        executable: car.executable.clone(),
+        source,
+    };
+    let process = SitlProcess::start(&car.executable).map_err(start)?;
+    let (major, minor) = process.firmware_version();
+    let version = FirmwareVersion::new(major, minor);
+    if !version.profile().supported {
+        return Err(SitlCarError::Version(major, minor));
+    }
+    let plant = Plant::new(car.plant.clone());
+    let mut bridge = Bridge::new(process, plant, version);
+    bridge.start_up().map_err(start)?;
+    let shared = Arc::new(Mutex::new(Shared {
+        truth: bridge.truth(),
+        events: Vec::new(),
+        ended: None,
+    }));
+    let pipe = car_link::transport::sim_pipe();
+    let task = tokio::spawn(bridge.run(pipe.car, shared.clone()));
+    let handle = SitlHandle { shared, task };
+    let client = Car::over_stream(pipe.host, car_config())
+        .await
+        .map_err(SitlCarError::Connect)?;
+    Ok((client, handle))
+}
+
+/// The firmware, the plant, and what is on its way between them.
+struct Bridge {
+    process: SitlProcess,
+    plant: Plant,
+    version: FirmwareVersion,
+    /// Range answers due, in order: (due µs of firmware time, module id, anchor, metres).
+    ranges: VecDeque<(u64, u8, u8, f32)>,
+    /// Fixes measured and not yet arrived.
+    fixes: VecDeque<GnssMeasurement>,
+    /// The firmware time at which the plant is at time 0.
+    plant_zero_us: u64,
+    /// The plant time of the receiver's next pulse per second, ms (every whole UTC second).
+    next_pps_ms: u64,
+    /// The last fused and UWB poses the firmware reported (GET_STATE replies on their way to
+    /// the client): the truth's estimates.
+    fused: FwPose,
+    uwb: FwPose,
+    decoder: FrameDecoder,
+    events: Vec<DebugEvent>,
+}
+
+impl Bridge {
+    fn new(process: SitlProcess, plant: Plant, version: FirmwareVersion) -> Self {
+        let p = plant.options().placement;
+        let pose = FwPose {
+            x: p.x as f32,
+            y: p.y as f32,
+            yaw: (-p.heading.to_degrees()) as f32,
+        };
+        Self {
+            plant_zero_us: process.now_us(),
+            next_pps_ms: 1000 - UTC_AT_START_MS % 1000,
+            process,
+            plant,
+            version,
+            ranges: VecDeque::new(),
+            fixes: VecDeque::new(),
+            fused: pose,
+            uwb: pose,
+            decoder: FrameDecoder::host(),
+            events: Vec::new(),
+        }
+    }
+
+    /// Standing still through the firmware's start-up, then the ENU reference and the pose.
+    fn start_up(&mut self) -> Result<(), SitlError> {
+        self.feed_sensors()?;
+        let seed = self.plant.options().seed;
+        self.process.set_imu_noise(IMU_NOISE.0, IMU_NOISE.1, seed)?;
+        let steps = START_UP.as_micros() as u64 / PLANT_TICK_US;
+        for _ in 0..steps {
+            self.tick()?;
+        }
+        let p = self.plant.options().placement;
+        for request in [
+            Request::SetEnuRef(EnuRef {
+                lat: ORIGIN.lat,
+                lon: ORIGIN.lon,
+                height: ORIGIN.height,
+            }),
+            Request::SetPos(Pose {
+                x: p.x,
+                y: p.y,
+                yaw: -p.heading.to_degrees(),
+            }),
+        ] {
+            self.request(&request)?;
+            self.tick()?;
+        }
+        // settle: a few fixes in the new frame
+        for _ in 0..50 {
+            self.tick()?;
+        }
+        self.decoder = FrameDecoder::host();
+        self.events.clear();
+        Ok(())
+    }
+
+    /// A request of the bridge's own (its reply is not the client's and is dropped).
+    fn request(&mut self, request: &Request) -> Result<(), SitlError> {
+        let payload = request
+            .encode(car_link::message::ID_ALL, Dialect::host(self.version))
+            .map_err(|e| SitlError::Firmware(format!("cannot encode {request:?}: {e}")))?;
+        let frame = FrameEncoder::to_firmware()
+            .encode_to_bytes(&payload)
+            .map_err(|e| SitlError::Firmware(format!("cannot frame {request:?}: {e}")))?;
+        self.process.send_car_bytes(&frame)
+    }
+
+    /// The plant's time in the firmware's.
+    fn plant_us(&self) -> u64 {
+        self.plant_zero_us + self.plant.now_ms() * 1000
+    }
+
+    fn feed_sensors(&mut self) -> Result<(), SitlError> {
+        let imu = self.plant.imu();
+        self.process.set_imu(Imu {
+            accel: imu.accel_g.map(|a| a as f32),
+            gyro: imu.gyro_dps.map(|g| g as f32),
+            mag: [0.0; 3],
+        })?;
+        let m = self.plant.motor_reading();
+        self.process.set_motor_values(MotorValues {
+            rpm: m.rpm as f32,
+            tachometer: m.tachometer,
+            tachometer_abs: m.tachometer_abs,
+            v_in: m.v_in as f32,
+            current_motor: 0.0,
+            duty_now: m.duty as f32,
+        })
+    }
+
+    /// One plant tick and the firmware advanced to it; the firmware's car bytes are returned.
+    fn tick(&mut self) -> Result<Vec<u8>, SitlError> {
+        self.plant.step();
+        if let Some(fix) = self.plant.gnss_fix() {
+            self.fixes.push_back(fix);
+        }
+        self.feed_sensors()?;
+        let target = self.plant_us();
+        let mut out = Vec::new();
+        // advance in STEPs within the tick so that range answers and fixes land on time
+        let mut t = self.process.now_us();
+        while t < target {
+            t = (t + STEP.as_micros() as u64).min(target);
+            out.extend(self.advance_to(t)?);
+        }
+        Ok(out)
+    }
+
+    /// Delivers what is due by `t_us`, advances the firmware there and handles its outputs.
+    fn advance_to(&mut self, t_us: u64) -> Result<Vec<u8>, SitlError> {
+        // The pulse first: the fix of that second arrives after it, with the receiver's latency.
+        if self.plant_zero_us + self.next_pps_ms * 1000 <= t_us {
+            self.process.pps()?;
+            self.next_pps_ms += 1000;
+        }
+        while let Some(fix) = self.fixes.front().copied() {
+            if self.plant_zero_us + fix.arrives_ms * 1000 > t_us {
+                break;
+            }
+            self.fixes.pop_front();
+            let sentence = ORIGIN.gga(fix.x, fix.y, UTC_AT_START_MS + fix.measured_ms);
+            self.process.send_nmea(&sentence)?;
+        }
+        while let Some(&(due, id, dest, range)) = self.ranges.front() {
+            if due > t_us {
+                break;
+            }
+            self.ranges.pop_front();
+            self.process.send_uwb_range(id, dest, range)?;
+        }
+        let frames = self.process.advance_to(t_us)?;
+        let mut bytes = Vec::new();
+        for frame in frames {
+            match frame {
+                SitlFrame::CarBytes { bytes: b, .. } => {
+                    self.snoop(&b);
+                    bytes.extend(b);
+                }
+                SitlFrame::Motor { command, .. } => self.plant.command_motor(match command {
+                    MotorCommand::Duty(d) => PlantMotor::Duty(d),
+                    MotorCommand::Current(a) => PlantMotor::Current(a),
+                    MotorCommand::CurrentBrake(a) | MotorCommand::Handbrake(a) => {
+                        PlantMotor::CurrentBrake(a)
+                    }
+                    MotorCommand::Rpm(r) => PlantMotor::Rpm(r),
+                    MotorCommand::Pos(_) => PlantMotor::Position,
+                }),
+                SitlFrame::Servo { pos, .. } => self.plant.command_servo(pos),
+                SitlFrame::UwbRequest { t_us, id, dest, .. } => {
+                    let m = self.plant.range(dest);
+                    self.events.push(DebugEvent::Range {
+                        at_ms: self.plant.now_ms(),
+                        anchor: dest,
+                        path: m.path,
+                        true_range: m.true_range,
+                        result: m.result,
+                    });
+                    if let RangeResult::Measured(r) = m.result {
+                        self.ranges.push_back((t_us + RANGE_REPLY_US, id, dest, r));
+                    }
+                }
+                SitlFrame::Note { .. }
+                | SitlFrame::Hello { .. }
+                | SitlFrame::Advanced(_)
+                | SitlFrame::Stats { .. } => {}
+                SitlFrame::Error(text) => return Err(SitlError::Firmware(text)),
+            }
+        }
+        Ok(bytes)
+    }
+
+    /// Reads the firmware's state replies on their way to the client: the truth's estimates.
+    fn snoop(&mut self, bytes: &[u8]) {
+        self.decoder.push(bytes);
+        while let Some(frame) = self.decoder.next_frame() {
+            let Ok(frame) = frame else { continue };
+            if let Ok((_, Reply::State(s))) = Reply::decode(&frame.payload, self.version) {
+                self.fused = FwPose {
+                    x: s.px as f32,
+                    y: s.py as f32,
+                    yaw: s.yaw as f32,
+                };
+                self.uwb = FwPose {
+                    x: s.px_uwb as f32,
+                    y: s.py_uwb as f32,
+                    yaw: s.yaw as f32,
+                };
+            }
+        }
+    }
+
+    fn truth(&self) -> Truth {
+        self.plant.truth(self.fused, self.uwb)
+    }
+
+    /// Runs the bridge on tokio's clock until the client closes its end or the firmware fails.
+    async fn run(mut self, mut stream: DuplexStream, shared: Arc<Mutex<Shared>>) {
+        let started = Instant::now();
+        let mut buf = vec![0u8; 4096];
+        let mut ticks: u64 = 0;
+        let result: Result<(), String> = loop {
+            let next = started + Duration::from_micros((ticks + 1) * PLANT_TICK_US);
+            tokio::select! {
+                biased;
+                read = stream.read(&mut buf) => match read {
+                    Ok(0) | Err(_) => break Ok(()),
+                    Ok(n) => {
+                        if let Err(e) = self.process.send_car_bytes(&buf[..n]) {
+                            break Err(e.to_string());
+                        }
+                    }
+                },
+                () = tokio::time::sleep_until(next) => {
+                    ticks += 1;
+                    let out = match self.tick() {
+                        Ok(out) => out,
+                        Err(e) => break Err(e.to_string()),
+                    };
+                    {
+                        let mut s = shared.lock().unwrap_or_else(|e| e.into_inner());
+                        s.truth = self.truth();
+                        s.events.append(&mut self.events);
+                    }
+                    if !out.is_empty() && stream.write_all(&out).await.is_err() {
+                        break Ok(());
+                    }
+                }
+            }
+        };
+        if let Err(e) = result {
+            tracing::error!("the firmware built for the host stopped: {e}");
+            shared.lock().unwrap_or_else(|e| e.into_inner()).ended = Some(e);
+        }
+    }
+}
+
+/// The firmware cars of a campaign with a fresh car per test (`run --car sitl:TREE`): test
+/// *i*'s car is a fresh start of the executable, its plant seeded as the embedded simulated
+/// car's of test *i* (the same noise streams), standing where the runner says.
+pub struct SitlCars {
+    car: SitlCar,
+    seed: u64,
+    virtual_time: bool,
+}
+
+impl SitlCars {
+    /// The cars of a campaign with `seed` on the firmware `executable`, each in the world and
+    /// with the physics of `sim` (a scenario's car with its profile applied).
+    pub fn new(
+        executable: &Path,
+        firmware: FirmwareVersion,
+        sim: &car_sim::SimConfig,
+        seed: u64,
+        virtual_time: bool,
+    ) -> Self {
+        Self {
+            car: SitlCar {
+                executable: executable.to_path_buf(),
+                plant: plant_options(firmware, sim),
+            },
+            seed,
+            virtual_time,
+        }
+    }
+}
+
+/// The physical car of the simulated car `sim`: its world, radio, receiver and sensor errors;
+/// the geometry of `firmware`'s default configuration (what the car's firmware assumes).
+pub fn plant_options(firmware: FirmwareVersion, sim: &car_sim::SimConfig) -> PlantOptions {
+    let config = car_sim::FirmwareConfig::defaults(firmware);
+    PlantOptions {
+        vehicle: config.vehicle,
+        gnss_antenna: (f64::from(config.gps_ant_x), f64::from(config.gps_ant_y)),
+        world: sim.world.clone(),
+        radio: sim.radio,
+        gnss: sim.gnss,
+        sensors: sim.sensors,
+        placement: sim.placement.unwrap_or(Placement {
+            x: 0.0,
+            y: 0.0,
+            heading: 0.0,
+        }),
+        seed: sim.seed,
+    }
+}
+
+impl FreshCars for SitlCars {
+    type Vehicle = Car;
+
+    fn virtual_time(&self) -> bool {
+        self.virtual_time
+    }
+
+    fn connect(&self, test_index: usize, start: Option<StartPose>) -> Connecting<'_, Car> {
+        let mut car = self.car.clone();
+        car.plant.seed = campaign::seed::derive(self.seed, Purpose::Simulator { test_index });
+        if let Some(start) = start {
+            car.plant.placement = Placement {
+                x: start.position.x,
+                y: start.position.y,
+                heading: start.heading,
+            };
+        }
+        Box::pin(async move {
+            let (client, handle) = connect_sitl(&car)
+                .await
+                .map_err(super::ConnectError::Sitl)?;
+            Ok((client, Box::new(handle) as Box<dyn SimulatorView>))
+        })
+    }
+}
