@@ -18,6 +18,7 @@ mod logging;
 mod old_recordings;
 mod progress;
 mod replay_command;
+mod replay_reproduces;
 mod report_command;
 mod run_command;
 mod shrink_command;
