@@ -13,10 +13,11 @@
 //! | [`Purpose::SafeStop`] | `s`, test `i` | bytes 24..32 of the plan seed, little-endian | test `i`'s safe stop extension (`drive::TestDrive`) |
 //! | [`Purpose::Simulator`] | `s`, test `i` | `mix(s ^ (i + 1)·γ)` | test `i`'s fresh embedded simulated car (orchestrator `commands::shared::EmbeddedSims`) |
 //! | simulator noise | the simulator's seed `m` | `m ^ n·γ`, stream `n` = 1 GNSS, 2 UWB, 3 link | `car_sim`'s `Noise` streams (`car-sim` is below this crate and keeps this line) |
+//! | [`Purpose::Rerun`] | `s`, test `i`, run `k` | `k = 0`: the [`Purpose::Simulator`] seed `m` of test `i`; `k ≥ 1`: `mix(mix(m) ^ k)` | the simulated car of run `k` of test `i` driven again: run 0 is the campaign's own car (a replay, a shrink's first run), runs `k ≥ 1` other cars (a replay's `--vary-seed` runs 1…N, a shrink's other runs and its confirmation) |
 //! | [`Purpose::StartJoin`] | `s` | `s` | the join from the recovery route to the start route, planned once per campaign |
 //! | [`Purpose::Margins`] | `s` | `s` | ahead margins added to a case that has none (replay, shrink candidates) |
 //! | [`Purpose::ShrinkJoin`] | `s` | `s` | the routes a shrink joins segments with (`shrink::Edit::DropSegments`) |
-//! | [`Purpose::Run`] | `s`, run `k` (from 0) | `s + k` | the campaign seed of run `k` of a replay (`--vary-seed`), a shrink's candidate (its confirmation continues at `k = runs`), a sweep's point, an explanation's counterfactual |
+//! | [`Purpose::Run`] | `s`, run `k` (from 0) | `s + k` | the campaign seed of run `k` of a case without a campaign (hand-written: a replay's runs with `--vary-seed`, a shrink's candidate runs, its confirmation continuing at `k = runs`), a sweep's point, an explanation's counterfactual |
 //! | [`Purpose::Calibration`] | `s` | `mix(s ^ 0xCA1B)` | the campaign seed of a case's runs in `calibrate` (its runs `k` then as [`Purpose::Run`]): the same for every candidate profile, other than a replay's or a twin check's |
 //! | [`Purpose::FidelityRerun`] | `s`, rerun `k` | `s + k·1_000_003` | `bench fidelity`'s reruns of a test on other simulators and its route-following runs |
 //! | [`Purpose::PlacementSim`] | `s`, link seed `l` | `s·1_000_003 + l` | `bench placement`'s simulators (the link's draws differ per link seed) |
@@ -64,14 +65,22 @@ pub enum Purpose {
         /// The test.
         test_index: usize,
     },
+    /// The simulated car of run `run` of test `test_index` driven again: run 0 is the car the
+    /// campaign drove the test on ([`Purpose::Simulator`]), every later run another car.
+    Rerun {
+        /// The test.
+        test_index: usize,
+        /// The run, from 0 (the campaign's car).
+        run: u64,
+    },
     /// The join from the recovery route to the start route (once per campaign).
     StartJoin,
     /// Ahead margins generated for a case's segments that have none.
     Margins,
     /// A shrink's joining routes.
     ShrinkJoin,
-    /// Run `run` (from 0) of a case driven again: a replay with `--vary-seed`, a shrink, a sweep,
-    /// an explanation's counterfactual.
+    /// Run `run` (from 0) of a case driven again as a campaign of its own: a hand-written case's
+    /// replay with `--vary-seed` and shrink, a sweep, an explanation's counterfactual.
     Run {
         /// The run, from 0.
         run: u64,
@@ -102,6 +111,14 @@ pub fn derive(seed: u64, purpose: Purpose) -> u64 {
         Purpose::SafeStop { test_index } => plan_seed_word(seed, test_index, 3),
         Purpose::Simulator { test_index } => {
             splitmix64_mix(seed ^ (test_index as u64).wrapping_add(1).wrapping_mul(GAMMA))
+        }
+        Purpose::Rerun { test_index, run } => {
+            let car = derive(seed, Purpose::Simulator { test_index });
+            if run == 0 {
+                car
+            } else {
+                splitmix64_mix(splitmix64_mix(car) ^ run)
+            }
         }
         Purpose::StartJoin | Purpose::Margins | Purpose::ShrinkJoin => seed,
         Purpose::Run { run } => seed.wrapping_add(run),
@@ -224,6 +241,21 @@ mod tests {
         assert_eq!(
             rng_for(9, purpose).random::<u64>(),
             rng(derive(9, purpose)).random::<u64>()
+        );
+    }
+
+    #[test]
+    fn a_rerun_starts_on_the_campaigns_car_and_then_drives_other_cars() {
+        let rerun = |run| derive(7, Purpose::Rerun { test_index: 3, run });
+        let car = derive(7, Purpose::Simulator { test_index: 3 });
+        assert_eq!(rerun(0), car);
+        assert_eq!(rerun(1), splitmix64_mix(splitmix64_mix(car) ^ 1));
+        let others: std::collections::BTreeSet<u64> = (1..100).map(rerun).collect();
+        assert_eq!(others.len(), 99);
+        assert!(!others.contains(&car));
+        // No other test's campaign car either.
+        assert!(
+            (0..100).all(|i| !others.contains(&derive(7, Purpose::Simulator { test_index: i })))
         );
     }
 

@@ -33,8 +33,10 @@ pub enum Command {
     /// Run a test campaign: drive generated tests with injected faults and judge UWB against
     /// RTK. Exit status: 0 every test passed, 1 a test failed or was aborted, 2 error.
     Run(RunArgs),
-    /// Drive a recorded case again, N times after the same reset, and compare the runs segment by
-    /// segment. Exit status: 0 every run passed, 1 a run failed or was aborted, 2 error.
+    /// Drive a recorded case again and compare it segment by segment: on the embedded simulated
+    /// car the case's own test (the same car from the same start: every segment's largest
+    /// deviation as the case's), or with --vary-seed other cars and their spread. Exit status: 0
+    /// every run passed, 1 a run failed or was aborted, 2 error.
     Replay(ReplayArgs),
     /// Shrink a failing case to the smallest test that still fails the same way every time (on
     /// the embedded simulated car, in virtual time). Exit status: 0 shrunk, 1 the case does not
@@ -264,9 +266,12 @@ pub struct ReplayArgs {
     /// see docs/case-format.md).
     #[arg(value_name = "CASE.json")]
     pub case: PathBuf,
-    /// How many times to drive it.
-    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=1000))]
-    pub times: u32,
+    /// How many times to drive it (default: once, or 3 times with --vary-seed, --realtime or a
+    /// real car). On the embedded simulated car in virtual time the case's own test gives the
+    /// same figures every time, so more than one run there implies --vary-seed (the summary
+    /// says so).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub times: Option<u32>,
     /// Leave out the case's fault commands (does the failure disappear without them?).
     #[arg(long)]
     pub no_faults: bool,
@@ -281,11 +286,13 @@ pub struct ReplayArgs {
     /// Replay even when the scenario's hash differs from the case's (or the case has none).
     #[arg(long)]
     pub ignore_scenario_hash: bool,
-    /// Seed of the reset's return route, the safe stop and the simulated car (default: the
-    /// case's campaign seed).
+    /// The campaign seed of the reset's return route, the safe stop and the simulated car
+    /// (default: the case's campaign seed, which drives the case's own test again: the same
+    /// simulated car from the same start, so the same figures).
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Give run k the seed SEED + k − 1 (other sensor noise each run) instead of the same seed.
+    /// Drive the case's test on other simulated cars (other sensor noise each run, seeded by
+    /// the seed map) and report the spread, instead of the case's own car.
     #[arg(long)]
     pub vary_seed: bool,
     /// Run the embedded simulated car against the wall clock instead of in virtual time.

@@ -33,7 +33,7 @@ use super::{
 };
 use crate::vehicle::{ConnectError, FreshCars, StartPose, Vehicle};
 use campaign::files::{Case, Settings};
-use campaign::model::TestPlan;
+use campaign::model::{Campaign, TestPlan, TestPlanner};
 use campaign::oracle::Verdict;
 use campaign::safety::SafetyConfig;
 use recording::{Held, Recorder};
@@ -46,6 +46,63 @@ fn start_pose(tests: &TestSource<'_>, test_index: usize) -> Result<Option<StartP
         return Ok(None);
     }
     Ok(end_pose(&tests.plan(test_index - 1)?))
+}
+
+/// Where the simulated car stood when test `test_index` of a generated campaign (`run` on the
+/// embedded simulator, without `--cases-from`) began, as the campaign placed it: where the plan
+/// of the test before it ends; `None` for the first test (the start of the start route). What
+/// a case driven again as that test starts from ([`ReplaySource::as_test`](crate::ReplaySource)).
+pub fn start_of_test(
+    scenario: &Scenario,
+    campaign: &Campaign,
+    test_index: usize,
+) -> Result<Option<StartPose>, RunError> {
+    let Some(before) = test_index.checked_sub(1) else {
+        return Ok(None);
+    };
+    let planner = TestPlanner::new(scenario)?;
+    let plan = planner.plan_test(campaign, before, campaign::model::start_tail(scenario)?)?;
+    Ok(end_pose(&plan))
+}
+
+/// The test a case was on the embedded simulator, as a case driven again as that test drives
+/// it: the campaign's seed (its reset, safe stop and simulated car), the test's index, and where
+/// the campaign placed the car.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SameTest {
+    /// The campaign's seed.
+    pub campaign_seed: u64,
+    /// The test's index.
+    pub test_index: usize,
+    /// Where its car stood when it began ([`start_of_test`]).
+    pub start: Option<StartPose>,
+}
+
+impl SameTest {
+    /// The test of `case` in `scenario`: `None` for a case that names no campaign seed or test
+    /// index (written by hand). The start is derived as the campaign placed the car
+    /// ([`start_of_test`], from the case's settings' number of tests and `no_faults`): exact for
+    /// a generated campaign (sharded or resumed alike), not for a test of `run --cases-from`,
+    /// whose car stood where the case before it ended.
+    pub fn of_case(case: &Case, scenario: &Scenario) -> Result<Option<Self>, RunError> {
+        let (Some(campaign_seed), Some(test_index)) = (case.campaign_seed, case.test_index) else {
+            return Ok(None);
+        };
+        let tests = case
+            .settings
+            .as_ref()
+            .map_or(test_index + 1, |s| s.tests.max(test_index + 1));
+        let campaign = Campaign {
+            seed: campaign_seed,
+            tests,
+            no_faults: case.no_faults,
+        };
+        Ok(Some(Self {
+            campaign_seed,
+            test_index,
+            start: start_of_test(scenario, &campaign, test_index)?,
+        }))
+    }
 }
 
 /// The last point `plan` drives, heading along its last leg.

@@ -85,7 +85,7 @@ use recording::{
 pub use dry_run::{DryRun, dry_run};
 pub use events::{CampaignObserver, Silent};
 pub use fresh::SPAN_GAP_NS;
-pub use fresh::run_campaign_fresh;
+pub use fresh::{SameTest, run_campaign_fresh, start_of_test};
 pub use lab::{LabCar, run_campaign_on_cars};
 pub use pause::PAUSE_ENV;
 pub use run_dir::{
@@ -209,6 +209,10 @@ pub struct ReplaySource {
     pub plan: TestPlan,
     /// Where it came from, for `campaign.json`.
     pub of: ReplayOf,
+    /// Drive it as test `i` of its campaign: the one test of the campaign is test `i` (its
+    /// reset's and safe stop's seeds, its case file `case-NNN.json`), with the campaign's seed
+    /// as [`RunConfig::campaign`]'s. `None`: as test 0 of a campaign of its own.
+    pub as_test: Option<usize>,
 }
 
 /// An earlier run's cases driven again, test for test (`run --cases-from DIR`): test *i* drives
@@ -279,8 +283,16 @@ impl RunConfig {
         }
     }
 
-    /// The indices of the tests this run drives: all of the campaign's, or its shard's.
+    /// The indices of the tests this run drives: all of the campaign's, or its shard's; a case
+    /// driven again as test `i` of its campaign ([`ReplaySource::as_test`]) is test `i` alone.
     pub fn test_indices(&self) -> Vec<usize> {
+        if let Tests::Replay(ReplaySource {
+            as_test: Some(test_index),
+            ..
+        }) = &self.tests
+        {
+            return vec![*test_index];
+        }
         let tests = self.campaign.tests;
         let all: Vec<usize> = match self.shard {
             Some(shard) => shard.tests(tests).collect(),

@@ -10,7 +10,7 @@ use thiserror::Error;
 use tokio_util::sync::CancellationToken;
 use trajgen::{GenerationError, Generator, Point, Strategy};
 
-use crate::vehicle::{ConnectError, SimulatorView, connect_sim};
+use crate::vehicle::{ConnectError, SimulatorView, connect_sim, placed};
 use crate::{RecordMode, ReplaySource, RunConfig, RunError, Silent, Tests, run_campaign};
 use campaign::files::{Case, CaseError, ReplayOf};
 use campaign::model::{Campaign, TestPlan};
@@ -114,6 +114,11 @@ pub struct SimDriver<'a> {
     pub record: bool,
     /// Seed of run 1.
     pub seed: u64,
+    /// Drive every run as the case's own test (its campaign's seed for the reset and the safe
+    /// stop, its index, its car's start), the seed given to [`SimDriver::drive_once`] then
+    /// being the simulated car's alone; `None`: every run is test 0 of a campaign of its own
+    /// with that seed.
+    pub test: Option<crate::SameTest>,
     /// Cancels the runs (a signal).
     pub cancel: &'a CancellationToken,
 }
@@ -147,6 +152,7 @@ impl<'a> SimDriver<'a> {
             runs,
             record: false,
             seed,
+            test: None,
             cancel,
         }
     }
@@ -160,7 +166,8 @@ impl<'a> SimDriver<'a> {
             .map_err(|e| SimDriveError::Plan(Box::new(e)))
     }
 
-    /// Drives `case` `runs` times (run k with seed + k, [`Purpose::Run`]) with `settings`:
+    /// Drives `case` `runs` times with `settings` (run k on the car [`Purpose::Rerun`] k of the
+    /// case's own test, with [`SimDriver::test`]; otherwise with seed + k, [`Purpose::Run`]):
     /// each run's seed and case.
     pub async fn drive_all(
         &self,
@@ -170,7 +177,17 @@ impl<'a> SimDriver<'a> {
         let plan = self.plan(case)?;
         let mut cases = Vec::new();
         for k in 0..self.runs {
-            let seed = derive(self.seed, Purpose::Run { run: u64::from(k) });
+            let run = u64::from(k);
+            let seed = match self.test {
+                Some(test) => derive(
+                    test.campaign_seed,
+                    Purpose::Rerun {
+                        test_index: test.test_index,
+                        run,
+                    },
+                ),
+                None => derive(self.seed, Purpose::Run { run }),
+            };
             cases.push((seed, self.drive_once(&plan, seed, settings).await?));
         }
         Ok(cases)
@@ -193,7 +210,7 @@ impl<'a> SimDriver<'a> {
         let _ = std::fs::remove_dir_all(&dir);
         let mut config = RunConfig::new(
             Campaign {
-                seed,
+                seed: self.test.map_or(seed, |t| t.campaign_seed),
                 tests: 1,
                 no_faults: false,
             },
@@ -203,6 +220,7 @@ impl<'a> SimDriver<'a> {
         config.tests = Tests::Replay(ReplaySource {
             plan: plan.clone(),
             of: self.of.clone(),
+            as_test: self.test.map(|t| t.test_index),
         });
         config.policy = self.policy;
         config.record = if self.record {
@@ -210,7 +228,11 @@ impl<'a> SimDriver<'a> {
         } else {
             RecordMode::None
         };
-        let (car, sim) = connect_sim(&settings.config(&self.sim, seed)).await?;
+        let config_of_car = placed(
+            settings.config(&self.sim, seed),
+            self.test.and_then(|t| t.start),
+        );
+        let (car, sim) = connect_sim(&config_of_car).await?;
         let sim = Some(sim);
         let result = run_campaign(
             &car,

@@ -59,7 +59,9 @@ pub use case::{
     PlaceRuleRecord, PointRecord, RoutePointRecord, SegmentResult, StreamingRecord, TestTiming,
 };
 pub use explanation::{CauseRecord, SegmentExplanationRecord, SourceRecord};
-pub use replay::{Comparison, ReplayRun, SegmentComparison};
+pub use replay::{
+    Comparison, Drove, ReplayRun, Reproduction, SegmentComparison, SegmentDifference,
+};
 pub use settings::{
     FaultRanges, FaultRangesForm, FlatFaultRanges, ProbeFaultsRecord, SafetyConfigRecord, Settings,
     StreamingConfigRecord, Weights,

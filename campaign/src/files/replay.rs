@@ -14,8 +14,13 @@ use crate::oracle::Verdict;
 pub struct ReplayRun {
     /// Its run directory, relative to the replay directory (`run-1`, …).
     pub dir: String,
-    /// The seed it ran with (the simulator's and the reset's).
+    /// The campaign seed it ran with: its reset's and safe stop's (and, without
+    /// `simulator_seed`, the simulated car's).
     pub seed: u64,
+    /// The simulated car's seed, when it is not `seed` (a case driven as its own test: the
+    /// seed map's [`crate::seed::Purpose::Rerun`] of its test; absent on a real car).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub simulator_seed: Option<u64>,
     /// Its verdict (`None` when it never ran).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub verdict: Option<Verdict>,
@@ -38,6 +43,52 @@ pub struct SegmentComparison {
     pub mean_m: Option<f64>,
     /// Each run's maximum minus the mean, metres.
     pub diff_from_mean_m: Vec<Option<f64>>,
+}
+
+/// What the runs of a replay drove, and so what they can be expected to reproduce.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Drove {
+    /// The case's own test: the same simulated car (the seed map's streams of that test of
+    /// that campaign seed, the same car profile) from the same start, in virtual time. Every
+    /// segment's largest deviation should be the case's to the last digit.
+    SameTest,
+    /// The case's test on other simulated cars (`--vary-seed`): the spread.
+    OtherCars,
+    /// The case's test with something changed (`--no-faults`, another `--seed` or car
+    /// profile): its figures need not be the case's.
+    Altered,
+    /// The same simulated car against the wall clock (`--realtime`): the timing differs.
+    WallClock,
+    /// A real car: the same commands, faults at the same places and the same seeds of the reset
+    /// and the safe stop, but not the same sensors, start or link timing.
+    RealCar,
+    /// A case that names no campaign (written by hand): each run a campaign of its own.
+    OwnCampaign,
+}
+
+/// A segment whose largest deviation in a run is not the case's (with [`Drove::SameTest`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SegmentDifference {
+    /// The segment's index among the test's segments.
+    pub segment_index: usize,
+    /// The run, from 1 (`run-1`, …).
+    pub run: usize,
+    /// The case's largest deviation in it, metres (`None`: not driven, or no samples).
+    pub original_max_m: Option<f64>,
+    /// The run's, metres (`None`: not driven, or no samples).
+    pub max_m: Option<f64>,
+}
+
+/// Whether runs of the case's own test reproduced it (with [`Drove::SameTest`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Reproduction {
+    /// Every run's largest deviation of every segment equals the case's, and its verdict too.
+    pub identical: bool,
+    /// Every segment of a run whose largest deviation differs from the case's, in order.
+    pub differing: Vec<SegmentDifference>,
 }
 
 /// The comparison written to `replay.json`.
@@ -65,6 +116,13 @@ pub struct Comparison {
     /// For a replay without faults of a case that failed: true when every run passed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub failure_disappeared: Option<bool>,
+    /// What the runs drove (absent in a file of an earlier drivecheck).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub drove: Option<Drove>,
+    /// With `drove` [`Drove::SameTest`] and a case that was run: whether the runs reproduced
+    /// it, segment by segment.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reproduction: Option<Reproduction>,
 }
 
 impl Comparison {

@@ -7,8 +7,8 @@
 //! earlier) has no value for that run and is left out of the mean.
 //!
 use crate::files::{
-    Case, Comparison, Header, REPLAY_FORMAT, REPLAY_SCHEMA_VERSION, ReplayOf, ReplayRun,
-    ScenarioRef, SegmentComparison,
+    Case, Comparison, Drove, Header, REPLAY_FORMAT, REPLAY_SCHEMA_VERSION, ReplayOf, ReplayRun,
+    Reproduction, ScenarioRef, SegmentComparison, SegmentDifference,
 };
 use crate::oracle::Verdict;
 
@@ -26,12 +26,14 @@ fn segment_max(case: &Case, segment_index: usize) -> Option<f64> {
 
 impl Comparison {
     /// Compares `runs` (each run's descriptor and its case, `None` when it never produced one)
-    /// of a replay of `original`.
+    /// of a replay of `original`; the runs `drove` what it says (with [`Drove::SameTest`] each
+    /// run is checked against the case segment by segment).
     pub fn new(
         original: &Case,
         replay_of: ReplayOf,
         scenario: ScenarioRef,
         runs: &[(ReplayRun, Option<Case>)],
+        drove: Drove,
     ) -> Self {
         let indices: std::collections::BTreeSet<usize> = std::iter::once(original)
             .chain(runs.iter().filter_map(|(_, case)| case.as_ref()))
@@ -73,6 +75,30 @@ impl Comparison {
         let failure_disappeared = (replay_of.no_faults
             && matches!(original.verdict, Some(Verdict::Failed)))
         .then(|| verdicts.iter().all(|&r| r == Some(Verdict::Passed)));
+        let reproduction = (drove == Drove::SameTest && original.verdict.is_some()).then(|| {
+            let differing: Vec<SegmentDifference> = segments
+                .iter()
+                .flat_map(|s| {
+                    s.max_m.iter().enumerate().filter_map(|(k, &max_m)| {
+                        // To the last digit: the same f64 (both absent alike).
+                        let same = match (s.original_max_m, max_m) {
+                            (Some(a), Some(b)) => a.to_bits() == b.to_bits(),
+                            (a, b) => a.is_none() && b.is_none(),
+                        };
+                        (!same).then_some(SegmentDifference {
+                            segment_index: s.segment_index,
+                            run: k + 1,
+                            original_max_m: s.original_max_m,
+                            max_m,
+                        })
+                    })
+                })
+                .collect();
+            Reproduction {
+                identical: differing.is_empty() && same_as_original == Some(true),
+                differing,
+            }
+        });
         Self {
             header: Header::untooled(REPLAY_FORMAT, REPLAY_SCHEMA_VERSION),
             replay_of,
@@ -83,6 +109,8 @@ impl Comparison {
             same_verdict,
             same_as_original,
             failure_disappeared,
+            drove: Some(drove),
+            reproduction,
         }
     }
 
@@ -112,18 +140,29 @@ impl Comparison {
         let _ = writeln!(out);
         let verdict = |v: Option<Verdict>| v.map_or("not run", Verdict::as_str);
         let verdicts: Vec<&str> = self.runs.iter().map(|r| verdict(r.verdict)).collect();
-        let _ = writeln!(
+        let _ = write!(
             out,
-            "original: {}; runs: {}; same verdict every time: {}",
+            "case: {}; runs: {}",
             verdict(self.replay_of.verdict),
-            verdicts.join(", "),
-            if self.same_verdict { "yes" } else { "no" }
+            verdicts.join(", ")
         );
-        let _ = writeln!(
-            out,
-            "largest difference from the mean: {} m",
-            metres(self.max_abs_diff_m)
-        );
+        if let Some(same) = self.same_as_original {
+            let _ = write!(out, "; same verdict as the case: {}", yes(same));
+        }
+        if self.runs.len() > 1 {
+            let _ = write!(out, "; same verdict every run: {}", yes(self.same_verdict));
+        }
+        let _ = writeln!(out);
+        if let Some(line) = self.drove_line() {
+            let _ = writeln!(out, "{line}");
+        }
+        if self.runs.len() > 1 {
+            let _ = writeln!(
+                out,
+                "spread: largest difference from the mean {} m",
+                metres(self.max_abs_diff_m)
+            );
+        }
         if let Some(gone) = self.failure_disappeared {
             let _ = writeln!(
                 out,
@@ -132,6 +171,74 @@ impl Comparison {
             );
         }
         out
+    }
+}
+
+fn yes(b: bool) -> &'static str {
+    if b { "yes" } else { "no" }
+}
+
+impl Comparison {
+    /// What the runs drove and, for the case's own test, whether they reproduced it, in words.
+    fn drove_line(&self) -> Option<String> {
+        let metres = |m: Option<f64>| m.map_or_else(|| "-".to_owned(), |m| format!("{m:.3} m"));
+        Some(match self.drove? {
+            Drove::SameTest => match &self.reproduction {
+                Some(r) if r.identical => {
+                    "reproduced: every segment identical (the case's test: the same simulated \
+                     car from the same start)"
+                        .to_owned()
+                }
+                Some(r) if r.differing.is_empty() => {
+                    "not reproduced: every segment identical, but not the verdict".to_owned()
+                }
+                Some(r) => {
+                    let mut segments: Vec<usize> =
+                        r.differing.iter().map(|d| d.segment_index).collect();
+                    segments.dedup();
+                    let listed: Vec<String> = r
+                        .differing
+                        .iter()
+                        .map(|d| {
+                            format!(
+                                "segment {} case {}, run {} {}",
+                                d.segment_index,
+                                metres(d.original_max_m),
+                                d.run,
+                                metres(d.max_m)
+                            )
+                        })
+                        .collect();
+                    format!(
+                        "not reproduced: {} segment(s) differ from the case (the case's test on \
+                         the same simulated car from the same start): {}",
+                        segments.len(),
+                        listed.join("; ")
+                    )
+                }
+                None => "the case's test on the same simulated car from the same start (the \
+                         case has no results to reproduce)"
+                    .to_owned(),
+            },
+            Drove::OtherCars => "the runs drove other simulated cars (--vary-seed): the spread \
+                                 of the case's test over the simulator's noise, not a \
+                                 reproduction"
+                .to_owned(),
+            Drove::Altered => "the case's test altered (--no-faults, another --seed or car \
+                               profile): its figures need not be the case's"
+                .to_owned(),
+            Drove::WallClock => "the same simulated car against the wall clock: the timing \
+                                 differs, so the figures need not be the case's"
+                .to_owned(),
+            Drove::RealCar => "on a real car: the same commands, the faults at the same places \
+                               and the same seeds of the reset and the safe stop; not the same: \
+                               the car's sensors and their noise, where it stands and the \
+                               link's timing, so the figures need not be the case's"
+                .to_owned(),
+            Drove::OwnCampaign => "a case that names no campaign (written by hand): each run a \
+                                   campaign of its own, nothing recorded to reproduce"
+                .to_owned(),
+        })
     }
 }
 
@@ -206,6 +313,7 @@ mod tests {
         let run = ReplayRun {
             dir: format!("run-{i}"),
             seed: 1,
+            simulator_seed: None,
             verdict: case.verdict,
             reason: None,
         };
@@ -219,7 +327,13 @@ mod tests {
             run(1, &case(&[0.4, 1.1], Verdict::Failed)),
             run(2, &case(&[0.6, 1.3], Verdict::Failed)),
         ];
-        let c = Comparison::new(&original, of(false), original.scenario.clone(), &runs);
+        let c = Comparison::new(
+            &original,
+            of(false),
+            original.scenario.clone(),
+            &runs,
+            Drove::OtherCars,
+        );
         assert_eq!(c.segments.len(), 2);
         let s = &c.segments[1];
         assert_eq!(s.original_max_m, Some(1.2));
@@ -245,7 +359,13 @@ mod tests {
             run(1, &case(&[1.4], Verdict::Failed)),
             run(2, &case(&[0.6, 0.7], Verdict::Passed)),
         ];
-        let c = Comparison::new(&original, of(false), original.scenario.clone(), &runs);
+        let c = Comparison::new(
+            &original,
+            of(false),
+            original.scenario.clone(),
+            &runs,
+            Drove::OtherCars,
+        );
         assert_eq!(c.segments[1].max_m, vec![None, Some(0.7)]);
         assert_eq!(c.segments[1].mean_m, Some(0.7));
         assert_eq!(c.segments[1].diff_from_mean_m, vec![None, Some(0.0)]);
@@ -259,11 +379,83 @@ mod tests {
         let passed = case(&[0.5, 0.6], Verdict::Passed);
         let failed = case(&[0.5, 1.6], Verdict::Failed);
         let all = [run(1, &passed), run(2, &passed)];
-        let c = Comparison::new(&original, of(true), original.scenario.clone(), &all);
+        let c = Comparison::new(
+            &original,
+            of(true),
+            original.scenario.clone(),
+            &all,
+            Drove::OtherCars,
+        );
         assert_eq!(c.failure_disappeared, Some(true));
         assert!(c.table().contains("failure disappears"));
         let some = [run(1, &passed), run(2, &failed)];
-        let c = Comparison::new(&original, of(true), original.scenario.clone(), &some);
+        let c = Comparison::new(
+            &original,
+            of(true),
+            original.scenario.clone(),
+            &some,
+            Drove::OtherCars,
+        );
         assert_eq!(c.failure_disappeared, Some(false));
+    }
+
+    #[test]
+    fn runs_of_the_same_test_reproduce_only_when_every_segment_is_the_cases_to_the_last_digit() {
+        let original = case(&[1.006, 0.3], Verdict::Failed);
+        let same = [run(1, &original)];
+        let c = Comparison::new(
+            &original,
+            of(false),
+            original.scenario.clone(),
+            &same,
+            Drove::SameTest,
+        );
+        let r = c.reproduction.as_ref().expect("the same test is checked");
+        assert!(r.identical && r.differing.is_empty(), "{r:?}");
+        assert!(
+            c.table().contains("reproduced: every segment identical"),
+            "{}",
+            c.table()
+        );
+        // One ulp off in segment 0, segment 1 not driven, a segment 2 the case never drove.
+        let close = case(&[f64::from_bits(1.006_f64.to_bits() + 1)], Verdict::Failed);
+        let other = case(&[0.98, 0.3, 1.47], Verdict::Failed);
+        let runs = [run(1, &close), run(2, &other)];
+        let c = Comparison::new(
+            &original,
+            of(false),
+            original.scenario.clone(),
+            &runs,
+            Drove::SameTest,
+        );
+        let r = c.reproduction.as_ref().unwrap();
+        assert!(!r.identical);
+        let listed: Vec<(usize, usize)> = r
+            .differing
+            .iter()
+            .map(|d| (d.segment_index, d.run))
+            .collect();
+        assert_eq!(listed, vec![(0, 1), (0, 2), (1, 1), (2, 2)]);
+        assert_eq!(r.differing[3].original_max_m, None);
+        assert_eq!(r.differing[3].max_m, Some(1.47));
+        let table = c.table();
+        assert!(
+            table.contains("not reproduced: 3 segment(s) differ")
+                && table.contains("segment 0 case 1.006 m, run 2 0.980 m")
+                && table.contains("segment 2 case -, run 2 1.470 m"),
+            "{table}"
+        );
+        assert!(!table.contains("same verdict every time"), "{table}");
+        assert_eq!(Comparison::from_json(&c.to_json().unwrap()).unwrap(), c);
+        // Other cars are not checked against the case: their spread is the point.
+        let c = Comparison::new(
+            &original,
+            of(false),
+            original.scenario.clone(),
+            &runs,
+            Drove::OtherCars,
+        );
+        assert_eq!(c.reproduction, None);
+        assert!(c.table().contains("other simulated cars"), "{}", c.table());
     }
 }

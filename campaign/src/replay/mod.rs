@@ -15,5 +15,7 @@
 mod compare;
 mod plan;
 
-pub use crate::files::{Comparison, REPLAY_FORMAT, ReplayRun, SegmentComparison};
+pub use crate::files::{
+    Comparison, Drove, REPLAY_FORMAT, ReplayRun, Reproduction, SegmentComparison, SegmentDifference,
+};
 pub use compare::REPLAY_FILE;

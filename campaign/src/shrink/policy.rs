@@ -2,8 +2,10 @@
 //! minimal case is confirmed. Pure; the driving is the caller's ([`Drive`]: fresh simulated cars
 //! in the orchestrator, a stand-in in the tests).
 //!
-//! 1. The case is driven `runs` times (run k with [`Purpose::Run`] k): every run must fail at one
-//!    segment or two neighbouring ones (its [`Target`]), or there is nothing to shrink.
+//! 1. The case is driven `runs` times (run k on the car [`Purpose::Rerun`] k of the case's test,
+//!    so that run 0 is the campaign's own car and gives the case's figures; a case without a
+//!    test index with [`Purpose::Run`] k): every run must fail at one segment or two
+//!    neighbouring ones (its [`Target`]), or there is nothing to shrink.
 //! 2. Every run of a kept candidate must fail by `margin` above the threshold, or by as much as
 //!    the case did in its least clear run if that is less.
 //! 3. Each candidate of the [`Shrinker`] is driven up to `runs` times, stopping at the first run
@@ -32,8 +34,9 @@ pub trait Drive {
     /// Why a run could not be driven.
     type Error;
 
-    /// Drives `case` once, its run seeded with `seed` (the campaign seed of a one-test
-    /// campaign): the case the run wrote, with its results.
+    /// Drives `case` once, its run seeded with `seed` (with [`Settings::test_index`] the
+    /// simulated car's seed, the case driven as its own test; otherwise the campaign seed of a
+    /// one-test campaign): the case the run wrote, with its results.
     fn drive(&mut self, case: &Case, seed: u64) -> Result<Case, Self::Error>;
 
     /// Whether the shrink ends before its next candidate: `Some(Ended::Interrupted)` when the
@@ -72,8 +75,11 @@ pub enum Progress<'a> {
 pub struct Settings {
     /// Runs per candidate.
     pub runs: u32,
-    /// The seed: run k has the seed [`Purpose::Run`] k of it.
+    /// The seed: the case's campaign seed, run k then on the car [`Purpose::Rerun`] k of test
+    /// [`Settings::test_index`]; without a test index run k has the seed [`Purpose::Run`] k of it.
     pub seed: u64,
+    /// The case's test in its campaign (`None`: a hand-written case).
+    pub test_index: Option<usize>,
     /// How far above the threshold every run must fail (at most the case's own smallest
     /// excess), m.
     pub margin_m: f64,
@@ -137,6 +143,7 @@ struct Kept {
 struct Runs<'d, D> {
     driver: &'d mut D,
     seed: u64,
+    test_index: Option<usize>,
     driven: usize,
 }
 
@@ -154,7 +161,11 @@ impl<D: Drive> Runs<'_, D> {
         let mut results = Vec::new();
         let mut first_case = None;
         for k in first..first + count {
-            let seed = derive(self.seed, Purpose::Run { run: u64::from(k) });
+            let run = u64::from(k);
+            let seed = match self.test_index {
+                Some(test_index) => derive(self.seed, Purpose::Rerun { test_index, run }),
+                None => derive(self.seed, Purpose::Run { run }),
+            };
             self.driven += 1;
             let driven = self.driver.drive(case, seed)?;
             let result = RunResult::of(seed, &driven);
@@ -179,6 +190,7 @@ pub fn shrink<D: Drive>(
     let mut runs = Runs {
         driver,
         seed: settings.seed,
+        test_index: settings.test_index,
         driven: 0,
     };
     runs.driver.progress(Progress::Reproducing);

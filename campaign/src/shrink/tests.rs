@@ -370,6 +370,7 @@ fn strong_case() -> (Scenario, Case, Settings) {
     let settings = Settings {
         runs: 3,
         seed: 40,
+        test_index: None,
         margin_m: 0.1,
     };
     (s, with_strong_fault(case), settings)

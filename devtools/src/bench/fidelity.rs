@@ -154,6 +154,7 @@ fn drive(
             verdict: None,
             no_faults,
         },
+        as_test: None,
     });
     config.policy = campaign::oracle::FailurePolicy::ContinueAndRecord;
     config.record = RecordMode::None;

@@ -1,12 +1,18 @@
 //! `drivecheck replay CASE.json`: a recorded (or hand-written) case driven again N times, each
 //! after the same reset, each recorded like a campaign, then compared segment by segment.
 //!
-//! Every run is a one-test campaign of its own in `run-K/` inside the replay directory
-//! (`campaign.json` naming the case it replays, `case-000.json`, `campaign.mcap`). With the
-//! embedded simulated car every run gets a fresh simulator seeded alike, so in virtual time
-//! with one seed the runs are identical (`--vary-seed` varies the sensor noise instead); a real
-//! car is connected once and reset before each run. The comparison (`replay.json`, see
-//! [`campaign::replay`]) is written and printed at the end, also when a run ended the replay early.
+//! Every run is a one-test campaign in `run-K/` inside the replay directory (`campaign.json`
+//! naming the case it replays, the case file, `campaign.mcap`). A case from a campaign is driven
+//! as its own test (`runner::SameTest`): test *i* of its campaign seed, so the reset's and safe
+//! stop's seeds are the campaign's and the case file is `case-NNN.json` of its index; on the
+//! embedded simulated car every run gets a fresh simulator, the test's own car (the seed map's
+//! `Simulator` seed of test *i*) standing where the campaign placed it, so in virtual time every
+//! segment's largest deviation is the case's (`--vary-seed`, or `--times` above 1, drives the
+//! seed map's other cars of that test, `Purpose::Rerun`). A hand-written case is test 0 of a
+//! campaign of its own. A real car is connected once and reset before each run. The comparison
+//! (`replay.json`, see [`campaign::replay`]) says what the runs drove and, for the case's own
+//! test, whether they reproduced it; it is written and printed at the end, also when a run
+//! ended the replay early.
 
 use std::path::Path;
 use std::time::Instant;
@@ -29,10 +35,10 @@ use campaign::files::{CASE_FAULT_PLACES_SINCE, CommandRecord};
 use campaign::files::{Case, ReplayOf, ScenarioRef};
 use campaign::model::{Campaign, TestPlan};
 use campaign::oracle::Verdict;
-use campaign::replay::{Comparison, REPLAY_FILE, ReplayRun};
+use campaign::replay::{Comparison, Drove, REPLAY_FILE, ReplayRun};
 use campaign::seed::{Purpose, derive};
 use report::REPORT_FILE;
-use runner::vehicle::{ConnectError, Vehicle, connect};
+use runner::vehicle::{ConnectError, Vehicle, connect, placed};
 use runner::{
     ReplaySource, RunConfig, Silent, TestSummary, Tests, rfc3339_now, run_campaign, run_dir_name,
 };
@@ -87,9 +93,37 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
     }
     let profile = crate::profile_arg::load(args.profile.as_deref())?;
     let sim = profile.sim_config(&scenario)?;
-    if embedded {
-        warn_other_profile(&case, path, &profile);
-    }
+    let other_profile = embedded && warn_other_profile(&case, path, &profile);
+    let virtual_time = embedded && !args.realtime;
+    let times = args.times.unwrap_or(if args.vary_seed || !virtual_time {
+        3
+    } else {
+        1
+    });
+    // The case's own test in virtual time is the same every run: more runs mean other cars.
+    let implied_vary = virtual_time && !args.vary_seed && times > 1;
+    let vary = args.vary_seed || implied_vary;
+    // The case's test in its campaign (the seeds of its reset, safe stop and car, its start),
+    // with --seed's campaign seed when given.
+    let test = runner::SameTest::of_case(&case, &scenario)
+        .with_context(|| format!("{}: where its test started", path.display()))?
+        .map(|test| runner::SameTest {
+            campaign_seed: seed,
+            ..test
+        });
+    let drove = if !embedded {
+        Drove::RealCar
+    } else if test.is_none() {
+        Drove::OwnCampaign
+    } else if vary {
+        Drove::OtherCars
+    } else if !virtual_time {
+        Drove::WallClock
+    } else if args.no_faults || Some(seed) != case.campaign_seed || other_profile {
+        Drove::Altered
+    } else {
+        Drove::SameTest
+    };
     let made = args.out.is_none();
     let out = match &args.out {
         Some(out) => out.clone(),
@@ -105,11 +139,28 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
         verdict: case.verdict,
         no_faults: args.no_faults,
     };
-    let virtual_time = address == CarAddress::Sim && !args.realtime;
+    let what = match (test, drove) {
+        (Some(t), Drove::OtherCars) => format!(
+            "test {} of campaign seed {seed} on {times} other simulated car(s){}",
+            t.test_index,
+            if implied_vary {
+                format!(" (--times {times} implies --vary-seed)")
+            } else {
+                String::new()
+            }
+        ),
+        (Some(t), Drove::RealCar) => {
+            format!("test {} of campaign seed {seed} on the car", t.test_index)
+        }
+        (Some(t), _) => format!(
+            "test {} of campaign seed {seed} on its own simulated car from its start",
+            t.test_index
+        ),
+        (None, _) => format!("seed {seed}{}", if vary { " + run − 1" } else { "" }),
+    };
     eprintln!(
-        "replaying {} {} time(s) on {} with car {}{}{}, seed {seed}{}, writing {}",
+        "replaying {} {times} time(s) on {} with car {}{}{}: {what}, writing {}",
         path.display(),
-        args.times,
         scenario.name,
         args.car,
         if virtual_time { " (virtual time)" } else { "" },
@@ -118,7 +169,6 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
         } else {
             ""
         },
-        if args.vary_seed { " + run − 1" } else { "" },
         out.display()
     );
     let _claim = runner::claim_out_dir(&out, made)?;
@@ -137,6 +187,9 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
         plan: &plan,
         of: &of,
         seed,
+        test,
+        times,
+        vary,
         out: &out,
         policy: case.settings.as_ref().map(|s| s.failure_policy),
     };
@@ -149,7 +202,7 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
         Some(error) if nothing_driven => return Err(error),
         other => other,
     };
-    let comparison = Comparison::new(&case, of.clone(), ScenarioRef::of(&scenario), &runs);
+    let comparison = Comparison::new(&case, of.clone(), ScenarioRef::of(&scenario), &runs, drove);
     let file = out.join(REPLAY_FILE);
     runner::atomic::write(&file, format!("{}\n", comparison.to_json()?))
         .with_context(|| format!("cannot write {}", file.display()))?;
@@ -160,7 +213,15 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
             runner::junit::Clock::Wall
         };
         let timing = (started_at.as_str(), started.elapsed().as_secs_f64(), clock);
-        write_junit(&runs, &of, &scenario, &out, timing, junit_file)?;
+        let case_file = format!("case-{:03}.json", test.map_or(0, |t| t.test_index));
+        write_junit(
+            &runs,
+            &of,
+            &scenario,
+            (&out, &case_file),
+            timing,
+            junit_file,
+        )?;
     }
     if args.report {
         super::report::write(
@@ -181,6 +242,12 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
         )?;
     } else {
         print!("{}", comparison.table());
+        if implied_vary {
+            println!(
+                "--times {times} on the embedded simulated car in virtual time implies \
+                 --vary-seed: the case's own car gives the same figures every run"
+            );
+        }
         println!(
             "{:.1} s wall time; replay directory: {} ({REPLAY_FILE} written {})",
             started.elapsed().as_secs_f64(),
@@ -202,11 +269,11 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
     })
 }
 
-/// Warns when `case` was driven on a simulated car of another profile than `profile`: its
-/// results then need not be reproduced.
-fn warn_other_profile(case: &Case, path: &Path, profile: &LoadedProfile) {
+/// Warns when `case` was driven on a simulated car of another profile than `profile` (and says
+/// so): its results then need not be reproduced.
+fn warn_other_profile(case: &Case, path: &Path, profile: &LoadedProfile) -> bool {
     let Some(recorded) = &case.car_profile else {
-        return;
+        return false;
     };
     let hash = profile.profile.hash();
     if recorded.hash != hash {
@@ -219,7 +286,9 @@ fn warn_other_profile(case: &Case, path: &Path, profile: &LoadedProfile) {
             profile.name,
             &hash[..12]
         );
+        return true;
     }
+    false
 }
 
 /// Everything the runs share.
@@ -234,6 +303,13 @@ struct Job<'a> {
     plan: &'a TestPlan,
     of: &'a ReplayOf,
     seed: u64,
+    /// The case's test in its campaign (`None`: a hand-written case, each run test 0 of a
+    /// campaign of its own).
+    test: Option<runner::SameTest>,
+    /// Runs.
+    times: u32,
+    /// Other simulated cars (`--vary-seed`, or implied by `--times`).
+    vary: bool,
     out: &'a Path,
     policy: Option<campaign::oracle::FailurePolicy>,
 }
@@ -245,14 +321,11 @@ impl Job<'_> {
         // A real car is connected once; the simulated one is fresh for every run.
         let mut shared = None;
         let mut runs = Vec::new();
-        for k in 0..self.args.times {
-            let seed = if self.args.vary_seed {
-                derive(self.seed, Purpose::Run { run: u64::from(k) })
-            } else {
-                self.seed
-            };
+        let sim = placed(self.sim.clone(), self.test.and_then(|t| t.start));
+        for k in 0..self.times {
+            let (seed, sim_seed) = self.seeds(k);
             let dir = format!("run-{}", k + 1);
-            let connecting = connect(self.address, self.sim, seed);
+            let connecting = connect(self.address, &sim, sim_seed);
             let (case, result) = match car_for_run(&mut shared, connecting).await {
                 Ok((car, sim)) => self.run_one(&car, sim, seed, &dir, &interrupt).await,
                 Err(error) => (None, Err(error.into())),
@@ -260,13 +333,15 @@ impl Job<'_> {
             let run = ReplayRun {
                 dir,
                 seed,
+                simulator_seed: (*self.address == CarAddress::Sim && sim_seed != seed)
+                    .then_some(sim_seed),
                 verdict: case.as_ref().and_then(|c| c.verdict),
                 reason: case.as_ref().and_then(|c| c.reason.clone()),
             };
             eprintln!(
                 "run {}/{}: {}, worst deviation {}{}",
                 k + 1,
-                self.args.times,
+                self.times,
                 run.verdict.map_or("not run", Verdict::as_str),
                 case.as_ref().map_or_else(|| "-".to_owned(), worst),
                 run.reason
@@ -279,6 +354,30 @@ impl Job<'_> {
             }
         }
         (runs, None)
+    }
+
+    /// Run `k`'s (from 0) campaign seed and simulated car's seed: the case's own test (its
+    /// campaign's car, or with `vary` the seed map's other cars of that test,
+    /// [`Purpose::Rerun`] k + 1), or a hand-written case's seed (with `vary` [`Purpose::Run`] k).
+    fn seeds(&self, k: u32) -> (u64, u64) {
+        match self.test {
+            Some(test) => {
+                let run = if self.vary { u64::from(k) + 1 } else { 0 };
+                let car = Purpose::Rerun {
+                    test_index: test.test_index,
+                    run,
+                };
+                (test.campaign_seed, derive(test.campaign_seed, car))
+            }
+            None => {
+                let seed = if self.vary {
+                    derive(self.seed, Purpose::Run { run: u64::from(k) })
+                } else {
+                    self.seed
+                };
+                (seed, seed)
+            }
+        }
     }
 
     /// Drives run `dir` with `seed` on `car` (`sim` its simulator, shut down after the run): the
@@ -304,6 +403,7 @@ impl Job<'_> {
         config.tests = Tests::Replay(ReplaySource {
             plan: self.plan.clone(),
             of: self.of.clone(),
+            as_test: self.test.map(|t| t.test_index),
         });
         if let Some(policy) = self.policy {
             config.policy = policy;
@@ -369,7 +469,7 @@ fn write_junit(
     runs: &[(ReplayRun, Option<Case>)],
     of: &ReplayOf,
     scenario: &Scenario,
-    out: &Path,
+    (out, case_file): (&Path, &str),
     (started_at, wall_s, clock): (&str, f64, runner::junit::Clock),
     file: &Path,
 ) -> Result<()> {
@@ -386,11 +486,7 @@ fn write_junit(
             case.as_ref().map(|case| runner::junit::TestCase {
                 name: format!("{replayed}/{}", run.dir),
                 case: case.into(),
-                file: out
-                    .join(&run.dir)
-                    .join("case-000.json")
-                    .display()
-                    .to_string(),
+                file: out.join(&run.dir).join(case_file).display().to_string(),
             })
         })
         .collect();

@@ -220,7 +220,7 @@ pub(super) fn shrink_case(
     let cancel = runtime.block_on(async { cancel_on_ctrl_c() });
     // Claimed for the whole shrink: another process given the same --out is refused.
     let _claim = runner::claim_out_dir(out, false)?;
-    let sim = SimDriver::new(
+    let mut sim = SimDriver::new(
         (scenario, options.sim.clone()),
         path,
         case,
@@ -228,6 +228,14 @@ pub(super) fn shrink_case(
         (options.runs, options.seed),
         &cancel,
     );
+    // Every run is the case's own test (the campaign's reset, safe stop and start), run 0 on
+    // the campaign's own car: the shrink's "before" is the case's figures.
+    sim.test = runner::SameTest::of_case(case, scenario)
+        .with_context(|| format!("{}: where its test started", path.display()))?
+        .map(|test| runner::SameTest {
+            campaign_seed: options.seed,
+            ..test
+        });
     let mut driver = SimRuns {
         sim: &sim,
         runtime,
@@ -239,6 +247,7 @@ pub(super) fn shrink_case(
     let settings = Settings {
         runs: options.runs,
         seed: options.seed,
+        test_index: sim.test.map(|t| t.test_index),
         margin_m: options.margin,
     };
     let shrunk = campaign::shrink::shrink(case, scenario, &settings, &mut driver);

@@ -20,6 +20,13 @@ fn failing_case(dir: &Path) -> PathBuf {
     campaign.join(&record.summary.unwrap().failing_cases[0])
 }
 
+/// The one case file of a replay's run directory (`case-NNN.json` of the test it replays).
+fn replayed_case(run: &Path) -> PathBuf {
+    let names = common::cases(run);
+    assert_eq!(names.len(), 1, "{names:?}");
+    run.join(names.keys().next().unwrap())
+}
+
 fn read(file: &Path) -> Case {
     Case::from_json(&std::fs::read_to_string(file).unwrap()).unwrap()
 }
@@ -27,7 +34,7 @@ fn read(file: &Path) -> Case {
 fn replay(case: &Path, out: &Path) -> (Case, String) {
     let run = drivecheck(&["replay", path(case), "--times", "1", "--out", path(out)]);
     assert!(matches!(run.status.code(), Some(0 | 1)), "{}", text(&run));
-    (read(&out.join("run-1").join("case-000.json")), text(&run))
+    (read(&replayed_case(&out.join("run-1"))), text(&run))
 }
 
 #[test]
@@ -109,7 +116,7 @@ fn replay_three(case: &Path, out: &Path) -> (Vec<Case>, String) {
     ]);
     assert_eq!(run.status.code(), Some(1), "{}", text(&run));
     let cases = (1..=3)
-        .map(|k| read(&out.join(format!("run-{k}")).join("case-000.json")))
+        .map(|k| read(&replayed_case(&out.join(format!("run-{k}")))))
         .collect();
     (cases, text(&run))
 }

@@ -19,6 +19,7 @@ mod logging;
 mod old_recordings;
 mod progress;
 mod replay_command;
+mod replay_reproduces;
 mod report_command;
 mod run_command;
 mod shrink_command;

@@ -126,22 +126,31 @@ impl FreshCars for EmbeddedSims {
     }
 
     fn connect(&self, test_index: usize, start: Option<StartPose>) -> Connecting<'_, Car> {
-        let mut config = car_sim::SimConfig {
-            seed: campaign::seed::derive(self.config.seed, Purpose::Simulator { test_index }),
-            ..self.config.clone()
-        };
-        if let Some(start) = start {
-            config.placement = Some(car_sim::Placement {
-                x: start.position.x,
-                y: start.position.y,
-                heading: start.heading,
-            });
-        }
+        let config = placed(
+            car_sim::SimConfig {
+                seed: campaign::seed::derive(self.config.seed, Purpose::Simulator { test_index }),
+                ..self.config.clone()
+            },
+            start,
+        );
         Box::pin(async move {
             let (car, sim) = sim_car(&config).await?;
             Ok((car, Box::new(sim) as Box<dyn SimulatorView>))
         })
     }
+}
+
+/// The simulated car `config` standing at `start` when it starts (`None`: where `config` puts
+/// it, the start of the scenario's start route unless it says otherwise).
+pub fn placed(mut config: car_sim::SimConfig, start: Option<StartPose>) -> car_sim::SimConfig {
+    if let Some(start) = start {
+        config.placement = Some(car_sim::Placement {
+            x: start.position.x,
+            y: start.position.y,
+            heading: start.heading,
+        });
+    }
+    config
 }
 
 /// The embedded simulator's debug view, as the runner records it.

@@ -57,6 +57,7 @@ fn replay_config(case: &Case, scenario: &Scenario, out: &Path) -> RunConfig {
             verdict: case.verdict,
             no_faults: false,
         },
+        as_test: None,
     });
     config
 }
