@@ -310,9 +310,14 @@ fn dry_run(
                 runner::vehicle::Vehicle::version(&connected)
             );
         }
-        runner::dry_run(&connected, scenario, &config)
-            .await
-            .map_err(anyhow::Error::from)
+        runner::dry_run(
+            &connected,
+            scenario,
+            &config,
+            &super::progress::WarningsOnly,
+        )
+        .await
+        .map_err(anyhow::Error::from)
     })?;
     if !args.json {
         println!(
