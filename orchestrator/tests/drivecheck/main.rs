@@ -19,6 +19,7 @@ mod old_recordings;
 mod progress;
 mod replay_command;
 mod report_command;
+mod resume_checks;
 mod run_command;
 mod shrink_command;
 mod sweep_command;
