@@ -38,6 +38,38 @@ use crate::transport::{Link, PC_BYTE_TIMEOUT};
 use crate::version::CommandId;
 use session::{RouteMemory, Shared, StateOutcome, StateTicket, keep_alive, lock, supervise};
 
+/// One `fi_add_fault` in flight, counted in [`Shared::fault_adds`] until it is dropped (also when
+/// the command is cancelled).
+struct FaultAdding<'a> {
+    shared: &'a Shared,
+    /// The count of commands started when this one started, if no other was in flight then.
+    alone_from: Option<u64>,
+}
+
+impl<'a> FaultAdding<'a> {
+    fn start(shared: &'a Shared) -> Self {
+        let mut adds = lock(&shared.fault_adds);
+        adds.in_flight += 1;
+        adds.started += 1;
+        let alone_from = (adds.in_flight == 1).then_some(adds.started);
+        drop(adds);
+        Self { shared, alone_from }
+    }
+
+    /// Whether no other `fi_add_fault` was in flight from this one's start until now: then no
+    /// other fault command's reply was due meanwhile.
+    fn ran_alone(&self) -> bool {
+        let adds = lock(&self.shared.fault_adds);
+        self.alone_from == Some(adds.started) && adds.in_flight == 1
+    }
+}
+
+impl Drop for FaultAdding<'_> {
+    fn drop(&mut self) {
+        lock(&self.shared.fault_adds).in_flight -= 1;
+    }
+}
+
 /// How closely a point read back from the car must match the point sent, metres: far above the
 /// float32_auto rounding of the wire (under 0.1 mm at a kilometre), far below any real difference.
 const STORED_POINT_TOLERANCE_M: f64 = 1e-3;
@@ -981,17 +1013,38 @@ impl Car {
         }
         let command = fault::add_fault_command(probe, kind, param, start, duration);
         let success = format!("successfully added to probe {probe}.");
+        let shared = self.shared();
+        let adding = FaultAdding::start(shared);
+        // Success lines naming another probe, kept to say what the car answered when nothing
+        // named this one.
+        let others = std::sync::Mutex::new(Vec::new());
         // Fault commands are in flight together, those of one probe in an ordered lane: their success lines
         // name their probes, and the car answers one probe's commands in the order they arrive.
-        let lines = self
-            .shared()
+        let lines = shared
             .terminal_lines_ordered(
                 &format!("fi_add_fault {id}"),
                 &command,
-                |line| fault::is_add_fault_reply(line, probe),
+                |line| {
+                    let ours = fault::is_add_fault_reply(line, probe);
+                    if !ours && fault::is_add_fault_success(line) {
+                        lock(&others).push(line.to_owned());
+                    }
+                    ours
+                },
                 |lines| lines.iter().any(|l| l.contains(&success)),
             )
-            .await?;
+            .await;
+        let ran_alone = adding.ran_alone();
+        drop(adding);
+        let lines = lines?;
+        let others = others.into_inner().unwrap_or_else(|e| e.into_inner());
+        if lines.is_empty() && ran_alone && !others.is_empty() {
+            return Err(FaultError::OtherProbe {
+                asked: id,
+                reply: others.concat(),
+            }
+            .into());
+        }
         Ok(fault::parse_add_fault_reply(&lines, probe)?)
     }
 

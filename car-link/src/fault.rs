@@ -149,6 +149,15 @@ pub enum FaultError {
          car's fault list could not be read ({0})"
     )]
     Unconfirmed(String),
+    /// No reply named the probe of a `fi_add_fault` sent while no other was in flight, but the
+    /// car printed a success line naming another probe: a reply drivecheck does not recognise.
+    #[error("the car answered {reply:?} to a fault for probe {asked}, which names another probe")]
+    OtherProbe {
+        /// The probe id the command named.
+        asked: String,
+        /// The success lines the car printed meanwhile.
+        reply: String,
+    },
     /// Part of the reply arrived, not all of it (a lossy link lost some of its lines).
     #[error("the reply to {0} arrived incomplete (some of its lines were lost on the link)")]
     Incomplete(&'static str),
@@ -231,6 +240,11 @@ pub fn parse_add_fault_reply(lines: &[String], probe: &Probe) -> Result<(), Faul
 /// probe).
 pub fn is_add_fault_reply(line: &str, probe: &Probe) -> bool {
     line.contains(&add_fault_success(probe)) || rejection(line).is_some()
+}
+
+/// Whether a PRINTF line is a success line of `fi_add_fault`, for whatever probe.
+pub fn is_add_fault_success(line: &str) -> bool {
+    line.contains("successfully added to probe ")
 }
 
 fn add_fault_success(probe: &Probe) -> String {

@@ -176,6 +176,10 @@ pub struct CarOptions {
     /// `drivecheck sweep` varies it to show the method's trade-off (larger helps against wheel
     /// slip, smaller against reflections).
     pub uwb_step_clamp_m: Option<f32>,
+    /// Conformance only: `fi_add_fault` adds the fault, but its success line names another probe
+    /// (the id asked with a `0` appended: `uwb_range_500` for `uwb_range_50`), as a car whose
+    /// replies drivecheck does not recognise (default false: the firmware's reply).
+    pub misname_fault_probe: bool,
 }
 
 impl Default for CarOptions {
@@ -197,6 +201,7 @@ impl Default for CarOptions {
             record_events: false,
             imu_on_bench: false,
             uwb_step_clamp_m: None,
+            misname_fault_probe: false,
         }
     }
 }
@@ -802,7 +807,16 @@ impl SimCar {
     }
 
     fn run_terminal(&mut self, cmd: &str, args: &[&str]) -> Vec<String> {
-        if let Some(out) = self.fi.terminal(args) {
+        if let Some(mut out) = self.fi.terminal(args) {
+            if self.options.misname_fault_probe
+                && cmd == "fi_add_fault"
+                && let Some(id) = args.get(1)
+            {
+                let (asked, other) = (format!("probe {id}."), format!("probe {id}0."));
+                for line in &mut out {
+                    *line = line.replace(&asked, &other);
+                }
+            }
             return out;
         }
         if let Some(out) = self.autopilot.terminal(args) {

@@ -117,6 +117,17 @@ impl FaultInjection {
         self.enabled = enabled;
     }
 
+    /// The fault slots taken (expired faults included: they keep their slot until
+    /// `fi_clear_faults`).
+    pub fn faults_armed(&self) -> usize {
+        self.probes
+            .iter()
+            .filter(|p| p.active)
+            .flat_map(|p| p.slots.iter())
+            .filter(|s| s.active)
+            .count()
+    }
+
     /// The probes, in slot order.
     pub fn probes(&self) -> &[Probe] {
         &self.probes

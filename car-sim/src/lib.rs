@@ -75,7 +75,10 @@ pub use debug::{DebugEvent, Truth};
 pub use fault::{FaultInjection, FaultKind};
 pub use profile::{CarProfile, ProfileError};
 pub use protocol::Board;
-pub use server::{LinkImpairment, SimConfig, SimHandle, serve_tcp, serve_udp, spawn_in_process};
+pub use server::{
+    FaultInjectionView, LinkImpairment, SimConfig, SimHandle, serve_tcp, serve_udp,
+    spawn_in_process,
+};
 pub use uwb::{RadioModel, RangeResult};
 pub use world::{RadioPath, Wall, World, WorldAnchor};
 

@@ -117,6 +117,8 @@ pub struct SimConfig {
     pub idle_timeout: Option<Duration>,
     /// Link impairment.
     pub link: LinkImpairment,
+    /// Conformance only: see [`CarOptions::misname_fault_probe`].
+    pub misname_fault_probe: bool,
 }
 
 impl SimConfig {
@@ -145,6 +147,7 @@ impl SimConfig {
             record_events: self.record_events,
             imu_on_bench: self.imu_on_bench,
             uwb_step_clamp_m: self.uwb_step_clamp_m,
+            misname_fault_probe: self.misname_fault_probe,
         }
     }
 }
@@ -154,6 +157,26 @@ impl SimConfig {
 struct Shared {
     truth: Truth,
     events: Vec<DebugEvent>,
+    fault_injection: FaultInjectionView,
+}
+
+/// The simulated car's fault injection as its handle sees it (what a car does not report: the
+/// firmware has no command that says whether fault injection is enabled).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct FaultInjectionView {
+    /// Whether fault injection is enabled (`fi_set_enabled 1`).
+    pub enabled: bool,
+    /// The fault slots taken (until `fi_clear_faults`).
+    pub faults_armed: usize,
+}
+
+impl FaultInjectionView {
+    fn of(car: &SimCar) -> Self {
+        Self {
+            enabled: car.fault_injection().is_enabled(),
+            faults_armed: car.fault_injection().faults_armed(),
+        }
+    }
 }
 
 /// A running simulated car. Dropping it stops the simulation and closes its connections.
@@ -168,6 +191,11 @@ impl SimHandle {
     /// The debug view at the last simulated tick.
     pub fn truth(&self) -> Truth {
         self.lock().truth
+    }
+
+    /// The fault injection at the last simulated tick: enabled or not, and the faults armed.
+    pub fn fault_injection(&self) -> FaultInjectionView {
+        self.lock().fault_injection
     }
 
     /// Takes the debug events recorded so far (empty unless `record_events`).
@@ -287,6 +315,7 @@ impl Core {
         let shared = Arc::new(Mutex::new(Shared {
             truth: car.truth(),
             events: Vec::new(),
+            fault_injection: FaultInjectionView::of(&car),
         }));
         Core {
             board: Board::new(car),
@@ -410,9 +439,11 @@ impl Core {
         } else {
             Vec::new()
         };
+        let fault_injection = FaultInjectionView::of(self.board.car());
         let mut shared = self.shared.lock().unwrap_or_else(|e| e.into_inner());
         shared.truth = truth;
         shared.events.extend(events);
+        shared.fault_injection = fault_injection;
     }
 }
 

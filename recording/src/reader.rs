@@ -653,6 +653,27 @@ fn metadata_at(
     })
 }
 
+/// The campaign seed the recording at `path` names in its `drivecheck.campaign` metadata, read
+/// from the file's start up to that record (written before any message, so only the first few
+/// records are read, whatever the file's size). `None` when the file has no such record before
+/// its first message or its damage.
+pub fn recorded_seed(path: &Path) -> Result<Option<String>, RecordingError> {
+    let file = File::open(path).map_err(|source| RecordingError::Read {
+        path: path.to_owned(),
+        source,
+    })?;
+    for record in Records::new(BufReader::new(file)) {
+        match record {
+            Ok(McapRecord::Metadata(m)) if m.name == "drivecheck.campaign" => {
+                return Ok(m.metadata.get("seed").cloned());
+            }
+            Ok(McapRecord::Message { .. }) | Err(_) => break,
+            Ok(_) => {}
+        }
+    }
+    Ok(None)
+}
+
 impl<R: Read> Spans<R> {
     /// The spans of the recording `input` holds, read from it as they are taken.
     pub fn from_reader(input: R) -> Self {

@@ -440,9 +440,9 @@ async fn add_fault_once<V: Vehicle>(car: &V, fault: Fault, before: usize) -> OpR
         match result {
             // A reply that is lost, or partly lost (a lossy link drops some of its lines, and
             // what is left reads as neither success nor a refusal), says nothing of the car.
-            Err(CarError::Fault(FaultError::NoReply | FaultError::Unexpected(_)))
-                if tries < FAULT_TRIES =>
-            {
+            Err(CarError::Fault(
+                FaultError::NoReply | FaultError::Unexpected(_) | FaultError::OtherProbe { .. },
+            )) if tries < FAULT_TRIES => {
                 if holds_more_than(car, &probe, before).await? {
                     return Ok(true);
                 }

@@ -2,8 +2,10 @@
 //! nothing after. Preflight as a campaign runs it (the firmware, the configuration switched and
 //! read back, the anchors, fault injection, the car inside the fence, the link measured); then
 //! the first test's route uploaded with the autopilot off and read back point by point, its
-//! fault commands uploaded and listed back, and everything cleared again. No route is started,
-//! so the car does not move; no run directory is written.
+//! fault commands uploaded and listed back, and everything cleared again: the session ends as a
+//! campaign's does, faults cleared and fault injection disabled, whether the dry run passed or
+//! not (`session_end`). No route is started, so the car does not move; no run directory is
+//! written.
 
 use car_link::RoutePoint;
 use car_link::fault::ListedFault;
@@ -11,7 +13,7 @@ use scenarios::Scenario;
 
 use super::journal::Journal;
 use super::preflight::Preflight;
-use super::{RunConfig, RunError, retried};
+use super::{CampaignObserver, RunConfig, RunError, retried};
 use crate::vehicle::Vehicle;
 use campaign::streaming::route_points;
 use trajgen::Waypoint;
@@ -46,12 +48,26 @@ pub struct DryRun {
     pub faults_listed: usize,
 }
 
-/// Runs the dry run of a campaign of `config` in `scenario` against `car`.
+/// Runs the dry run of a campaign of `config` in `scenario` against `car`. However it ends, it
+/// ends the session as a campaign does ([`crate::end_session`]: the faults cleared, fault
+/// injection disabled), and warns through `observer` when the car cannot be disarmed.
 ///
-/// Timeout: every command is bounded by the link's timeouts. Cancellation: safe at any await;
-/// a dry run cut short may leave route points or faults on the car, which the next preflight
-/// clears.
+/// Timeout: every command is bounded by the link's timeouts, the session's end by
+/// [`crate::session_end::DISARM_LIMIT`]. Cancellation: safe at any await; a dry run cut short
+/// may leave route points or faults on the car, which the next preflight clears.
 pub async fn dry_run<V: Vehicle>(
+    car: &V,
+    scenario: &Scenario,
+    config: &RunConfig,
+    observer: &dyn CampaignObserver,
+) -> Result<DryRun, RunError> {
+    let found = checks(car, scenario, config).await;
+    crate::end_session(car, None, observer).await;
+    found
+}
+
+/// The dry run's checks (see the module doc), leaving the session open.
+async fn checks<V: Vehicle>(
     car: &V,
     scenario: &Scenario,
     config: &RunConfig,

@@ -10,6 +10,12 @@ use campaign::oracle::Verdict;
 pub trait CampaignObserver: Sync {
     /// Something the operator should know that is not an error (`preflight: switched off …`).
     fn note(&self, text: &str);
+    /// Something the operator must know even when told to be quiet, such as a car left with
+    /// fault injection enabled (`fault injection could not be disabled on the car: …`). By
+    /// default a note.
+    fn warning(&self, text: &str) {
+        self.note(text);
+    }
     /// What is true of every run and worth saying only when asked (`-v`): the embedded
     /// simulator's fresh cars start from the firmware's factory configuration, so preflight
     /// switches off the same fields on every run.

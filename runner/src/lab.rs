@@ -177,6 +177,15 @@ pub async fn run_campaign_on_cars<V: Vehicle>(
         }
         Err(error) => Err(error),
     };
+    // Every car's session ends disarmed, a car that left too (best effort: its link may be
+    // lost); after the second signal the command line does it.
+    if !super::hard_stop().is_cancelled() {
+        futures::future::join_all(
+            cars.iter()
+                .map(|car| super::end_session(&car.car, Some(&car.name), observer)),
+        )
+        .await;
+    }
     finish_campaign(dir, journal, result)
 }
 

@@ -53,6 +53,7 @@ mod pause;
 mod preflight;
 mod reset;
 mod run_dir;
+pub mod session_end;
 pub mod simdrive;
 pub mod store;
 mod telemetry;
@@ -96,6 +97,7 @@ pub use run_dir::{
     RunDirectory, Staged, claim_default_run_dir, claim_out_dir, claim_run_dir_again, is_cut_off,
     is_used, rfc3339_now, run_dir_name,
 };
+pub use session_end::{NotDisarmed, disarm, end_session};
 
 use journal::Journal;
 use preflight::Preflight;
@@ -589,6 +591,11 @@ pub async fn run_campaign<V: Vehicle>(
         journal: &journal,
     };
     let result = run_tests(&inputs, &mut dir).await;
+    // After the second signal the command line disarms the car it brakes, in the moment the
+    // process still lives: the run directory comes first here.
+    if !hard_stop().is_cancelled() {
+        end_session(car, None, observer).await;
+    }
     finish_campaign(dir, journal, result)
 }
 

@@ -136,6 +136,16 @@ pub(super) struct Shared {
     pub(super) request_timeout_ns: AtomicU64,
     /// The tries of an acked request in force: `config.tries` until [`Shared::set_tries`].
     pub(super) tries: AtomicU32,
+    /// `fi_add_fault` commands in flight now, and started so far: a command that ran alone
+    /// knows that a success line naming another probe answered it (see `Car::add_fault`).
+    pub(super) fault_adds: Mutex<FaultAdds>,
+}
+
+/// The `fi_add_fault` commands of a car: in flight now, started so far.
+#[derive(Debug, Default)]
+pub(super) struct FaultAdds {
+    pub(super) in_flight: usize,
+    pub(super) started: u64,
 }
 
 /// Locks a std mutex, ignoring poisoning (no code here panics while holding one).
@@ -271,6 +281,7 @@ impl Shared {
             latest: watch::channel(None).0,
             request_timeout_ns: AtomicU64::new(duration_ns(config.request_timeout)),
             tries: AtomicU32::new(config.tries),
+            fault_adds: Mutex::new(FaultAdds::default()),
             config,
         }
     }

@@ -51,6 +51,18 @@ pub fn read_rows(dir: &Path) -> Result<Vec<TestRow>> {
     let mut rows = Vec::new();
     for (index, file) in case_files(dir)? {
         let case = read_case(dir, &file)?;
+        // Nothing a case says is taken on trust, as `runs merge` takes none: an edited verdict,
+        // statistics no deviations give, a segment's result repeated are refused, naming it.
+        case.check()
+            .with_context(|| dir.join(&file).display().to_string())?;
+        if case.test_index != Some(index) {
+            bail!(
+                "{}: holds test {}, not test {index}",
+                dir.join(&file).display(),
+                case.test_index
+                    .map_or_else(|| "none".to_owned(), |t| t.to_string())
+            );
+        }
         rows.push(TestRow::of(&case, index));
     }
     Ok(rows)

@@ -18,7 +18,8 @@ use runner::CampaignObserver;
 ///   every [`STATUS_EVERY`] or 1 % of the tests (done, failed, rate, time left);
 /// - with `-q`, nothing (errors and the summary still are).
 ///
-/// Notes (what preflight switched off) are printed unless `-q`.
+/// Notes (what preflight switched off) are printed unless `-q`; warnings (a car left with fault
+/// injection enabled) always.
 #[derive(Debug)]
 pub(super) struct Progress {
     bar: ProgressBar,
@@ -163,6 +164,11 @@ impl CampaignObserver for Progress {
         }
     }
 
+    fn warning(&self, text: &str) {
+        // Also with `-q`: a car left armed is not a detail.
+        self.line(&format!("warning: {text}"));
+    }
+
     fn detail(&self, text: &str) {
         if crate::output::verbosity() == crate::output::Verbosity::Verbose {
             self.line(text);
@@ -251,4 +257,23 @@ impl CampaignObserver for Progress {
             }
         }
     }
+}
+
+/// The runner's warnings on standard error, and nothing else: for a command that shows no
+/// progress of its own (`run --dry-run`, `replay`).
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct WarningsOnly;
+
+impl CampaignObserver for WarningsOnly {
+    fn note(&self, _text: &str) {}
+
+    fn warning(&self, text: &str) {
+        eprintln!("warning: {text}");
+    }
+
+    fn tests_planned(&self, _tests: usize) {}
+
+    fn test_started(&self, _test_index: usize) {}
+
+    fn test_finished(&self, _test_index: usize, _verdict: Option<Verdict>) {}
 }

@@ -40,7 +40,7 @@ use campaign::seed::{Purpose, derive};
 use report::REPORT_FILE;
 use runner::vehicle::{ConnectError, Vehicle, connect, placed};
 use runner::{
-    ReplaySource, RunConfig, Silent, TestSummary, Tests, rfc3339_now, run_campaign, run_dir_name,
+    ReplaySource, RunConfig, TestSummary, Tests, rfc3339_now, run_campaign, run_dir_name,
 };
 
 /// Replays the case and prints the comparison. Exit status: 0 every run passed, 1 a run failed
@@ -414,7 +414,7 @@ impl Job<'_> {
             self.scenario,
             &config,
             interrupt.token(),
-            &Silent,
+            &super::progress::WarningsOnly,
             sim_view(&sim),
         )
         .await;

@@ -2,7 +2,11 @@
 //! driven, then continued in its run directory (`docs/scaling.md`, *Long campaigns*).
 //!
 //! A test *ended* when its case file holds a verdict that was not cut off (aborted
-//! `interrupted` or `link lost`); every other test of the plan (or of the shard) is driven. A
+//! `interrupted` or `link lost`); every other test of the plan (or of the shard) is driven.
+//! Every case file is checked first, as `runs merge` checks a shard's: it holds the test its
+//! name says, its verdicts agree with its statistics, and it is a case of the campaign (seed,
+//! scenario, faults, settings); a case that is not is refused, naming the file. So is a
+//! recording (`campaign.mcap`, `campaign.mcap.resumed`) whose metadata names another seed. A
 //! cut-off test's case is kept beside it as `case-NNN.partial-K.json` (K from 1, the first name
 //! free) and the test is driven again from its start. The recording of the sessions before is
 //! moved aside to `campaign.mcap.resumed` and copied into the new `campaign.mcap` by the runner
@@ -48,6 +52,7 @@ impl Resumed {
                 dir.display()
             );
         }
+        check_recordings(dir, &record)?;
         let planned: BTreeSet<usize> = match record.shard {
             Some(shard) => shard.tests(record.settings.tests).collect(),
             None => (0..record.settings.tests).collect(),
@@ -67,6 +72,8 @@ impl Resumed {
                 );
             }
             let case = read_case(dir, &name).with_context(at)?;
+            check_case(&record, &case, index)
+                .with_context(|| format!("--resume {}: {name}", dir.display()))?;
             if is_cut_off(&case) {
                 cut_off.push(index);
             } else {
@@ -256,6 +263,53 @@ impl Resumed {
             prior_recording,
         })
     }
+}
+
+/// Nothing a case file says is taken on trust, as `runs merge` takes none: it must hold test
+/// `index` (the test its name says), its values and verdicts must agree with its own statistics
+/// ([`campaign::files::Case::check`]), and it must be a case of `record`'s campaign (its seed,
+/// scenario, faults and settings: [`CampaignRecord::foreign`]). Another campaign's case copied
+/// in, a case copied under another test's name, or an edited verdict would otherwise count as a
+/// test that ended.
+fn check_case(record: &CampaignRecord, case: &campaign::files::Case, index: usize) -> Result<()> {
+    if case.test_index != Some(index) {
+        bail!(
+            "holds test {}, not test {index}: a case copied under another test's name is not \
+             resumed",
+            case.test_index
+                .map_or_else(|| "none".to_owned(), |t| t.to_string())
+        );
+    }
+    case.check()?;
+    if let Some(difference) = record.foreign(case) {
+        bail!("not a case of the campaign of campaign.json: {difference}");
+    }
+    Ok(())
+}
+
+/// The recordings a resume continues (`campaign.mcap`, and `campaign.mcap.resumed` that a resume
+/// which died left) must be of the campaign of `record`: the seed in their `drivecheck.campaign`
+/// metadata is its seed. Another campaign's recording copied in is refused, naming it, before it
+/// is moved, copied or removed.
+fn check_recordings(dir: &Path, record: &CampaignRecord) -> Result<()> {
+    let store = RunStore::new(dir);
+    for file in [store.recording(), store.prior_recording()] {
+        if !file.exists() {
+            continue;
+        }
+        let recorded = recording::recorded_seed(&file)
+            .with_context(|| format!("--resume {}", dir.display()))?;
+        if let Some(seed) = recorded.filter(|s| *s != record.seed.to_string()) {
+            bail!(
+                "--resume {}: {} is the recording of a campaign with seed {seed}, campaign.json's \
+                 is seed {}: a recording of another campaign is not resumed",
+                dir.display(),
+                file.file_name().unwrap_or_default().to_string_lossy(),
+                record.seed
+            );
+        }
+    }
+    Ok(())
 }
 
 fn policy_name(policy: FailurePolicy) -> &'static str {

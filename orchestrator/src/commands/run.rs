@@ -332,7 +332,7 @@ fn dry_run(
                 connected.version()
             );
         }
-        runner::dry_run(connected, scenario, config)
+        runner::dry_run(connected, scenario, config, &super::progress::WarningsOnly)
             .await
             .map_err(anyhow::Error::from)
     }

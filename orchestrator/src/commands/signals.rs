@@ -1,6 +1,8 @@
 //! The async runtime and the signals of a command that drives a car: the first SIGINT (Ctrl-C)
-//! or SIGTERM cancels the campaign (the runner ends the test with its safe stop), the second
-//! brakes every registered car at once; the embedded simulator's debug view the runner records.
+//! or SIGTERM cancels the campaign (the runner ends the test with its safe stop and the session
+//! with the car disarmed), the second brakes every registered car at once and disarms it (its
+//! faults cleared, fault injection disabled); the embedded simulator's debug view the runner
+//! records.
 
 use std::future::Future;
 use std::pin::Pin;
@@ -61,8 +63,18 @@ pub(super) struct Interrupt {
 /// The registered car's brake: a clone of the car, braking with the current given.
 type Brake = Box<dyn Fn(f64) -> Pin<Box<dyn Future<Output = Result<(), CarError>> + Send>> + Send>;
 
+/// The registered cars' session end: their faults cleared and fault injection disabled within
+/// the time given; what could not be done, a warning per car.
+type Disarm = Box<dyn Fn(Duration) -> Pin<Box<dyn Future<Output = Vec<String>> + Send>> + Send>;
+
+/// What the second signal does to the registered cars.
+struct Registered {
+    brake: Brake,
+    disarm: Disarm,
+}
+
 /// Where the car the second signal brakes is registered.
-type Slot = Arc<Mutex<Option<Brake>>>;
+type Slot = Arc<Mutex<Option<Registered>>>;
 
 impl std::fmt::Debug for Interrupt {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -88,6 +100,10 @@ const HARD_STOP_GRACE: Duration = Duration::from_millis(500);
 /// brakes it in any case once the process is gone.
 const BRAKE_SEND_LIMIT: Duration = Duration::from_millis(500);
 
+/// At most this long, after the second signal's brake, for the cars to clear their faults and
+/// disable fault injection (the runner does not: the process is about to end).
+const DISARM_LIMIT: Duration = Duration::from_millis(400);
+
 impl Interrupt {
     /// Listens for SIGINT, SIGTERM and SIGHUP from now on. Call it inside the runtime.
     pub(super) fn listen() -> Self {
@@ -109,6 +125,7 @@ impl Interrupt {
             let second = signals.next().await;
             eprintln!("{second} again: braking at once and exiting");
             listener.brake_now().await;
+            listener.disarm_now().await;
             // The test in flight ends at once, aborted; its case, campaign.json and the recording
             // are written in the half second the process still lives (a command that completes
             // sooner exits sooner).
@@ -136,6 +153,8 @@ impl Interrupt {
         self.cars
             .store(cars.len(), std::sync::atomic::Ordering::SeqCst);
         let cars = cars.to_vec();
+        let several = cars.len() > 1;
+        let to_disarm = cars.clone();
         let brake: Brake = Box::new(move |current_a| {
             let cars = cars.clone();
             Box::pin(async move {
@@ -147,7 +166,27 @@ impl Interrupt {
                     .map(drop)
             })
         });
-        *lock(&self.car) = Some(brake);
+        let disarm: Disarm = Box::new(move |limit| {
+            let cars = to_disarm.clone();
+            Box::pin(async move {
+                let disarmed =
+                    futures::future::join_all(cars.iter().map(|car| runner::disarm(car, limit)))
+                        .await;
+                disarmed
+                    .into_iter()
+                    .enumerate()
+                    .filter_map(|(k, result)| result.err().map(|e| (k, e)))
+                    .map(|(k, error)| {
+                        if several {
+                            format!("car {}: {error}", k + 1)
+                        } else {
+                            error.to_string()
+                        }
+                    })
+                    .collect()
+            })
+        });
+        *lock(&self.car) = Some(Registered { brake, disarm });
         BrakeOnSecond {
             car: Arc::clone(&self.car),
         }
@@ -157,7 +196,7 @@ impl Interrupt {
     async fn brake_now(&self) {
         let Some(braking) = lock(&self.car)
             .as_ref()
-            .map(|brake| brake(SECOND_SIGNAL_BRAKE_A))
+            .map(|registered| (registered.brake)(SECOND_SIGNAL_BRAKE_A))
         else {
             return;
         };
@@ -165,6 +204,22 @@ impl Interrupt {
             Ok(Ok(())) => tokio::time::sleep(BRAKE_FLUSH).await,
             Ok(Err(error)) => eprintln!("cannot brake: {error}"),
             Err(_) => eprintln!("cannot brake: the link's send queue stayed full"),
+        }
+    }
+}
+
+impl Interrupt {
+    /// Clears the registered cars' faults and disables their fault injection, within
+    /// [`DISARM_LIMIT`]; says on standard error which could not be.
+    async fn disarm_now(&self) {
+        let Some(disarming) = lock(&self.car)
+            .as_ref()
+            .map(|registered| (registered.disarm)(DISARM_LIMIT))
+        else {
+            return;
+        };
+        for warning in disarming.await {
+            eprintln!("warning: {warning}");
         }
     }
 }
@@ -188,7 +243,7 @@ impl Drop for BrakeOnSecond {
 }
 
 /// The slot's car, whether or not a thread panicked while holding it.
-fn lock(slot: &Mutex<Option<Brake>>) -> std::sync::MutexGuard<'_, Option<Brake>> {
+fn lock(slot: &Mutex<Option<Registered>>) -> std::sync::MutexGuard<'_, Option<Registered>> {
     slot.lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner)
 }

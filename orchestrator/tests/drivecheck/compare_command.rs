@@ -171,3 +171,60 @@ fn runs_of_other_tests_are_refused_naming_the_first_difference() {
     let said = String::from_utf8_lossy(&refused.stderr);
     assert!(said.contains("test 2"), "{said}");
 }
+
+/// Edits `new`'s `case-000.json` with `edit` and expects `compare base new` refused with exit
+/// status 2, naming the file and saying `why`.
+fn assert_edited_case_refused(edit: impl Fn(&mut Value), why: &str) {
+    let tmp = tempfile::tempdir().unwrap();
+    let (base, new) = (tmp.path().join("base"), tmp.path().join("new"));
+    run_unrecorded(&["--seed", "5", "--tests", "2"], &base);
+    run_unrecorded(&["--cases-from", path(&base), "--seed", "6"], &new);
+    let file = new.join("case-000.json");
+    let mut case: Value = serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+    edit(&mut case);
+    std::fs::write(&file, serde_json::to_string_pretty(&case).unwrap()).unwrap();
+    let output = drivecheck(&["compare", path(&base), path(&new)]);
+    let said = text(&output);
+    assert_eq!(output.status.code(), Some(2), "{said}");
+    assert!(said.contains("case-000.json"), "names the file: {said}");
+    assert!(said.contains(why), "says {why:?}: {said}");
+}
+
+#[test]
+fn compare_refuses_an_edited_verdict() {
+    assert_edited_case_refused(
+        |case| {
+            let edited = if case["verdict"] == "passed" {
+                "failed"
+            } else {
+                "passed"
+            };
+            case["verdict"] = Value::from(edited);
+        },
+        "verdict",
+    );
+}
+
+#[test]
+fn compare_refuses_deviations_no_samples_give() {
+    for (max, why) in [(1e308, "max_m"), (-5.0, "max_m")] {
+        assert_edited_case_refused(
+            move |case| {
+                let stats = &mut case["segments"][0]["oracle"]["stats"];
+                stats["max_m"] = Value::from(max);
+            },
+            why,
+        );
+    }
+}
+
+#[test]
+fn compare_refuses_a_segment_repeated() {
+    assert_edited_case_refused(
+        |case| {
+            let first = case["segments"][0].clone();
+            case["segments"] = Value::Array(vec![first; 50]);
+        },
+        "segments[1].command_index",
+    );
+}

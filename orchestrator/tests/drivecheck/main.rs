@@ -21,6 +21,7 @@ mod progress;
 mod replay_command;
 mod replay_reproduces;
 mod report_command;
+mod resume_checks;
 mod run_command;
 mod shrink_command;
 mod sweep_command;

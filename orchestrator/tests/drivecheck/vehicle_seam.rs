@@ -420,6 +420,15 @@ fn a_campaign_runs_through_a_tapped_vehicle_as_the_runner_promises() {
         }
     }
 
+    // The session ends disarmed: its last calls clear the faults and disable fault injection.
+    let ops: Vec<&Op> = calls.iter().map(|c| &c.op).collect();
+    assert_eq!(
+        ops[ops.len() - 2..],
+        [&Op::ClearFaults, &Op::SetFiEnabled(false)],
+        "{ops:?}"
+    );
+    let calls = &calls[..calls.len() - 2];
+
     // Each test: the reset (from its clear_faults) and the drive (from the autopilot's second
     // start, after the return route's). Faults only during the drive, exactly those the case
     // says were confirmed; the test ends braking after its last route upload.
@@ -505,7 +514,7 @@ fn a_dry_run_uploads_and_reads_back_but_never_starts_the_autopilot() {
         let (car, sim) = connect_sim(&sim_config).await.expect("the simulated car");
         let tapped = Tap::new(car);
         let before = tapped.state().await.expect("a state").state;
-        let found = runner::dry_run(&tapped, &scenario, &config)
+        let found = runner::dry_run(&tapped, &scenario, &config, &Silent)
             .await
             .expect("the dry run passes on the simulated car");
         tokio::time::sleep(Duration::from_secs(2)).await;
@@ -538,6 +547,12 @@ fn a_dry_run_uploads_and_reads_back_but_never_starts_the_autopilot() {
     assert!(last(|op| matches!(op, Op::ClearRoute)) > last(|op| matches!(op, Op::AddPoints(_))));
     assert!(
         last(|op| matches!(op, Op::ClearFaults)) > last(|op| matches!(op, Op::AddFault { .. }))
+    );
+    // The session ends disarmed: fault injection off after it was last on.
+    assert!(
+        last(|op| matches!(op, Op::SetFiEnabled(false)))
+            > last(|op| matches!(op, Op::SetFiEnabled(true))),
+        "{ops:?}"
     );
     assert!(moved < 0.05, "the car moved {moved:.3} m");
 }

@@ -770,6 +770,15 @@ const CHECKED_BY: &[(&str, &[&str])] = &[
         ],
     ),
     (
+        "Every session on a car ends with its faults cleared",
+        &[
+            "a_campaign_that_ends_leaves_the_car_disarmed",
+            "an_interrupted_campaign_leaves_the_car_disarmed",
+            "the_dry_run_that_does_not_recognise_a_fault_reply_says_it_and_disarms",
+            "a_car_that_cannot_be_reached_is_named_armed",
+        ],
+    ),
+    (
         "In virtual time the same seed gives byte-identical case files",
         &[
             "the_same_seed_gives_identical_case_files",

@@ -14,7 +14,9 @@ impl Case {
     /// autopilot's top speed, non-empty segments whose intent agrees with their points, fault
     /// parameters within what a scenario's ranges may hold ([`scenarios::check_fault_param`]),
     /// fault start and duration within [`scenarios::limits::MAX_FAULT_ITERATIONS`], result
-    /// indices in range.
+    /// indices in range, one result per segment in order, statistics that deviations can give
+    /// (finite, non-negative, within what two positions on the wire can be apart, RMS and 95th
+    /// percentile not above the largest), and verdicts that agree with them.
     pub fn check(&self) -> Result<(), CaseError> {
         let mut segments = 0;
         for (i, command) in self.commands.iter().enumerate() {
@@ -39,7 +41,24 @@ impl Case {
 
     fn check_results(&self) -> Result<(), CaseError> {
         let threshold = self.settings.as_ref().map(|s| s.oracle_threshold_m);
+        let mut previous: Option<usize> = None;
         for (i, result) in self.segments.iter().enumerate() {
+            // One result per segment, in the order they were driven: a result repeated would
+            // count its segment many times.
+            if previous.is_some_and(|p| result.command_index <= p) {
+                return Err(invalid(
+                    format!("segments[{i}].command_index"),
+                    format!(
+                        "{}, after a result of command {}: each segment has one result, in order",
+                        result.command_index,
+                        previous.unwrap_or_default()
+                    ),
+                ));
+            }
+            previous = Some(result.command_index);
+            if let Some(stats) = &result.oracle.stats {
+                check_stats(i, stats)?;
+            }
             // Each segment's verdict is the oracle's on its own statistics and threshold, and
             // the threshold is the campaign's: an edited verdict or threshold is refused.
             let outcome = &result.oracle;
@@ -295,6 +314,47 @@ fn readable(x: f64) -> String {
 }
 
 /// A segment verdict as case files write it.
+/// The largest deviation two positions on the wire can have: each coordinate is an `f32`, so no
+/// two are more than `2 × f32::MAX` apart on an axis (about 9.6e38 m in the plane).
+const MAX_WIRE_DEVIATION_M: f64 = 2.0 * std::f64::consts::SQRT_2 * f32::MAX as f64;
+
+/// A segment's statistics are what some deviations can give: finite, non-negative, within what
+/// two positions on the wire can be apart, the RMS and the 95th percentile not above the
+/// largest, and at least one sample.
+fn check_stats(i: usize, stats: &crate::oracle::DeviationStats) -> Result<(), CaseError> {
+    for (field, value) in [
+        ("max_m", stats.max_m),
+        ("rms_m", stats.rms_m),
+        ("p95_m", stats.p95_m),
+    ] {
+        if !(value.is_finite() && (0.0..=MAX_WIRE_DEVIATION_M).contains(&value)) {
+            return Err(invalid(
+                format!("segments[{i}].oracle.stats.{field}"),
+                format!(
+                    "{value} m: a deviation is at least 0 and at most {MAX_WIRE_DEVIATION_M:e} m \
+                     (two positions on the wire)"
+                ),
+            ));
+        }
+    }
+    for (field, value) in [("rms_m", stats.rms_m), ("p95_m", stats.p95_m)] {
+        // The RMS of values is at most their largest, up to rounding.
+        if value > stats.max_m * (1.0 + 1e-12) {
+            return Err(invalid(
+                format!("segments[{i}].oracle.stats.{field}"),
+                format!("{value} m, above the largest deviation {} m", stats.max_m),
+            ));
+        }
+    }
+    if stats.samples == 0 {
+        return Err(invalid(
+            format!("segments[{i}].oracle.stats.samples"),
+            "0: statistics come from at least one sample",
+        ));
+    }
+    Ok(())
+}
+
 fn verdict_name(verdict: crate::oracle::SegmentVerdict) -> &'static str {
     match verdict {
         crate::oracle::SegmentVerdict::Passed => "passed",

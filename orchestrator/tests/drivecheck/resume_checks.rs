@@ -1,0 +1,126 @@
+//! `drivecheck run --resume` trusts no case file of the run directory (#51 item 1): a case of
+//! another campaign copied in, a case copied under another test's name and a case whose verdict
+//! was edited are each refused, naming the file, before anything is driven (item 1); so are
+//! another campaign's `campaign.json`, `campaign.mcap` and a stray `campaign.mcap.resumed`
+//! (item 3), and the real recording is left where it was.
+
+use crate::common;
+
+use std::path::{Path, PathBuf};
+
+use common::{drivecheck, path, run_unrecorded, text};
+
+/// A run directory of 3 tests with seed 7 whose last case is gone (so that a resume has a test
+/// to drive), and beside it a campaign of seed 8.
+fn resumable(tmp: &Path) -> (PathBuf, PathBuf) {
+    let (seven, eight) = (tmp.join("seven"), tmp.join("eight"));
+    run_unrecorded(&["--seed", "7", "--tests", "3"], &seven);
+    run_unrecorded(&["--seed", "8", "--tests", "3"], &eight);
+    std::fs::remove_file(seven.join("case-002.json")).unwrap();
+    (seven, eight)
+}
+
+/// Runs `--resume dir` and expects it refused with a message naming `file` and saying `why`.
+fn assert_refused(dir: &Path, file: &str, why: &str) {
+    let out = drivecheck(&["run", "--resume", path(dir), "--record", "none"]);
+    let said = text(&out);
+    assert_eq!(out.status.code(), Some(2), "{said}");
+    assert!(said.contains(file), "names {file}: {said}");
+    assert!(said.contains(why), "says {why:?}: {said}");
+    assert!(
+        !dir.join("case-002.json").exists(),
+        "nothing was driven: {said}"
+    );
+}
+
+#[test]
+fn resume_refuses_another_campaigns_case() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (seven, eight) = resumable(tmp.path());
+    std::fs::copy(eight.join("case-001.json"), seven.join("case-001.json")).unwrap();
+    assert_refused(
+        &seven,
+        "case-001.json",
+        "campaign seed 8, the campaign's is 7",
+    );
+}
+
+#[test]
+fn resume_refuses_a_case_copied_under_another_tests_name() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (seven, _) = resumable(tmp.path());
+    std::fs::copy(seven.join("case-000.json"), seven.join("case-001.json")).unwrap();
+    assert_refused(&seven, "case-001.json", "holds test 0, not test 1");
+}
+
+#[test]
+fn resume_refuses_an_edited_verdict() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (seven, _) = resumable(tmp.path());
+    // A passed test written as failed, or one that did not pass written as passed.
+    let file = seven.join("case-000.json");
+    let mut case: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+    let edited = if case["verdict"] == "passed" {
+        "failed"
+    } else {
+        "passed"
+    };
+    case["verdict"] = serde_json::Value::from(edited);
+    std::fs::write(&file, serde_json::to_string_pretty(&case).unwrap()).unwrap();
+    assert_refused(&seven, "case-000.json", "verdict");
+}
+
+/// [`resumable`] with recordings.
+fn recorded(tmp: &Path) -> (PathBuf, PathBuf) {
+    let (seven, eight) = (tmp.join("seven"), tmp.join("eight"));
+    for (seed, dir) in [("7", &seven), ("8", &eight)] {
+        let out = drivecheck(&[
+            "-q",
+            "run",
+            "--seed",
+            seed,
+            "--tests",
+            "3",
+            "--out",
+            path(dir),
+        ]);
+        assert!(matches!(out.status.code(), Some(0 | 1)), "{}", text(&out));
+    }
+    std::fs::remove_file(seven.join("case-002.json")).unwrap();
+    (seven, eight)
+}
+
+#[test]
+fn resume_refuses_another_campaigns_campaign_json() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (seven, eight) = resumable(tmp.path());
+    std::fs::copy(eight.join("campaign.json"), seven.join("campaign.json")).unwrap();
+    assert_refused(&seven, "case-000.json", "campaign of campaign.json");
+}
+
+#[test]
+fn resume_refuses_another_campaigns_recording() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (seven, eight) = recorded(tmp.path());
+    std::fs::copy(eight.join("campaign.mcap"), seven.join("campaign.mcap")).unwrap();
+    assert_refused(&seven, "campaign.mcap", "seed 8");
+}
+
+#[test]
+fn resume_refuses_a_stray_resumed_recording_and_keeps_the_real_one() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (seven, eight) = recorded(tmp.path());
+    let real = std::fs::read(seven.join("campaign.mcap")).unwrap();
+    std::fs::copy(
+        eight.join("campaign.mcap"),
+        seven.join("campaign.mcap.resumed"),
+    )
+    .unwrap();
+    assert_refused(&seven, "campaign.mcap.resumed", "seed 8");
+    assert_eq!(
+        std::fs::read(seven.join("campaign.mcap")).unwrap(),
+        real,
+        "the campaign's own recording is left as it was"
+    );
+}
