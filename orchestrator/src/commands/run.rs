@@ -79,8 +79,8 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     let embedded = address == CarAddress::Sim || firmware.is_some();
     if args.profile.is_some() && !embedded {
         anyhow::bail!(
-            "--profile describes the embedded simulated car (--car sim, or the physical car \
-             around --car sitl:TREE), not the car at {car_label}"
+            "--profile describes the embedded simulated car (--car sim) or the physical car \
+             around the firmware built for the host (--car sitl:TREE), not the car at {car_label}"
         );
     }
     let profile = crate::profile_arg::load(args.profile.as_deref())?;
