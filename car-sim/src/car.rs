@@ -425,18 +425,9 @@ impl SimCar {
     }
 
     fn move_truth(&mut self) {
-        let v = &self.config.vehicle;
-        let speed = f64::from(self.motor.rpm())
-            * f64::from(v.speed_per_erpm())
-            * self.options.sensors.odometry_scale;
-        let delta = f64::from(v.angle_for_servo(self.servo.position()));
-        self.truth.advance(
-            speed,
-            delta,
-            f64::from(v.steering_max_angle_rad),
-            f64::from(v.axis_distance),
-            TICK_MS as f64 / 1000.0,
-        );
+        let scale = self.options.sensors.odometry_scale;
+        self.truth
+            .tick(&self.config.vehicle, &self.motor, &self.servo, scale);
     }
 
     fn odometry_tick(&mut self) {

@@ -64,6 +64,27 @@ impl Motion {
         }
     }
 
+    /// One tick ([`TICK_MS`]) of the car `vehicle` driven by `motor` and steered by `servo`:
+    /// the speed the motor's rpm gives (times `odometry_scale`, the distance really driven per
+    /// distance counted) and the steering angle of the servo's position.
+    pub fn tick(
+        &mut self,
+        vehicle: &VehicleParams,
+        motor: &Motor,
+        servo: &Servo,
+        odometry_scale: f64,
+    ) {
+        let speed = f64::from(motor.rpm()) * f64::from(vehicle.speed_per_erpm()) * odometry_scale;
+        let delta = f64::from(vehicle.angle_for_servo(servo.position()));
+        self.advance(
+            speed,
+            delta,
+            f64::from(vehicle.steering_max_angle_rad),
+            f64::from(vehicle.axis_distance),
+            TICK_MS as f64 / 1000.0,
+        );
+    }
+
     /// One step of `dt` seconds at `speed` (m/s) with steering angle `delta` (rad, clamped to
     /// `±max_angle`), on a wheelbase of `axis_distance` m: the exact arc of a kinematic bicycle.
     pub fn advance(&mut self, speed: f64, delta: f64, max_angle: f64, axis_distance: f64, dt: f64) {
@@ -255,16 +276,11 @@ impl Plant {
         self.now_ms += TICK_MS;
         self.motor.step();
         let v = &self.options.vehicle;
-        let speed = f64::from(self.motor.rpm())
-            * f64::from(v.speed_per_erpm())
-            * self.options.sensors.odometry_scale;
-        let delta = f64::from(v.angle_for_servo(self.servo.position()));
-        self.motion.advance(
-            speed,
-            delta,
-            f64::from(v.steering_max_angle_rad),
-            f64::from(v.axis_distance),
-            TICK_MS as f64 / 1000.0,
+        self.motion.tick(
+            v,
+            &self.motor,
+            &self.servo,
+            self.options.sensors.odometry_scale,
         );
         self.servo.step(v.steering_ramp_time);
         let tacho = self.motor.tachometer();
