@@ -30,6 +30,15 @@ use trajgen::{Area, Point};
 /// window), so a route that passes near itself does not hide a deviation.
 const ROUTE_WINDOW: usize = 8;
 
+/// The fastest a car can move, metres per second, by which [`AbortReason::Implausible`] tells
+/// garbage from a state (54 km/h: several times what a test drives, above any car of this
+/// method).
+pub const MAX_PLAUSIBLE_SPEED_MPS: f64 = 15.0;
+
+/// What a position may move between two samples beyond [`MAX_PLAUSIBLE_SPEED_MPS`], metres: an
+/// RTK solution going from float to fixed moves by up to a metre or so.
+pub const PLAUSIBLE_JUMP_M: f64 = 2.0;
+
 /// The monitor's limits (on record: `crate::files::SafetyConfigRecord`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SafetyConfig {
@@ -128,6 +137,15 @@ pub enum AbortReason {
     },
     /// A state sample had no finite position.
     NoPosition,
+    /// The car's position moved farther between two samples than any car can
+    /// ([`MAX_PLAUSIBLE_SPEED_MPS`] over the time between them, and [`PLAUSIBLE_JUMP_M`] for an
+    /// RTK solution that changes): what it sends is not a state.
+    Implausible {
+        /// How far the position moved, metres.
+        jump_m: f64,
+        /// In how long, milliseconds.
+        dt_ms: u64,
+    },
     /// The RTK fix was lost: the reference is gone.
     RtkLost,
     /// The link to the car was lost.
@@ -150,6 +168,16 @@ pub enum AbortReason {
 }
 
 impl AbortReason {
+    /// Does the car stop answering sensibly (no state for too long, a state without a position,
+    /// or positions no car could reach)? In a campaign on several cars such a test is cut off
+    /// and given to another car, as one whose link was lost.
+    pub fn car_unresponsive(&self) -> bool {
+        matches!(
+            self,
+            Self::StaleTelemetry { .. } | Self::NoPosition | Self::Implausible { .. }
+        )
+    }
+
     /// How to stop the car for this reason.
     pub fn action(&self) -> StopAction {
         match self {
@@ -161,6 +189,7 @@ impl AbortReason {
             | Self::OffRoute { .. }
             | Self::StaleTelemetry { .. }
             | Self::NoPosition
+            | Self::Implausible { .. }
             | Self::LinkLost
             | Self::CommandRefused { .. } => StopAction::Brake,
         }
@@ -187,6 +216,10 @@ impl fmt::Display for AbortReason {
             ),
             Self::StaleTelemetry { age_ms } => write!(f, "no state for {age_ms} ms"),
             Self::NoPosition => f.write_str("a state sample had no position"),
+            Self::Implausible { jump_m, dt_ms } => write!(
+                f,
+                "the car's position moved {jump_m:.1} m in {dt_ms} ms: its state is not physical"
+            ),
             Self::RtkLost => f.write_str("RTK fix lost"),
             Self::LinkLost => f.write_str("link lost"),
             Self::Starved => f.write_str("the car reached the end of its route (starvation)"),
@@ -235,6 +268,8 @@ pub struct SafetyMonitor {
     route: Vec<Point>,
     cursor: usize,
     last_sample_at: Duration,
+    /// The last sample's position and when it came.
+    last_position: Option<(Duration, Point)>,
     tripped: Option<Abort>,
 }
 
@@ -247,6 +282,7 @@ impl SafetyMonitor {
             route: Vec::new(),
             cursor: 0,
             last_sample_at: now,
+            last_position: None,
             tripped: None,
         }
     }
@@ -276,6 +312,9 @@ impl SafetyMonitor {
             return self.trip(abort.reason, now);
         }
         self.last_sample_at = now;
+        if let Some(reason) = self.implausible(now, sample.position) {
+            return self.trip(reason, now);
+        }
         match self.check_sample(sample) {
             Some(reason) => self.trip(reason, now),
             None => None,
@@ -317,6 +356,23 @@ impl SafetyMonitor {
         (age > self.config.stale_after).then(|| {
             let age_ms = u64::try_from(age.as_millis()).unwrap_or(u64::MAX);
             Abort::new(AbortReason::StaleTelemetry { age_ms }, now)
+        })
+    }
+
+    /// A move from the last sample's position to `p` that no car makes in the time between.
+    fn implausible(&mut self, now: Duration, p: Point) -> Option<AbortReason> {
+        if !p.is_finite() {
+            return None;
+        }
+        let last = self.last_position.replace((now, p));
+        let (then, q) = last?;
+        let dt = now.saturating_sub(then);
+        let jump_m = (p - q).norm();
+        (jump_m > MAX_PLAUSIBLE_SPEED_MPS * dt.as_secs_f64() + PLAUSIBLE_JUMP_M).then(|| {
+            AbortReason::Implausible {
+                jump_m,
+                dt_ms: u64::try_from(dt.as_millis()).unwrap_or(u64::MAX),
+            }
         })
     }
 
@@ -431,10 +487,54 @@ mod tests {
     #[test]
     fn a_car_on_its_route_inside_the_area_drives_on() {
         let mut m = monitor();
-        for (i, x) in [3.0, 5.0, 9.0, 15.0].into_iter().enumerate() {
-            assert_eq!(m.sample(ms(100 * i as u64), at(x, 5.4)), None);
+        // 3 m to 15 m at 10 m/s, a sample every 50 ms.
+        for i in 0..=24u32 {
+            let x = 3.0 + 0.5 * f64::from(i);
+            assert_eq!(m.sample(ms(50 * u64::from(i)), at(x, 5.4)), None);
         }
-        assert_eq!(m.tick(ms(500)), None);
+        assert_eq!(m.tick(ms(1300)), None);
+    }
+
+    #[test]
+    fn a_position_no_car_could_reach_is_not_a_state() {
+        let mut m = monitor();
+        assert_eq!(m.sample(ms(0), at(3.0, 5.0)), None);
+        // An RTK solution that moves 1.9 m between two samples is still a car.
+        assert_eq!(m.sample(ms(50), at(4.9, 5.0)), None);
+        // 12 m in 50 ms is 240 m/s: garbage with a valid checksum.
+        let abort = m.sample(ms(100), at(16.9, 5.0)).unwrap();
+        assert!(
+            matches!(abort.reason, AbortReason::Implausible { jump_m, dt_ms: 50 } if (jump_m - 12.0).abs() < 1e-9),
+            "{abort:?}"
+        );
+        assert!(abort.reason.car_unresponsive());
+        assert_eq!(abort.action, StopAction::Brake);
+        assert_eq!(
+            abort.reason.to_string(),
+            "the car's position moved 12.0 m in 50 ms: its state is not physical"
+        );
+    }
+
+    #[test]
+    fn a_car_that_stops_answering_sensibly_is_told_from_one_that_drives_badly() {
+        assert!(AbortReason::StaleTelemetry { age_ms: 300 }.car_unresponsive());
+        assert!(AbortReason::NoPosition.car_unresponsive());
+        let badly = [
+            AbortReason::OutsideFence {
+                x: 0.0,
+                y: 0.0,
+                distance_m: 1.0,
+            },
+            AbortReason::OffRoute {
+                x: 0.0,
+                y: 0.0,
+                cross_track_m: 2.0,
+            },
+            AbortReason::RtkLost,
+            AbortReason::Starved,
+            AbortReason::TimeLimit { limit_s: 60.0 },
+        ];
+        assert!(badly.iter().all(|r| !r.car_unresponsive()));
     }
 
     #[test]
@@ -552,5 +652,24 @@ mod tests {
             r#"{"reason":{"kind":"stale_telemetry","age_ms":300},"action":"brake","at":1234}"#
         );
         assert_eq!(serde_json::from_str::<Abort>(&json).unwrap(), abort);
+    }
+
+    proptest::proptest! {
+        /// A car moving at any speed up to [`MAX_PLAUSIBLE_SPEED_MPS`], sampled at any rate,
+        /// is never called implausible.
+        #[test]
+        fn no_drivable_path_is_implausible(
+            steps in proptest::collection::vec((1u64..250, 0.0f64..1.0, -3.2f64..3.2), 1..200),
+        ) {
+            let mut m = SafetyMonitor::new(area(), SafetyConfig::default(), ms(0));
+            let (mut t, mut p) = (0, Point::new(10.0, 5.0));
+            for (dt, fraction, heading) in steps {
+                t += dt;
+                let d = fraction * MAX_PLAUSIBLE_SPEED_MPS * dt as f64 / 1000.0;
+                p = p + Point::new(d * heading.cos(), d * heading.sin());
+                let tripped = m.implausible(ms(t), p);
+                proptest::prop_assert!(tripped.is_none(), "{tripped:?} at {t} ms");
+            }
+        }
     }
 }

@@ -158,6 +158,8 @@ struct Shared {
     truth: Truth,
     events: Vec<DebugEvent>,
     fault_injection: FaultInjectionView,
+    /// The board answers nothing from now on ([`SimHandle::freeze`]).
+    frozen: bool,
 }
 
 /// The simulated car's fault injection as its handle sees it (what a car does not report: the
@@ -206,6 +208,12 @@ impl SimHandle {
     /// The bound address of a TCP or UDP server.
     pub fn local_addr(&self) -> Option<SocketAddr> {
         self.local_addr
+    }
+
+    /// Freezes the board: from now on it answers nothing, while its connection stays open and
+    /// the simulated world goes on (a car whose firmware hangs, not one whose link is lost).
+    pub fn freeze(&self) {
+        self.lock().frozen = true;
     }
 
     /// Stops the simulation and its connections at once.
@@ -316,6 +324,7 @@ impl Core {
             truth: car.truth(),
             events: Vec::new(),
             fault_injection: FaultInjectionView::of(&car),
+            frozen: false,
         }));
         Core {
             board: Board::new(car),
@@ -422,7 +431,11 @@ impl Core {
     }
 
     fn flush_outbound(&mut self, now: Instant) {
+        let frozen = self.shared.lock().unwrap_or_else(|e| e.into_inner()).frozen;
         while let Some(p) = self.outbound.pop_due(now) {
+            if frozen {
+                continue;
+            }
             if let Some(tx) = &self.client
                 && tx.try_send(p).is_err()
                 && tx.is_closed()

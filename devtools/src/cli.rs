@@ -69,6 +69,31 @@ pub enum BenchCommand {
     /// segment's largest deviation), and on degraded cars (how often the regression is found,
     /// by number of tests), and firmware 10.1 against 12.3. Exit status: 0 measured, 2 error.
     Compare(BenchCompareArgs),
+    /// A campaign killed (`kill -9`) at random moments and resumed each time, against the
+    /// uninterrupted run: how often its case files, summary and recording messages are the
+    /// same. Exit status: 0 every resumed campaign the uninterrupted one, 1 one is not, 2 error.
+    KillResume(BenchKillResumeArgs),
+}
+
+/// Options of `drivecheck-dev bench kill-resume`.
+#[derive(Debug, Args)]
+pub struct BenchKillResumeArgs {
+    /// Tests of the campaign.
+    #[arg(long, default_value_t = 30, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=10_000))]
+    pub tests: usize,
+    /// How many times it is killed and resumed (each time from the start, in a directory of
+    /// its own).
+    #[arg(long, default_value_t = 50, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=10_000))]
+    pub kills: usize,
+    /// The campaign's seed (and of the moments of the kills).
+    #[arg(long, default_value_t = 3)]
+    pub seed: u64,
+    /// Tests at once.
+    #[arg(long, default_value_t = 1, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=256))]
+    pub jobs: usize,
+    /// Where the run directories go (kept; default: a scratch directory removed at the end).
+    #[arg(long, value_name = "DIR")]
+    pub scratch: Option<PathBuf>,
 }
 
 /// Options of `drivecheck-dev bench compare`.

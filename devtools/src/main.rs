@@ -59,5 +59,6 @@ fn bench(command: BenchCommand) -> anyhow::Result<Exit> {
         BenchCommand::Placement(args) => bench::placement::run(&args),
         BenchCommand::Scale(args) => bench::scale::run(&args),
         BenchCommand::Compare(args) => bench::compare::run(&args),
+        BenchCommand::KillResume(args) => bench::kill_resume::run(&args),
     }
 }

@@ -1,7 +1,8 @@
 //! The `drivecheck` command line: the shell over the engine's library crates.
 //!
 //! [`process::main`] parses the command line ([`cli`], clap's derive) and hands each subcommand
-//! to its module in [`commands`], which reads files, resolves the settings and drives the engine:
+//! to its module in [`commands`], which reads files, resolves the settings once ([`settings`]) and
+//! drives the engine:
 //! the campaign runner, the vehicle seam and the run directory (`runner`), the recording
 //! (`recording`), the report pages and explanations (`report`). The `drivecheck` binary in
 //! `src/main.rs` calls [`process::main`] and nothing else.
@@ -19,3 +20,4 @@ pub mod process;
 pub mod profile_arg;
 pub mod scenario_arg;
 pub mod seed;
+pub mod settings;

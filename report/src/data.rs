@@ -159,6 +159,20 @@ pub fn read_record(dir: &Path) -> Result<CampaignRecord, ReportError> {
     CampaignRecord::from_json(&read_text(&path)?).map_err(|e| invalid(&path, e))
 }
 
+/// Refuses the recording of the run directory `dir` when it is another campaign's than
+/// `campaign.json`'s ([`RunStore::check_recording`]): nothing is drawn or explained from a
+/// recording beside cases it does not belong to. Without a recording or a record, nothing to
+/// check.
+pub fn check_recording(dir: &Path) -> Result<(), ReportError> {
+    let store = RunStore::new(dir);
+    let path = store.recording();
+    if !path.is_file() || !store.campaign().is_file() {
+        return Ok(());
+    }
+    let record = read_record(dir)?;
+    Ok(store.check_recording(&path, record.seed)?)
+}
+
 /// The case files of the run directory `dir` (`case-NNN.json`), by the index in their names.
 pub fn case_files(dir: &Path) -> Result<Vec<(usize, String)>, ReportError> {
     let files = RunStore::new(dir)
@@ -219,6 +233,9 @@ pub fn read_campaign(dir: &Path) -> Result<CampaignData, ReportError> {
         });
     }
     let mut notes = Vec::new();
+    // A recording of another campaign is refused, not a note: its tracks would be drawn as
+    // these cases'.
+    check_recording(dir)?;
     let recorded_scenario = read_tracks(dir, &mut tests, &mut notes);
     Ok(CampaignData {
         tests,
@@ -302,6 +319,7 @@ pub fn read_spans(
         ));
         return Ok(None);
     }
+    check_recording(dir)?;
     // One test: from its place in a finished file's index, else read from the start (to it).
     let opened = match only {
         Some(test) => recording::Spans::open_test(&path, test)

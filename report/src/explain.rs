@@ -385,6 +385,7 @@ pub fn score_run(
     use recording::{Recording, SimFault, SimRange, Spans, Stamped, TruthRecord};
     let explanations = explain_run(dir, None, scenario, options)?;
     let record = read_record(dir)?;
+    crate::data::check_recording(dir)?;
     let path = dir.join(runner::RECORDING_FILE);
     let read = |e: recording::RecordingError| invalid(&path, e);
     let slack_ns = (TRUTH_SLACK_S * 1e9) as u64;

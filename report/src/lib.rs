@@ -76,6 +76,10 @@ pub enum ReportError {
         /// What is wrong.
         message: String,
     },
+    /// A file of the run directory is refused (a recording of another campaign beside its
+    /// cases).
+    #[error(transparent)]
+    Store(#[from] runner::store::StoreError),
     /// A picture could not be drawn.
     #[error("cannot draw a picture: {0}")]
     Draw(String),

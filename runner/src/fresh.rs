@@ -347,23 +347,27 @@ fn write_test<C: FreshCars + ?Sized>(
         dir.set_runtime(ran.safety, shared.config.streaming);
     }
     observer.test_started(test_index);
-    dir.write_case(&ran.case)?;
     let keep = match shared.config.record {
         RecordMode::All => true,
         RecordMode::Failing => ran.case.verdict != Some(Verdict::Passed),
         RecordMode::None => false,
     };
+    // The recording first (its span written through to the file), then the case file: a test
+    // with a case file has its span, whenever the process is killed (#51 item 2). A recording
+    // that failed writes no case file: a resume drives the test again.
     if keep && !ran.held.is_empty() {
         let last = ran.held.iter().map(Held::log_time).max().unwrap_or(0);
         journal.write_held(ran.held, order.offset_ns);
         journal.test_span(test_index, order.offset_ns, order.offset_ns + last, None);
         order.offset_ns += last + SPAN_GAP_NS;
     }
+    journal.check()?;
+    dir.write_case(&ran.case)?;
     observer.test_finished(test_index, ran.case.verdict);
     if let TestEnd::Stop(error) = ran.end {
         return Err(error);
     }
-    journal.check()
+    Ok(())
 }
 
 /// Runs test `test_index` on a fresh car, on a runtime of its own.

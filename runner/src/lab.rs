@@ -65,6 +65,7 @@ fn is_car_failure(error: &RunError) -> bool {
     matches!(
         error,
         RunError::LinkLost { .. }
+            | RunError::Unresponsive { .. }
             | RunError::Car { .. }
             | RunError::Preflight(_)
             | RunError::Reset { .. }
@@ -260,6 +261,19 @@ async fn drive_car<V: Vehicle>(lab: &Lab<'_>, k: usize, car: &LabCar<V>) {
             (TestEnd::Continue, Err(error)) => TestEnd::Stop(error),
             (end, _) => end,
         };
+        // A car that stops answering sensibly leaves, its test cut off, while another car can
+        // drive it (the last car's test is an aborted one, as on one car).
+        let end = match (end, case.abort) {
+            (TestEnd::Continue, Some(abort))
+                if abort.reason.car_unresponsive() && lab.cars_in.get() > 1 =>
+            {
+                TestEnd::Stop(RunError::Unresponsive {
+                    test_index,
+                    reason: abort.reason,
+                })
+            }
+            (end, _) => end,
+        };
         match end {
             TestEnd::Stop(error) if is_car_failure(&error) && lab.cars_in.get() > 1 => {
                 journal.drop_held();
@@ -323,7 +337,8 @@ impl Lab<'_> {
     fn write_test(&self, case: &Case, held: Vec<Held>, end: TestEnd) -> Result<(), RunError> {
         let test_index = case.test_index.unwrap_or_default();
         let mut state = self.state.borrow_mut();
-        state.dir.write_case(case)?;
+        // The span first (written through to the file), then the case file: a test with a case
+        // file has its span (as in `fresh::write_test`).
         if let (Some(first), Some(last)) = (
             held.iter().map(Held::log_time).min(),
             held.iter().map(Held::log_time).max(),
@@ -339,12 +354,14 @@ impl Lab<'_> {
             );
             state.offset_ns = offset + (last - first) + SPAN_GAP_NS;
         }
+        self.journal.check()?;
+        state.dir.write_case(case)?;
         drop(state);
         self.observer.test_finished(test_index, case.verdict);
         if let TestEnd::Stop(error) = end {
             self.fail(error);
         }
-        self.journal.check()
+        Ok(())
     }
 
     /// Car `car` failed with `error` in test `test_index`: its case is kept as a partial, the
@@ -412,13 +429,17 @@ mod tests {
     use campaign::model::Campaign;
     use std::time::Duration;
 
+    /// Car K stopped after a time: shut down, or frozen.
+    type Stop = (usize, Duration, fn(&car_sim::SimHandle));
+
     /// A campaign of `tests` tests on `cars` embedded simulated cars (each behind the client, in
-    /// process, as a car behind a link is), in virtual time; car `kill.0` is shut down `kill.1`
-    /// after the start. The run directory, its report or failure, and the virtual time taken.
+    /// process, as a car behind a link is), in virtual time; car `kill.0` is stopped by `kill.2`
+    /// `kill.1` after the start. The run directory, its report or failure, and the virtual time
+    /// taken.
     async fn lab_campaign(
         tests: usize,
         cars: usize,
-        kill: Option<(usize, Duration)>,
+        kill: Option<Stop>,
     ) -> (
         tempfile::TempDir,
         Result<CampaignReport, CampaignFailure>,
@@ -451,9 +472,9 @@ mod tests {
         }
         let started = tokio::time::Instant::now();
         let killer = async {
-            if let Some((k, after)) = kill {
+            if let Some((k, after, stop)) = kill {
                 tokio::time::sleep(after).await;
-                handles[k].shutdown();
+                stop(&handles[k]);
             }
         };
         let cancel = CancellationToken::new();
@@ -522,7 +543,12 @@ mod tests {
 
     #[tokio::test(start_paused = true)]
     async fn a_car_lost_mid_test_leaves_and_the_other_drives_its_test_again() {
-        let (dir, result, _) = lab_campaign(4, 2, Some((1, Duration::from_secs(20)))).await;
+        let (dir, result, _) = lab_campaign(
+            4,
+            2,
+            Some((1, Duration::from_secs(20), car_sim::SimHandle::shutdown)),
+        )
+        .await;
         let report = result.unwrap();
         assert_eq!(report.tests.len(), 4);
         assert!(report.tests.iter().all(|t| !t.cut_off));
@@ -541,8 +567,50 @@ mod tests {
     }
 
     #[tokio::test(start_paused = true)]
+    async fn a_car_that_freezes_mid_test_leaves_and_the_other_drives_its_test_again() {
+        // Frozen: the connection stays, the car answers nothing (its state goes stale).
+        let (dir, result, _) = lab_campaign(
+            4,
+            2,
+            Some((1, Duration::from_secs(20), car_sim::SimHandle::freeze)),
+        )
+        .await;
+        let report = result.unwrap();
+        assert_eq!(report.tests.len(), 4);
+        assert!(report.tests.iter().all(|t| !t.cut_off));
+        let record = record(&dir);
+        let frozen = &record.cars[1];
+        let left = frozen.left.as_deref().unwrap_or_default();
+        assert!(
+            left.contains("stopped answering sensibly (no state for"),
+            "{record:?}"
+        );
+        // It took no test after the one it froze in; the other car drove every test.
+        assert!(frozen.tests.is_empty(), "{record:?}");
+        assert_eq!(record.cars[0].tests.len(), 4);
+        let partial: Case = Case::from_json(
+            &std::fs::read_to_string(dir.path().join("run/case-001.partial-1.json")).unwrap(),
+        )
+        .unwrap();
+        assert!(
+            partial.abort.unwrap().reason.car_unresponsive(),
+            "{partial:?}"
+        );
+        let case: Case = Case::from_json(
+            &std::fs::read_to_string(dir.path().join("run/case-001.json")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(case.car.as_deref(), Some("car1"));
+    }
+
+    #[tokio::test(start_paused = true)]
     async fn a_car_that_fails_its_preflight_leaves_and_the_others_drive_every_test() {
-        let (dir, result, _) = lab_campaign(3, 2, Some((0, Duration::ZERO))).await;
+        let (dir, result, _) = lab_campaign(
+            3,
+            2,
+            Some((0, Duration::ZERO, car_sim::SimHandle::shutdown)),
+        )
+        .await;
         let report = result.unwrap();
         assert_eq!(report.tests.len(), 3);
         let record = record(&dir);
@@ -560,7 +628,12 @@ mod tests {
 
     #[tokio::test(start_paused = true)]
     async fn when_the_last_car_is_lost_the_campaign_ends_as_an_error_it_can_resume() {
-        let (dir, result, _) = lab_campaign(3, 1, Some((0, Duration::from_secs(20)))).await;
+        let (dir, result, _) = lab_campaign(
+            3,
+            1,
+            Some((0, Duration::from_secs(20), car_sim::SimHandle::shutdown)),
+        )
+        .await;
         let failure = result.unwrap_err();
         assert!(
             matches!(failure.error, RunError::LinkLost { test_index: 0 }),

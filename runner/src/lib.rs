@@ -343,6 +343,16 @@ pub enum RunError {
         /// The test that was running.
         test_index: usize,
     },
+    /// The car stopped answering sensibly in a test (no state for too long, states without a
+    /// position or that no car could reach; the abort said which): in a campaign on several cars
+    /// the test is cut off and another car drives it, as after a lost link.
+    #[error("test {test_index}: the car stopped answering sensibly ({reason})")]
+    Unresponsive {
+        /// The test that was running.
+        test_index: usize,
+        /// The abort that said so.
+        reason: AbortReason,
+    },
     /// The operator interrupted the campaign (after the safe stop).
     #[error("interrupted during test {test_index}")]
     Interrupted {
@@ -793,16 +803,19 @@ async fn run_tests<V: Vehicle>(
         }
         let (case, end) =
             plan_and_run(&ctx, &mut telemetry, &tests, test_index, dir.settings()).await?;
-        dir.write_case(&case)?;
+        // The test's messages first, written through to the file, then its case file: a test
+        // with a case file is in the recording, whenever the process is killed (#51 item 2).
         record_test_end(journal, test_index, &case);
         if config.record == RecordMode::Failing {
             journal.release(case.verdict != Some(Verdict::Passed));
+            journal.flush();
         }
+        journal.check()?;
+        dir.write_case(&case)?;
         observer.test_finished(test_index, case.verdict);
         if let TestEnd::Stop(error) = end {
             return Err(error);
         }
-        journal.check()?;
     }
     Ok(())
 }

@@ -227,6 +227,11 @@ impl RunDirectory {
                 );
             }
         }
+        // A car is credited with the tests whose case files stay: one it was cut off in (its
+        // case now a partial) is driven again, by whichever car.
+        for car in &mut record.cars {
+            car.tests.retain(|t| kept.contains(t));
+        }
         record.sessions.push(Session {
             started_at: rfc3339_now(),
             ended_at: None,

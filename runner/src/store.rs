@@ -51,6 +51,29 @@ pub enum StoreError {
         /// Its size.
         bytes: u64,
     },
+    /// A recording beside the case files is another campaign's.
+    #[error(
+        "{}: the recording of a campaign with seed {recorded}, campaign.json's is seed {seed}: a \
+         recording of another campaign is not read beside this one's cases",
+        path.display()
+    )]
+    OtherCampaign {
+        /// The recording.
+        path: PathBuf,
+        /// The seed its metadata names.
+        recorded: String,
+        /// The seed of `campaign.json`.
+        seed: u64,
+    },
+    /// A recording's start cannot be read.
+    #[error("{}", path.display())]
+    Recording {
+        /// The recording.
+        path: PathBuf,
+        /// What is wrong.
+        #[source]
+        source: Box<recording::RecordingError>,
+    },
     /// A case file is not a case.
     #[error("{}", path.display())]
     Case {
@@ -97,6 +120,25 @@ impl RunStore {
     /// `.drivecheck-writing`, the claim of the process writing the directory.
     pub fn claim(&self) -> PathBuf {
         self.dir.join(CLAIM_FILE)
+    }
+
+    /// Refuses `file`, a recording of this directory (`campaign.mcap`, `campaign.mcap.resumed`),
+    /// when it is another campaign's: the seed its `drivecheck.campaign` metadata names (read
+    /// from the file's first records) must be `seed`, campaign.json's. Every reader of a
+    /// recording beside case files checks this first (resume, report, explain, calibrate).
+    pub fn check_recording(&self, file: &Path, seed: u64) -> Result<(), StoreError> {
+        let recorded = recording::recorded_seed(file).map_err(|source| StoreError::Recording {
+            path: file.to_owned(),
+            source: Box::new(source),
+        })?;
+        match recorded {
+            Some(recorded) if recorded != seed.to_string() => Err(StoreError::OtherCampaign {
+                path: file.to_owned(),
+                recorded,
+                seed,
+            }),
+            _ => Ok(()),
+        }
     }
 
     /// The case file of test `test_index`: `case-NNN.json`.

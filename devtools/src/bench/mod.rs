@@ -4,6 +4,7 @@ pub mod compare;
 pub mod fidelity;
 mod fidelity_route;
 pub mod generator;
+pub mod kill_resume;
 pub mod placement;
 pub mod recovery;
 pub mod scale;

@@ -188,11 +188,6 @@ impl Resumed {
         Ok(())
     }
 
-    /// The failure policy of the campaign.
-    pub(super) fn policy(&self) -> FailurePolicy {
-        self.record.settings.failure_policy
-    }
-
     /// The tests to drive: how many and which, in words.
     pub(super) fn describe(&self) -> String {
         let planned = match self.record.shard {
@@ -294,19 +289,10 @@ fn check_case(record: &CampaignRecord, case: &campaign::files::Case, index: usiz
 fn check_recordings(dir: &Path, record: &CampaignRecord) -> Result<()> {
     let store = RunStore::new(dir);
     for file in [store.recording(), store.prior_recording()] {
-        if !file.exists() {
-            continue;
-        }
-        let recorded = recording::recorded_seed(&file)
-            .with_context(|| format!("--resume {}", dir.display()))?;
-        if let Some(seed) = recorded.filter(|s| *s != record.seed.to_string()) {
-            bail!(
-                "--resume {}: {} is the recording of a campaign with seed {seed}, campaign.json's \
-                 is seed {}: a recording of another campaign is not resumed",
-                dir.display(),
-                file.file_name().unwrap_or_default().to_string_lossy(),
-                record.seed
-            );
+        if file.exists() {
+            store
+                .check_recording(&file, record.seed)
+                .with_context(|| format!("--resume {}", dir.display()))?;
         }
     }
     Ok(())

@@ -14,10 +14,11 @@ use super::resume::Resumed;
 use super::shrink;
 use super::signals::{Interrupt, runtime, sim_view};
 use super::table::{CampaignFailed, print_report};
-use crate::cli::{OnFailure, RecordArg, RunArgs};
+use crate::cli::{RecordArg, RunArgs};
 use crate::exit::Exit;
 use crate::scenario_arg::{load_scenario, print_warnings_of_use};
 use crate::seed::choose_seed;
+use crate::settings::{Origin, OutDir, Recorded, RunSettings, ScenarioFrom};
 use campaign::files::Case;
 use campaign::model::Campaign;
 use campaign::oracle::FailurePolicy;
@@ -50,11 +51,23 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         None => args.cases_from.clone(),
     };
     let source = cases_dir.as_deref().map(CasesRun::read).transpose()?;
-    let scenario_arg = match (&args.scenario, &resumed, &source) {
-        (Some(given), _, _) => given.clone(),
-        (None, Some(resumed), _) => resumed.scenario_name()?,
-        (None, None, Some(source)) => source.scenario_name()?,
-        (None, None, None) => DEFAULT_SCENARIO.to_owned(),
+    let origin = match (&resumed, &source) {
+        (Some(resumed), _) => Origin::Resumed {
+            recorded: Recorded::from(&resumed.record),
+            dir: resumed.dir.clone(),
+        },
+        (None, Some(source)) => Origin::CasesFrom {
+            recorded: Recorded::from(&source.record),
+            cases: source.files.len(),
+        },
+        (None, None) => Origin::Fresh,
+    };
+    let settings = RunSettings::resolve(args, &origin);
+    let scenario_arg = match (&settings.scenario, &resumed, &source) {
+        (ScenarioFrom::Given(given), _, _) => given.clone(),
+        (ScenarioFrom::Resumed, Some(resumed), _) => resumed.scenario_name()?,
+        (ScenarioFrom::CasesFrom, _, Some(source)) => source.scenario_name()?,
+        _ => DEFAULT_SCENARIO.to_owned(),
     };
     let loaded = load_scenario(&scenario_arg)?;
     print_warnings_of_use(&scenario_arg, &loaded);
@@ -68,7 +81,14 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         );
     }
     let cars = named_cars(&args.car)?;
-    let car_label = cars_label(&cars);
+    // A campaign begun on several cars goes on as one on several cars, also with one car left:
+    // its cars named, each credited with the tests it drove, one recording span per test.
+    let on_several = cars.len() > 1
+        || resumed.as_ref().is_some_and(|r| {
+            !r.record.cars.is_empty()
+                && !matches!(cars[0].address, CarAddress::Sim | CarAddress::Sitl { .. })
+        });
+    let car_label = cars_label(&cars, on_several);
     let address = cars[0].address.clone();
     // A fresh car for each test: the embedded simulated car, or the car's own firmware built
     // for the host (its physical car and world are the simulated car's).
@@ -88,21 +108,11 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     if let Some(resumed) = &resumed {
         resumed.check(args, &scenario, &profile)?;
     }
-    let seed = match (&resumed, &source) {
-        (Some(resumed), _) => resumed.record.seed,
-        (None, Some(source)) => args.seed.unwrap_or(source.record.seed),
-        (None, None) => choose_seed(args.seed),
-    };
+    let seed = choose_seed(settings.seed);
     let campaign = Campaign {
         seed,
-        tests: match (&resumed, &source) {
-            (Some(resumed), _) => resumed.record.settings.tests,
-            (None, Some(source)) => source.files.len(),
-            (None, None) => args.tests.unwrap_or(scenario.campaign.tests),
-        },
-        no_faults: resumed
-            .as_ref()
-            .map_or(args.no_faults, |r| r.record.no_faults),
+        tests: settings.tests.unwrap_or(scenario.campaign.tests),
+        no_faults: settings.no_faults,
     };
     let cases = source
         .map(|source| source.check(&scenario, &campaign))
@@ -159,42 +169,30 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         }
         return Ok(Exit::Success);
     }
-    let made = args.out.is_none() && resumed.is_none();
-    let out = match (&args.out, &resumed) {
-        (_, Some(resumed)) => resumed.dir.clone(),
-        (Some(out), None) => out.clone(),
-        (None, None) => {
+    let made = settings.out == OutDir::Default;
+    let out = match &settings.out {
+        OutDir::Resumed(dir) | OutDir::Given(dir) => dir.clone(),
+        OutDir::Default => {
             let name = run_dir_name(&scenario.name, seed);
-            runner::claim_default_run_dir(&match args.shard {
+            runner::claim_default_run_dir(&match settings.shard {
                 Some(shard) => format!("{name}-shard{}of{}", shard.index, shard.count),
                 None => name,
             })?
         }
     };
     // A resumed campaign's directory is claimed again: not while another process writes it.
-    let _claim = match &resumed {
-        Some(_) => runner::claim_run_dir_again(&out)?,
-        None => runner::claim_out_dir(&out, made)?,
+    let _claim = match &settings.out {
+        OutDir::Resumed(_) => runner::claim_run_dir_again(&out)?,
+        _ => runner::claim_out_dir(&out, made)?,
     };
     if let Some(file) = &args.junit {
         super::case_input::check_output_file("--junit", file, &out)?;
     }
     let mut config = RunConfig::new(campaign, out, car_label.clone());
     config.safety.stale_after = args.stale_after;
-    config.policy = match (args.on_failure, &cases) {
-        (Some(OnFailure::Stop), _) => FailurePolicy::StopAtFailingSegment,
-        (Some(OnFailure::Continue), _) => FailurePolicy::ContinueAndRecord,
-        (None, _) if resumed.is_some() => resumed
-            .as_ref()
-            .map_or_else(FailurePolicy::default, Resumed::policy),
-        (None, Some((_, policy))) => *policy,
-        (None, None) => FailurePolicy::default(),
-    };
+    config.policy = settings.policy;
     config.tests = cases.map_or(Tests::Generated, |(cases, _)| Tests::Cases(cases));
-    config.shard = match &resumed {
-        Some(resumed) => resumed.record.shard,
-        None => args.shard,
-    };
+    config.shard = settings.shard;
     config.record = match args.record {
         RecordArg::All => RecordMode::All,
         RecordArg::Failing => RecordMode::Failing,
@@ -247,7 +245,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     } else if embedded {
         let cars = EmbeddedSims::new(&sim, config.campaign.seed, virtual_time);
         campaign_on_fresh_cars(&cars, &scenario, &mut config, jobs, args.live)
-    } else if cars.len() > 1 {
+    } else if on_several {
         let runtime = runtime(false)?;
         runtime.block_on(async {
             let _server = start_live(args.live, &mut config).await?;
@@ -295,7 +293,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     let summary = report.record.summary.as_ref();
     // A shard may hold no test (more shards than tests): it ran all of its tests.
     let all_passed =
-        summary.is_some_and(|s| s.passed == s.tests && (s.tests > 0 || args.shard.is_some()));
+        summary.is_some_and(|s| s.passed == s.tests && (s.tests > 0 || settings.shard.is_some()));
     Ok(if all_passed {
         Exit::Success
     } else {
@@ -820,10 +818,11 @@ pub(super) fn named_cars(given: &[String]) -> Result<Vec<NamedCar>> {
     Ok(cars)
 }
 
-/// What `campaign.json` calls the cars: the address of one, `A=…, B=…` of several.
-fn cars_label(cars: &[NamedCar]) -> String {
+/// What `campaign.json` calls the cars: the address of one, `A=…, B=…` of several (and of one
+/// that goes on with a campaign begun on several).
+fn cars_label(cars: &[NamedCar], several: bool) -> String {
     match cars {
-        [one] => one.given.clone(),
+        [one] if !several => one.given.clone(),
         several => several
             .iter()
             .map(|c| format!("{}={}", c.name, c.given))

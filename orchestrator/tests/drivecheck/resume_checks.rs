@@ -124,3 +124,62 @@ fn resume_refuses_a_stray_resumed_recording_and_keeps_the_real_one() {
         "the campaign's own recording is left as it was"
     );
 }
+
+/// `report`, `explain` (and `explain --score`) and `calibrate` read the recording beside the
+/// case files only when it is of their campaign: another campaign's `campaign.mcap` is refused,
+/// naming it and both seeds, and nothing is written (#51 item 3, the readers).
+#[test]
+fn the_readers_refuse_another_campaigns_recording_beside_the_cases() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (seven, eight) = recorded(tmp.path());
+    std::fs::copy(eight.join("campaign.mcap"), seven.join("campaign.mcap")).unwrap();
+    let page = tmp.path().join("page.html");
+    let profile = tmp.path().join("fitted.toml");
+    let commands: [Vec<&str>; 4] = [
+        vec!["report", path(&seven), "--out", path(&page)],
+        vec!["explain", path(&seven)],
+        vec!["explain", path(&seven), "--score"],
+        vec!["calibrate", path(&seven), "--out", path(&profile)],
+    ];
+    for command in commands {
+        let out = drivecheck(&command);
+        let said = text(&out);
+        assert_eq!(out.status.code(), Some(2), "{command:?}: {said}");
+        assert!(
+            said.contains("campaign.mcap") && said.contains("seed 8") && said.contains("seed 7"),
+            "{command:?}: {said}"
+        );
+    }
+    assert!(!page.exists() && !profile.exists());
+}
+
+/// A partial case (`case-NNN.partial-K.json`, the kept case of a test cut off) is a record of
+/// what happened, never read back as a result: one tampered with (another campaign's, or not
+/// JSON at all) changes nothing the resume drives or counts, and is left as it was.
+#[test]
+fn a_tampered_partial_changes_nothing_the_resume_drives_or_counts() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (seven, eight) = resumable(tmp.path());
+    let whole = tmp.path().join("whole");
+    run_unrecorded(&["--seed", "7", "--tests", "3"], &whole);
+    std::fs::copy(
+        eight.join("case-002.json"),
+        seven.join("case-002.partial-1.json"),
+    )
+    .unwrap();
+    std::fs::write(seven.join("case-001.partial-1.json"), "not a case {").unwrap();
+    let out = drivecheck(&["run", "--resume", path(&seven), "--record", "none"]);
+    assert!(matches!(out.status.code(), Some(0 | 1)), "{}", text(&out));
+    let whole_cases = |dir: &Path| -> Vec<(String, String)> {
+        common::cases(dir)
+            .into_iter()
+            .filter(|(name, _)| !name.contains(".partial-"))
+            .collect()
+    };
+    assert_eq!(whole_cases(&whole), whole_cases(&seven));
+    assert_eq!(common::summary(&whole), common::summary(&seven));
+    assert_eq!(
+        std::fs::read_to_string(seven.join("case-001.partial-1.json")).unwrap(),
+        "not a case {"
+    );
+}

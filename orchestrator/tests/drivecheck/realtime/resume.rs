@@ -293,3 +293,77 @@ fn a_campaign_that_died_after_its_last_test_is_completed_by_the_resume() {
             .is_complete()
     );
 }
+
+/// A campaign begun on two cars and resumed on a third goes on as one on several cars: the
+/// third car is named and credited with the test it drove, its case says so, and the cars of
+/// the first session keep only what they drove (#51 item 5; about 90 s of wall time).
+#[test]
+fn a_campaign_on_two_cars_resumed_on_another_credits_the_car_that_drove() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (mut sim_a, a) = common::start_sim(tmp.path(), "a");
+    let (mut sim_b, b) = common::start_sim(tmp.path(), "b");
+    let out = tmp.path().join("run");
+    let (car_a, car_b) = (format!("a={a}"), format!("b={b}"));
+    let args = [
+        "run",
+        "--car",
+        &car_a,
+        "--car",
+        &car_b,
+        "--seed",
+        "3",
+        "--tests",
+        "1",
+        "--out",
+        path(&out),
+    ];
+    let (code, said) = interrupted(&args, "in:0", "-INT", || {});
+    let _ = (sim_b.kill(), sim_b.wait());
+    assert_eq!(code, Some(2), "{said}");
+    let car_c = format!("c={a}");
+    let resumed = drivecheck(&["run", "--resume", path(&out), "--car", &car_c]);
+    let _ = (sim_a.kill(), sim_a.wait());
+    assert!(
+        matches!(resumed.status.code(), Some(0 | 1)),
+        "{}",
+        text(&resumed)
+    );
+    let r = record(&out);
+    let cars: Vec<(&str, Vec<u64>)> = r["cars"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| {
+            let tests = c["tests"].as_array().unwrap();
+            (
+                c["name"].as_str().unwrap(),
+                tests.iter().map(|t| t.as_u64().unwrap()).collect(),
+            )
+        })
+        .collect();
+    // Car a was cut off in test 0 (its case kept as a partial), car c drove it.
+    assert_eq!(
+        cars,
+        [("a", vec![]), ("b", vec![]), ("c", vec![0])],
+        "{r:#}"
+    );
+    assert!(out.join("case-000.partial-1.json").exists());
+    let case: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("case-000.json")).unwrap()).unwrap();
+    assert_eq!(case["car"], "c", "{case}");
+    let sessions = r["sessions"].as_array().unwrap();
+    assert_eq!(sessions.last().unwrap()["car"], car_c.as_str(), "{r:#}");
+    assert_eq!(
+        sessions.last().unwrap()["tests"],
+        serde_json::json!([0]),
+        "{r:#}"
+    );
+    // One recording with a span per test, the resumed test's naming car c.
+    let spans = recording::Spans::open(&out.join("campaign.mcap")).unwrap();
+    let named: Vec<Option<String>> = spans
+        .map(|s| s.unwrap())
+        .filter(|s| s.test_index == Some(0))
+        .map(|s| s.car)
+        .collect();
+    assert_eq!(named, [Some("c".to_owned())]);
+}
