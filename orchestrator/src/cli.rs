@@ -357,6 +357,11 @@ pub struct ShrinkArgs {
     /// file (docs/twin.md).
     #[arg(long, value_name = "FILE")]
     pub profile: Option<PathBuf>,
+    /// The simulated car every run drives the case on: `sim` (the embedded simulated car) or
+    /// `sitl:TREE` (the car's own firmware tree, built for the host, driving the same physical
+    /// car in virtual time; docs/sitl.md).
+    #[arg(long, value_name = "sim|sitl:TREE", default_value = "sim")]
+    pub car: String,
     /// Print the result as one JSON document on standard output instead of the table (the
     /// shrink report, or why the case was not shrunk; docs/json.md).
     #[arg(long)]
@@ -397,6 +402,11 @@ pub struct SweepArgs {
     /// file (docs/twin.md).
     #[arg(long, value_name = "FILE")]
     pub profile: Option<PathBuf>,
+    /// The simulated car every run drives the case on: `sim` (the embedded simulated car) or
+    /// `sitl:TREE` (the car's own firmware tree, built for the host, driving the same physical
+    /// car in virtual time; docs/sitl.md).
+    #[arg(long, value_name = "sim|sitl:TREE", default_value = "sim")]
+    pub car: String,
 }
 
 /// Options of `drivecheck report`.
@@ -512,6 +522,11 @@ pub struct ExplainArgs {
     /// or a TOML file (docs/twin.md).
     #[arg(long, value_name = "FILE")]
     pub profile: Option<PathBuf>,
+    /// With `--score`: the simulated car the counterfactual drives: `sim` (the embedded simulated car) or
+    /// `sitl:TREE` (the car's own firmware tree, built for the host, driving the same physical
+    /// car in virtual time; docs/sitl.md).
+    #[arg(long, value_name = "sim|sitl:TREE", default_value = "sim")]
+    pub car: String,
 }
 
 /// Options of `drivecheck runs`.
@@ -705,6 +720,11 @@ pub struct TwinCheckArgs {
     /// Drive the cases although the scenario's hash is not the one they were recorded in.
     #[arg(long)]
     pub ignore_scenario_hash: bool,
+    /// The simulated car the cases are driven on: `sim` (the embedded simulated car) or
+    /// `sitl:TREE` (the car's own firmware tree, built for the host, driving the profile's
+    /// physical car in virtual time: a twin of the car with its own firmware; docs/sitl.md).
+    #[arg(long, value_name = "sim|sitl:TREE", default_value = "sim")]
+    pub car: String,
 }
 
 /// `drivecheck area …`

@@ -1,6 +1,8 @@
-//! Driving a case on fresh embedded simulated cars in virtual time, unrecorded, as `shrink` and
-//! `sweep` do: run k with seed + k ([`Purpose::Run`]), each on a simulator of its own, optionally with simulator
-//! settings changed (`sweep`'s `sim.…` parameters).
+//! Driving a case on fresh simulated cars in virtual time, unrecorded, as `shrink` and `sweep`
+//! do: run k with seed + k ([`Purpose::Run`]), each on a simulator of its own, optionally with
+//! simulator settings changed (`sweep`'s `sim.…` parameters). The simulated car is the embedded
+//! one, or with [`SimDriver::firmware`] the car's own firmware built for the host, driving the
+//! same physical car in the same world (`--car sitl:TREE`).
 
 use std::path::PathBuf;
 
@@ -10,7 +12,8 @@ use thiserror::Error;
 use tokio_util::sync::CancellationToken;
 use trajgen::{GenerationError, Generator, Point, Strategy};
 
-use crate::vehicle::{ConnectError, SimulatorView, connect_sim, placed};
+use crate::vehicle::sitl::HostFirmware;
+use crate::vehicle::{ConnectError, connect_fresh, placed};
 use crate::{RecordMode, ReplaySource, RunConfig, RunError, Silent, Tests, run_campaign};
 use campaign::files::{Case, CaseError, ReplayOf};
 use campaign::model::{Campaign, TestPlan};
@@ -36,6 +39,16 @@ pub enum SimDriveError {
         error: Box<RunError>,
         /// Its run directory.
         dir: PathBuf,
+    },
+    /// A setting of the embedded simulator's own firmware model, asked of the car's own
+    /// firmware.
+    #[error(
+        "{setting} changes the embedded simulated car's model of the firmware; the car's own \
+         firmware built for the host has its own"
+    )]
+    SimulationOnly {
+        /// The setting.
+        setting: &'static str,
     },
     /// The run's case file could not be read back.
     #[error(transparent)]
@@ -121,6 +134,9 @@ pub struct SimDriver<'a> {
     pub test: Option<crate::SameTest>,
     /// Cancels the runs (a signal).
     pub cancel: &'a CancellationToken,
+    /// The car's own firmware built for the host, driving the simulated car's physical car
+    /// (`None`: the embedded simulated car).
+    pub firmware: Option<HostFirmware>,
 }
 
 impl<'a> SimDriver<'a> {
@@ -154,6 +170,7 @@ impl<'a> SimDriver<'a> {
             seed,
             test: None,
             cancel,
+            firmware: None,
         }
     }
 
@@ -215,7 +232,10 @@ impl<'a> SimDriver<'a> {
                 no_faults: false,
             },
             dir,
-            "sim",
+            match &self.firmware {
+                Some(firmware) => format!("sitl:{}", firmware.executable.display()),
+                None => "sim".to_owned(),
+            },
         );
         config.tests = Tests::Replay(ReplaySource {
             plan: plan.clone(),
@@ -232,20 +252,23 @@ impl<'a> SimDriver<'a> {
             settings.config(&self.sim, seed),
             self.test.and_then(|t| t.start),
         );
-        let (car, sim) = connect_sim(&config_of_car).await?;
-        let sim = Some(sim);
+        if self.firmware.is_some() && settings.uwb_clamp_m.is_some() {
+            return Err(SimDriveError::SimulationOnly {
+                setting: "sim.uwb_clamp_m",
+            });
+        }
+        let (car, sim) = connect_fresh(&config_of_car, self.firmware.as_ref()).await?;
         let result = run_campaign(
             &car,
             self.scenario,
             &config,
             self.cancel,
             &Silent,
-            sim.as_ref().map(|sim| sim as &dyn SimulatorView),
+            Some(sim.as_ref()),
         )
         .await;
-        if let Some(sim) = sim {
-            sim.shutdown();
-        }
+        // The simulated car stops with its view.
+        drop(sim);
         let report = result.map_err(|failure| SimDriveError::Campaign {
             error: Box::new(failure.error),
             dir: config.out_dir.clone(),

@@ -94,6 +94,11 @@ pub fn explain(args: &ExplainArgs) -> Result<Exit> {
             notes: Vec::new(),
         };
         let profile = crate::profile_arg::load(args.profile.as_deref())?;
+        let firmware = if args.counterfactual_runs > 0 {
+            super::firmware::fresh_car("explain --score", &args.car)?
+        } else {
+            None
+        };
         let mut scored = Vec::new();
         for run in run_dirs(&dir) {
             let (e, mut s, recorded_in) = score_run(&run, scenario.as_ref(), &options)
@@ -103,7 +108,7 @@ pub fn explain(args: &ExplainArgs) -> Result<Exit> {
                     recorded_in.as_ref(),
                     &mut s,
                     args.counterfactual_runs,
-                    &profile,
+                    (&profile, firmware.as_ref()),
                 )
                 .with_context(|| format!("cannot drive the cases of {} again", run.display()))?;
             }
@@ -146,7 +151,7 @@ fn counterfactual(
     scenario: Option<&scenarios::Scenario>,
     scored: &mut [Scored],
     runs: u32,
-    profile: &LoadedProfile,
+    (profile, firmware): (&LoadedProfile, Option<&super::firmware::HostFirmware>),
 ) -> Result<()> {
     let pending: BTreeSet<std::path::PathBuf> = scored
         .iter()
@@ -169,7 +174,7 @@ fn counterfactual(
     let result = pending.iter().try_for_each(|path| {
         let case = read_case_file(path)?;
         let seed = case.campaign_seed.unwrap_or_default();
-        let driver = SimDriver::new(
+        let mut driver = SimDriver::new(
             (scenario, sim.clone()),
             path,
             &case,
@@ -177,6 +182,7 @@ fn counterfactual(
             (runs, seed),
             &cancel,
         );
+        driver.firmware = firmware.cloned();
         let settings = SimSettings::default();
         let mut of_case: Vec<&mut SegmentScore> = scored
             .iter_mut()

@@ -7,6 +7,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use car_link::FirmwareVersion;
+pub use runner::vehicle::sitl::HostFirmware;
 
 /// The environment variable that overrides where built firmware executables are kept.
 pub const CACHE_ENV: &str = "DRIVECHECK_SITL_CACHE";
@@ -31,17 +32,8 @@ pub fn cache_dir() -> PathBuf {
     PathBuf::from(".drivecheck-sitl")
 }
 
-/// A firmware tree built for the host: the executable and the firmware version it reports.
-#[derive(Debug, Clone)]
-pub struct BuiltFirmware {
-    /// The executable.
-    pub executable: PathBuf,
-    /// The tree's firmware version.
-    pub version: FirmwareVersion,
-}
-
 /// Builds `tree` (or takes it from the cache) and says so unless quiet.
-pub fn build(tree: &str) -> Result<BuiltFirmware> {
+pub fn build(tree: &str) -> Result<HostFirmware> {
     let started = Instant::now();
     let cache = cache_dir();
     let build = sitl::build(Path::new(tree), &cache)
@@ -59,8 +51,24 @@ pub fn build(tree: &str) -> Result<BuiltFirmware> {
             build.executable.display()
         );
     }
-    Ok(BuiltFirmware {
+    Ok(HostFirmware {
         executable: build.executable,
         version,
     })
+}
+
+/// The simulated car a command that drives cases on fresh cars is given (`--car`): `sim`, the
+/// embedded simulated car (`None`), or `sitl:TREE`, the car's own firmware built for the host
+/// (built or taken from the cache). A car behind a link is refused, naming the command.
+pub fn fresh_car(command: &str, car: &str) -> Result<Option<HostFirmware>> {
+    let address: car_link::CarAddress = car.parse().with_context(|| format!("--car {car}"))?;
+    match address {
+        car_link::CarAddress::Sim => Ok(None),
+        car_link::CarAddress::Sitl { tree } => build(&tree).map(Some),
+        _ => anyhow::bail!(
+            "--car {car}: {command} drives the case on a fresh simulated car for every run: \
+             `sim` (the embedded simulated car) or `sitl:TREE` (the car's own firmware built \
+             for the host); drive a car behind a link with `drivecheck replay --car {car}`"
+        ),
+    }
 }

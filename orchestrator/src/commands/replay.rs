@@ -24,7 +24,7 @@ use scenarios::Scenario;
 use trajgen::{Generator, Strategy};
 
 use super::case_input::{check_hash, read_case, scenario_of};
-use super::signals::{Interrupt, runtime, sim_view};
+use super::signals::{Interrupt, runtime};
 use super::table::{CampaignFailed, metres};
 use crate::cli::ReplayArgs;
 use crate::exit::Exit;
@@ -38,7 +38,7 @@ use campaign::oracle::Verdict;
 use campaign::replay::{Comparison, Drove, REPLAY_FILE, ReplayRun};
 use campaign::seed::{Purpose, derive};
 use report::REPORT_FILE;
-use runner::vehicle::{ConnectError, Vehicle, connect, placed};
+use runner::vehicle::{ConnectError, SimulatorView, Vehicle, connect, connect_fresh, placed};
 use runner::{
     ReplaySource, RunConfig, TestSummary, Tests, rfc3339_now, run_campaign, run_dir_name,
 };
@@ -84,10 +84,17 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
         .car
         .parse()
         .with_context(|| format!("--car {}", args.car))?;
-    let embedded = address == CarAddress::Sim;
+    // The car's own firmware built for the host drives the simulated car's physical car, a
+    // fresh start of it per run, as the embedded simulated car does.
+    let firmware = match &address {
+        CarAddress::Sitl { tree } => Some(super::firmware::build(tree)?),
+        _ => None,
+    };
+    let embedded = address == CarAddress::Sim || firmware.is_some();
     if args.profile.is_some() && !embedded {
         bail!(
-            "--profile describes the embedded simulated car (--car sim), not the car at {}",
+            "--profile describes the embedded simulated car (--car sim) or the physical car \
+             around the firmware built for the host (--car sitl:TREE), not the car at {}",
             args.car
         );
     }
@@ -181,6 +188,7 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
     let job = Job {
         args,
         address: &address,
+        firmware: firmware.as_ref(),
         scenario: &scenario,
         sim: &sim,
         profile: embedded.then(|| profile.clone()),
@@ -295,6 +303,8 @@ fn warn_other_profile(case: &Case, path: &Path, profile: &LoadedProfile) -> bool
 struct Job<'a> {
     args: &'a ReplayArgs,
     address: &'a CarAddress,
+    /// `--car sitl:TREE`: the firmware every run starts afresh.
+    firmware: Option<&'a super::firmware::HostFirmware>,
     scenario: &'a Scenario,
     /// The embedded simulated car (the scenario's, with the profile applied).
     sim: &'a car_sim::SimConfig,
@@ -325,16 +335,34 @@ impl Job<'_> {
         for k in 0..self.times {
             let (seed, sim_seed) = self.seeds(k);
             let dir = format!("run-{}", k + 1);
-            let connecting = connect(self.address, &sim, sim_seed);
-            let (case, result) = match car_for_run(&mut shared, connecting).await {
-                Ok((car, sim)) => self.run_one(&car, sim, seed, &dir, &interrupt).await,
-                Err(error) => (None, Err(error.into())),
+            let (case, result) = match self.firmware {
+                Some(firmware) => {
+                    let config = car_sim::SimConfig {
+                        seed: sim_seed,
+                        ..sim.clone()
+                    };
+                    match connect_fresh(&config, Some(firmware)).await {
+                        Ok((car, view)) => {
+                            self.run_one(&car, Some(view), seed, &dir, &interrupt).await
+                        }
+                        Err(error) => (None, Err(error.into())),
+                    }
+                }
+                None => {
+                    let connecting = connect(self.address, &sim, sim_seed);
+                    match car_for_run(&mut shared, connecting).await {
+                        Ok((car, sim)) => {
+                            let view = sim.map(|s| Box::new(s) as Box<dyn SimulatorView + Send>);
+                            self.run_one(&car, view, seed, &dir, &interrupt).await
+                        }
+                        Err(error) => (None, Err(error.into())),
+                    }
+                }
             };
             let run = ReplayRun {
                 dir,
                 seed,
-                simulator_seed: (*self.address == CarAddress::Sim && sim_seed != seed)
-                    .then_some(sim_seed),
+                simulator_seed: (self.profile.is_some() && sim_seed != seed).then_some(sim_seed),
                 verdict: case.as_ref().and_then(|c| c.verdict),
                 reason: case.as_ref().and_then(|c| c.reason.clone()),
             };
@@ -385,7 +413,7 @@ impl Job<'_> {
     async fn run_one<V: Vehicle>(
         &self,
         car: &V,
-        sim: Option<SimHandle>,
+        sim: Option<Box<dyn SimulatorView + Send>>,
         seed: u64,
         dir: &str,
         interrupt: &Interrupt,
@@ -415,12 +443,11 @@ impl Job<'_> {
             &config,
             interrupt.token(),
             &super::progress::WarningsOnly,
-            sim_view(&sim),
+            sim.as_deref().map(|s| s as &dyn SimulatorView),
         )
         .await;
-        if let Some(sim) = sim {
-            sim.shutdown();
-        }
+        // The simulated car stops with its view.
+        drop(sim);
         match result {
             Ok(report) => match report.cases().next().transpose() {
                 Ok(case) => (case, Ok(())),

@@ -274,7 +274,13 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         write_junit(&report, file, clock, Some(wall.as_secs_f64()))?;
     }
     if args.shrink {
-        shrink_failed(&report, &scenario, &sim, args.shrink_budget, !args.json)?;
+        shrink_failed(
+            &report,
+            &scenario,
+            (&sim, firmware.as_ref()),
+            args.shrink_budget,
+            !args.json,
+        )?;
     }
     if args.report {
         let options = report::ReportOptions {
@@ -306,7 +312,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
 fn dry_run(
     args: &RunArgs,
     car: &NamedCar,
-    firmware: Option<&super::firmware::BuiltFirmware>,
+    firmware: Option<&runner::vehicle::sitl::HostFirmware>,
     scenario: &Scenario,
     sim: &car_sim::SimConfig,
     campaign: Campaign,
@@ -593,7 +599,10 @@ pub(super) fn write_junit(
 fn shrink_failed(
     report: &CampaignReport,
     scenario: &Scenario,
-    sim: &car_sim::SimConfig,
+    (sim, firmware): (
+        &car_sim::SimConfig,
+        Option<&runner::vehicle::sitl::HostFirmware>,
+    ),
     budget: Duration,
     to_stdout: bool,
 ) -> Result<()> {
@@ -625,6 +634,7 @@ fn shrink_failed(
             seed: case.campaign_seed.unwrap_or(report.record.seed),
             margin: shrink::DEFAULT_MARGIN_M,
             sim: sim.clone(),
+            firmware: firmware.cloned(),
         };
         let result = shrink::shrink_case(&runtime, &path, &case, scenario, &options, &out, true);
         match result {

@@ -46,6 +46,9 @@ pub(super) struct Options {
     pub margin: f64,
     /// The simulated car: the scenario's, with the car profile applied.
     pub sim: car_sim::SimConfig,
+    /// The car's own firmware built for the host, driving that simulated car's physical car
+    /// (`--car sitl:TREE`; `None`: the embedded simulated car).
+    pub firmware: Option<super::firmware::HostFirmware>,
 }
 
 /// The case does not fail at one segment (or two neighbouring ones) in every run: nothing to
@@ -78,6 +81,7 @@ pub fn shrink(args: &ShrinkArgs) -> Result<Exit> {
         .unwrap_or_else(|| choose_seed(None));
     let profile = crate::profile_arg::load(args.profile.as_deref())?;
     let sim = profile.sim_config(&scenario)?;
+    let firmware = super::firmware::fresh_car("shrink", &args.car)?;
     let out = match &args.out {
         Some(out) => out.clone(),
         None => runner::claim_default_run_dir(&run_dir_name(
@@ -91,6 +95,7 @@ pub fn shrink(args: &ShrinkArgs) -> Result<Exit> {
         seed,
         margin: args.margin,
         sim,
+        firmware,
     };
     let runtime = runtime(true)?;
     let report = match shrink_case(&runtime, path, &case, &scenario, &options, &out, true) {
@@ -228,6 +233,7 @@ pub(super) fn shrink_case(
         (options.runs, options.seed),
         &cancel,
     );
+    sim.firmware = options.firmware.clone();
     // Every run is the case's own test (the campaign's reset, safe stop and start), run 0 on
     // the campaign's own car: the shrink's "before" is the case's figures.
     sim.test = runner::SameTest::of_case(case, scenario)

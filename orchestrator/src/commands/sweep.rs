@@ -31,6 +31,7 @@ pub fn sweep(args: &SweepArgs) -> Result<Exit> {
         .unwrap_or_else(|| choose_seed(None));
     let profile = crate::profile_arg::load(args.profile.as_deref())?;
     let sim = profile.sim_config(&scenario)?;
+    let firmware = super::firmware::fresh_car("sweep", &args.car)?;
     campaign::sweep::grid_size(&axes)?;
     let points = grid(&axes);
     eprintln!(
@@ -43,7 +44,7 @@ pub fn sweep(args: &SweepArgs) -> Result<Exit> {
     let scratch = std::env::temp_dir().join(format!("drivecheck-sweep-{}", std::process::id()));
     let report = runtime(true)?.block_on(async {
         let cancel = cancel_on_ctrl_c();
-        let driver = SimDriver::new(
+        let mut driver = SimDriver::new(
             (&scenario, sim.clone()),
             path,
             &case,
@@ -51,6 +52,7 @@ pub fn sweep(args: &SweepArgs) -> Result<Exit> {
             (args.runs, seed),
             &cancel,
         );
+        driver.firmware = firmware;
         let mut results = Vec::with_capacity(points.len());
         for values in points {
             let swept = with_fault_values(&case, &axes, &values);

@@ -123,7 +123,7 @@ fn repeatability(cases: &[(PathBuf, Case)], other: &Path) -> Result<TwinRepeat> 
 
 /// Drives every case again on `profile` and compares.
 fn check_profile(
-    profile: &LoadedProfile,
+    (profile, firmware): (&LoadedProfile, Option<&super::firmware::HostFirmware>),
     scenario: &scenarios::Scenario,
     cases: &[(PathBuf, Case)],
     (runs, default_seed): (u32, u64),
@@ -137,7 +137,7 @@ fn check_profile(
     let result = cases.iter().enumerate().try_for_each(|(i, (path, case))| {
         bar.set_message(format!("{}: {}", profile.name, path.display()));
         let seed = case.campaign_seed.unwrap_or(default_seed);
-        let driver = SimDriver::new(
+        let mut driver = SimDriver::new(
             (scenario, sim.clone()),
             path,
             case,
@@ -145,6 +145,7 @@ fn check_profile(
             (runs, seed),
             &cancel,
         );
+        driver.firmware = firmware.cloned();
         let driven = runtime
             .block_on(driver.drive_all(case, &SimSettings::default()))
             .with_context(|| format!("{}: cannot be driven again", path.display()))?;
@@ -178,6 +179,7 @@ pub fn check(args: &TwinCheckArgs) -> Result<Exit> {
     let scenario = scenario_of(args.scenario.as_deref(), first_path, first)?;
     check_hash(first, &scenario, args.ignore_scenario_hash)?;
     let profile = crate::profile_arg::load(args.profile.as_deref())?;
+    let firmware = super::firmware::fresh_car("twin check", &args.car)?;
     let mut profiles = vec![profile.clone()];
     if profile.profile.hash() != LoadedProfile::default().profile.hash() {
         profiles.push(LoadedProfile::default());
@@ -193,7 +195,15 @@ pub fn check(args: &TwinCheckArgs) -> Result<Exit> {
     }
     let results = profiles
         .iter()
-        .map(|p| check_profile(p, &scenario, &cases, (args.runs, record.seed), &bar))
+        .map(|p| {
+            check_profile(
+                (p, firmware.as_ref()),
+                &scenario,
+                &cases,
+                (args.runs, record.seed),
+                &bar,
+            )
+        })
         .collect::<Result<Vec<_>>>()?;
     bar.finish_and_clear();
     let repeatability = args

@@ -131,3 +131,100 @@ fn a_folder_that_is_not_a_firmware_tree_is_refused_naming_it() {
         "{stderr}"
     );
 }
+
+/// `replay`, `sweep`, `shrink` and `twin check` take `--car sitl:TREE` as `run` does: every run
+/// a fresh start of the firmware driving the simulated car's physical car. A case of a campaign
+/// on the firmware, replayed on it, is its own test again to the last digit; a setting of the
+/// embedded simulator's model of the firmware is refused on the firmware itself.
+#[test]
+fn replay_sweep_shrink_and_twin_check_drive_the_firmware() {
+    for (version, tree) in trees() {
+        let dir = tempfile::tempdir().unwrap();
+        let car = format!("sitl:{}", tree.display());
+        let run = dir.path().join("run");
+        campaign(&run, 3, &["--car", &car]);
+        let case = run.join("case-001.json");
+
+        let replayed = dir.path().join("replay");
+        let out = drivecheck(&[
+            "replay",
+            path(&case),
+            "--car",
+            &car,
+            "--out",
+            path(&replayed),
+        ]);
+        assert!(matches!(out.status.code(), Some(0 | 1)), "{}", text(&out));
+        let replay: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(replayed.join("replay.json")).unwrap())
+                .unwrap();
+        assert_eq!(
+            replay["reproduction"]["identical"], true,
+            "{version}: {replay:#}"
+        );
+
+        let out = drivecheck(&[
+            "sweep",
+            path(&case),
+            "--car",
+            &car,
+            "--runs",
+            "1",
+            "--seed",
+            "1",
+            "--set",
+            "sim.range_sigma_m=0.02,0.2",
+            "--json",
+        ]);
+        assert_eq!(out.status.code(), Some(0), "{version}: {}", text(&out));
+        let sweep: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(sweep["points"].as_array().unwrap().len(), 2, "{sweep:#}");
+        let refused = drivecheck(&[
+            "sweep",
+            path(&case),
+            "--car",
+            &car,
+            "--set",
+            "sim.uwb_clamp_m=0.1",
+        ]);
+        assert_eq!(refused.status.code(), Some(2), "{}", text(&refused));
+        assert!(
+            text(&refused).contains("the car's own firmware built for the host has its own"),
+            "{}",
+            text(&refused)
+        );
+
+        let shrunk = dir.path().join("shrink");
+        let out = drivecheck(&[
+            "shrink",
+            path(&case),
+            "--car",
+            &car,
+            "--runs",
+            "1",
+            "--budget",
+            "20s",
+            "--out",
+            path(&shrunk),
+        ]);
+        assert!(
+            matches!(out.status.code(), Some(0 | 1)),
+            "{version}: {}",
+            text(&out)
+        );
+
+        let out = drivecheck(&[
+            "twin",
+            "check",
+            path(&run),
+            "--car",
+            &car,
+            "--runs",
+            "1",
+            "--json",
+        ]);
+        assert_eq!(out.status.code(), Some(0), "{version}: {}", text(&out));
+        let twin = String::from_utf8_lossy(&out.stdout);
+        assert!(twin.contains("verdicts_agreed"), "{twin}");
+    }
+}

@@ -74,6 +74,31 @@ pub async fn connect_sim(
     sim_car(config).await
 }
 
+/// A fresh simulated car in the world of `config`, standing where it says, seeded as it says:
+/// the embedded simulated car, or with `firmware` the car's own firmware built for the host
+/// driving the same physical car (`car_sim::plant`); with its debug view, which stops the car
+/// when dropped. What `shrink`, `sweep`, `explain --score`, `twin` and `calibrate` drive a case
+/// on ([`crate::simdrive::SimDriver`]).
+pub async fn connect_fresh(
+    config: &car_sim::SimConfig,
+    firmware: Option<&super::sitl::HostFirmware>,
+) -> Result<(impl Vehicle + use<>, Box<dyn SimulatorView + Send>), ConnectError> {
+    match firmware {
+        None => {
+            let (car, sim) = sim_car(config).await?;
+            Ok((car, Box::new(sim) as Box<dyn SimulatorView + Send>))
+        }
+        Some(firmware) => {
+            let car = super::sitl::SitlCar {
+                executable: firmware.executable.clone(),
+                plant: super::sitl::plant_options(firmware.version, config),
+            };
+            let (car, handle) = super::sitl::connect_sitl(&car).await?;
+            Ok((car, Box::new(handle) as Box<dyn SimulatorView + Send>))
+        }
+    }
+}
+
 /// [`connect_sim`], as the concrete car.
 async fn sim_car(config: &car_sim::SimConfig) -> Result<(Car, SimHandle), ConnectError> {
     let (stream, sim) = car_sim::spawn_in_process(config);

@@ -42,7 +42,7 @@ use car_sim::{DebugEvent, Truth};
 use futures::Stream;
 use trajgen::Point;
 
-pub use connect::{ConnectError, EmbeddedSims, connect, connect_sim, placed};
+pub use connect::{ConnectError, EmbeddedSims, connect, connect_fresh, connect_sim, placed};
 
 /// A car the runner drives (see the module doc). Every async method is bounded by the link's
 /// timeouts; a lost link is [`CarError::LinkLost`], never a default value.

@@ -82,6 +82,15 @@ pub enum SitlCarError {
     Connect(#[source] CarError),
 }
 
+/// The car's own firmware built for the host: its executable and the version it reports.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct HostFirmware {
+    /// The executable (`sitl::Build::executable`).
+    pub executable: PathBuf,
+    /// Its firmware version (what its physical car's geometry defaults to).
+    pub version: FirmwareVersion,
+}
+
 /// The firmware executable of a build, and the physical car it drives.
 #[derive(Debug, Clone)]
 pub struct SitlCar {
