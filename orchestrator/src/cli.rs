@@ -64,6 +64,9 @@ pub enum Command {
     /// Serve a simulated car over TCP (like the reference bridge) or UDP, until Ctrl-C. Exit
     /// status: 0 stopped by Ctrl-C, 2 error.
     Sim(SimArgs),
+    /// The car's own firmware built for the host (`--car sitl:TREE`, docs/sitl.md).
+    #[command(subcommand)]
+    Sitl(SitlCommand),
     /// Fit a car profile to recordings of a car: its cases driven again on simulated cars of
     /// candidate profiles until their UWB − RTK error matches the recorded one (docs/twin.md).
     /// Exit status: 0 fitted, 2 error.
@@ -683,6 +686,28 @@ pub struct CalibrateArgs {
     /// Use the runs although the scenario's hash is not the one they were recorded in.
     #[arg(long)]
     pub ignore_scenario_hash: bool,
+}
+
+/// `drivecheck sitl …`
+#[derive(Debug, Subcommand)]
+pub enum SitlCommand {
+    /// Build a firmware tree for the host (or take it from the cache, by a hash of the tree's
+    /// sources, the shim and the compiler): print its firmware version, the tree's hash, the
+    /// executable, the files compiled and the symbols the shim provides. Exit status: 0 built,
+    /// 2 error (naming the file, the missing symbol or the compiler's first error).
+    Build(SitlBuildArgs),
+}
+
+/// Options of `drivecheck sitl build`.
+#[derive(Debug, Args)]
+pub struct SitlBuildArgs {
+    /// The firmware tree: the folder with the firmware's `main.c` and `conf_general.h`
+    /// (`rise_sdvp/Embedded/RC_Controller`).
+    #[arg(value_name = "TREE")]
+    pub tree: PathBuf,
+    /// Print the build as one JSON document (docs/json.md).
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// `drivecheck twin …`

@@ -4,8 +4,8 @@
 //! (#51's acceptance: 50 random moments of a 30-test campaign).
 //!
 //! One uninterrupted campaign first, timed; then for each kill a campaign of the same seed into
-//! a directory of its own, killed after a random share of that time (seeded: the same moments
-//! every time), and `run --resume` until it ends. Each step is a `drivecheck` process
+//! a directory of its own, killed once a random number of its tests have their case files and a
+//! random share of one test's time later (seeded), and `run --resume` until it ends. Each step is a `drivecheck` process
 //! (`drivecheck-dev exec`).
 
 use std::collections::BTreeMap;
@@ -66,7 +66,7 @@ pub fn run(args: &BenchKillResumeArgs) -> Result<Exit> {
     let expected = RunContents::read(&whole)?;
     println!(
         "bench kill-resume: seed {}, {} tests, --jobs {}; the uninterrupted campaign took {:.2} s; \
-         {} kills at random moments within it",
+         {} kills, each after a random number of its tests and a random part of the next",
         args.seed,
         args.tests,
         args.jobs,
@@ -76,7 +76,10 @@ pub fn run(args: &BenchKillResumeArgs) -> Result<Exit> {
     let mut rng = rng(args.seed);
     let mut tally = Tally::default();
     for k in 0..args.kills {
-        let after = took.mul_f64(rng.random_range(0.02..0.98));
+        // A moment in the campaign's own progress, whatever the machine's load: once test
+        // `cases` has its case file, after a further random share of one test's time.
+        let cases = rng.random_range(0..args.tests);
+        let jitter = took.mul_f64(rng.random_range(0.0..1.0) / args.tests as f64);
         let out = root.join(format!("cut-{k:03}"));
         let mut child = Command::new(&exe)
             .arg("exec")
@@ -86,7 +89,12 @@ pub fn run(args: &BenchKillResumeArgs) -> Result<Exit> {
             .stderr(Stdio::null())
             .spawn()
             .with_context(|| format!("cannot start {}", exe.display()))?;
-        std::thread::sleep(after);
+        let began = Instant::now();
+        while child.try_wait()?.is_none() && case_files(&out) < cases {
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
+        std::thread::sleep(jitter);
+        let after = began.elapsed();
         if child.try_wait()?.is_some() {
             tally.ended_first += 1;
             continue;
@@ -153,6 +161,20 @@ pub fn run(args: &BenchKillResumeArgs) -> Result<Exit> {
         Exit::Success
     } else {
         Exit::Found
+    })
+}
+
+/// How many case files (not partials) `dir` holds now.
+fn case_files(dir: &Path) -> usize {
+    std::fs::read_dir(dir).map_or(0, |entries| {
+        entries
+            .flatten()
+            .filter(|e| {
+                let name = e.file_name();
+                let name = name.to_string_lossy();
+                name.starts_with("case-") && name.ends_with(".json") && !name.contains(".partial-")
+            })
+            .count()
     })
 }
 

@@ -72,3 +72,66 @@ pub fn fresh_car(command: &str, car: &str) -> Result<Option<HostFirmware>> {
         ),
     }
 }
+
+/// `drivecheck sitl build TREE`: builds the tree (or takes it from the cache) and says what went
+/// into it.
+pub fn build_command(args: &crate::cli::SitlBuildArgs) -> Result<crate::exit::Exit> {
+    let started = Instant::now();
+    let build = sitl::build(&args.tree, &cache_dir()).with_context(|| {
+        format!(
+            "{}: cannot build the firmware for the host",
+            args.tree.display()
+        )
+    })?;
+    let seconds = started.elapsed().as_secs_f64();
+    let version = FirmwareVersion::new(build.version.0, build.version.1);
+    if args.json {
+        #[derive(serde::Serialize)]
+        struct Built<'a> {
+            tree: &'a Path,
+            firmware: String,
+            tree_hash: &'a str,
+            executable: &'a Path,
+            cached: bool,
+            seconds: f64,
+            compiled: &'a [String],
+            stubbed: &'a [String],
+        }
+        crate::output::print_json(
+            "sitl build",
+            &Built {
+                tree: &args.tree,
+                firmware: version.to_string(),
+                tree_hash: &build.tree_hash,
+                executable: &build.executable,
+                cached: build.cached,
+                seconds,
+                compiled: &build.compiled,
+                stubbed: &build.stubbed,
+            },
+        )?;
+    } else {
+        println!(
+            "firmware {version} of {} built for the host ({})",
+            args.tree.display(),
+            if build.cached {
+                "from the cache".to_owned()
+            } else {
+                format!("in {seconds:.1} s")
+            }
+        );
+        println!("  tree hash  {}", build.tree_hash);
+        println!("  executable {}", build.executable.display());
+        println!(
+            "  compiled   {} files: {}",
+            build.compiled.len(),
+            build.compiled.join(", ")
+        );
+        println!(
+            "  stubbed    {} symbols the shim provides: {}",
+            build.stubbed.len(),
+            build.stubbed.join(", ")
+        );
+    }
+    Ok(crate::exit::Exit::Success)
+}

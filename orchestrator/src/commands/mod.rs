@@ -28,7 +28,9 @@ mod twin;
 
 use anyhow::Result;
 
-use crate::cli::{AreaCommand, Cli, Command, RouteCommand, ScenarioCommand, TwinCommand};
+use crate::cli::{
+    AreaCommand, Cli, Command, RouteCommand, ScenarioCommand, SitlCommand, TwinCommand,
+};
 use crate::exit::Exit;
 
 /// Runs a parsed command line and returns the process's exit status.
@@ -43,6 +45,7 @@ pub fn run(cli: Cli) -> Result<Exit> {
         Command::Explain(args) => explain::explain(&args),
         Command::Compare(args) => compare::compare(&args),
         Command::Sim(args) => sim::serve(&args),
+        Command::Sitl(SitlCommand::Build(args)) => firmware::build_command(&args),
         Command::Calibrate(args) => calibrate::calibrate(&args),
         Command::Twin(TwinCommand::Check(args)) => twin::check(&args),
         Command::Area(AreaCommand::Validate(args)) => area::validate(&args),

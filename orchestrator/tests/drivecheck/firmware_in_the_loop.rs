@@ -228,3 +228,39 @@ fn replay_sweep_shrink_and_twin_check_drive_the_firmware() {
         assert!(twin.contains("verdicts_agreed"), "{twin}");
     }
 }
+
+/// `drivecheck sitl build TREE` says what it built: the version, the tree's hash, the files
+/// compiled and the symbols the shim stubs; the second build comes from the cache.
+#[test]
+fn sitl_build_says_what_went_into_the_executable() {
+    for (version, tree) in trees() {
+        let first = drivecheck(&["sitl", "build", path(&tree), "--json"]);
+        assert_eq!(first.status.code(), Some(0), "{}", text(&first));
+        let built: serde_json::Value = serde_json::from_slice(&first.stdout).unwrap();
+        assert_eq!(built["command"], "sitl build", "{built:#}");
+        assert_eq!(built["firmware"], version, "{built:#}");
+        assert_eq!(built["tree_hash"].as_str().unwrap().len(), 64, "{built:#}");
+        let compiled: Vec<&str> = built["compiled"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|f| f.as_str().unwrap())
+            .collect();
+        assert!(
+            compiled.iter().any(|f| f.ends_with("pos_uwb.c")),
+            "{compiled:?}"
+        );
+        assert!(
+            !built["stubbed"].as_array().unwrap().is_empty(),
+            "{built:#}"
+        );
+        assert!(Path::new(built["executable"].as_str().unwrap()).is_file());
+        let again = drivecheck(&["sitl", "build", path(&tree)]);
+        let said = String::from_utf8_lossy(&again.stdout);
+        assert!(said.contains("from the cache"), "{said}");
+    }
+    let not_a_tree = tempfile::tempdir().unwrap();
+    let out = drivecheck(&["sitl", "build", path(not_a_tree.path())]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    assert!(text(&out).contains("not a firmware tree"), "{}", text(&out));
+}
