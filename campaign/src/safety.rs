@@ -50,6 +50,10 @@ pub struct SafetyConfig {
     pub max_cross_track_m: f64,
     /// Longest time without a state sample (250 ms).
     pub stale_after: Duration,
+    /// The fastest a car's position may move between two samples, m/s
+    /// ([`MAX_PLAUSIBLE_SPEED_MPS`]; infinite: never [`AbortReason::Implausible`], for a
+    /// harness that moves its car by whole metres between samples).
+    pub max_plausible_speed_mps: f64,
 }
 
 impl Default for SafetyConfig {
@@ -58,6 +62,7 @@ impl Default for SafetyConfig {
             area_margin_m: 0.3,
             max_cross_track_m: 1.5,
             stale_after: Duration::from_millis(250),
+            max_plausible_speed_mps: MAX_PLAUSIBLE_SPEED_MPS,
         }
     }
 }
@@ -368,11 +373,10 @@ impl SafetyMonitor {
         let (then, q) = last?;
         let dt = now.saturating_sub(then);
         let jump_m = (p - q).norm();
-        (jump_m > MAX_PLAUSIBLE_SPEED_MPS * dt.as_secs_f64() + PLAUSIBLE_JUMP_M).then(|| {
-            AbortReason::Implausible {
-                jump_m,
-                dt_ms: u64::try_from(dt.as_millis()).unwrap_or(u64::MAX),
-            }
+        let reach_m = self.config.max_plausible_speed_mps * dt.as_secs_f64() + PLAUSIBLE_JUMP_M;
+        (jump_m > reach_m).then(|| AbortReason::Implausible {
+            jump_m,
+            dt_ms: u64::try_from(dt.as_millis()).unwrap_or(u64::MAX),
         })
     }
 

@@ -238,6 +238,7 @@ impl From<SafetyConfigRecord> for SafetyConfig {
             area_margin_m: r.area_margin_m,
             max_cross_track_m: r.max_cross_track_m,
             stale_after: Duration::from_millis(r.stale_after),
+            max_plausible_speed_mps: crate::safety::MAX_PLAUSIBLE_SPEED_MPS,
         }
     }
 }

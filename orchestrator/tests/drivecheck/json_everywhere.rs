@@ -298,6 +298,27 @@ fn every_command_that_prints_a_result_prints_one_json_document() {
     );
     assert_eq!(check["command"], "scenario check");
 
+    // The firmware built for the host needs a tree (docs/sitl.md): under CI=true there is one.
+    match std::env::var_os("DRIVECHECK_FIRMWARE_10").filter(|v| !v.is_empty()) {
+        Some(tree) => {
+            let tree = std::path::PathBuf::from(tree);
+            let built = try_it(
+                "sitl build",
+                &["sitl", "build", path(&tree), "--json"],
+                &[0],
+            );
+            assert_eq!(built["command"], "sitl build");
+        }
+        None => {
+            assert_ne!(
+                std::env::var("CI").as_deref(),
+                Ok("true"),
+                "CI=true and no firmware tree for `sitl build --json`"
+            );
+            println!("skipped: sitl build --json (no firmware tree)");
+            tried.insert("sitl build".to_owned());
+        }
+    }
     assert_eq!(
         tried,
         commands_with_json(),
