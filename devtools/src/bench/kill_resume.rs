@@ -166,16 +166,9 @@ pub fn run(args: &BenchKillResumeArgs) -> Result<Exit> {
 
 /// How many case files (not partials) `dir` holds now.
 fn case_files(dir: &Path) -> usize {
-    std::fs::read_dir(dir).map_or(0, |entries| {
-        entries
-            .flatten()
-            .filter(|e| {
-                let name = e.file_name();
-                let name = name.to_string_lossy();
-                name.starts_with("case-") && name.ends_with(".json") && !name.contains(".partial-")
-            })
-            .count()
-    })
+    runner::store::RunStore::new(dir)
+        .case_files()
+        .map_or(0, |files| files.len())
 }
 
 /// Runs `drivecheck ARGS`, its output discarded; its exit code (`None`: killed by a signal).
