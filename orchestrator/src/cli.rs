@@ -18,13 +18,225 @@ pub struct Cli {
     /// What to do.
     #[command(subcommand)]
     pub command: Command,
-    /// Print only the result (a campaign's summary) and errors: no progress, notes or warnings.
+    /// Print only the result and errors: no progress, notes or warnings. A safety warning (a car
+    /// left with fault injection enabled, what Ctrl-C does) prints even so. What each command
+    /// leaves out: its --help.
     #[arg(short, long, global = true, conflicts_with = "verbose")]
     pub quiet: bool,
-    /// Print more: a line for every test of a large campaign, every test in its table, the
-    /// bundled scenarios' drawing warnings.
+    /// Print more: what is the same on every run (a bundled scenario's drawing warnings) and, of
+    /// a campaign, every test. What each command adds: its --help.
     #[arg(short, long, global = true)]
     pub verbose: bool,
+}
+
+/// `-v` of a command that reads a scenario and prints nothing more with it.
+const VERBOSE_BUNDLED: &str = "Print the bundled scenario's drawing warnings too (about data you \
+    cannot change, the same on every run: without -v only a scenario file's are printed).";
+
+/// What `-q` and `-v` do for each command, as its `--help` says: the command (as typed), then
+/// `-q`'s help and `-v`'s. `None`: the option does nothing for the command and is not offered
+/// (its --help and the completions leave it out), though taken. What is printed at which
+/// verbosity is decided in [`crate::output`]; `quiet_everywhere` (orchestrator/tests) runs every
+/// command with `-q`.
+pub const VERBOSITY: &[(&str, Option<&str>, Option<&str>)] = &[
+    (
+        "run",
+        Some(
+            "Print only the summary (no table of tests, no explanations) and errors: no \
+             progress, notes or warnings. A safety warning (a car left with fault injection \
+             enabled, what Ctrl-C does) prints even so.",
+        ),
+        Some(
+            "Print more: a line and a table row for every test of a large campaign, every \
+             failing case and explanation, the fields preflight switches off on the simulated \
+             car, the bundled scenario's drawing warnings.",
+        ),
+    ),
+    (
+        "replay",
+        Some(
+            "Print only the comparison and errors: no progress (`replaying …`, a line per run), \
+             notes or warnings. A safety warning (a car left with fault injection enabled, what \
+             Ctrl-C does) prints even so.",
+        ),
+        Some(VERBOSE_BUNDLED),
+    ),
+    (
+        "shrink",
+        Some(
+            "Print only the result and errors: no progress, notes or warnings (why a case is \
+             not shrunk still prints).",
+        ),
+        Some(VERBOSE_BUNDLED),
+    ),
+    (
+        "sweep",
+        Some(
+            "Print only the table and errors: no progress (`sweeping …`, a line per value) or \
+             warnings.",
+        ),
+        Some(VERBOSE_BUNDLED),
+    ),
+    ("runs", None, None),
+    (
+        "runs show",
+        Some("Print only a campaign's summary (no table of tests) and errors."),
+        Some("List every test in the table and every failing case, however many."),
+    ),
+    (
+        "runs merge",
+        Some(
+            "Print only the result and errors: no notes (with --json, the merge's lines on \
+             standard error; where --junit wrote).",
+        ),
+        None,
+    ),
+    (
+        "report",
+        Some("Print only errors: not where the report was written."),
+        Some("Print the drawing warnings of a bundled --scenario too."),
+    ),
+    (
+        "explain",
+        Some(
+            "Print only the explanations and errors: no progress (--score's counterfactual \
+             runs) or warnings.",
+        ),
+        Some("Print the drawing warnings of a bundled --scenario too."),
+    ),
+    (
+        "compare",
+        Some("Print only the comparison and errors: not where --report wrote its page."),
+        None,
+    ),
+    ("sitl build", Some("Print only the build and errors."), None),
+    (
+        "sim",
+        Some(
+            "Print only errors: not the line with the car's address (--address-file writes it) \
+             or the scenario file's warnings.",
+        ),
+        Some(VERBOSE_BUNDLED),
+    ),
+    (
+        "calibrate",
+        Some("Print only the fit's table and errors: no progress or warnings."),
+        Some(VERBOSE_BUNDLED),
+    ),
+    (
+        "twin check",
+        Some("Print only the table and errors: no progress bar or warnings."),
+        Some(VERBOSE_BUNDLED),
+    ),
+    (
+        "area validate",
+        Some(
+            "Print only the report and errors: no seed line (the report names the seed), \
+             progress bar, notes or the scenario file's warnings.",
+        ),
+        Some(VERBOSE_BUNDLED),
+    ),
+    (
+        "route generate",
+        Some(
+            "Print only the route and errors: no seed line (the route's first line names the \
+             seed) or the scenario file's warnings.",
+        ),
+        Some(VERBOSE_BUNDLED),
+    ),
+    (
+        "route return",
+        Some(
+            "Print only the route and errors: no seed line (the route's first line names the \
+             seed) or the scenario file's warnings; without a route, why still prints.",
+        ),
+        Some(VERBOSE_BUNDLED),
+    ),
+    (
+        "scenario import",
+        Some(
+            "Print only the scenario TOML and errors: not the file's drawing warnings, how its \
+             coordinates were read or where the TOML was written.",
+        ),
+        None,
+    ),
+    (
+        "scenario export",
+        Some(
+            "Print only the GeoJSON and errors: not where it was written or a scenario file's \
+             drawing warnings.",
+        ),
+        Some(VERBOSE_BUNDLED),
+    ),
+    (
+        "scenario check",
+        Some(
+            "Print only the summary line (it counts the warnings; --json lists them) and \
+             errors: not the warnings.",
+        ),
+        Some(VERBOSE_BUNDLED),
+    ),
+    ("scenario list", None, None),
+    ("completions", None, None),
+    (
+        "man",
+        Some("Print only errors: not how many pages --out wrote."),
+        None,
+    ),
+];
+
+/// The command line's definition: [`Cli`]'s, with each command's own `-q` and `-v` help
+/// ([`VERBOSITY`]). What parses the command line, `completions` and `man` use.
+pub fn command() -> clap::Command {
+    with_verbosity_help(<Cli as clap::CommandFactory>::command(), "")
+}
+
+/// `command`'s subcommands (under `path`, as typed) with their [`VERBOSITY`] help: their own `-q`
+/// and `-v` (the same ids as [`Cli`]'s global ones, which clap then does not propagate to them,
+/// and whose values it still gathers into [`Cli::quiet`] and [`Cli::verbose`]).
+fn with_verbosity_help(command: clap::Command, path: &str) -> clap::Command {
+    command.mut_subcommands(|sub| {
+        let path = format!("{path} {}", sub.get_name()).trim_start().to_owned();
+        let sub = match VERBOSITY.iter().find(|(name, _, _)| *name == path) {
+            Some(&(_, quiet, verbose)) => sub
+                .arg(verbosity_arg("quiet", 'q', quiet).conflicts_with("verbose"))
+                .arg(verbosity_arg("verbose", 'v', verbose)),
+            None => sub,
+        };
+        with_verbosity_help(sub, &path)
+    })
+}
+
+/// `-q/--quiet` or `-v/--verbose` with `help` (without its last full stop, as clap shows a doc
+/// comment's), hidden without one.
+fn verbosity_arg(name: &'static str, short: char, help: Option<&'static str>) -> clap::Arg {
+    clap::Arg::new(name)
+        .short(short)
+        .long(name)
+        .action(clap::ArgAction::SetTrue)
+        .help(help.map(|h| h.strip_suffix('.').unwrap_or(h)))
+        .hide(help.is_none())
+}
+
+/// Parses the command line `args` (the program's name first) by [`command`].
+pub fn parse_from<I, T>(args: I) -> Result<Cli, clap::Error>
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    use clap::FromArgMatches;
+    let mut command = command();
+    let mut matches = command.try_get_matches_from_mut(args)?;
+    let cli =
+        Cli::from_arg_matches_mut(&mut matches).map_err(|error| error.format(&mut command))?;
+    // Given at two levels (`drivecheck -q run -v`), clap checks each level's options apart.
+    if cli.quiet && cli.verbose {
+        return Err(command.error(
+            clap::error::ErrorKind::ArgumentConflict,
+            "-q/--quiet and -v/--verbose cannot be used together",
+        ));
+    }
+    Ok(cli)
 }
 
 /// The subcommands.
@@ -863,7 +1075,8 @@ pub enum ScenarioCommand {
     /// 0 written, 2 error (an unknown scenario, no origin for longitude/latitude, a file that
     /// cannot be written).
     Export(ExportArgs),
-    /// Load and validate a scenario; print its warnings. Exit status: 0 valid, 2 invalid.
+    /// Load and validate a scenario; print its warnings (a bundled scenario's with -v: they are
+    /// about data you cannot change). Exit status: 0 valid, 2 invalid.
     Check(CheckArgs),
     /// List the bundled scenarios. Exit status: 0 listed, 2 error.
     List(ListArgs),
@@ -1013,7 +1226,7 @@ mod tests {
 
     #[test]
     fn run_defaults_to_the_embedded_car_on_the_two_anchor_lot() {
-        let cli = Cli::try_parse_from(["drivecheck", "run"]).unwrap();
+        let cli = parse_from(["drivecheck", "run"]).unwrap();
         let Command::Run(args) = cli.command else {
             panic!("not the run command");
         };
@@ -1024,9 +1237,85 @@ mod tests {
         assert!(!args.realtime && !args.no_faults);
     }
 
+    /// The commands that do something (as typed), from the built definition: every command but
+    /// clap's `help` and the groups that only hold subcommands.
+    fn commands() -> Vec<(String, clap::Command)> {
+        fn walk(command: &clap::Command, path: &str, found: &mut Vec<(String, clap::Command)>) {
+            for sub in command.get_subcommands().filter(|s| s.get_name() != "help") {
+                let path = format!("{path} {}", sub.get_name()).trim_start().to_owned();
+                if !sub.is_subcommand_required_set() {
+                    found.push((path.clone(), sub.clone()));
+                }
+                walk(sub, &path, found);
+            }
+        }
+        let mut root = command();
+        root.build();
+        let mut found = Vec::new();
+        walk(&root, "", &mut found);
+        found
+    }
+
+    #[test]
+    fn every_command_says_what_quiet_and_verbose_do_for_it() {
+        let commands = commands();
+        let names: Vec<&str> = commands.iter().map(|(n, _)| n.as_str()).collect();
+        for (name, _, _) in VERBOSITY {
+            assert!(names.contains(name), "VERBOSITY names no command {name}");
+        }
+        let generic = |id: &str| {
+            let mut root = command();
+            root.build();
+            root.get_arguments()
+                .find(|a| a.get_id() == id)
+                .and_then(|a| a.get_help().map(ToString::to_string))
+                .unwrap()
+        };
+        for (name, command) in &commands {
+            let entry = VERBOSITY.iter().find(|(n, _, _)| n == name);
+            let (_, quiet, verbose) = entry.unwrap_or_else(|| panic!("{name}: not in VERBOSITY"));
+            for (id, help) in [("quiet", quiet), ("verbose", verbose)] {
+                let arg = command
+                    .get_arguments()
+                    .find(|a| a.get_id() == id)
+                    .unwrap_or_else(|| panic!("{name}: no --{id}"));
+                assert_eq!(arg.is_hide_set(), help.is_none(), "{name} --{id}");
+                let said = arg.get_help().map(ToString::to_string);
+                let help = help.map(|h| h.strip_suffix('.').unwrap_or(h));
+                assert_eq!(said.as_deref(), help, "{name} --{id}");
+                assert_ne!(said, Some(generic(id)), "{name} --{id}: its own help");
+            }
+        }
+    }
+
+    #[test]
+    fn quiet_and_verbose_are_taken_before_and_after_the_command() {
+        for args in [
+            &["drivecheck", "-q", "run"][..],
+            &["drivecheck", "run", "-q"],
+            &["drivecheck", "scenario", "check", "courtyard", "--quiet"],
+            &["drivecheck", "-q", "scenario", "list"],
+            &["drivecheck", "completions", "bash", "-q"],
+        ] {
+            let cli = parse_from(args).unwrap();
+            assert!(cli.quiet && !cli.verbose, "{args:?}");
+        }
+        let cli = parse_from(["drivecheck", "runs", "show", "x", "-v"]).unwrap();
+        assert!(cli.verbose && !cli.quiet);
+        for args in [
+            &["drivecheck", "run", "-q", "-v"][..],
+            &["drivecheck", "-q", "-v", "run"],
+            &["drivecheck", "area", "validate", "courtyard", "-v", "-q"],
+            &["drivecheck", "-q", "run", "-v"],
+            &["drivecheck", "-v", "scenario", "list", "-q"],
+        ] {
+            assert!(parse_from(args).is_err(), "{args:?}: -q and -v together");
+        }
+    }
+
     #[test]
     fn sim_takes_human_durations() {
-        let cli = Cli::try_parse_from([
+        let cli = parse_from([
             "drivecheck",
             "sim",
             "--scenario",

@@ -1,14 +1,11 @@
-//! The process around a command: how `drivecheck` starts (standard output closing, `RUST_LOG`,
-//! the command line parsed, the verbosity set) and ends (its status, an error printed). The
+//! The process around a command: how `drivecheck` starts (standard output closing, the command
+//! line parsed, the verbosity set, `RUST_LOG`) and ends (its status, an error printed). The
 //! `drivecheck` binary is [`main`] and nothing else; the development tools (`drivecheck-dev exec`)
 //! run a command through the same function.
 
 use std::ffi::OsString;
 use std::io::IsTerminal;
 
-use clap::Parser;
-
-use crate::cli::Cli;
 use crate::exit::Exit;
 
 /// Runs the command line `args` (the program's name first) as the `drivecheck` binary does and
@@ -20,8 +17,7 @@ where
     T: Into<OsString> + Clone,
 {
     exit_quietly_when_stdout_closes();
-    log_as_rust_log_says();
-    let cli = match Cli::try_parse_from(args) {
+    let cli = match crate::cli::parse_from(args) {
         Ok(cli) => cli,
         Err(error) => {
             let _ = error.print();
@@ -39,6 +35,8 @@ where
     } else {
         crate::output::Verbosity::Normal
     });
+    // After the verbosity: a `RUST_LOG` that cannot be read is a warning (not with `-q`).
+    log_as_rust_log_says();
     match crate::commands::run(cli) {
         Ok(exit) => exit,
         Err(error) => {
@@ -64,11 +62,11 @@ fn log_as_rust_log_says() {
     {
         Some(Ok(filter)) => filter,
         Some(Err(error)) => {
-            eprintln!("warning: {RUST_LOG} ignored: {error}");
+            crate::output::warning(format_args!("{RUST_LOG} ignored: {error}"));
             return;
         }
         None => {
-            eprintln!("warning: {RUST_LOG} ignored: it is not UTF-8");
+            crate::output::warning(format_args!("{RUST_LOG} ignored: it is not UTF-8"));
             return;
         }
     };

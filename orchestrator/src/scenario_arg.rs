@@ -5,6 +5,8 @@ use std::path::Path;
 use anyhow::{Context, Result, bail};
 use scenarios::Loaded;
 
+use crate::output::{self, Says};
+
 /// Loads the scenario a user named: an existing file wins, then a bundled name.
 pub fn load_scenario(arg: &str) -> Result<Loaded> {
     let path = Path::new(arg);
@@ -21,36 +23,40 @@ pub fn load_scenario(arg: &str) -> Result<Loaded> {
     )
 }
 
-/// Prints a loaded scenario's warnings on standard error, one a line: always (what `scenario
-/// check` and `area validate` are for).
-pub fn print_warnings(loaded: &Loaded) {
-    for warning in &loaded.warnings {
-        eprintln!("warning: {warning}");
+/// Whether `arg` names a bundled scenario (no file of that name, a bundled one), as
+/// [`load_scenario`] resolves it.
+pub fn is_bundled(arg: &str) -> bool {
+    !Path::new(arg).exists() && scenarios::bundled::text(arg).is_some()
+}
+
+/// What the warnings of the scenario `arg` named are on standard error: a file's are
+/// [`Says::Warning`]s (not with `-q`), a bundled scenario's [`Says::Detail`]s (only with `-v`):
+/// they are about data the user cannot change, the same on every run.
+pub fn warnings_say(arg: &str) -> Says {
+    if is_bundled(arg) {
+        Says::Detail
+    } else {
+        Says::Warning
     }
 }
 
-/// Prints the warnings of the scenario `arg` named when a command uses it: a file's (unless
-/// `-q`), but a bundled scenario's only with `-v` — they are the same on every run, and `scenario
-/// check NAME` shows them.
-pub fn print_warnings_of_use(arg: &str, loaded: &Loaded) {
-    use crate::output::{Verbosity, verbosity};
-    let bundled = !Path::new(arg).exists() && scenarios::bundled::text(arg).is_some();
-    let shown = match verbosity() {
-        Verbosity::Quiet => false,
-        Verbosity::Normal => !bundled,
-        Verbosity::Verbose => true,
-    };
-    if shown {
-        print_warnings(loaded);
+/// Prints the warnings of the scenario `arg` named (loaded as `loaded`), one a line, as
+/// [`warnings_say`] says; every command that reads a scenario prints them here. Whether they
+/// were printed.
+pub fn print_warnings(arg: &str, loaded: &Loaded) -> bool {
+    let kind = warnings_say(arg);
+    for warning in &loaded.warnings {
+        output::say(kind, format_args!("warning: {warning}"));
     }
+    output::shows(kind)
 }
 
 /// The scenario of an optional `--scenario` argument, loaded with its warnings printed (see
-/// [`print_warnings_of_use`]).
+/// [`print_warnings`]).
 pub fn optional_scenario(arg: Option<&str>) -> Result<Option<scenarios::Scenario>> {
     arg.map(|arg| {
         let loaded = load_scenario(arg)?;
-        print_warnings_of_use(arg, &loaded);
+        print_warnings(arg, &loaded);
         Ok(loaded.scenario)
     })
     .transpose()

@@ -9,6 +9,7 @@ use trajgen::{AreaVerdict, ValidationConfig, ValidationReport, validate_area};
 
 use crate::cli::ValidateArgs;
 use crate::exit::Exit;
+use crate::output;
 use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::{choose_seed, rng};
 use report::svg::area_picture;
@@ -59,10 +60,10 @@ pub fn validate(args: &ValidateArgs) -> Result<Exit> {
         args.km
     );
     let loaded = load_scenario(args.scenario.name())?;
-    print_warnings(&loaded);
+    print_warnings(args.scenario.name(), &loaded);
     let scenario = &loaded.scenario;
     let seed = choose_seed(args.seed);
-    eprintln!("seed {seed}");
+    output::note(format_args!("seed {seed}"));
     let mut config = ValidationConfig::default()
         .with_km(args.km)
         .with_generator(scenario.generator.generator_config(args.strategy.into()));
@@ -90,11 +91,11 @@ pub fn validate(args: &ValidateArgs) -> Result<Exit> {
     if let Some(path) = &args.svg {
         runner::atomic::write(path, area_picture(scenario, &report))
             .with_context(|| format!("cannot write {}", path.display()))?;
-        eprintln!("wrote {}", path.display());
+        output::note(format_args!("wrote {}", path.display()));
     }
     let summary = summarise(&scenario.name, seed, args, &report, wall_s);
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&summary)?);
+        output::print_json(output::json::AREA_VALIDATE, &summary)?;
     } else {
         print_summary(&summary);
     }
@@ -105,7 +106,7 @@ pub fn validate(args: &ValidateArgs) -> Result<Exit> {
 }
 
 fn progress_bar(km: f64) -> ProgressBar {
-    let bar = ProgressBar::new((km * 1000.0) as u64);
+    let bar = output::bar(Some((km * 1000.0) as u64));
     if let Ok(style) =
         ProgressStyle::with_template("{bar:40} {pos:>7}/{len:7} m  {elapsed_precise}  {msg}")
     {

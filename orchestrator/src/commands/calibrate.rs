@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::ProgressStyle;
 use tokio_util::sync::CancellationToken;
 
 use super::case_input::{check_hash, scenario_of};
@@ -329,12 +329,12 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Exit> {
         scratch: scratch.clone(),
         cancel: &cancel,
     };
-    let bar = ProgressBar::new_spinner();
+    let bar = crate::output::bar(None);
     if let Ok(style) = ProgressStyle::with_template("{elapsed_precise} {spinner} {msg}") {
         bar.set_style(style);
     }
     bar.enable_steady_tick(std::time::Duration::from_millis(120));
-    eprintln!(
+    crate::output::progress(format_args!(
         "calibrating {} parameters on {} recorded test(s) ({} stretches before any fault), {} simulated run(s) each, {} at once, budget {}",
         parameters.len(),
         simulator.tests.len(),
@@ -342,7 +342,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Exit> {
         args.sim_runs,
         jobs,
         humantime::format_duration(args.budget)
-    );
+    ));
     let evaluations = std::cell::Cell::new(0usize);
     let result = fit(
         &parameters,

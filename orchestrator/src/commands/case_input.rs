@@ -8,7 +8,7 @@ use anyhow::Result;
 use runner::store::RunStore;
 use scenarios::Scenario;
 
-use crate::scenario_arg::{load_scenario, print_warnings_of_use};
+use crate::scenario_arg::{load_scenario, print_warnings};
 use anyhow::bail;
 use campaign::files::Case;
 
@@ -85,7 +85,7 @@ pub(super) fn scenario_of(
             load_scenario(name)?
         }
     };
-    print_warnings_of_use(arg, &loaded);
+    print_warnings(arg, &loaded);
     Ok(loaded.scenario)
 }
 
@@ -107,7 +107,9 @@ pub(super) fn check_hash(case: &Case, scenario: &Scenario, ignore: bool) -> Resu
         ),
     };
     if ignore {
-        eprintln!("warning: {problem}; replaying anyway (--ignore-scenario-hash)");
+        crate::output::warning(format_args!(
+            "{problem}; replaying anyway (--ignore-scenario-hash)"
+        ));
         return Ok(());
     }
     bail!("{problem}; pass --ignore-scenario-hash to replay it anyway")

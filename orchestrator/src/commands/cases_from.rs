@@ -54,14 +54,14 @@ impl CasesRun {
             files.push(dir.join(name));
         }
         if files.len() < record.settings.tests {
-            eprintln!(
+            crate::output::note(format_args!(
                 "note: --cases-from {}: the run planned {} tests and ended {} of them; driving \
                  those {}",
                 dir.display(),
                 record.settings.tests,
                 files.len(),
                 files.len()
-            );
+            ));
         }
         Ok(Self {
             dir: dir.to_owned(),

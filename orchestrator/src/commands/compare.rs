@@ -14,6 +14,7 @@ use serde::Serialize;
 
 use crate::cli::{CompareArgs, FailOn};
 use crate::exit::Exit;
+use crate::output;
 use campaign::compare::{
     BreakdownRow, Options, Paired, Report, Significance, TestRow, compare as compare_runs, p_words,
     pair,
@@ -152,13 +153,11 @@ pub fn compare(args: &CompareArgs) -> Result<Exit> {
             .unwrap_or_else(|| args.new.join(COMPARE_REPORT_FILE));
         report::compare::write(&compared, &out)
             .with_context(|| format!("cannot write {}", out.display()))?;
-        if crate::output::chatty() {
-            eprintln!("wrote {}", out.display());
-        }
+        output::note(format_args!("wrote {}", out.display()));
     }
     if args.json {
-        crate::output::print_json(
-            "compare",
+        output::print_json(
+            output::json::COMPARE,
             &Document {
                 base: args.base.display().to_string(),
                 new: args.new.display().to_string(),

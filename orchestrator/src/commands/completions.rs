@@ -4,15 +4,13 @@
 use std::io::Write;
 use std::path::Path;
 
-use anyhow::{Context, Result};
-use clap::CommandFactory;
-
-use crate::cli::{Cli, CompletionsArgs, ManArgs};
+use crate::cli::{CompletionsArgs, ManArgs};
 use crate::exit::Exit;
+use anyhow::{Context, Result};
 
 /// Prints the completion script of `args.shell` on standard output.
 pub fn completions(args: &CompletionsArgs) -> Result<Exit> {
-    let mut command = Cli::command();
+    let mut command = crate::cli::command();
     let mut script = Vec::new();
     clap_complete::generate(args.shell, &mut command, "drivecheck", &mut script);
     write_stdout(&script)?;
@@ -22,7 +20,7 @@ pub fn completions(args: &CompletionsArgs) -> Result<Exit> {
 /// Writes the manual pages into `args.out` (every command's), or the main page on standard
 /// output.
 pub fn man(args: &ManArgs) -> Result<Exit> {
-    let command = Cli::command();
+    let command = crate::cli::command();
     match &args.out {
         None => {
             let mut page = Vec::new();
@@ -33,7 +31,7 @@ pub fn man(args: &ManArgs) -> Result<Exit> {
             std::fs::create_dir_all(dir)
                 .with_context(|| format!("cannot create {}", dir.display()))?;
             let written = write_pages(&command, "drivecheck", dir)?;
-            eprintln!("{written} manual pages in {}", dir.display());
+            crate::output::note(format_args!("{written} manual pages in {}", dir.display()));
         }
     }
     Ok(Exit::Success)

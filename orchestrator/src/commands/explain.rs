@@ -12,6 +12,7 @@ use super::case_input::read_case as read_case_file;
 use super::signals::{cancel_on_ctrl_c, runtime};
 use crate::cli::ExplainArgs;
 use crate::exit::Exit;
+use crate::output;
 use crate::profile_arg::LoadedProfile;
 use crate::scenario_arg::optional_scenario;
 use campaign::case::Case;
@@ -53,7 +54,7 @@ pub fn explain(args: &ExplainArgs) -> Result<Exit> {
         let c = calibrate(&dir, scenario.as_ref(), args.budget)
             .with_context(|| format!("cannot calibrate on {}", dir.display()))?;
         if args.json {
-            println!("{}", serde_json::to_string_pretty(&c)?);
+            output::print_json(output::json::EXPLAIN_CALIBRATE, &c)?;
         } else {
             println!(
                 "{} samples and {} segments of a fault-free run, false-alarm budget {:.1} %:\n\
@@ -118,7 +119,7 @@ pub fn explain(args: &ExplainArgs) -> Result<Exit> {
         }
         if args.json {
             let out = serde_json::json!({ "cases": explanations.cases, "scored": scored });
-            println!("{}", serde_json::to_string_pretty(&out)?);
+            output::print_json(output::json::EXPLAIN_SCORE, &out)?;
         } else {
             print!("{}", score_table(&scored));
         }
@@ -135,7 +136,7 @@ pub fn explain(args: &ExplainArgs) -> Result<Exit> {
         explanations.notes.extend(e.notes);
     }
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&explanations)?);
+        output::print_json(output::json::EXPLAIN, &explanations)?;
     } else {
         print!("{}", text(&explanations));
     }
@@ -162,10 +163,10 @@ fn counterfactual(
         return Ok(());
     }
     let scenario = scenario.context("the run's scenario is unknown (give --scenario)")?;
-    eprintln!(
+    output::progress(format_args!(
         "driving {} case(s) again without each fault that moved a failing segment's estimate ({runs} runs each)",
         pending.len()
-    );
+    ));
     let sim = profile.sim_config(scenario)?;
     let scratch =
         std::env::temp_dir().join(format!("drivecheck-counterfactual-{}", std::process::id()));

@@ -39,18 +39,16 @@ pub fn build(tree: &str) -> Result<HostFirmware> {
     let build = sitl::build(Path::new(tree), &cache)
         .with_context(|| format!("--car sitl:{tree}: cannot build the firmware for the host"))?;
     let version = FirmwareVersion::new(build.version.0, build.version.1);
-    if crate::output::chatty() {
-        eprintln!(
-            "firmware {version} of {tree} built for the host ({}, {} files; {})",
-            if build.cached {
-                "from the cache".to_string()
-            } else {
-                format!("in {:.1} s", started.elapsed().as_secs_f64())
-            },
-            build.compiled.len(),
-            build.executable.display()
-        );
-    }
+    crate::output::note(format_args!(
+        "firmware {version} of {tree} built for the host ({}, {} files; {})",
+        if build.cached {
+            "from the cache".to_string()
+        } else {
+            format!("in {:.1} s", started.elapsed().as_secs_f64())
+        },
+        build.compiled.len(),
+        build.executable.display()
+    ));
     Ok(HostFirmware {
         executable: build.executable,
         version,
@@ -98,7 +96,7 @@ pub fn build_command(args: &crate::cli::SitlBuildArgs) -> Result<crate::exit::Ex
             stubbed: &'a [String],
         }
         crate::output::print_json(
-            "sitl build",
+            crate::output::json::SITL_BUILD,
             &Built {
                 tree: &args.tree,
                 firmware: version.to_string(),

@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 
 use crate::exit::Exit;
+use crate::output;
 use campaign::files::{CampaignRecord, Case};
 use campaign::oracle::Verdict;
 use campaign::shard::Shard;
@@ -146,7 +147,7 @@ pub fn merge(
     let summary = report.record.summary.as_ref();
     let say = |line: String| {
         if json {
-            eprintln!("{line}");
+            output::note(&line);
         } else {
             println!("{line}");
         }
@@ -183,7 +184,7 @@ pub fn merge(
         super::run::write_junit(&report, file, clock, wall_s)?;
     }
     if json {
-        super::table::print_report_json("runs merge", &report, None)?;
+        super::table::print_report_json(output::json::RUNS_MERGE, &report, None)?;
     }
     Ok(Exit::Success)
 }

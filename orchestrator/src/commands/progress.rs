@@ -1,5 +1,7 @@
 //! The progress of a campaign on standard error: a bar on a terminal, plain lines elsewhere,
-//! nothing with `-q` (the runner's `CampaignObserver`).
+//! nothing with `-q` (the runner's `CampaignObserver`). What is printed at which verbosity is
+//! [`crate::output`]'s: the runner's notes are [`Says::Note`]s, its warnings (a car left armed)
+//! [`Says::Safety`], its details [`Says::Detail`], the lines per test [`Says::Progress`].
 
 use std::io::IsTerminal;
 use std::sync::Mutex;
@@ -10,6 +12,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use campaign::oracle::Verdict;
 use runner::CampaignObserver;
 
+use crate::output::{self, Says};
+
 /// A campaign's progress where it is read (`docs/scaling.md`):
 /// - on a terminal, a bar of the tests run and the test running, with a line above it for each
 ///   test (above [`EVERY_TEST_UP_TO`] tests only for those that did not pass, unless `-v`);
@@ -18,8 +22,9 @@ use runner::CampaignObserver;
 ///   every [`STATUS_EVERY`] or 1 % of the tests (done, failed, rate, time left);
 /// - with `-q`, nothing (errors and the summary still are).
 ///
-/// Notes (what preflight switched off) are printed unless `-q`; warnings (a car left with fault
-/// injection enabled) always.
+/// Notes (how the reset joins the start route) are printed unless `-q`, details (what preflight
+/// switched off on the simulated car) only with `-v`, warnings (a car left with fault injection
+/// enabled) always.
 #[derive(Debug)]
 pub(super) struct Progress {
     bar: ProgressBar,
@@ -27,7 +32,7 @@ pub(super) struct Progress {
     lines: bool,
     /// Lines for every test (not only those that did not pass).
     every_test: bool,
-    /// Nothing but notes… and with `-q` not those either.
+    /// No lines of progress (`-q`).
     quiet: bool,
     state: Mutex<Tally>,
 }
@@ -75,12 +80,12 @@ const LISTED_AT_MOST: usize = 20;
 
 /// Whether a campaign of `tests` tests gets a line (and a table row) for every test.
 pub(super) fn every_test(tests: usize) -> bool {
-    tests <= EVERY_TEST_UP_TO || crate::output::verbosity() == crate::output::Verbosity::Verbose
+    tests <= EVERY_TEST_UP_TO || output::verbosity() == output::Verbosity::Verbose
 }
 
 /// How many failing cases (and explanations) a summary lists: [`LISTED_AT_MOST`], all with `-v`.
 pub(super) fn listed_at_most() -> usize {
-    if crate::output::verbosity() == crate::output::Verbosity::Verbose {
+    if output::verbosity() == output::Verbosity::Verbose {
         usize::MAX
     } else {
         LISTED_AT_MOST
@@ -93,8 +98,7 @@ const STATUS_EVERY: Duration = Duration::from_secs(10);
 impl Progress {
     /// Progress of `tests` tests, as the process's verbosity and standard error say.
     pub(super) fn new(tests: usize) -> Self {
-        use crate::output::{Verbosity, verbosity};
-        let quiet = verbosity() == Verbosity::Quiet;
+        let quiet = !output::shows(Says::Progress);
         let lines = !std::io::stderr().is_terminal();
         let bar = if quiet || lines {
             ProgressBar::hidden()
@@ -159,18 +163,20 @@ impl Tally {
 
 impl CampaignObserver for Progress {
     fn note(&self, text: &str) {
-        if !self.quiet {
+        if output::shows(Says::Note) {
             self.line(text);
         }
     }
 
     fn warning(&self, text: &str) {
         // Also with `-q`: a car left armed is not a detail.
-        self.line(&format!("warning: {text}"));
+        if output::shows(Says::Safety) {
+            self.line(&format!("warning: {text}"));
+        }
     }
 
     fn detail(&self, text: &str) {
-        if crate::output::verbosity() == crate::output::Verbosity::Verbose {
+        if output::shows(Says::Detail) {
             self.line(text);
         }
     }
@@ -205,7 +211,7 @@ impl CampaignObserver for Progress {
             tally.driving.retain(|(c, _)| c != car);
             self.bar.set_message(tally.cars());
         }
-        if !self.quiet {
+        if output::shows(Says::Note) {
             self.line(&format!(
                 "car {car} left the campaign: {reason}; the other cars go on"
             ));
@@ -259,8 +265,8 @@ impl CampaignObserver for Progress {
     }
 }
 
-/// The runner's warnings on standard error, and nothing else: for a command that shows no
-/// progress of its own (`run --dry-run`, `replay`).
+/// The runner's warnings on standard error ([`Says::Safety`], whatever `-q` says), and nothing
+/// else: for a command that shows no campaign progress of its own (`run --dry-run`, `replay`).
 #[derive(Debug, Clone, Copy, Default)]
 pub(super) struct WarningsOnly;
 
@@ -268,7 +274,7 @@ impl CampaignObserver for WarningsOnly {
     fn note(&self, _text: &str) {}
 
     fn warning(&self, text: &str) {
-        eprintln!("warning: {text}");
+        output::safety(format_args!("warning: {text}"));
     }
 
     fn tests_planned(&self, _tests: usize) {}

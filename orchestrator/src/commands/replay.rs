@@ -28,6 +28,7 @@ use super::signals::{Interrupt, runtime};
 use super::table::{CampaignFailed, metres};
 use crate::cli::ReplayArgs;
 use crate::exit::Exit;
+use crate::output;
 use crate::profile_arg::LoadedProfile;
 use crate::seed::choose_seed;
 use campaign::drive::EARLIER_TOOL_POINTS_LEFT;
@@ -62,12 +63,12 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
         } else {
             "no place given".to_owned()
         };
-        eprintln!(
-            "warning: {}: {unplaced} fault(s) without a place ({why}); each is sent as the \
-             earlier tool sent faults, once its segment's car has {EARLIER_TOOL_POINTS_LEFT} or \
-             fewer route points left of it",
+        output::warning(format_args!(
+            "{}: {unplaced} fault(s) without a place ({why}); each is sent as the earlier tool \
+             sent faults, once its segment's car has {EARLIER_TOOL_POINTS_LEFT} or fewer route \
+             points left of it",
             path.display()
-        );
+        ));
     }
     let scenario = scenario_of(args.scenario.as_deref(), path, &case)?;
     check_hash(&case, &scenario, args.ignore_scenario_hash)?;
@@ -165,7 +166,7 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
         ),
         (None, _) => format!("seed {seed}{}", if vary { " + run − 1" } else { "" }),
     };
-    eprintln!(
+    output::progress(format_args!(
         "replaying {} {times} time(s) on {} with car {}{}{}: {what}, writing {}",
         path.display(),
         scenario.name,
@@ -177,7 +178,7 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
             ""
         },
         out.display()
-    );
+    ));
     let _claim = runner::claim_out_dir(&out, made)?;
     if let Some(file) = &args.junit {
         super::case_input::check_output_file("--junit", file, &out)?;
@@ -240,8 +241,8 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
         )?;
     }
     if args.json {
-        crate::output::print_json(
-            "replay",
+        output::print_json(
+            output::json::REPLAY,
             &ReplayJson {
                 dir: &out,
                 wall_time_s: started.elapsed().as_secs_f64(),
@@ -285,15 +286,15 @@ fn warn_other_profile(case: &Case, path: &Path, profile: &LoadedProfile) -> bool
     };
     let hash = profile.profile.hash();
     if recorded.hash != hash {
-        eprintln!(
-            "warning: {} was driven on car profile {} ({}…), this replay on {} ({}…): another \
-             simulated car, its results need not reproduce",
+        output::warning(format_args!(
+            "{} was driven on car profile {} ({}…), this replay on {} ({}…): another simulated \
+             car, its results need not reproduce",
             path.display(),
             recorded.name,
             &recorded.hash[..recorded.hash.len().min(12)],
             profile.name,
             &hash[..12]
-        );
+        ));
         return true;
     }
     false
@@ -366,7 +367,7 @@ impl Job<'_> {
                 verdict: case.as_ref().and_then(|c| c.verdict),
                 reason: case.as_ref().and_then(|c| c.reason.clone()),
             };
-            eprintln!(
+            output::progress(format_args!(
                 "run {}/{}: {}, worst deviation {}{}",
                 k + 1,
                 self.times,
@@ -375,7 +376,7 @@ impl Job<'_> {
                 run.reason
                     .as_deref()
                     .map_or_else(String::new, |r| format!(" ({r})"))
-            );
+            ));
             runs.push((run, case));
             if let Err(error) = result {
                 return (runs, Some(error));
@@ -538,7 +539,7 @@ fn write_junit(
     };
     let xml = runner::junit::to_xml(&[suite]).context("cannot write the JUnit XML")?;
     runner::atomic::write(file, xml).with_context(|| format!("cannot write {}", file.display()))?;
-    eprintln!("JUnit XML: {}", file.display());
+    output::note(format_args!("JUnit XML: {}", file.display()));
     Ok(())
 }
 

@@ -55,10 +55,10 @@ pub(super) fn write(
         ReportKind::Replay => format!("{} runs", written.items),
         ReportKind::Shrink => format!("{} steps, no maps", written.items),
     };
-    eprintln!(
+    crate::output::note(format_args!(
         "report: {} ({items}, {:.1} kB)",
         written.path.display(),
         written.bytes as f64 / 1000.0
-    );
+    ));
     Ok(())
 }

@@ -8,7 +8,8 @@ use trajgen::{ExtensionStats, Generator, Point, RouteTail};
 
 use crate::cli::GenerateArgs;
 use crate::exit::Exit;
-use crate::scenario_arg::{load_scenario, print_warnings_of_use};
+use crate::output;
+use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::{choose_seed, rng};
 
 /// What `route generate --json` prints.
@@ -49,10 +50,10 @@ impl RouteStats {
 /// Generates `--points` points after the start route, in extensions of the scenario's size.
 pub fn generate(args: &GenerateArgs) -> Result<Exit> {
     let loaded = load_scenario(args.scenario.name())?;
-    print_warnings_of_use(args.scenario.name(), &loaded);
+    print_warnings(args.scenario.name(), &loaded);
     let scenario = &loaded.scenario;
     let seed = choose_seed(args.seed);
-    eprintln!("seed {seed}");
+    output::note(format_args!("seed {seed}"));
     let speed_kmh = args.speed_kmh.unwrap_or(scenario.campaign.speed_kmh.min);
     let top_kmh = scenarios::MAX_SPEED_KMH;
     ensure!(
@@ -87,7 +88,7 @@ pub fn generate(args: &GenerateArgs) -> Result<Exit> {
         stats,
     };
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&route)?);
+        output::print_json(output::json::ROUTE_GENERATE, &route)?;
     } else {
         print_route(&route);
     }
@@ -116,8 +117,9 @@ fn extension_size<R: rand::Rng + ?Sized>(
 
 fn print_route(route: &GeneratedRoute) {
     println!(
-        "{}: {} points after the {}-point start route, {} extensions, speed {:.2} m/s",
+        "{} (seed {}): {} points after the {}-point start route, {} extensions, speed {:.2} m/s",
         route.scenario,
+        route.seed,
         route.points.len(),
         route.start_route.len(),
         route.stats.extensions,

@@ -9,7 +9,8 @@ use trajgen::{Point, Pose};
 
 use crate::cli::ReturnArgs;
 use crate::exit::Exit;
-use crate::scenario_arg::{load_scenario, print_warnings_of_use};
+use crate::output;
+use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::{choose_seed, rng};
 
 /// What `route return --json` prints.
@@ -60,11 +61,11 @@ pub fn parse_pose(text: &str) -> Result<Pose> {
 /// Plans and prints the return route.
 pub fn plan(args: &ReturnArgs) -> Result<Exit> {
     let loaded = load_scenario(args.scenario.name())?;
-    print_warnings_of_use(args.scenario.name(), &loaded);
+    print_warnings(args.scenario.name(), &loaded);
     let scenario = &loaded.scenario;
     let from = parse_pose(&args.from)?;
     let seed = choose_seed(args.seed);
-    eprintln!("seed {seed}");
+    output::note(format_args!("seed {seed}"));
     let config = PlanConfig::default().with_planner(args.planner);
     let recovery_route = scenario.recovery_route.positions();
     let started = Instant::now();
@@ -81,11 +82,11 @@ pub fn plan(args: &ReturnArgs) -> Result<Exit> {
         Ok(route) => route,
         // A finding about the pose, not a usage error: exit 1, as an unsafe area does.
         Err(error @ RecoveryError::NoRoute { .. }) => {
-            eprintln!(
+            output::finding(format_args!(
                 "no return route from {}: {error}; a car this boxed in (too close to an edge \
                  ahead to turn away) must be moved by hand",
                 args.from
-            );
+            ));
             return Ok(Exit::Found);
         }
         Err(error) => {
@@ -95,7 +96,7 @@ pub fn plan(args: &ReturnArgs) -> Result<Exit> {
     let plan_ms = started.elapsed().as_secs_f64() * 1e3;
     let summary = summarise(&scenario.name, seed, &route, plan_ms);
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&summary)?);
+        output::print_json(output::json::ROUTE_RETURN, &summary)?;
     } else {
         print_summary(&summary);
     }
@@ -126,8 +127,9 @@ fn summarise(scenario: &str, seed: u64, route: &ReturnRoute, plan_ms: f64) -> Re
 
 fn print_summary(s: &ReturnSummary) {
     println!(
-        "{}: return route by the {} planner, {} points, joins recovery segment {} at ({:.2}, {:.2})",
+        "{} (seed {}): return route by the {} planner, {} points, joins recovery segment {} at ({:.2}, {:.2})",
         s.scenario,
+        s.seed,
         s.planner,
         s.points.len(),
         s.join_segment,

@@ -16,7 +16,8 @@ use super::signals::{Interrupt, runtime, sim_view};
 use super::table::{CampaignFailed, print_report};
 use crate::cli::{RecordArg, RunArgs};
 use crate::exit::Exit;
-use crate::scenario_arg::{load_scenario, print_warnings_of_use};
+use crate::output;
+use crate::scenario_arg::{load_scenario, print_warnings};
 use crate::seed::choose_seed;
 use crate::settings::{Origin, OutDir, Recorded, RunSettings, ScenarioFrom};
 use campaign::files::Case;
@@ -70,7 +71,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         _ => DEFAULT_SCENARIO.to_owned(),
     };
     let loaded = load_scenario(&scenario_arg)?;
-    print_warnings_of_use(&scenario_arg, &loaded);
+    print_warnings(&scenario_arg, &loaded);
     let scenario = loaded.scenario;
     if scenario.anchors.is_empty() && !args.allow_no_anchors {
         anyhow::bail!(
@@ -142,7 +143,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         if args.json {
             // One document: a car's findings, or with several cars each car's by name.
             match found.as_slice() {
-                [one] => crate::output::print_json("run --dry-run", one)?,
+                [one] => output::print_json(output::json::RUN_DRY_RUN, one)?,
                 _ => {
                     #[derive(serde::Serialize)]
                     struct CarFound<'a> {
@@ -160,8 +161,8 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
                             found,
                         })
                         .collect();
-                    crate::output::print_json(
-                        "run --dry-run",
+                    output::print_json(
+                        output::json::RUN_DRY_RUN,
                         &serde_json::json!({ "cars": cars }),
                     )?;
                 }
@@ -207,31 +208,27 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     // A live view is for watching: a virtual-time campaign would be over before anyone looks.
     let virtual_time = embedded && !args.realtime && args.live.is_none();
     if let Some(resumed) = resumed {
-        if crate::output::chatty() {
-            eprintln!("{}", resumed.describe());
-        }
+        output::note(resumed.describe());
         config.resume = Some(resumed.prepare(config.record != RecordMode::None)?);
     }
-    if crate::output::chatty() {
-        eprintln!(
-            "seed {seed}: {}{} tests on {} with car{} {}{}{}, writing {}",
-            config.test_indices().len(),
-            config
-                .shard
-                .map(|s| format!(" of {} (shard {s})", campaign.tests))
-                .unwrap_or_default(),
-            scenario.name,
-            if cars.len() > 1 { "s" } else { "" },
-            car_label,
-            if virtual_time { " (virtual time)" } else { "" },
-            if jobs > 1 {
-                format!(", {jobs} at once")
-            } else {
-                String::new()
-            },
-            config.out_dir.display()
-        );
-    }
+    output::note(format_args!(
+        "seed {seed}: {}{} tests on {} with car{} {}{}{}, writing {}",
+        config.test_indices().len(),
+        config
+            .shard
+            .map(|s| format!(" of {} (shard {s})", campaign.tests))
+            .unwrap_or_default(),
+        scenario.name,
+        if cars.len() > 1 { "s" } else { "" },
+        car_label,
+        if virtual_time { " (virtual time)" } else { "" },
+        if jobs > 1 {
+            format!(", {jobs} at once")
+        } else {
+            String::new()
+        },
+        config.out_dir.display()
+    ));
     let started = Instant::now();
     let result = if let Some(firmware) = &firmware {
         let cars = runner::vehicle::sitl::SitlCars::new(
@@ -294,7 +291,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         )?;
     }
     if args.json {
-        super::table::print_report_json("run", &report, Some(wall))?;
+        super::table::print_report_json(output::json::RUN, &report, Some(wall))?;
     }
     let summary = report.record.summary.as_ref();
     // A shard may hold no test (more shards than tests): it ran all of its tests.
@@ -329,13 +326,11 @@ fn dry_run(
         scenario: &Scenario,
         config: &RunConfig,
     ) -> Result<runner::DryRun> {
-        if crate::output::chatty() {
-            eprintln!(
-                "connected to {given} (firmware {}); preflight, then the first test's route and \
-                 faults uploaded and read back, with the autopilot off",
-                connected.version()
-            );
-        }
+        output::progress(format_args!(
+            "connected to {given} (firmware {}); preflight, then the first test's route and \
+             faults uploaded and read back, with the autopilot off",
+            connected.version()
+        ));
         runner::dry_run(connected, scenario, config, &super::progress::WarningsOnly)
             .await
             .map_err(anyhow::Error::from)
@@ -402,7 +397,7 @@ fn explain_failed(report: &CampaignReport, scenario: &Scenario, print: bool) {
         return;
     }
     // Every explanation is in its case file; a summary's share is printed.
-    let shown = if print && crate::output::chatty() {
+    let shown = if print && output::verbosity() >= output::Verbosity::Normal {
         super::progress::listed_at_most()
     } else {
         0
@@ -504,7 +499,7 @@ fn explain_from_recording(report: &CampaignReport, scenario: &Scenario, lines: &
     ) {
         Ok(explained) => explained,
         Err(error) => {
-            eprintln!("warning: the failures are not explained: {error}");
+            output::warning(format_args!("the failures are not explained: {error}"));
             return;
         }
     };
@@ -520,10 +515,10 @@ fn explain_from_recording(report: &CampaignReport, scenario: &Scenario, lines: &
         let on_disk = match written {
             Ok(on_disk) => Some(on_disk),
             Err(error) => {
-                eprintln!(
-                    "warning: {}: the explanation is not written: {error}",
+                output::warning(format_args!(
+                    "{}: the explanation is not written: {error}",
                     case.case.display()
-                );
+                ));
                 None
             }
         };
@@ -588,7 +583,7 @@ pub(super) fn write_junit(
     };
     let xml = junit::to_xml(&[suite]).context("cannot write the JUnit XML")?;
     runner::atomic::write(file, xml).with_context(|| format!("cannot write {}", file.display()))?;
-    eprintln!("JUnit XML: {}", file.display());
+    output::note(format_args!("JUnit XML: {}", file.display()));
     Ok(())
 }
 
@@ -615,7 +610,7 @@ fn shrink_failed(
     if failed.is_empty() {
         return Ok(());
     }
-    eprintln!("shrinking {} failed case(s)", failed.len());
+    output::progress(format_args!("shrinking {} failed case(s)", failed.len()));
     let runtime = runtime(true)?;
     let mut lines = vec![
         "| case | commands | segments | faults | failing segment | simulator runs | wall |"
@@ -652,13 +647,13 @@ fn shrink_failed(
                 r.simulator_runs,
                 r.wall_s
             )),
-            Err(error) => eprintln!("warning: not shrunk: {error:#}"),
+            Err(error) => output::warning(format_args!("not shrunk: {error:#}")),
         }
     }
     if to_stdout {
         println!("{}", lines.join("\n"));
     } else {
-        eprintln!("{}", lines.join("\n"));
+        output::note(lines.join("\n"));
     }
     Ok(())
 }
@@ -697,11 +692,11 @@ async fn start_live(
         return Ok(None);
     };
     let (view, server) = LiveView::start(addr).await?;
-    eprintln!(
+    output::note(format_args!(
         "live view: ws://{}:{} (Foxglove: Open connection…)",
         addr.ip(),
         server.port()
-    );
+    ));
     config.live = Some(view);
     Ok(Some(server))
 }
@@ -871,7 +866,7 @@ async fn campaign_on_cars(
         anyhow::bail!("no car could be connected: {}", unreachable.join("; "));
     }
     for text in &unreachable {
-        eprintln!("warning: {text}; the campaign goes on without it");
+        output::warning(format_args!("{text}; the campaign goes on without it"));
     }
     let interrupt = Interrupt::listen();
     let vehicles: Vec<_> = connected.iter().map(|c| c.car.clone()).collect();

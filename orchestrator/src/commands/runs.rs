@@ -9,6 +9,7 @@ use anyhow::{Context, Result, bail};
 use super::table::{metres, print_report};
 use crate::cli::{RunsArgs, RunsCommand};
 use crate::exit::Exit;
+use crate::output;
 use campaign::coverage::CoverageBuilder;
 use campaign::coverage::CoverageStats;
 use campaign::files::{CampaignRecord, Case, CoverageRecord};
@@ -135,7 +136,7 @@ fn list(root: &Path, json: bool) -> Result<Exit> {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
             if json {
                 let runs = Vec::new();
-                crate::output::print_json("runs", &ListJson { dir: root, runs })?;
+                output::print_json(output::json::RUNS, &ListJson { dir: root, runs })?;
             } else {
                 println!(
                     "no run directories in {} (it does not exist)",
@@ -157,7 +158,7 @@ fn list(root: &Path, json: bool) -> Result<Exit> {
             .filter_map(|dir| read_entry(&dir).map(|entry| (dir, entry)))
             .collect();
         let runs = read.iter().map(|(dir, e)| EntryJson::of(dir, e)).collect();
-        crate::output::print_json("runs", &ListJson { dir: root, runs })?;
+        output::print_json(output::json::RUNS, &ListJson { dir: root, runs })?;
         return Ok(Exit::Success);
     }
     println!(
@@ -276,7 +277,7 @@ fn show(dir: &Path, coverage: bool, json: bool) -> Result<Exit> {
         ),
         Some(Entry::Unreadable(why)) => bail!("{}: {why}", dir.display()),
         Some(entry @ Entry::Replay(_)) if json => {
-            crate::output::print_json("runs show", &EntryJson::of(dir, &entry))?;
+            output::print_json(output::json::RUNS_SHOW, &EntryJson::of(dir, &entry))?;
             Ok(Exit::Success)
         }
         Some(Entry::Replay(c)) => {
@@ -387,7 +388,7 @@ fn show_campaign_json(dir: &Path, record: CampaignRecord, coverage: bool) -> Res
         tests: &tests,
         coverage,
     };
-    crate::output::print_json("runs show", &result)
+    output::print_json(output::json::RUNS_SHOW, &result)
 }
 
 /// Every test's row of the table, from the case files of run directory `dir` in test order,

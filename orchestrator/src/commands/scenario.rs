@@ -9,8 +9,8 @@ use serde_json::{Value, json};
 
 use crate::cli::{CheckArgs, ExportArgs, ImportArgs, ListArgs};
 use crate::exit::Exit;
-use crate::output::{Verbosity, verbosity};
-use crate::scenario_arg::{load_scenario, print_warnings, print_warnings_of_use};
+use crate::output;
+use crate::scenario_arg::{load_scenario, print_warnings};
 
 /// Converts a reference XML or GeoJSON file into scenario TOML.
 pub fn import(args: &ImportArgs) -> Result<Exit> {
@@ -18,15 +18,16 @@ pub fn import(args: &ImportArgs) -> Result<Exit> {
         None => import_file(args)?,
         Some(anchors) => import_with_anchors(args, anchors)?,
     };
-    print_warnings(&loaded);
+    // A file's warnings, whatever file it is.
+    print_warnings(&args.file.display().to_string(), &loaded);
     let written = write_or_print(args.out.as_deref(), args.force, &loaded.scenario.to_toml())?;
     if let Some(path) = written {
-        eprintln!(
+        output::note(format_args!(
             "wrote {} (scenario {}, {} warning(s))",
             path.display(),
             loaded.scenario.name,
             loaded.warnings.len()
-        );
+        ));
     }
     Ok(Exit::Success)
 }
@@ -47,8 +48,12 @@ fn import_file(args: &ImportArgs) -> Result<Loaded> {
         origin: args.origin,
     };
     let imported = scenarios::load_with(&args.file, &options)?;
-    if geojson && verbosity() != Verbosity::Quiet {
-        eprintln!("note: {}: {}", args.file.display(), imported.note());
+    if geojson {
+        output::note(format_args!(
+            "note: {}: {}",
+            args.file.display(),
+            imported.note()
+        ));
     }
     Ok(imported.loaded)
 }
@@ -99,7 +104,7 @@ fn write_or_print<'a>(out: Option<&'a Path>, force: bool, text: &str) -> Result<
 /// Writes a scenario as GeoJSON.
 pub fn export(args: &ExportArgs) -> Result<Exit> {
     let loaded = load_scenario(args.scenario.name())?;
-    print_warnings_of_use(args.scenario.name(), &loaded);
+    print_warnings(args.scenario.name(), &loaded);
     let options = WriteOptions {
         crs: args.crs.map(Into::into),
         origin: args.origin,
@@ -107,12 +112,12 @@ pub fn export(args: &ExportArgs) -> Result<Exit> {
     let text = scenarios::geojson::to_geojson(&loaded.scenario, &options)?;
     if let Some(path) = write_or_print(args.out.as_deref(), args.force, &text)? {
         let crs = options.crs.unwrap_or(Crs::Wgs84);
-        eprintln!(
+        output::note(format_args!(
             "wrote {} (scenario {}, {})",
             path.display(),
             loaded.scenario.name,
             crs.describe()
-        );
+        ));
     }
     Ok(Exit::Success)
 }
@@ -143,12 +148,21 @@ pub fn check(args: &CheckArgs) -> Result<Exit> {
             .iter()
             .map(|w| json!({"field": w.field, "message": w.kind.to_string()}))
             .collect();
-        crate::output::print_json("scenario check", &document)?;
+        output::print_json(output::json::SCENARIO_CHECK, &document)?;
         return Ok(Exit::Success);
     }
-    print_warnings(&loaded);
+    let printed = print_warnings(args.scenario.name(), &loaded);
+    // A bundled scenario's warnings are for -v (data the user cannot change): say where they are.
+    let hidden = if !printed
+        && !loaded.warnings.is_empty()
+        && output::verbosity() == output::Verbosity::Normal
+    {
+        " (a bundled scenario's: -v prints them)"
+    } else {
+        ""
+    };
     println!(
-        "{}: valid; fence {} vertices, {} cutout(s), drivable {:.0} m², {} anchor(s), {} warning(s); hash {}",
+        "{}: valid; fence {} vertices, {} cutout(s), drivable {:.0} m², {} anchor(s), {} warning(s){hidden}; hash {}",
         loaded.source,
         s.area.fence().vertices().len(),
         s.area.cutouts().len(),
@@ -179,7 +193,7 @@ pub fn list(args: &ListArgs) -> Result<Exit> {
         );
     }
     if args.json {
-        crate::output::print_json("scenario list", &json!({ "scenarios": all }))?;
+        output::print_json(output::json::SCENARIO_LIST, &json!({ "scenarios": all }))?;
     }
     Ok(Exit::Success)
 }

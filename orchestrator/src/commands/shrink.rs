@@ -21,6 +21,7 @@ use super::case_input::{check_hash, read_case, scenario_of};
 use super::signals::{cancel_on_ctrl_c, runtime};
 use crate::cli::ShrinkArgs;
 use crate::exit::Exit;
+use crate::output;
 use crate::seed::choose_seed;
 use campaign::files::{Case, Header, SHRINK_FORMAT, SHRINK_SCHEMA_VERSION, ScenarioRef};
 use campaign::shrink::{
@@ -102,12 +103,12 @@ pub fn shrink(args: &ShrinkArgs) -> Result<Exit> {
         Ok(report) => report,
         Err(error) => {
             let not_reproduced = error.downcast::<NotReproduced>()?;
-            eprintln!("{not_reproduced}");
-            eprintln!(
+            output::finding(&not_reproduced);
+            output::note(format_args!(
                 "on the simulated car of car profile {}: {}",
                 profile.name,
                 super::twin::agreement_note(path, &profile)
-            );
+            ));
             if args.json {
                 let result = ShrinkJson {
                     case: path,
@@ -117,7 +118,7 @@ pub fn shrink(args: &ShrinkArgs) -> Result<Exit> {
                     minimal: None,
                     shrink: None,
                 };
-                crate::output::print_json("shrink", &result)?;
+                output::print_json(output::json::SHRINK, &result)?;
             }
             return Ok(Exit::Found);
         }
@@ -131,7 +132,7 @@ pub fn shrink(args: &ShrinkArgs) -> Result<Exit> {
             minimal: Some(out.join(MINIMAL_FILE)),
             shrink: Some(&report),
         };
-        crate::output::print_json("shrink", &result)?;
+        output::print_json(output::json::SHRINK, &result)?;
     } else {
         print_summary(&report, &out);
     }
@@ -351,7 +352,7 @@ fn spinner(show: bool) -> ProgressBar {
     if !show {
         return ProgressBar::hidden();
     }
-    let bar = ProgressBar::new_spinner();
+    let bar = output::bar(None);
     if let Ok(style) = ProgressStyle::with_template("{elapsed_precise} {spinner} {msg}") {
         bar.set_style(style);
     }

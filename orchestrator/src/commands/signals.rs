@@ -17,6 +17,8 @@ use car_link::CarError;
 use runner::vehicle::SimulatorView;
 use runner::vehicle::Vehicle;
 
+use crate::output;
+
 /// The async runtime: on one thread with a paused clock (virtual time, the embedded simulated
 /// car) or on two threads against the wall clock.
 pub fn runtime(virtual_time: bool) -> Result<tokio::runtime::Runtime> {
@@ -120,10 +122,12 @@ impl Interrupt {
                 0 | 1 => "the car",
                 _ => "every car",
             };
-            eprintln!("{first}: stopping {cars} safely (send it again to brake at once and exit)");
+            output::safety(format_args!(
+                "{first}: stopping {cars} safely (send it again to brake at once and exit)"
+            ));
             listener.cancel.cancel();
             let second = signals.next().await;
-            eprintln!("{second} again: braking at once and exiting");
+            output::safety(format_args!("{second} again: braking at once and exiting"));
             listener.brake_now().await;
             listener.disarm_now().await;
             // The test in flight ends at once, aborted; its case, campaign.json and the recording
@@ -202,8 +206,8 @@ impl Interrupt {
         };
         match tokio::time::timeout(BRAKE_SEND_LIMIT, braking).await {
             Ok(Ok(())) => tokio::time::sleep(BRAKE_FLUSH).await,
-            Ok(Err(error)) => eprintln!("cannot brake: {error}"),
-            Err(_) => eprintln!("cannot brake: the link's send queue stayed full"),
+            Ok(Err(error)) => output::safety(format_args!("cannot brake: {error}")),
+            Err(_) => output::safety("cannot brake: the link's send queue stayed full"),
         }
     }
 }
@@ -219,7 +223,7 @@ impl Interrupt {
             return;
         };
         for warning in disarming.await {
-            eprintln!("warning: {warning}");
+            output::safety(format_args!("warning: {warning}"));
         }
     }
 }

@@ -7,12 +7,12 @@ use car_sim::{LinkImpairment, SimConfig};
 
 use crate::cli::SimArgs;
 use crate::exit::Exit;
-use crate::scenario_arg::{load_scenario, print_warnings_of_use};
+use crate::scenario_arg::{load_scenario, print_warnings};
 
 /// Serves the simulated car until Ctrl-C.
 pub fn serve(args: &SimArgs) -> Result<Exit> {
     let loaded = load_scenario(&args.scenario)?;
-    print_warnings_of_use(&args.scenario, &loaded);
+    print_warnings(&args.scenario, &loaded);
     let config = sim_config(args, &loaded.scenario)?;
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(1)
@@ -62,21 +62,28 @@ async fn serve_until_ctrl_c(args: &SimArgs, config: &SimConfig) -> Result<()> {
     })?;
     let scheme = if args.udp { "udp" } else { "tcp" };
     let address = sim.local_addr().unwrap_or(args.listen);
+    // Ctrl-C's handler is in place (polled once) before the address file says the car serves: a
+    // script that reads the file and then sends SIGINT stops the car as Ctrl-C does.
+    let ctrl_c = tokio::signal::ctrl_c();
+    tokio::pin!(ctrl_c);
+    if let std::task::Poll::Ready(stopped) = futures::poll!(&mut ctrl_c) {
+        stopped.context("cannot wait for Ctrl-C")?;
+        sim.shutdown();
+        return Ok(());
+    }
     if let Some(file) = &args.address_file {
         runner::atomic::write(file, format!("{scheme}://{address}\n"))
             .with_context(|| format!("cannot write {}", file.display()))?;
     }
-    eprintln!(
+    crate::output::note(format_args!(
         "simulated car (firmware {}, seed {}) at {scheme}://{address}; latency {:?} + up to {:?}, loss {:.1} %; Ctrl-C stops it",
         config.firmware,
         config.seed,
         config.link.latency,
         config.link.jitter,
         config.link.loss * 100.0
-    );
-    tokio::signal::ctrl_c()
-        .await
-        .context("cannot wait for Ctrl-C")?;
+    ));
+    ctrl_c.await.context("cannot wait for Ctrl-C")?;
     sim.shutdown();
     Ok(())
 }

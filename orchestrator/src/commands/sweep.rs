@@ -9,6 +9,7 @@ use super::case_input::{check_hash, read_case, scenario_of};
 use super::signals::{cancel_on_ctrl_c, runtime};
 use crate::cli::SweepArgs;
 use crate::exit::Exit;
+use crate::output;
 use crate::seed::choose_seed;
 use campaign::files::{Header, SWEEP_FORMAT, SWEEP_SCHEMA_VERSION, ScenarioRef};
 use campaign::sweep::{Axis, Parameter, Point, SimSetting, SweepReport, grid, with_fault_values};
@@ -34,12 +35,12 @@ pub fn sweep(args: &SweepArgs) -> Result<Exit> {
     let firmware = super::firmware::fresh_car("sweep", &args.car)?;
     campaign::sweep::grid_size(&axes)?;
     let points = grid(&axes);
-    eprintln!(
+    output::progress(format_args!(
         "sweeping {} over {} point(s), {} run(s) each, seed {seed}",
         path.display(),
         points.len(),
         args.runs
-    );
+    ));
     // The runs' scratch run directories (unrecorded), removed at the end.
     let scratch = std::env::temp_dir().join(format!("drivecheck-sweep-{}", std::process::id()));
     let report = runtime(true)?.block_on(async {
@@ -63,11 +64,11 @@ pub fn sweep(args: &SweepArgs) -> Result<Exit> {
                 .await
                 .with_context(|| what.clone())?;
             let point = Point::new(values, &driven);
-            eprintln!(
+            output::progress(format_args!(
                 "{what}: {} of {} runs failed",
                 point.failed_runs(),
                 point.runs.len()
-            );
+            ));
             results.push(point);
         }
         anyhow::Ok(SweepReport {
@@ -83,7 +84,7 @@ pub fn sweep(args: &SweepArgs) -> Result<Exit> {
     let _ = std::fs::remove_dir_all(&scratch);
     let report = report?;
     if args.json {
-        println!("{}", report.to_json()?);
+        output::print_json(output::json::SWEEP, &SweepJson { sweep: &report })?;
     } else {
         print!("{}", report.table());
         println!("median of each segment's largest deviation over the runs; * a run failed it");
@@ -91,15 +92,22 @@ pub fn sweep(args: &SweepArgs) -> Result<Exit> {
     if case.verdict == Some(campaign::oracle::Verdict::Failed)
         && report.points.iter().all(|p| p.failed_runs() == 0)
     {
-        eprintln!(
-            "warning: {} failed where it was recorded but fails at no point on the simulated car \
-             of car profile {}: {}",
+        output::warning(format_args!(
+            "{} failed where it was recorded but fails at no point on the simulated car of car \
+             profile {}: {}",
             path.display(),
             profile.name,
             super::twin::agreement_note(path, &profile)
-        );
+        ));
     }
     Ok(Exit::Success)
+}
+
+/// A sweep's result as `--json` prints it (docs/json.md).
+#[derive(serde::Serialize)]
+struct SweepJson<'a> {
+    /// The sweep's own document (`drivecheck-sweep`, docs/case-format.md).
+    sweep: &'a SweepReport,
 }
 
 /// The simulator settings of a grid point.

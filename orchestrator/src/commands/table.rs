@@ -65,14 +65,14 @@ pub(super) struct CampaignJson<'a> {
     tests: &'a [runner::TestSummary],
 }
 
-/// Prints a campaign's result as one JSON document (`command` is the command that printed it).
+/// Prints a campaign's result as one JSON document (`document`: of the command that printed it).
 pub(super) fn print_report_json(
-    command: &str,
+    document: crate::output::json::Document,
     report: &CampaignReport,
     wall: Option<Duration>,
 ) -> Result<()> {
     crate::output::print_json(
-        command,
+        document,
         &CampaignJson {
             dir: &report.dir,
             wall_time_s: wall.map(|w| w.as_secs_f64()),
@@ -115,7 +115,7 @@ fn print_summary(report: &CampaignReport, wall: Option<Duration>) {
     let Some(s) = &report.record.summary else {
         return;
     };
-    if crate::output::chatty() {
+    if crate::output::verbosity() >= crate::output::Verbosity::Normal {
         println!();
     }
     println!(

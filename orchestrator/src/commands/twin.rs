@@ -11,6 +11,7 @@ use super::case_input::{check_hash, read_case, scenario_of};
 use super::signals::{cancel_on_ctrl_c, runtime};
 use crate::cli::TwinCheckArgs;
 use crate::exit::Exit;
+use crate::output;
 use crate::profile_arg::LoadedProfile;
 use campaign::files::{
     CampaignRecord, Case, Header, ScenarioRef, TWIN_FORMAT, TWIN_SCHEMA_VERSION, TwinCheck,
@@ -184,11 +185,7 @@ pub fn check(args: &TwinCheckArgs) -> Result<Exit> {
     if profile.profile.hash() != LoadedProfile::default().profile.hash() {
         profiles.push(LoadedProfile::default());
     }
-    let bar = if args.json {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new((cases.len() * profiles.len()) as u64)
-    };
+    let bar = output::bar(Some((cases.len() * profiles.len()) as u64));
     if let Ok(style) = ProgressStyle::with_template("{elapsed_precise} {bar:30} {pos}/{len} {msg}")
     {
         bar.set_style(style);
@@ -222,14 +219,30 @@ pub fn check(args: &TwinCheckArgs) -> Result<Exit> {
         repeatability,
     };
     let json = check.to_json()?;
-    runner::atomic::write(&dir.join(TWIN_FILE), format!("{json}\n"))?;
+    let file = dir.join(TWIN_FILE);
+    runner::atomic::write(&file, format!("{json}\n"))?;
     if args.json {
-        println!("{json}");
+        output::print_json(
+            output::json::TWIN_CHECK,
+            &TwinJson {
+                file: &file,
+                twin: &check,
+            },
+        )?;
     } else {
         print!("{}", table(&check));
         println!("written: {}", dir.join(TWIN_FILE).display());
     }
     Ok(Exit::Success)
+}
+
+/// A twin check's result as `--json` prints it (docs/json.md).
+#[derive(serde::Serialize)]
+struct TwinJson<'a> {
+    /// Where `twin.json` was written (in the run directory).
+    file: &'a Path,
+    /// `twin.json` (`drivecheck-twin`, docs/twin.md).
+    twin: &'a TwinCheck,
 }
 
 /// The agreement of every profile, one row each.

@@ -198,8 +198,9 @@ fn twin_check_tells_the_right_profile_from_the_default_car_and_the_report_shows_
         "--json",
     ]);
     assert_eq!(out.status.code(), Some(0), "{}", text(&out));
-    let printed: campaign::files::TwinCheck =
-        campaign::files::TwinCheck::from_json(&String::from_utf8_lossy(&out.stdout)).unwrap();
+    let printed: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(printed["command"], "twin check", "{printed:#}");
+    let printed = campaign::files::TwinCheck::from_json(&printed["twin"].to_string()).unwrap();
     let written = campaign::files::TwinCheck::from_json(
         &std::fs::read_to_string(run.join("twin.json")).unwrap(),
     )

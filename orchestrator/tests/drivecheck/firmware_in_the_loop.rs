@@ -178,7 +178,11 @@ fn replay_sweep_shrink_and_twin_check_drive_the_firmware() {
         ]);
         assert_eq!(out.status.code(), Some(0), "{version}: {}", text(&out));
         let sweep: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-        assert_eq!(sweep["points"].as_array().unwrap().len(), 2, "{sweep:#}");
+        assert_eq!(
+            sweep["sweep"]["points"].as_array().unwrap().len(),
+            2,
+            "{sweep:#}"
+        );
         let refused = drivecheck(&[
             "sweep",
             path(&case),

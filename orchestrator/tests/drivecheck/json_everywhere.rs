@@ -1,7 +1,8 @@
 //! `--json` on every command that prints a result: one JSON document on standard output that
-//! `python3 -m json.tool` reads, with the keys docs/json.md names. The test walks the command
-//! line's own definition, so a command that gains `--json` without being tried here fails it, as
-//! does a command tried here that lost it.
+//! `python3 -m json.tool` reads, in the envelope every command shares (`command`, then
+//! `schema_version`, then the result: `orchestrator::output::json`), with the keys and versions
+//! docs/json.md names. The test walks the command line's own definition, so a command that gains
+//! `--json` without being tried here fails it, as does a command tried here that lost it.
 
 use crate::common;
 
@@ -10,9 +11,8 @@ use std::io::Write;
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 
-use clap::CommandFactory;
 use common::{drivecheck, path, text};
-use orchestrator::cli::Cli;
+use orchestrator::output::json;
 
 /// The commands (as typed, `runs show`) whose definition has a `--json` option.
 fn commands_with_json() -> BTreeSet<String> {
@@ -27,7 +27,7 @@ fn commands_with_json() -> BTreeSet<String> {
             walk(sub, &format!("{name} {}", sub.get_name()), found);
         }
     }
-    let mut cli = Cli::command();
+    let mut cli = orchestrator::cli::command();
     // Propagates the global options (`runs --json`) to the subcommands.
     cli.build();
     let mut found = BTreeSet::new();
@@ -53,9 +53,25 @@ fn python_reads(stdout: &[u8]) -> Option<Result<(), String>> {
     })
 }
 
+/// The documents and their schema versions as docs/json.md's table of them says: its rows
+/// ``| `COMMAND` | VERSION | … |``.
+fn documented_versions() -> BTreeSet<(String, u32)> {
+    let doc = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/json.md"))
+        .expect("docs/json.md");
+    doc.lines()
+        .filter_map(|line| {
+            let mut cells = line.strip_prefix("| `")?.split(" | ");
+            let command = cells.next()?.strip_suffix('`')?;
+            let version = cells.next()?.trim().parse().ok()?;
+            Some((command.to_owned(), version))
+        })
+        .collect()
+}
+
 /// Runs `drivecheck args`, expects one of `codes`, checks that standard output is one JSON
-/// document (for serde and for python3) and returns it.
-fn json_of(args: &[&str], codes: &[i32]) -> serde_json::Value {
+/// document (for serde and for python3) in the envelope of `document` (its first key `command`,
+/// its second `schema_version`, as `orchestrator::output::json` says), and returns it.
+fn json_of(document: &str, args: &[&str], codes: &[i32]) -> serde_json::Value {
     let out: Output = drivecheck(args);
     assert!(
         out.status.code().is_some_and(|c| codes.contains(&c)),
@@ -74,6 +90,21 @@ fn json_of(args: &[&str], codes: &[i32]) -> serde_json::Value {
     if let Some(read) = python_reads(&out.stdout) {
         read.unwrap_or_else(|e| panic!("python3 -m json.tool refused it: {e}"));
     }
+    let known = json::ALL
+        .iter()
+        .find(|d| d.command == document)
+        .unwrap_or_else(|| panic!("{document}: not in orchestrator::output::json::ALL"));
+    let envelope = format!(
+        "{{\n  \"command\": \"{document}\",\n  \"schema_version\": {},\n",
+        known.schema_version
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.starts_with(&envelope),
+        "drivecheck {}: the document does not begin with the envelope {envelope:?}:\n{}",
+        args.join(" "),
+        &stdout[..stdout.len().min(400)]
+    );
     value
 }
 
@@ -84,10 +115,9 @@ fn has_keys(value: &serde_json::Value, keys: &[&str], what: &str) {
     }
 }
 
-/// The documents of the campaign commands (`run`, `runs merge`) name their command and version.
+/// The documents of the campaign commands (`run`, `runs merge`).
 fn is_campaign_document(value: &serde_json::Value, command: &str, tests: usize) {
     assert_eq!(value["command"], command);
-    assert_eq!(value["schema_version"], 1);
     has_keys(value, &["dir", "campaign", "tests"], command);
     assert_eq!(
         value["tests"].as_array().map(Vec::len),
@@ -101,10 +131,14 @@ fn is_campaign_document(value: &serde_json::Value, command: &str, tests: usize) 
 fn every_command_that_prints_a_result_prints_one_json_document() {
     let dir = tempfile::tempdir().unwrap();
     let d = |name: &str| dir.path().join(name);
+    // The commands tried (as clap names them) and the documents printed (`explain --score`).
     let mut tried = BTreeSet::new();
-    let mut try_it = |command: &str, args: &[&str], codes: &[i32]| {
+    let mut printed = BTreeSet::new();
+    let mut try_it = |document: &str, args: &[&str], codes: &[i32]| {
+        let command = document.split(" --").next().unwrap_or(document);
         tried.insert(command.to_owned());
-        json_of(args, codes)
+        printed.insert(document.to_owned());
+        json_of(document, args, codes)
     };
 
     let run_dir = d("runs/campaign");
@@ -222,17 +256,55 @@ fn every_command_that_prints_a_result_prints_one_json_document() {
         ],
         &[0],
     );
-    assert_eq!(sweep["format"], "drivecheck-sweep");
+    assert_eq!(sweep["sweep"]["format"], "drivecheck-sweep", "{sweep:#}");
 
     let explained = try_it("explain", &["explain", path(&run_dir), "--json"], &[0]);
     has_keys(&explained, &["cases"], "explain");
+    let scored = try_it(
+        "explain --score",
+        &[
+            "explain",
+            path(&run_dir),
+            "--score",
+            "--counterfactual-runs",
+            "0",
+            "--json",
+        ],
+        &[0],
+    );
+    has_keys(&scored, &["cases", "scored"], "explain --score");
+    let fault_free_recorded = d("fault-free");
+    let out = drivecheck(&[
+        "-q",
+        "run",
+        "--seed",
+        "7",
+        "--tests",
+        "2",
+        "--no-faults",
+        "--out",
+        path(&fault_free_recorded),
+    ]);
+    assert!(matches!(out.status.code(), Some(0 | 1)), "{}", text(&out));
+    let calibrated = try_it(
+        "explain --calibrate",
+        &[
+            "explain",
+            path(&fault_free_recorded),
+            "--calibrate",
+            "--json",
+        ],
+        &[0],
+    );
+    has_keys(&calibrated, &["samples", "segments"], "explain --calibrate");
 
     let twin = try_it(
         "twin check",
         &["twin", "check", path(&run_dir), "--runs", "1", "--json"],
         &[0],
     );
-    assert_eq!(twin["format"], "drivecheck-twin");
+    assert_eq!(twin["twin"]["format"], "drivecheck-twin", "{twin:#}");
+    assert_eq!(twin["file"], path(&run_dir.join("twin.json")));
 
     let area = try_it(
         "area validate",
@@ -265,7 +337,7 @@ fn every_command_that_prints_a_result_prints_one_json_document() {
         ],
         &[0],
     );
-    assert!(route.is_object() || route.is_array(), "{route:#}");
+    has_keys(&route, &["seed", "points"], "route generate");
     let back = try_it(
         "route return",
         &[
@@ -279,7 +351,7 @@ fn every_command_that_prints_a_result_prints_one_json_document() {
         ],
         &[0, 1],
     );
-    assert!(back.is_object(), "{back:#}");
+    has_keys(&back, &["seed", "points", "length_m"], "route return");
 
     let compared = try_it(
         "compare",
@@ -297,6 +369,9 @@ fn every_command_that_prints_a_result_prints_one_json_document() {
         &[0],
     );
     assert_eq!(check["command"], "scenario check");
+
+    let dry_run = try_it("run --dry-run", &["run", "--dry-run", "--json"], &[0]);
+    has_keys(&dry_run, &["firmware", "round_trip_ms"], "run --dry-run");
 
     // The firmware built for the host needs a tree (docs/sitl.md): under CI=true there is one.
     match std::env::var_os("DRIVECHECK_FIRMWARE_10").filter(|v| !v.is_empty()) {
@@ -323,6 +398,17 @@ fn every_command_that_prints_a_result_prints_one_json_document() {
         tried,
         commands_with_json(),
         "the commands tried here and the commands with --json differ"
+    );
+    let every_document: BTreeSet<String> = json::ALL.iter().map(|d| d.command.to_owned()).collect();
+    assert_eq!(printed, every_document, "a document was not printed here");
+    let versions: BTreeSet<(String, u32)> = json::ALL
+        .iter()
+        .map(|d| (d.command.to_owned(), d.schema_version))
+        .collect();
+    assert_eq!(
+        documented_versions(),
+        versions,
+        "docs/json.md's table of documents and their versions"
     );
 }
 

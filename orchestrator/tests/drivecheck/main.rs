@@ -18,6 +18,7 @@ mod junit;
 mod logging;
 mod old_recordings;
 mod progress;
+mod quiet_everywhere;
 mod replay_command;
 mod replay_reproduces;
 mod report_command;

@@ -22,7 +22,10 @@ fn sweep(case: &Path, sets: &[&str]) -> SweepReport {
     }
     let run = drivecheck(&args);
     assert_eq!(run.status.code(), Some(0), "{}", text(&run));
-    serde_json::from_slice(&run.stdout).expect("sweep --json prints a sweep report")
+    let printed: serde_json::Value =
+        serde_json::from_slice(&run.stdout).expect("sweep --json prints one document");
+    assert_eq!(printed["command"], "sweep", "{printed:#}");
+    serde_json::from_value(printed["sweep"].clone()).expect("its `sweep` is a sweep report")
 }
 
 /// Runs that failed and the median of segment 3's largest deviation, per clamp value.

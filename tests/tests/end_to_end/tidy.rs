@@ -363,6 +363,30 @@ fn only_the_seam_names_a_concrete_car() {
     );
 }
 
+/// What a command prints on standard error goes through `orchestrator::output`, which decides what
+/// `-q` and `-v` print: no other `eprintln!` (the error `process::main` prints, and the campaign's
+/// progress lines `commands/progress.rs` prints as `output` says, excepted) and no progress bar
+/// but `output::bar`'s (and the campaign's, hidden with `-q`).
+#[test]
+fn standard_error_is_written_through_output() {
+    let found = offences(&["orchestrator/src"], false, |file, line| {
+        let anywhere = [
+            "orchestrator/src/output.rs",
+            "orchestrator/src/commands/progress.rs",
+        ];
+        if anywhere.contains(&file) {
+            return None;
+        }
+        if (line.contains("eprintln!") || line.contains("eprint!"))
+            && !(file == "orchestrator/src/process.rs" && line.contains("eprintln!(\"error: "))
+        {
+            return Some("writes on standard error past `output`".to_owned());
+        }
+        (line.contains("ProgressBar::new")).then(|| "a progress bar past `output::bar`".to_owned())
+    });
+    assert_none("standard error written past orchestrator::output", found);
+}
+
 /// No code but the firmware model compares version numbers.
 #[test]
 fn only_the_firmware_model_compares_versions() {
