@@ -415,7 +415,7 @@ fn every_command_with_quiet_prints_nothing_on_standard_error_but_errors() {
     // The firmware built for the host needs a tree (docs/sitl.md): under CI=true there is one.
     match std::env::var_os("DRIVECHECK_FIRMWARE_10").filter(|v| !v.is_empty()) {
         Some(tree) => {
-            let tree = std::path::PathBuf::from(tree);
+            let tree = PathBuf::from(tree);
             q.run("sitl build", &["sitl", "build", path(&tree)], &[0]);
         }
         None => {
