@@ -14,6 +14,7 @@ use campaign::coverage::CoverageBuilder;
 use campaign::coverage::CoverageStats;
 use campaign::files::{CampaignRecord, Case, CoverageRecord};
 use campaign::replay::{Comparison, REPLAY_FILE};
+use campaign::shrink::{SHRINK_FILE, ShrinkReport};
 use runner::{CampaignReport, TestSummary};
 use serde::Serialize;
 
@@ -50,6 +51,8 @@ pub fn runs(args: &RunsArgs) -> Result<Exit> {
 enum Entry {
     Campaign(Box<CampaignRecord>),
     Replay(Box<Comparison>),
+    /// A shrink: `shrink.json`.
+    Shrink(Box<ShrinkReport>),
     /// A record that cannot be read (or a replay without its comparison yet), and why.
     Unreadable(String),
 }
@@ -57,6 +60,13 @@ enum Entry {
 fn read_entry(dir: &Path) -> Option<Entry> {
     let replay = dir.join(REPLAY_FILE);
     let campaign = dir.join(CAMPAIGN_FILE);
+    let shrink = dir.join(SHRINK_FILE);
+    if shrink.exists() {
+        return Some(match read_shrink(&shrink) {
+            Ok(s) => Entry::Shrink(Box::new(s)),
+            Err(e) => Entry::Unreadable(format!("{e:#}")),
+        });
+    }
     if replay.exists() {
         return Some(match read_comparison(&replay) {
             Ok(c) => Entry::Replay(Box::new(c)),
@@ -77,6 +87,11 @@ fn read_entry(dir: &Path) -> Option<Entry> {
 fn read_comparison(path: &Path) -> Result<Comparison> {
     let text = std::fs::read_to_string(path).with_context(|| path.display().to_string())?;
     Comparison::from_json(&text).with_context(|| path.display().to_string())
+}
+
+fn read_shrink(path: &Path) -> Result<ShrinkReport> {
+    let text = std::fs::read_to_string(path).with_context(|| path.display().to_string())?;
+    ShrinkReport::from_json(&text).with_context(|| path.display().to_string())
 }
 
 fn read_campaign(path: &Path) -> Result<CampaignRecord> {
@@ -111,6 +126,13 @@ enum EntryJson<'a> {
         /// `replay.json`.
         replay: &'a Comparison,
     },
+    /// A shrink: `shrink.json`.
+    Shrink {
+        /// The directory.
+        dir: &'a Path,
+        /// `shrink.json`.
+        shrink: &'a ShrinkReport,
+    },
     /// A record that cannot be read, and why.
     Unreadable {
         /// The directory.
@@ -125,6 +147,7 @@ impl<'a> EntryJson<'a> {
         match entry {
             Entry::Campaign(campaign) => EntryJson::Campaign { dir, campaign },
             Entry::Replay(replay) => EntryJson::Replay { dir, replay },
+            Entry::Shrink(shrink) => EntryJson::Shrink { dir, shrink },
             Entry::Unreadable(error) => EntryJson::Unreadable { dir, error },
         }
     }
@@ -176,7 +199,12 @@ fn list(root: &Path, json: bool) -> Result<Exit> {
             .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
         println!("| {name} | {} |", row(&entry));
     }
-    println!("\n{shown} run directories in {}", root.display());
+    let noun = if shown == 1 {
+        "directory"
+    } else {
+        "directories"
+    };
+    println!("\n{shown} run {noun} in {}", root.display());
     Ok(Exit::Success)
 }
 
@@ -265,6 +293,17 @@ fn row(entry: &Entry) -> String {
                 metres(worst)
             )
         }
+        Entry::Shrink(s) => format!(
+            "shrink of {} ({} → {} segments, {}) | {} | {} | sim | {} | - | - | - | {} | -",
+            s.case,
+            s.before.size.segments,
+            s.after.size.segments,
+            s.ended.words(),
+            s.scenario.name,
+            s.seed,
+            s.simulator_runs,
+            metres(s.after.median_deviation_m())
+        ),
         Entry::Unreadable(why) => format!("unreadable: {why} | | | | | | | | | |"),
     }
 }
@@ -272,7 +311,7 @@ fn row(entry: &Entry) -> String {
 fn show(dir: &Path, coverage: bool, json: bool) -> Result<Exit> {
     match read_entry(dir) {
         None => bail!(
-            "{} is not a run directory (no {CAMPAIGN_FILE} or {REPLAY_FILE})",
+            "{} is not a run directory (no {CAMPAIGN_FILE}, {REPLAY_FILE} or {SHRINK_FILE})",
             dir.display()
         ),
         Some(Entry::Unreadable(why)) => bail!("{}: {why}", dir.display()),
@@ -305,6 +344,14 @@ fn show(dir: &Path, coverage: bool, json: bool) -> Result<Exit> {
             }
             println!();
             print!("{}", c.table());
+            Ok(Exit::Success)
+        }
+        Some(entry @ Entry::Shrink(_)) if json => {
+            output::print_json(output::json::RUNS_SHOW, &EntryJson::of(dir, &entry))?;
+            Ok(Exit::Success)
+        }
+        Some(Entry::Shrink(report)) => {
+            super::shrink::print_summary(&report, dir);
             Ok(Exit::Success)
         }
         Some(Entry::Campaign(record)) if json => {

@@ -83,12 +83,18 @@ pub fn shrink(args: &ShrinkArgs) -> Result<Exit> {
     let profile = crate::profile_arg::load(args.profile.as_deref())?;
     let sim = profile.sim_config(&scenario)?;
     let firmware = super::firmware::fresh_car("shrink", &args.car)?;
-    let out = match &args.out {
-        Some(out) => out.clone(),
-        None => runner::claim_default_run_dir(&run_dir_name(
-            &format!("shrink-{}", scenario.name),
-            seed,
-        ))?,
+    // The directory this shrink made (the default one, or an --out that did not exist), removed
+    // again when the shrink writes nothing into it: a case with nothing to shrink leaves no
+    // empty directory behind.
+    let (out, made) = match &args.out {
+        Some(out) => (out.clone(), !out.exists()),
+        None => (
+            runner::claim_default_run_dir(&run_dir_name(
+                &format!("shrink-{}", scenario.name),
+                seed,
+            ))?,
+            true,
+        ),
     };
     let options = Options {
         runs: args.runs,
@@ -102,6 +108,10 @@ pub fn shrink(args: &ShrinkArgs) -> Result<Exit> {
     let report = match shrink_case(&runtime, path, &case, &scenario, &options, &out, true) {
         Ok(report) => report,
         Err(error) => {
+            if made {
+                // Only an empty directory goes (`remove_dir` refuses any other).
+                let _ = std::fs::remove_dir(&out);
+            }
             let not_reproduced = error.downcast::<NotReproduced>()?;
             output::finding(&not_reproduced);
             output::note(format_args!(
@@ -112,7 +122,7 @@ pub fn shrink(args: &ShrinkArgs) -> Result<Exit> {
             if args.json {
                 let result = ShrinkJson {
                     case: path,
-                    dir: &out,
+                    dir: (!made).then_some(out.as_path()),
                     shrunk: false,
                     not_reproduced: Some(&not_reproduced.reason),
                     minimal: None,
@@ -126,7 +136,7 @@ pub fn shrink(args: &ShrinkArgs) -> Result<Exit> {
     if args.json {
         let result = ShrinkJson {
             case: path,
-            dir: &out,
+            dir: Some(&out),
             shrunk: true,
             not_reproduced: None,
             minimal: Some(out.join(MINIMAL_FILE)),
@@ -144,8 +154,8 @@ pub fn shrink(args: &ShrinkArgs) -> Result<Exit> {
 struct ShrinkJson<'a> {
     /// The case file shrunk.
     case: &'a Path,
-    /// The shrink directory.
-    dir: &'a Path,
+    /// The shrink directory (`None` when the shrink made it and, writing nothing, removed it).
+    dir: Option<&'a Path>,
     /// Whether the case was shrunk (or was minimal already): false when it does not fail the
     /// same way in every run (exit status 1).
     shrunk: bool,

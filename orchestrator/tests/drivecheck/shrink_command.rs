@@ -171,4 +171,20 @@ fn a_failure_that_moves_between_neighbouring_segments_shrinks_and_one_that_passe
         "{log}"
     );
     assert!(log.contains("seed 1: passed"), "{log}");
+    // Nothing was shrunk: the directory the shrink made is gone, not left empty.
+    assert!(!out.exists(), "{log}");
+
+    // `drivecheck runs` lists the shrink directory of the first case (and only it).
+    let listed = drivecheck(&["runs", "--dir", path(dir.path())]);
+    let table = text(&listed);
+    assert_eq!(listed.status.code(), Some(0), "{table}");
+    let row = table
+        .lines()
+        .find(|l| l.starts_with("| a |"))
+        .unwrap_or_else(|| panic!("no row for the shrink directory a: {table}"));
+    assert!(
+        row.contains("shrink of") && row.contains("earlier-vs-placed.json"),
+        "{row}"
+    );
+    assert!(table.contains("1 run directory in"), "{table}");
 }
