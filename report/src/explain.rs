@@ -336,6 +336,16 @@ pub fn faults_of(case: &Case) -> Vec<ExplainFault> {
         .collect()
 }
 
+/// The number of the fault of command `command_index` in its test (1, 2, …, in the order of
+/// the faults' places): the number the report's map, plot and fault key give it, and every
+/// cause in words.
+pub fn fault_number(case: &Case, command_index: usize) -> Option<usize> {
+    case.fault_places
+        .iter()
+        .position(|p| p.command_index == command_index)
+        .map(|k| k + 1)
+}
+
 /// A cause in words: a fault with its command (what `drivecheck explain` and `run` print).
 pub fn describe(source: &Source, case: Option<&Case>) -> String {
     match source {
@@ -345,10 +355,19 @@ pub fn describe(source: &Source, case: Option<&Case>) -> String {
                 .and_then(|c| match c {
                     CommandRecord::AddFault {
                         probe, kind, param, ..
-                    } => Some(format!(" ({probe} {kind} {param:.2})")),
+                    } => Some(format!("{probe} {kind} {param:.2}")),
                     CommandRecord::RunSegments { .. } => None,
                 });
-            format!("fault: command {command_index}{}", what.unwrap_or_default())
+            // Numbered as the report's map, plot and fault key number it (1, 2, … in the
+            // order of the faults' places); the command index is the case file's.
+            match (case.and_then(|c| fault_number(c, *command_index)), what) {
+                (Some(number), Some(what)) => {
+                    format!("fault {number} (command {command_index}: {what})")
+                }
+                (Some(number), None) => format!("fault {number} (command {command_index})"),
+                (None, Some(what)) => format!("fault: command {command_index} ({what})"),
+                (None, None) => format!("fault: command {command_index}"),
+            }
         }
         Source::Anchor { anchor_id } => format!("anchor {anchor_id}'s range"),
         Source::Odometry => "odometry (travelled distance)".to_owned(),

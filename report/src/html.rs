@@ -11,7 +11,7 @@ use super::draw::{
     AMBER, BarPanel, Colouring, FAULT, FaultMark, GREEN, MAX_TRACK_POINTS, MapLayers, PlotInput,
     RED_ABOVE, RUN_COLOURS, TrackLayer, Window, bars_svg, css, decimate, deviation_svg, map_svg,
 };
-use super::explain::{ExplainOptions, explain_segments};
+use super::explain::{ExplainOptions, explain_segments, fault_number};
 use super::route::{boundaries, point_along, segments};
 use campaign::case::CampaignRecord;
 use campaign::case::{Case, CommandRecord};
@@ -208,15 +208,6 @@ fn fault_brief(case: &Case, command_index: usize) -> String {
         }) => format!("{probe}: {} {param:.3}", kind.spec().name.replace('_', " ")),
         _ => format!("command {command_index}"),
     }
-}
-
-/// The number of the fault of command `command_index` in its test's key (1, 2, …, the order
-/// of the faults' places).
-fn fault_number(case: &Case, command_index: usize) -> Option<usize> {
-    case.fault_places
-        .iter()
-        .position(|p| p.command_index == command_index)
-        .map(|k| k + 1)
 }
 
 /// A fault's number as it is drawn on the map and the plot.
@@ -482,10 +473,16 @@ fn causes_table(out: &mut String, case: &Case, explained: &[SegmentExplanation])
 /// A cause in words, with its fault command's probe.
 fn cause_words(source: &Source, case: &Case) -> String {
     match source {
-        Source::Fault { command_index } => format!(
-            "fault: command {command_index} ({})",
-            probe_of(case, *command_index)
-        ),
+        Source::Fault { command_index } => match fault_number(case, *command_index) {
+            Some(number) => format!(
+                "fault {number} (command {command_index}: {})",
+                probe_of(case, *command_index)
+            ),
+            None => format!(
+                "fault: command {command_index} ({})",
+                probe_of(case, *command_index)
+            ),
+        },
         Source::Anchor { anchor_id } => format!("anchor {anchor_id}'s range"),
         Source::Odometry => "odometry".to_owned(),
         Source::Heading => "heading".to_owned(),
