@@ -355,33 +355,40 @@ impl std::fmt::Display for CoverageStats {
         let c = self;
         writeln!(
             out,
-            "coverage of {} tests: {:.1} % of the drivable area driven ({} of {} cells of {} m)",
+            "coverage of {} test{}: {:.1} % of the drivable area driven ({} of {} cells of {} m)",
             c.tests,
+            if c.tests == 1 { "" } else { "s" },
             c.area_share * 100.0,
             c.driven_cells,
             c.drivable_cells,
             c.cell_m
         )?;
+        // Markdown throughout, as the tables of tests and runs: a table per histogram, its bar
+        // a column of its own.
         let total = c.driven_m();
         writeln!(
             out,
-            "metres driven by heading (counter-clockwise from east), {total:.0} m in all:"
+            "\nmetres driven by heading (counter-clockwise from east), {total:.0} m in all:\n\n\
+             | heading | metres | share |\n|---|---|---|"
         )?;
         for b in c.heading_bins() {
             writeln!(
                 out,
-                "  {:>3.0}°–{:>3.0}° {:>7.1} m {}",
+                "| {:.0}°–{:.0}° | {:.1} | {} |",
                 b.from,
                 b.to,
                 b.metres,
                 bar(b.metres, total)
             )?;
         }
-        writeln!(out, "metres driven by speed:")?;
+        writeln!(
+            out,
+            "\nmetres driven by speed:\n\n| speed | metres | share |\n|---|---|---|"
+        )?;
         for b in c.speed_bins() {
             writeln!(
                 out,
-                "  {:>2.0}–{:>2.0} km/h {:>7.1} m {}",
+                "| {:.0}–{:.0} km/h | {:.1} | {} |",
                 b.from,
                 b.to,
                 b.metres,
@@ -389,10 +396,10 @@ impl std::fmt::Display for CoverageStats {
             )?;
         }
         if c.faults.is_empty() {
-            out.write_str("faults: none planned\n")?;
+            out.write_str("\nfaults: none planned\n")?;
         } else {
             out.write_str(
-                "| probe | fault type | planned | confirmed | began acting in its test |\n\
+                "\nfaults:\n\n| probe | fault type | planned | confirmed | began acting in its test |\n\
                  |---|---|---|---|---|\n",
             )?;
             for f in &c.faults {
@@ -408,7 +415,7 @@ impl std::fmt::Display for CoverageStats {
             .iter()
             .map(|(segments, n)| format!("{segments} segments: {n}"))
             .collect();
-        writeln!(out, "tests by segments driven: {}", counts.join(", "))
+        writeln!(out, "\ntests by segments driven: {}", counts.join(", "))
     }
 }
 
@@ -542,27 +549,30 @@ mod tests {
         let lines: Vec<&str> = text.lines().collect();
         assert_eq!(
             lines[0],
-            "coverage of 1 tests: 4.2 % of the drivable area driven (17 of 400 cells of 0.5 m)"
+            "coverage of 1 test: 4.2 % of the drivable area driven (17 of 400 cells of 0.5 m)"
         );
-        assert_eq!(
-            lines[1],
-            "metres driven by heading (counter-clockwise from east), 8 m in all:"
-        );
-        // Twelve heading bins of 30°, the first full: a bar of 30 characters.
+        // Markdown: a table per histogram, the bar a column of its own.
         assert_eq!(
             lines[2],
-            format!("    0°– 30°     8.0 m {}", "#".repeat(30))
+            "metres driven by heading (counter-clockwise from east), 8 m in all:"
         );
-        assert_eq!(lines[14], "metres driven by speed:");
-        // Speed bins up to the last one driven (2–4 km/h).
-        assert_eq!(lines[15], "   0– 2 km/h     0.0 m ");
         assert_eq!(
-            lines[16],
-            format!("   2– 4 km/h     8.0 m {}", "#".repeat(30))
+            lines[4..6],
+            ["| heading | metres | share |", "|---|---|---|"]
         );
-        assert_eq!(lines[17], "faults: none planned");
-        assert_eq!(lines[18], "tests by segments driven: 1 segments: 1");
-        assert_eq!(lines.len(), 19);
+        // Twelve heading bins of 30°, the first full: a bar of 30 characters.
+        assert_eq!(lines[6], format!("| 0°–30° | 8.0 | {} |", "#".repeat(30)));
+        assert_eq!(lines[17], "| 330°–360° | 0.0 |  |");
+        assert_eq!(lines[19], "metres driven by speed:");
+        // Speed bins up to the last one driven (2–4 km/h).
+        assert_eq!(lines[23], "| 0–2 km/h | 0.0 |  |");
+        assert_eq!(
+            lines[24],
+            format!("| 2–4 km/h | 8.0 | {} |", "#".repeat(30))
+        );
+        assert_eq!(lines[26], "faults: none planned");
+        assert_eq!(lines[28], "tests by segments driven: 1 segments: 1");
+        assert_eq!(lines.len(), 29);
         assert!(text.ends_with('\n'));
     }
 }

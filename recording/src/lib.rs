@@ -46,7 +46,9 @@ use std::path::PathBuf;
 use thiserror::Error;
 
 pub use profile::{DEFAULT_PROFILE, LoadedProfile, LoadedProfileError};
-pub use reader::{Recording, RecordingChannel, Span, Spans, Stamped, Summary, recorded_seed};
+pub use reader::{
+    Recording, RecordingChannel, Span, Spans, Stamped, Summary, recorded_scenario, recorded_seed,
+};
 pub use records::{
     AckOutcome, CarCommand, CarStateRecord, CommandAck, CommandSent, FaultRecord, FaultSpec,
     FaultStatus, OracleRecord, PlannedReturnRoute, PlannedSegment, Pose, Position, RadioPathKind,

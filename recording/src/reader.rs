@@ -658,15 +658,28 @@ fn metadata_at(
 /// records are read, whatever the file's size). `None` when the file has no such record before
 /// its first message or its damage.
 pub fn recorded_seed(path: &Path) -> Result<Option<String>, RecordingError> {
+    Ok(leading_metadata(path, "drivecheck.campaign")?.and_then(|m| m.get("seed").cloned()))
+}
+
+/// The canonical TOML of the scenario the recording at `path` was made in (its
+/// `drivecheck.scenario` metadata), read as [`recorded_seed`] reads the seed. `None` when the file
+/// has no such record before its first message or its damage.
+pub fn recorded_scenario(path: &Path) -> Result<Option<String>, RecordingError> {
+    Ok(leading_metadata(path, "drivecheck.scenario")?.and_then(|m| m.get("toml").cloned()))
+}
+
+/// The metadata record `name` among the records before the recording's first message.
+fn leading_metadata(
+    path: &Path,
+    name: &str,
+) -> Result<Option<BTreeMap<String, String>>, RecordingError> {
     let file = File::open(path).map_err(|source| RecordingError::Read {
         path: path.to_owned(),
         source,
     })?;
     for record in Records::new(BufReader::new(file)) {
         match record {
-            Ok(McapRecord::Metadata(m)) if m.name == "drivecheck.campaign" => {
-                return Ok(m.metadata.get("seed").cloned());
-            }
+            Ok(McapRecord::Metadata(m)) if m.name == name => return Ok(Some(m.metadata)),
             Ok(McapRecord::Message { .. }) | Err(_) => break,
             Ok(_) => {}
         }

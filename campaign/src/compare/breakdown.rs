@@ -11,7 +11,7 @@ use super::{Options, Paired, PairedSegment};
 /// One group of paired segments.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct BreakdownRow {
-    /// The group: `uwb_range_50 offset` (or `none`), `2–3 m/s`, `x 10–20 m, y 0–10 m`.
+    /// The group: `uwb_range_50 offset` (or `none`), `6–8 km/h`, `x 10–20 m, y 0–10 m`.
     pub key: String,
     /// Segments driven in both runs.
     pub segments: usize,
@@ -47,7 +47,7 @@ pub struct Breakdowns {
     /// By the probe and kind of each fault acting while the segment was driven (in either run; a
     /// segment with two faults is in both rows), `none` for a segment without one.
     pub by_fault: Vec<BreakdownRow>,
-    /// By commanded speed, in bands of `speed_band_mps`.
+    /// By commanded speed, in bands of `speed_band_kmh`.
     pub by_speed: Vec<BreakdownRow>,
     /// By the square cell of side `region_cell_m` holding the middle of the segment's route.
     pub by_region: Vec<BreakdownRow>,
@@ -66,7 +66,7 @@ struct Group {
 impl Breakdowns {
     /// The breakdowns of `paired` with `options`' noise, band and cell.
     pub fn of(paired: &Paired, options: &Options) -> Self {
-        let band = options.speed_band_mps;
+        let band = options.speed_band_kmh;
         let cell = options.region_cell_m;
         Self {
             by_fault: rows(paired, options.noise_m, |s| {
@@ -79,8 +79,8 @@ impl Breakdowns {
             by_speed: rows(paired, options.noise_m, |s| {
                 vec![match s.speed_mps {
                     Some(v) if v.is_finite() => {
-                        let k = (v / band).floor();
-                        format!("{}–{} m/s", trim(k * band), trim((k + 1.0) * band))
+                        let k = (v * 3.6 / band).floor();
+                        format!("{}–{} km/h", trim(k * band), trim((k + 1.0) * band))
                     }
                     _ => "unknown speed".to_owned(),
                 }]

@@ -45,8 +45,8 @@ pub const DEFAULT_ALPHA: f64 = 0.05;
 pub const DEFAULT_RESAMPLES: usize = 2000;
 /// The bootstrap's seed when none is given (`campaign::seed::rng` of it).
 pub const DEFAULT_BOOTSTRAP_SEED: u64 = 0;
-/// The width of a speed band of the breakdown, m/s.
-pub const DEFAULT_SPEED_BAND_MPS: f64 = 1.0;
+/// The width of a speed band of the breakdown, km/h (the coverage's speed bins are as wide).
+pub const DEFAULT_SPEED_BAND_KMH: f64 = 2.0;
 /// The side of a region's square cell of the breakdown, metres.
 pub const DEFAULT_REGION_CELL_M: f64 = 10.0;
 /// The level of the interval shown beside the median change (the decision's is 1 − α/2).
@@ -643,8 +643,8 @@ pub struct Options {
     pub resamples: usize,
     /// The bootstrap's seed.
     pub seed: u64,
-    /// The width of a speed band, m/s.
-    pub speed_band_mps: f64,
+    /// The width of a speed band, km/h.
+    pub speed_band_kmh: f64,
     /// The side of a region's cell, metres.
     pub region_cell_m: f64,
 }
@@ -657,7 +657,7 @@ impl Options {
             noise_m,
             resamples: DEFAULT_RESAMPLES,
             seed: DEFAULT_BOOTSTRAP_SEED,
-            speed_band_mps: DEFAULT_SPEED_BAND_MPS,
+            speed_band_kmh: DEFAULT_SPEED_BAND_KMH,
             region_cell_m: DEFAULT_REGION_CELL_M,
         }
     }
@@ -673,7 +673,7 @@ impl Options {
             return Err(OptionsError::Resamples);
         }
         for (what, value) in [
-            ("speed band", self.speed_band_mps),
+            ("speed band", self.speed_band_kmh),
             ("region cell", self.region_cell_m),
         ] {
             if !(value.is_finite() && value > 0.0) {

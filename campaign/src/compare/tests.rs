@@ -292,13 +292,13 @@ fn a_regression_under_range_faults_is_found_and_located() {
     assert_eq!(report.breakdowns.by_fault.last().unwrap().key, "none");
     assert_eq!(report.segments.worse, 80);
     assert!(report.segments.worse_share == 0.5);
-    // Speed bands follow the segments' speeds (1 + index m/s here).
+    // Speed bands of 2 km/h follow the segments' speeds (1 + index m/s here: 2 m/s is 7.2 km/h).
     assert!(
         report
             .breakdowns
             .by_speed
             .iter()
-            .any(|r| r.key == "2–3 m/s")
+            .any(|r| r.key == "6–8 km/h")
     );
     assert!(
         report

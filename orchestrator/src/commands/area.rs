@@ -178,7 +178,7 @@ fn print_summary(s: &ValidationSummary) {
     );
     if s.coverage < LOW_COVERAGE {
         println!(
-            "  note: parts of the area were never driven (grey in --svg); the generator avoids \
+            "  note: parts of the area were never driven (grey in the --out picture); the generator avoids \
              places too narrow to turn around in"
         );
     }

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use runner::store::RunStore;
-use scenarios::Scenario;
+use scenarios::{Loaded, Scenario};
 
 use crate::scenario_arg::{load_scenario, print_warnings};
 use anyhow::bail;
@@ -64,29 +64,52 @@ pub(super) fn read_case(path: &Path) -> Result<Case> {
     Ok(RunStore::read_case(path)?)
 }
 
-/// The scenario a case is driven in: `--scenario`, or the bundled one the case names.
+/// The scenario a case is driven in: `--scenario`, else the bundled one the case names, else
+/// the copy the recording beside the case holds (`campaign.mcap`'s `drivecheck.scenario`, taken
+/// only when it hashes to the case's scenario hash and the recording is of the case's campaign).
 pub(super) fn scenario_of(
     scenario: Option<&str>,
     case_path: &Path,
     case: &Case,
 ) -> Result<Scenario> {
-    let arg = scenario.unwrap_or(&case.scenario.name);
-    let loaded = match scenario {
-        Some(arg) => load_scenario(arg)?,
-        None => {
-            let name = &case.scenario.name;
-            if scenarios::bundled::text(name).is_none() {
-                bail!(
-                    "{}: scenario.name `{name}` is not a bundled scenario; give its file with \
-                     --scenario",
-                    case_path.display()
-                );
-            }
-            load_scenario(name)?
-        }
+    let name = &case.scenario.name;
+    let (arg, loaded) = match scenario {
+        Some(arg) => (arg.to_owned(), load_scenario(arg)?),
+        None if scenarios::bundled::text(name).is_some() => (name.clone(), load_scenario(name)?),
+        None => match recorded_scenario(case_path, case)? {
+            Some((recording, loaded)) => (recording.display().to_string(), loaded),
+            None => bail!(
+                "{}: scenario.name `{name}` is not a bundled scenario and no recording beside the \
+                 case holds it; give its file with --scenario",
+                case_path.display()
+            ),
+        },
     };
-    print_warnings(arg, &loaded);
+    print_warnings(&arg, &loaded);
     Ok(loaded.scenario)
+}
+
+/// The scenario the recording beside the case (`campaign.mcap` in its directory) was made in,
+/// when that recording is of the case's campaign and its scenario hashes to the case's.
+fn recorded_scenario(case_path: &Path, case: &Case) -> Result<Option<(PathBuf, Loaded)>> {
+    let Some(hash) = &case.scenario.hash else {
+        return Ok(None);
+    };
+    let dir = case_path.parent().unwrap_or(Path::new("."));
+    let store = RunStore::new(dir);
+    let file = store.recording();
+    if !file.is_file() {
+        return Ok(None);
+    }
+    if let Some(seed) = case.campaign_seed {
+        store.check_recording(&file, seed)?;
+    }
+    let Some(toml) = recording::recorded_scenario(&file)? else {
+        return Ok(None);
+    };
+    let source = format!("{}'s drivecheck.scenario", file.display());
+    let loaded = scenarios::from_toml_str(&toml, &source)?;
+    Ok((loaded.scenario.hash() == *hash).then_some((file, loaded)))
 }
 
 /// Refuses a case recorded in another scenario (or without a hash) unless told to proceed.

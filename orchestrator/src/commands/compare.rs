@@ -264,6 +264,11 @@ pub fn summary(compared: &Compared) -> String {
             );
         }
     }
+    // Each breakdown's rows are in the order of blame (docs/compare.md), not of their keys.
+    let _ = writeln!(
+        out,
+        "\nbreakdowns, the group that explains most of the regression first:"
+    );
     for (what, rows) in [
         ("fault", &r.breakdowns.by_fault),
         ("speed", &r.breakdowns.by_speed),

@@ -75,13 +75,20 @@ async fn serve_until_ctrl_c(args: &SimArgs, config: &SimConfig) -> Result<()> {
         runner::atomic::write(file, format!("{scheme}://{address}\n"))
             .with_context(|| format!("cannot write {}", file.display()))?;
     }
+    let link = &config.link;
+    let link = if link.latency.is_zero() && link.jitter.is_zero() && link.loss == 0.0 {
+        "an ideal link (no latency, no loss)".to_owned()
+    } else {
+        format!(
+            "latency {:.1} ms + up to {:.1} ms, loss {:.1} %",
+            link.latency.as_secs_f64() * 1e3,
+            link.jitter.as_secs_f64() * 1e3,
+            link.loss * 100.0
+        )
+    };
     crate::output::note(format_args!(
-        "simulated car (firmware {}, seed {}) at {scheme}://{address}; latency {:?} + up to {:?}, loss {:.1} %; Ctrl-C stops it",
-        config.firmware,
-        config.seed,
-        config.link.latency,
-        config.link.jitter,
-        config.link.loss * 100.0
+        "simulated car (firmware {}, seed {}) at {scheme}://{address}; {link}; Ctrl-C stops it",
+        config.firmware, config.seed,
     ));
     ctrl_c.await.context("cannot wait for Ctrl-C")?;
     sim.shutdown();

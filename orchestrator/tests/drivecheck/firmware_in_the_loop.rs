@@ -8,7 +8,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use super::common::{cases, path, text};
+use super::common::{cases, path, skipped, text};
 
 /// The trees given, with the firmware profile of their generation for the simulated car.
 fn trees() -> Vec<(&'static str, PathBuf)> {
@@ -28,7 +28,10 @@ fn trees() -> Vec<(&'static str, PathBuf)> {
             std::env::var("CI").as_deref() != Ok("true"),
             "CI=true and no firmware tree: set DRIVECHECK_FIRMWARE_10 / DRIVECHECK_FIRMWARE_12"
         );
-        println!("skipped: no firmware tree");
+        skipped(
+            "firmware",
+            "no firmware tree (DRIVECHECK_FIRMWARE_10, DRIVECHECK_FIRMWARE_12)",
+        );
     }
     found
 }

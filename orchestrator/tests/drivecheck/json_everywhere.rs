@@ -390,7 +390,7 @@ fn every_command_that_prints_a_result_prints_one_json_document() {
                 Ok("true"),
                 "CI=true and no firmware tree for `sitl build --json`"
             );
-            println!("skipped: sitl build --json (no firmware tree)");
+            common::skipped("firmware", "sitl build --json (no firmware tree)");
             tried.insert("sitl build".to_owned());
         }
     }
@@ -460,6 +460,16 @@ fn completions_and_manual_pages_come_from_the_command_line() {
         for word in ["replay", "dry-run"].into_iter().chain(options) {
             assert!(script.contains(word), "{shell}: no {word}");
         }
+        // A scenario completes to the bundled names, and (bash, fish) to files as well.
+        assert!(
+            script.contains("parking-lot-2anchors"),
+            "{shell}: no bundled names"
+        );
+        match shell {
+            "bash" => assert!(script.contains("-- \"${cur}\") $(compgen -f -- \"${cur}\"))")),
+            "fish" => assert!(script.contains("-r -F -a \"")),
+            _ => {}
+        }
     }
     let dir = tempfile::tempdir().unwrap();
     let out = drivecheck(&["man", "--out", path(dir.path())]);
@@ -475,4 +485,32 @@ fn completions_and_manual_pages_come_from_the_command_line() {
         "the run page names its options: {run}"
     );
     assert!(dir.path().join("drivecheck-runs-show.1").exists());
+    // The exit statuses and the environment have sections of their own on the main page, and
+    // no page names a page that is not written (there is no drivecheck-help).
+    for section in [".SH \"EXIT STATUS\"", ".SH ENVIRONMENT"] {
+        assert!(main.contains(section), "no {section}: {main}");
+    }
+    for variable in ["DRIVECHECK_RUNS_DIR", "DRIVECHECK_SITL_CACHE", "RUST_LOG"] {
+        assert!(main.contains(variable), "no {variable}: {main}");
+    }
+    let written: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    for name in &written {
+        let page = std::fs::read_to_string(dir.path().join(name)).unwrap();
+        assert!(!page.contains(".SH EXTRA"), "{name}: {page}");
+        // Every `drivecheck…(1)` a page names (roff writes `-` as `\-`).
+        let page = page.replace("\\-", "-");
+        for (at, _) in page.match_indices("(1)") {
+            let start = page[..at]
+                .rfind(|c: char| !(c.is_ascii_alphanumeric() || c == '-'))
+                .map_or(0, |k| k + 1);
+            let named = &page[start..at];
+            if named.starts_with("drivecheck") {
+                let file = format!("{named}.1");
+                assert!(written.contains(&file), "{name} names {file}, not written");
+            }
+        }
+    }
 }

@@ -169,6 +169,55 @@ fn a_case_from_another_scenario_is_refused_unless_told() {
     assert_eq!(out.status.code(), Some(1), "{}", text(&out));
 }
 
+#[test]
+fn a_case_of_a_scenario_file_replays_from_the_scenario_its_recording_holds() {
+    // A scenario file's campaign: its name is not bundled, so `replay` reads the scenario from
+    // the recording beside the case, as `report` does; without the recording it asks for it.
+    let tmp = tempfile::tempdir().unwrap();
+    let run = campaign(
+        tmp.path(),
+        1,
+        4,
+        &[
+            "--scenario",
+            concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/tests/fixtures/rock-wide-shadow.toml"
+            ),
+            "--no-faults",
+            "--on-failure",
+            "continue",
+        ],
+        1,
+    );
+    let case_file = run.join("case-000.json");
+    let out = drivecheck(&[
+        "replay",
+        path(&case_file),
+        "--out",
+        path(&tmp.path().join("r")),
+    ]);
+    assert!(matches!(out.status.code(), Some(0 | 1)), "{}", text(&out));
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains("reproduced: every segment identical"),
+        "{}",
+        text(&out)
+    );
+    std::fs::remove_file(run.join("campaign.mcap")).unwrap();
+    let out = drivecheck(&[
+        "replay",
+        path(&case_file),
+        "--out",
+        path(&tmp.path().join("s")),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("is not a bundled scenario and no recording beside the case holds it"),
+        "{stderr}"
+    );
+}
+
 /// The first JSON example of docs/case-format.md: a case written by hand.
 fn hand_written_example() -> &'static str {
     include_str!("../../../docs/case-format.md")

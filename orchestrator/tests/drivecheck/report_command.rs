@@ -226,7 +226,10 @@ fn screenshot(page: &Path, png: &Path) -> u64 {
 #[test]
 fn the_report_renders_in_a_browser() {
     if !Path::new(CHROMIUM).exists() {
-        eprintln!("skipped: {CHROMIUM} is not installed (apt-get install chromium)");
+        common::skipped(
+            "chromium",
+            &format!("{CHROMIUM} is not installed (apt-get install chromium)"),
+        );
         return;
     }
     let dir = tempfile::tempdir().unwrap();

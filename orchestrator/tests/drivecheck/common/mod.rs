@@ -25,6 +25,20 @@ pub fn text(output: &Output) -> String {
     )
 }
 
+/// Says that a test skipped a part of itself, and why, where the user sees it: straight to the
+/// process's standard error, which the test harness does not capture (a skip that only
+/// `--nocapture` shows reads as a pass). When `DRIVECHECK_REQUIRE` (a comma-separated list,
+/// which `.ci/run` sets for what it installed) names `what`, the skip is a failure instead.
+pub fn skipped(what: &str, why: &str) {
+    let required = std::env::var("DRIVECHECK_REQUIRE").unwrap_or_default();
+    assert!(
+        !required.split(',').any(|r| r.trim() == what),
+        "{what} is required (DRIVECHECK_REQUIRE={required}) but {why}"
+    );
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr(), "skipped ({what}): {why}");
+}
+
 /// A temporary path as a command-line argument.
 pub fn path(p: &Path) -> &str {
     p.to_str().expect("temporary paths are UTF-8")

@@ -402,16 +402,20 @@ fn the_slurm_job_array_runs_on_a_slurm_cluster_and_its_merge_is_the_unsharded_ru
     .filter(|p| !Path::new(p).exists())
     .collect();
     if !missing.is_empty() {
-        eprintln!(
-            "skipped: {} not installed (apt-get install slurm-wlm munge)",
-            missing.join(", ")
+        common::skipped(
+            "slurm",
+            &format!(
+                "{} not installed (apt-get install slurm-wlm munge)",
+                missing.join(", ")
+            ),
         );
         return;
     }
     if euid() != 0 {
-        eprintln!(
-            "skipped: the Slurm cluster did not start: the test is not root, and its slurmd \
-             runs jobs as root (SlurmdUser=root)"
+        common::skipped(
+            "slurm",
+            "the Slurm cluster did not start: the test is not root, and its slurmd runs jobs \
+             as root (SlurmdUser=root)",
         );
         return;
     }
@@ -421,7 +425,10 @@ fn the_slurm_job_array_runs_on_a_slurm_cluster_and_its_merge_is_the_unsharded_ru
     let cluster = match Cluster::start(&dir.path().join("cluster")) {
         Ok(cluster) => cluster,
         Err(NotStarted::Refused(reason)) => {
-            eprintln!("skipped: the Slurm cluster did not start: {reason}");
+            common::skipped(
+                "slurm",
+                &format!("the Slurm cluster did not start: {reason}"),
+            );
             return;
         }
         Err(NotStarted::Failed(reason)) => panic!("the Slurm cluster did not start: {reason}"),
