@@ -509,3 +509,70 @@ fn scenario_export_writes_longitude_latitude_around_an_origin() {
         String::from_utf8_lossy(&said.stderr)
     );
 }
+
+/// Every bundled scenario exported for QGIS (WGS84, around an origin) is valid RFC 7946 GeoJSON
+/// to an independent validator, `geojson-validator` (PyPI: structure, closed rings, exterior
+/// rings counter-clockwise and holes clockwise, latitudes and longitudes in range), run by
+/// `DRIVECHECK_PYTHON` (which `.ci/run` provides with the package).
+#[test]
+fn every_bundled_scenario_exported_for_qgis_is_valid_rfc_7946_to_an_independent_validator() {
+    let python = std::env::var("DRIVECHECK_PYTHON").unwrap_or_else(|_| "python3".to_owned());
+    let script = r#"
+import json, sys
+import geojson_validator
+for path in sys.argv[1:]:
+    document = json.load(open(path))
+    structure = geojson_validator.validate_structure(document)
+    geometries = geojson_validator.validate_geometries(document)
+    lat_lon = geometries["problematic"].get("outside_lat_lon_boundaries")
+    print(json.dumps({"file": path, "structure": structure, "invalid": geometries["invalid"],
+                      "outside_lat_lon": lat_lon}))
+"#;
+    let dir = tempfile::tempdir().unwrap();
+    let mut files = Vec::new();
+    for name in bundled::names() {
+        let file = dir.path().join(format!("{name}.geojson"));
+        let file = file.to_str().unwrap().to_owned();
+        let out = drivecheck(&[
+            "scenario",
+            "export",
+            name,
+            "--origin",
+            "57.7,11.9,30",
+            "-o",
+            &file,
+        ]);
+        assert_eq!(out.status.code(), Some(0), "{}", common::text(&out));
+        files.push(file);
+    }
+    let run = std::process::Command::new(&python)
+        .args(["-c", script])
+        .args(&files)
+        .output();
+    let Ok(run) = run else {
+        common::skipped("python-geojson", &format!("{python} does not run"));
+        return;
+    };
+    if !run.status.success() {
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        if stderr.contains("No module named") {
+            common::skipped(
+                "python-geojson",
+                &format!("the geojson-validator package is not installed ({python})"),
+            );
+            return;
+        }
+        panic!("geojson-validator failed: {stderr}");
+    }
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    let results: Vec<serde_json::Value> = stdout
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(results.len(), files.len(), "{stdout}");
+    for result in &results {
+        assert_eq!(result["structure"], serde_json::json!({}), "{result}");
+        assert_eq!(result["invalid"], serde_json::json!({}), "{result}");
+        assert!(result["outside_lat_lon"].is_null(), "{result}");
+    }
+}
