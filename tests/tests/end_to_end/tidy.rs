@@ -56,14 +56,33 @@ fn is_test_file(file: &str) -> bool {
         || file.contains("/tests/")
 }
 
-/// The code lines of `text` with their numbers: comments and the `#[cfg(test)]` module at the
-/// end of a file left out.
-fn code_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
-    text.lines()
-        .enumerate()
-        .take_while(|(_, line)| line.trim() != "#[cfg(test)]")
-        .filter(|(_, line)| !line.trim_start().starts_with("//"))
-        .map(|(i, line)| (i + 1, line))
+/// The code lines of `text` with their numbers: comments and every `#[cfg(test)]` item (a test
+/// module, a test-only `use` or function) left out — only the item, so that code after a test
+/// module is still read (by its braces: the item ends where they balance, or at its `;`).
+fn code_lines(text: &str) -> Vec<(usize, &str)> {
+    let mut lines = Vec::new();
+    let (mut in_test_item, mut depth) = (false, 0i64);
+    for (i, line) in text.lines().enumerate() {
+        let trimmed = line.trim();
+        if !in_test_item && trimmed == "#[cfg(test)]" {
+            (in_test_item, depth) = (true, 0);
+            continue;
+        }
+        if in_test_item {
+            let opens = line.matches('{').count() as i64;
+            let closes = line.matches('}').count() as i64;
+            depth += opens - closes;
+            let attribute = trimmed.starts_with("#[");
+            if !attribute && depth <= 0 && (closes > 0 || trimmed.ends_with(';')) {
+                in_test_item = false;
+            }
+            continue;
+        }
+        if !trimmed.starts_with("//") {
+            lines.push((i + 1, line));
+        }
+    }
+    lines
 }
 
 /// The lines of the files under `dirs` (test files left out unless `tests`) on which `forbidden`
