@@ -2,7 +2,10 @@
  * drivecheck SITL shim: a ChibiOS/RT 3.x API subset on one virtual CPU in virtual time.
  * Written for drivecheck (MIT OR Apache-2.0); no ChibiOS code.
  *
- * Threads are ucontext coroutines. One runs at a time, until it sleeps or blocks (cooperative:
+ * Threads are coroutines, each on a stack of its own: entered the first time with makecontext/
+ * swapcontext, switched afterwards with _setjmp/_longjmp, which unlike swapcontext save and
+ * restore no signal mask (two system calls a switch, most of the executable's time once the
+ * firmware's threads switch thousands of times a virtual second). One runs at a time, until it sleeps or blocks (cooperative:
  * there is no preemption by time slice; a thread woken by another of higher priority runs as
  * soon as the waking thread blocks or yields, and a thread that readies one of higher priority
  * yields to it). Ready threads run in priority order, FIFO within a priority. Virtual time is
@@ -10,11 +13,15 @@
  * or virtual timer, never past the target. Same inputs, same run.
  */
 #define _GNU_SOURCE
+/* _FORTIFY_SOURCE's longjmp checks that the stack it jumps to is above the current one, which a
+ * switch between coroutine stacks is not by design. */
+#undef _FORTIFY_SOURCE
 #include "sitl.h"
 
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <setjmp.h>
 #include <ucontext.h>
 
 #define SITL_STACK_SIZE (256u * 1024u)
@@ -22,7 +29,9 @@
 enum wait_kind { W_NONE, W_SLEEP, W_MTX, W_EVT, W_SEM, W_FINAL };
 
 struct sitl_thread_priv {
-  ucontext_t uc;
+  ucontext_t uc;  /* its first entry */
+  jmp_buf jb;     /* where it left off, once it ran */
+  bool started;
   void *stack;
   tfunc_t fn;
   void *arg;
@@ -49,7 +58,8 @@ static thread_t *ready_head;   /* sorted: priority desc, then seq asc */
 static thread_t *timed_head;   /* sorted: wake_us asc, then seq asc */
 static thread_t *reg_head, *reg_tail;
 static virtual_timer_t *vt_head; /* sorted: due asc, then seq asc */
-static ucontext_t sched_uc;
+static ucontext_t sched_uc; /* the scheduler, while a thread runs for the first time */
+static jmp_buf sched_jb;    /* the scheduler, while a thread runs */
 static uint64_t switches;
 
 uint64_t sitl_rt_now_us(void) { return now_us; }
@@ -145,7 +155,7 @@ static void need_thread(const char *what) {
 static void block_current(void) {
   thread_t *self = current;
   current = NULL;
-  swapcontext(&self->priv->uc, &sched_uc);
+  if (!_setjmp(self->priv->jb)) _longjmp(sched_jb, 1);
 }
 
 /* A thread made ready by the current thread: it runs first if its priority is higher. */
@@ -502,7 +512,13 @@ static void run_ready(void) {
     tp->p_state = CH_STATE_CURRENT;
     current = tp;
     switches++;
-    swapcontext(&sched_uc, &tp->priv->uc);
+    if (!_setjmp(sched_jb)) {
+      if (tp->priv->started) {
+        _longjmp(tp->priv->jb, 1);
+      }
+      tp->priv->started = true;
+      swapcontext(&sched_uc, &tp->priv->uc);
+    }
     current = NULL;
   }
 }
