@@ -113,12 +113,25 @@ static float get_f32(const uint8_t *p) {
   return f;
 }
 
+/* The host's frames, read from stdin as many at a time as have arrived (the host writes a
+ * step's frames at once): one read(2) a step instead of two a frame. */
+static uint8_t inbuf[1 << 16];
+static size_t in_pos, in_len;
+
 static bool read_exact(uint8_t *buf, size_t n) {
   size_t got = 0;
   while (got < n) {
-    ssize_t r = read(0, buf + got, n - got);
-    if (r <= 0) return false;
-    got += (size_t)r;
+    if (in_pos == in_len) {
+      ssize_t r = read(0, inbuf, sizeof inbuf);
+      if (r <= 0) return false;
+      in_pos = 0;
+      in_len = (size_t)r;
+    }
+    size_t take = in_len - in_pos;
+    if (take > n - got) take = n - got;
+    memcpy(buf + got, inbuf + in_pos, take);
+    in_pos += take;
+    got += take;
   }
   return true;
 }
