@@ -186,6 +186,9 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         OutDir::Resumed(_) => runner::claim_run_dir_again(&out)?,
         _ => runner::claim_out_dir(&out, made)?,
     };
+    // What a process killed while writing it left (`kill -9`: a temporary file of a case file
+    // or of campaign.json) is nobody's: removed, with a note.
+    super::signals::note_leftovers(runner::scratch::clear_leftovers(&out));
     if let Some(file) = &args.junit {
         super::case_input::check_output_file("--junit", file, &out)?;
     }
