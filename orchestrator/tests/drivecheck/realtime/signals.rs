@@ -361,6 +361,23 @@ fn explain_score_interrupted_in_its_counterfactual_runs_says_so_and_exits_2() {
     assert!(!scratch.exists(), "{said}");
 }
 
+/// `twin check` interrupted by SIGINT (#51 item 12 d): it said the case "cannot be driven
+/// again"; now it says it was interrupted and exits 2, writing no `twin.json`.
+#[test]
+fn an_interrupted_twin_check_says_interrupted_and_does_not_blame_the_case() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = recorded_run(dir.path(), "2", &[]);
+    let (code, said, _) = interrupt_when_paused(
+        &["twin", "check", path(&run), "--runs", "1"],
+        "twin:0",
+        "INT",
+    );
+    assert_eq!(code, Some(2), "{said}");
+    assert!(said.contains("interrupted by a signal"), "{said}");
+    assert!(!said.contains("cannot be driven again"), "{said}");
+    assert!(!run.join("twin.json").exists(), "{said}");
+}
+
 /// Under `nohup` (SIGHUP ignored when drivecheck starts) a hangup is ignored, as `nohup` asks;
 /// SIGINT still interrupts.
 #[test]
