@@ -159,8 +159,11 @@ impl Link {
     ///
     /// The reply port is bound on the local address that reaches the car (the loopback address for a
     /// car on loopback, else the address of the interface the system routes the car's address
-    /// through), never on every interface; and only datagrams from the car's address *and* port are
-    /// accepted: anyone else's, another program's on the car's host included, is ignored.
+    /// through), never on every interface, and the socket is connected to the car's address and
+    /// port, so that the system itself drops every other datagram (checked again on receipt):
+    /// anyone else's, another program's on the car's host included, never reaches the client. A
+    /// car not listening yet (the system reports *connection refused* on a connected socket) is
+    /// no error: its replies are waited for as before.
     ///
     /// Timeout: name resolution and binding are not timed. Cancellation: dropping the future is harmless.
     pub async fn udp(host: &str, port: u16, reply_port: u16) -> io::Result<Link> {
@@ -171,10 +174,12 @@ impl Link {
                 io::Error::new(io::ErrorKind::NotFound, format!("no address for {host}"))
             })?;
         let local = SocketAddr::new(local_ip_towards(car).await?, reply_port);
-        let socket = Arc::new(UdpSocket::bind(local).await?);
+        let socket = UdpSocket::bind(local).await?;
+        socket.connect(car).await?;
+        let socket = Arc::new(socket);
         let (out_tx, out_rx) = mpsc::channel(SEND_QUEUE);
         let (in_tx, in_rx) = mpsc::channel(SEND_QUEUE);
-        let write_task = tokio::spawn(send_datagrams(socket.clone(), car, out_rx, in_tx.clone()));
+        let write_task = tokio::spawn(send_datagrams(socket.clone(), out_rx, in_tx.clone()));
         let read_task = tokio::spawn(receive_datagrams(socket, car, in_tx));
         Ok(Link {
             outgoing: out_tx,
@@ -345,16 +350,24 @@ async fn local_ip_towards(car: SocketAddr) -> io::Result<IpAddr> {
 
 async fn send_datagrams(
     socket: Arc<UdpSocket>,
-    car: SocketAddr,
     mut outgoing: mpsc::Receiver<Bytes>,
     incoming: mpsc::Sender<Incoming>,
 ) {
     while let Some(payload) = outgoing.recv().await {
-        if let Err(error) = socket.send_to(&payload, car).await {
-            let _ = incoming
-                .send(Incoming::Closed(format!("UDP send failed: {error}")))
-                .await;
-            return;
+        match socket.send(&payload).await {
+            Ok(_) => continue,
+            // An earlier datagram found no one at the car's port (ICMP port unreachable, reported
+            // on the connected socket): the car may start listening later.
+            Err(error) if error.kind() == io::ErrorKind::ConnectionRefused => {
+                tracing::debug!(%error, "the car's port refused a datagram");
+                continue;
+            }
+            Err(error) => {
+                let _ = incoming
+                    .send(Incoming::Closed(format!("UDP send failed: {error}")))
+                    .await;
+                return;
+            }
         }
     }
 }
@@ -374,6 +387,10 @@ async fn receive_datagrams(
                 }
             }
             Ok((_, from)) => tracing::debug!(%from, "datagram from a stranger ignored"),
+            // A datagram sent found no one at the car's port yet (see `Link::udp`).
+            Err(error) if error.kind() == io::ErrorKind::ConnectionRefused => {
+                tracing::debug!(%error, "the car's port refused a datagram");
+            }
             Err(error) => {
                 let _ = incoming
                     .send(Incoming::Closed(format!("UDP receive failed: {error}")))

@@ -359,10 +359,12 @@ pub struct RunArgs {
     #[arg(long)]
     pub realtime: bool,
     /// The safety monitor brakes when no state sample came for this long (raised further when
-    /// the measured link jitter demands it; at most 1.9 s, under the car's 2 s watchdog). Raise
-    /// it on lossy links.
-    #[arg(long, value_name = "DURATION", default_value = "250ms", value_parser = humantime::parse_duration)]
-    pub stale_after: std::time::Duration,
+    /// the measured link jitter demands it; at most 1.9 s, under the car's 2 s watchdog). The
+    /// default, 500 ms, is well above the gaps of a loaded host (about 300 ms) and below the 1 s
+    /// of route the streaming keeps ahead of the car (docs/method.md, Safety). Raise it on lossy
+    /// links.
+    #[arg(long, value_name = "DURATION", default_value = "500ms", value_parser = TypedDuration::parse)]
+    pub stale_after: TypedDuration,
     /// After a segment fails the oracle: `stop` the test there (safe stop, then the next test) or
     /// `continue` driving it and record every segment (default: `stop`, or with --cases-from
     /// the earlier run's policy).
@@ -1335,5 +1337,68 @@ mod tests {
         );
         assert_eq!(args.link_loss, Some(0.02));
         assert!(args.listen.ip().is_loopback());
+    }
+}
+
+/// A duration as the user typed it: its value and its text, so that an error about it says a
+/// limit in the unit typed (`--stale-after 5s`: "at most 1.9 s").
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TypedDuration {
+    /// The duration.
+    pub value: std::time::Duration,
+    /// As typed.
+    pub text: String,
+}
+
+impl TypedDuration {
+    /// Reads a duration as `humantime` does (`500ms`, `1.5s` is not one: `1s 500ms`).
+    pub fn parse(text: &str) -> Result<Self, humantime::DurationError> {
+        Ok(Self {
+            value: humantime::parse_duration(text)?,
+            text: text.to_owned(),
+        })
+    }
+
+    /// `duration` in the unit of the last number typed: `1.9 s` for `5s`, `1900 ms` for
+    /// `3000ms`, `0.031667 min` for `1min` (seconds when the text names no unit).
+    pub fn in_typed_units(&self, duration: std::time::Duration) -> String {
+        let unit: String = {
+            let reversed: String = self
+                .text
+                .trim()
+                .chars()
+                .rev()
+                .take_while(|c| c.is_alphabetic())
+                .collect();
+            reversed.chars().rev().collect()
+        };
+        let (seconds, name) = match unit.as_str() {
+            "nsec" | "ns" => (1e-9, "ns"),
+            "usec" | "us" | "µs" => (1e-6, "µs"),
+            "msec" | "ms" => (1e-3, "ms"),
+            "min" | "mins" | "minute" | "minutes" | "m" => (60.0, "min"),
+            "hr" | "hrs" | "hour" | "hours" | "h" => (3600.0, "h"),
+            _ => (1.0, "s"),
+        };
+        let value = format!("{:.6}", duration.as_secs_f64() / seconds);
+        let value = value.trim_end_matches('0').trim_end_matches('.');
+        format!("{value} {name}")
+    }
+}
+
+#[cfg(test)]
+mod typed_duration_tests {
+    use super::TypedDuration;
+    use std::time::Duration;
+
+    #[test]
+    fn a_limit_is_said_in_the_unit_typed() {
+        let limit = Duration::from_millis(1900);
+        let said = |text: &str| TypedDuration::parse(text).unwrap().in_typed_units(limit);
+        assert_eq!(said("5s"), "1.9 s");
+        assert_eq!(said("3000ms"), "1900 ms");
+        assert_eq!(said("1min"), "0.031667 min");
+        assert_eq!(said("2s 500ms"), "1900 ms");
+        assert_eq!(said("4 seconds"), "1.9 s");
     }
 }

@@ -26,7 +26,8 @@ use std::process::ExitCode;
 /// 2 is every error: a command line that does not parse (as clap's own status), a scenario or
 /// case file that cannot be read or is invalid (so `scenario check` of an invalid scenario), a
 /// case refused (another scenario, faults that cannot act), a lost link, a car that refused the
-/// preflight, a recording that could not be written, a campaign interrupted by a signal.
+/// preflight, a recording that could not be written, a command interrupted by a signal (SIGINT,
+/// SIGTERM, SIGHUP; `commands::signals`).
 ///
 /// `shrink` of a case that does not fail the same way every time exits 1, not 2: nothing went
 /// wrong in the tool or its input (the case was read, checked and driven); driving it found that

@@ -37,6 +37,8 @@ where
     });
     // After the verbosity: a `RUST_LOG` that cannot be read is a warning (not with `-q`).
     log_as_rust_log_says();
+    // Before the command: a signal ends any command as `interrupted` says, or as it handles it.
+    crate::commands::signals::listen_for_the_process();
     match crate::commands::run(cli) {
         Ok(exit) => exit,
         Err(error) => {
@@ -44,6 +46,17 @@ where
             Exit::Error
         }
     }
+}
+
+/// Ends the process for the signal `signal` (its name, `interrupted (SIGINT)`) while no command
+/// handles signals (a command that reads and writes files: `report`, `runs merge`, `explain`, …;
+/// `commands::signals`): its scratch files removed (`runner::scratch::remove_all`: what it was
+/// writing is not left half written), `error: interrupted (SIGINT): …` said, status 2 as every
+/// command interrupted by a signal ([`Exit::Error`]).
+pub(crate) fn interrupted(signal: &str) -> ! {
+    let _held = runner::scratch::remove_all();
+    eprintln!("error: {signal}: stopped before its end; nothing it was writing was left behind");
+    Exit::Error.exit()
 }
 
 /// Diagnostics (`tracing`: the car link's events, the runner's steps) go to standard error as

@@ -25,6 +25,11 @@ const SDK_SUBPROTOCOL: &str = "foxglove.sdk.v1";
 const WS_SUBPROTOCOL: &str = "foxglove.websocket.v1";
 /// The largest HTTP upgrade request the live view reads.
 const MAX_HANDSHAKE: usize = 16 * 1024;
+/// The largest message a viewer may send, bytes (all its fragments): a viewer sends only small
+/// control messages (subscribe, unsubscribe: a few dozen bytes a channel), and the server would
+/// buffer whatever it is sent (a viewer sending 16 MB messages cost 40 MB of memory, #51). A
+/// viewer that sends more is disconnected (a close frame with status 1009, *message too big*).
+pub const MAX_VIEWER_MESSAGE: u64 = 64 * 1024;
 
 /// Where the live view's channels go: a `foxglove` context served by a WebSocket server.
 #[derive(Clone)]
@@ -235,6 +240,11 @@ async fn front_door(mut client: TcpStream, inner: SocketAddr) -> std::io::Result
     let (request, rest) = head.split_at(end);
     let request = String::from_utf8_lossy(request);
     let (request, renamed) = offer_sdk_subprotocol(&request);
+    // What the viewer sent after its request is its first frames: bounded as the rest.
+    let mut limit = FrameLimit::default();
+    if limit.feed(rest).is_err() {
+        return Ok(());
+    }
     let mut server = TcpStream::connect(inner).await?;
     server.write_all(request.as_bytes()).await?;
     server.write_all(rest).await?;
@@ -249,8 +259,112 @@ async fn front_door(mut client: TcpStream, inner: SocketAddr) -> std::io::Result
         client.write_all(answer.as_bytes()).await?;
         client.write_all(rest).await?;
     }
-    tokio::io::copy_bidirectional(&mut client, &mut server).await?;
+    let (mut from_viewer, mut to_viewer) = client.into_split();
+    let (mut from_server, mut to_server) = server.into_split();
+    let upstream = async {
+        let mut buf = vec![0u8; 16 * 1024];
+        loop {
+            let n = from_viewer.read(&mut buf).await?;
+            if n == 0 {
+                return std::io::Result::Ok(false);
+            }
+            if limit.feed(&buf[..n]).is_err() {
+                return Ok(true);
+            }
+            to_server.write_all(&buf[..n]).await?;
+        }
+    };
+    let too_big = tokio::select! {
+        up = upstream => up?,
+        down = tokio::io::copy(&mut from_server, &mut to_viewer) => {
+            down?;
+            false
+        }
+    };
+    if too_big {
+        // Close, status 1009 (message too big); the server's side of the connection is dropped.
+        let _ = to_viewer.write_all(&[0x88, 0x02, 0x03, 0xF1]).await;
+        let _ = to_viewer.shutdown().await;
+    }
     Ok(())
+}
+
+/// A viewer's message above [`MAX_VIEWER_MESSAGE`] (or a frame that is no WebSocket frame).
+#[derive(Debug, PartialEq, Eq)]
+struct TooBig;
+
+/// Follows the WebSocket frames a viewer sends (RFC 6455, section 5.2), as they stream through,
+/// and says when a message is larger than [`MAX_VIEWER_MESSAGE`]: nothing of a frame is held
+/// but its header.
+#[derive(Debug, Default)]
+struct FrameLimit {
+    /// The header being read.
+    header: Vec<u8>,
+    /// Payload bytes of the current frame still to come.
+    payload_left: u64,
+    /// The bytes of the message so far (its fragments).
+    message: u64,
+}
+
+impl FrameLimit {
+    fn feed(&mut self, mut bytes: &[u8]) -> Result<(), TooBig> {
+        while !bytes.is_empty() {
+            if self.payload_left > 0 {
+                let n = self.payload_left.min(bytes.len() as u64);
+                self.payload_left -= n;
+                bytes = &bytes[usize::try_from(n).unwrap_or(bytes.len())..];
+                continue;
+            }
+            self.header.push(bytes[0]);
+            bytes = &bytes[1..];
+            if let Some(len) = self.header_done()? {
+                let opcode = self.header[0] & 0x0F;
+                let fin = self.header[0] & 0x80 != 0;
+                self.header.clear();
+                if opcode >= 0x8 {
+                    // A control frame (close, ping, pong): at most 125 bytes, amid a message.
+                    if len > 125 {
+                        return Err(TooBig);
+                    }
+                } else {
+                    self.message = if opcode == 0 { self.message + len } else { len };
+                    if self.message > MAX_VIEWER_MESSAGE {
+                        return Err(TooBig);
+                    }
+                    if fin {
+                        self.message = 0;
+                    }
+                }
+                self.payload_left = len;
+            }
+        }
+        Ok(())
+    }
+
+    /// The payload length once the header is complete.
+    fn header_done(&self) -> Result<Option<u64>, TooBig> {
+        let h = &self.header;
+        if h.len() < 2 {
+            return Ok(None);
+        }
+        let masked = h[1] & 0x80 != 0;
+        let (extended, len7) = match h[1] & 0x7F {
+            126 => (2, None),
+            127 => (8, None),
+            n => (0, Some(u64::from(n))),
+        };
+        let total = 2 + extended + if masked { 4 } else { 0 };
+        if h.len() < total {
+            return Ok(None);
+        }
+        let len = match len7 {
+            Some(n) => n,
+            None => h[2..2 + extended]
+                .iter()
+                .fold(0u64, |acc, b| (acc << 8) | u64::from(*b)),
+        };
+        Ok(Some(len))
+    }
 }
 
 /// Reads an HTTP head from `stream`: the bytes read and where the head ends (after its empty
@@ -298,6 +412,101 @@ fn offer_sdk_subprotocol(request: &str) -> (String, bool) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A viewer's frame header: `fin`, `opcode`, masked, and the payload length.
+    fn frame(fin: bool, opcode: u8, len: u64) -> Vec<u8> {
+        let mut f = vec![if fin { 0x80 } else { 0 } | opcode];
+        match len {
+            0..=125 => f.push(0x80 | len as u8),
+            126..=0xFFFF => {
+                f.push(0x80 | 126);
+                f.extend_from_slice(&(len as u16).to_be_bytes());
+            }
+            _ => {
+                f.push(0x80 | 127);
+                f.extend_from_slice(&len.to_be_bytes());
+            }
+        }
+        f.extend_from_slice(&[1, 2, 3, 4]);
+        f
+    }
+
+    #[test]
+    fn a_viewer_may_send_small_messages_only() {
+        let mut limit = FrameLimit::default();
+        // A subscribe message, a ping, then a message of two fragments at the limit, fed a byte
+        // at a time as a slow connection gives them.
+        let mut stream = frame(true, 1, 60);
+        stream.extend(vec![b'x'; 60]);
+        stream.extend(frame(true, 9, 4));
+        stream.extend(b"ping");
+        let half = MAX_VIEWER_MESSAGE / 2;
+        for (fin, opcode) in [(false, 2), (true, 0)] {
+            stream.extend(frame(fin, opcode, half));
+            stream.extend(vec![0u8; half as usize]);
+        }
+        for byte in &stream {
+            assert_eq!(limit.feed(std::slice::from_ref(byte)), Ok(()));
+        }
+        // One byte more in a message, in one frame or over fragments, is too much.
+        let mut one = FrameLimit::default();
+        assert_eq!(one.feed(&frame(true, 2, MAX_VIEWER_MESSAGE + 1)), Err(TooBig));
+        let mut fragments = FrameLimit::default();
+        let mut stream = frame(false, 1, half);
+        stream.extend(vec![0u8; half as usize]);
+        assert_eq!(fragments.feed(&stream), Ok(()));
+        assert_eq!(fragments.feed(&frame(true, 0, half + 1)), Err(TooBig));
+        // 16 MB announced: refused at its header, before any of it is read.
+        assert_eq!(
+            FrameLimit::default().feed(&frame(true, 2, 16 << 20)),
+            Err(TooBig)
+        );
+        assert_eq!(FrameLimit::default().feed(&frame(true, 9, 126)), Err(TooBig));
+    }
+
+    /// A viewer that sends a 16 MB message is disconnected at its header (#51): the server
+    /// never buffers it.
+    #[tokio::test]
+    async fn a_viewer_sending_a_huge_message_is_disconnected() {
+        let (_view, server) = LiveView::start(SocketAddr::from(([127, 0, 0, 1], 0)))
+            .await
+            .expect("the live view starts");
+        let mut client = TcpStream::connect(("127.0.0.1", server.port()))
+            .await
+            .expect("connects");
+        client
+            .write_all(
+                b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\n\
+                  Connection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n\
+                  Sec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: foxglove.websocket.v1\r\n\r\n",
+            )
+            .await
+            .unwrap();
+        let (head, _) = read_head(&mut client).await.unwrap().expect("an answer");
+        assert!(
+            String::from_utf8_lossy(&head).starts_with("HTTP/1.1 101"),
+            "{}",
+            String::from_utf8_lossy(&head)
+        );
+        client.write_all(&frame(true, 2, 16 << 20)).await.unwrap();
+        // The connection ends (after a close frame 1009, and what the server had sent before).
+        let mut received = Vec::new();
+        let ended = tokio::time::timeout(std::time::Duration::from_secs(10), async {
+            let mut buf = [0u8; 4096];
+            loop {
+                match client.read(&mut buf).await {
+                    Ok(0) | Err(_) => break,
+                    Ok(n) => received.extend_from_slice(&buf[..n]),
+                }
+            }
+        })
+        .await;
+        assert!(ended.is_ok(), "the viewer is still connected");
+        assert!(
+            received.ends_with(&[0x88, 0x02, 0x03, 0xF1]),
+            "a close frame, message too big"
+        );
+    }
 
     #[test]
     fn only_a_request_offering_the_specifications_name_alone_is_renamed() {

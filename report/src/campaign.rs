@@ -26,6 +26,7 @@ use super::{ReportError, ReportOptions};
 use campaign::coverage::CoverageBuilder;
 use campaign::oracle::Verdict;
 use runner::atomic::Staged;
+use runner::scratch::Scratch;
 
 /// The most test sections one page holds: a failing test's section is about 90 kB (a map and a
 /// plot of up to 2000 samples each), so a page stays under about 10 MB; a campaign with more
@@ -94,7 +95,9 @@ pub fn write(
             threshold,
             true,
         )?;
-        spill.put(index, &html)
+        spill.put(index, &html)?;
+        runner::pause_at("report", index);
+        Ok(())
     };
     let recorded = read_spans(dir, None, &mut notes, |test, recording, recorded, notes| {
         let (scenario, _) = chosen.get_or_insert_with(|| pick(recorded));
@@ -296,32 +299,34 @@ fn remove_stale_pages(pages_dir: &Path, keep: usize) {
 
 /// The sections drawn so far, in a file beside the page (removed when dropped): the recording
 /// gives tests in the order they ended, the page wants them in test order.
+/// The file is this process's scratch (`runner::scratch`): a signal removes it, and one a
+/// `kill -9` left is removed by the next report beside it.
 struct Spill {
     file: File,
     path: PathBuf,
     end: u64,
     at: BTreeMap<usize, (u64, u64)>,
+    _scratch: Scratch,
 }
 
 impl Spill {
     fn create(out: &Path) -> Result<Self, ReportError> {
-        let name = out
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let path = out.with_file_name(format!(".{name}.sections-{}", std::process::id()));
-        let file = File::options()
-            .read(true)
-            .write(true)
-            .create(true)
-            .truncate(true)
-            .open(&path)
-            .map_err(|e| write_error(&path, e))?;
+        let path = runner::scratch::beside(out, "sections");
+        let (scratch, file) = Scratch::create(&path, |path| {
+            File::options()
+                .read(true)
+                .write(true)
+                .create(true)
+                .truncate(true)
+                .open(path)
+        })
+        .map_err(|e| write_error(&path, e))?;
         Ok(Self {
             file,
             path,
             end: 0,
             at: BTreeMap::new(),
+            _scratch: scratch,
         })
     }
 

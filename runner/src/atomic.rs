@@ -1,23 +1,30 @@
 //! Files written whole or not at all: a temporary file beside the target, flushed to disk, then
 //! renamed over it. A full disk, a kill or a crash leaves the old file (or none), never a
-//! truncated one, and no temporary file is left behind by an error.
+//! truncated one, and no temporary file is left behind by an error; the temporary file is this
+//! process's scratch ([`crate::scratch`]: a signal removes it, and one a `kill -9` left is removed
+//! by the next writer into its directory).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use crate::scratch::Scratch;
+
 /// Writes `contents` to `path` atomically (see the module doc).
 pub fn write(path: &Path, contents: impl AsRef<[u8]>) -> std::io::Result<()> {
     let temporary = temporary_beside(path);
+    let (scratch, mut file) = Scratch::create(&temporary, |p| std::fs::File::create(p))?;
     let result = (|| {
-        let mut file = std::fs::File::create(&temporary)?;
         file.write_all(contents.as_ref())?;
-        file.sync_all()?;
-        std::fs::rename(&temporary, path)
+        file.sync_all()
     })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&temporary);
-    }
-    result
+    drop(file);
+    scratch.settle(|| {
+        let result = result.and_then(|()| std::fs::rename(&temporary, path));
+        if result.is_err() {
+            let _ = std::fs::remove_file(&temporary);
+        }
+        result
+    })
 }
 
 /// A file written piece by piece and then put in place whole ([`Staged::commit`]): until then
@@ -27,17 +34,19 @@ pub struct Staged {
     file: Option<std::io::BufWriter<std::fs::File>>,
     temporary: PathBuf,
     path: PathBuf,
+    scratch: Option<Scratch>,
 }
 
 impl Staged {
     /// Starts writing `path` (nothing is at `path` until [`Staged::commit`]).
     pub fn create(path: &Path) -> std::io::Result<Self> {
         let temporary = temporary_beside(path);
-        let file = std::fs::File::create(&temporary)?;
+        let (scratch, file) = Scratch::create(&temporary, |p| std::fs::File::create(p))?;
         Ok(Self {
             file: Some(std::io::BufWriter::with_capacity(1 << 16, file)),
             temporary,
             path: path.to_owned(),
+            scratch: Some(scratch),
         })
     }
 
@@ -46,15 +55,21 @@ impl Staged {
         let Some(file) = self.file.take() else {
             return Ok(());
         };
-        let result = (|| {
+        let written = (|| {
             let file = file.into_inner().map_err(|e| e.into_error())?;
-            file.sync_all()?;
-            std::fs::rename(&self.temporary, &self.path)
+            file.sync_all()
         })();
-        if result.is_err() {
-            let _ = std::fs::remove_file(&self.temporary);
+        let settle = || {
+            let result = written.and_then(|()| std::fs::rename(&self.temporary, &self.path));
+            if result.is_err() {
+                let _ = std::fs::remove_file(&self.temporary);
+            }
+            result
+        };
+        match self.scratch.take() {
+            Some(scratch) => scratch.settle(settle),
+            None => settle(),
         }
-        result
     }
 }
 
@@ -84,11 +99,7 @@ impl Drop for Staged {
 
 /// `.<name>.tmp-<pid>` in the same directory (a rename within one file system is atomic).
 fn temporary_beside(path: &Path) -> PathBuf {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    path.with_file_name(format!(".{name}.tmp-{}", std::process::id()))
+    crate::scratch::beside(path, "tmp")
 }
 
 #[cfg(test)]

@@ -53,6 +53,7 @@ mod pause;
 mod preflight;
 mod reset;
 mod run_dir;
+pub mod scratch;
 pub mod session_end;
 pub mod simdrive;
 pub mod store;
@@ -88,7 +89,7 @@ pub use events::{CampaignObserver, Silent};
 pub use fresh::SPAN_GAP_NS;
 pub use fresh::{SameTest, run_campaign_fresh, start_of_test};
 pub use lab::{LabCar, run_campaign_on_cars};
-pub use pause::PAUSE_ENV;
+pub use pause::{PAUSE_ENV, note_signal, pause_at};
 pub use run_dir::{
     CAMPAIGN_FILE, CampaignReport, DEFAULT_RUNS_DIR, RECORDING_FILE, RUNS_DIR_ENV, TestSummary,
     runs_root,

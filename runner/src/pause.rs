@@ -8,6 +8,11 @@
 //! has it (the crate's tests and the `drivecheck` package's, through its dev-dependency); in any
 //! other build, the `drivecheck` a user installs among them, [`pause`] does nothing.
 //!
+//! `DRIVECHECK_PAUSE=PLACE:K` pauses a command that reads (`report:K` once test K's section is
+//! drawn, `merge:K` once test K's case is merged, `counterfactual:K` and `twin:K` before the K-th
+//! case is driven again) until a signal comes ([`note_signal`]) or 60 s pass
+//! ([`pause_at`]), saying `drivecheck: paused in PLACE at K` first.
+//!
 //! The pause blocks its thread: the test's own thread on the embedded simulator, a worker of the
 //! multi-threaded runtime on a car behind a link; the signals are served on another.
 
@@ -54,6 +59,34 @@ pub fn pause(at: At, test_index: usize, cancel: &CancellationToken) {
     eprintln!("drivecheck: paused {place} test {test_index}");
     let until = Instant::now() + Duration::from_secs(60);
     while !cancel.is_cancelled() && Instant::now() < until {
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// Whether a signal came ([`note_signal`]).
+static SIGNALLED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// The command line says a signal came: a pause of [`pause_at`] ends.
+pub fn note_signal() {
+    SIGNALLED.store(true, std::sync::atomic::Ordering::SeqCst);
+}
+
+/// Without the `test-hooks` feature: nothing.
+#[cfg(not(feature = "test-hooks"))]
+pub fn pause_at(_place: &str, _k: usize) {}
+
+/// Pauses here when `DRIVECHECK_PAUSE` is `PLACE:K` (see the module doc).
+#[cfg(feature = "test-hooks")]
+pub fn pause_at(place: &str, k: usize) {
+    let Ok(value) = std::env::var(PAUSE_ENV) else {
+        return;
+    };
+    if value.split_once(':') != Some((place, &k.to_string())) {
+        return;
+    }
+    eprintln!("drivecheck: paused in {place} at {k}");
+    let until = Instant::now() + Duration::from_secs(60);
+    while !SIGNALLED.load(std::sync::atomic::Ordering::SeqCst) && Instant::now() < until {
         std::thread::sleep(Duration::from_millis(5));
     }
 }

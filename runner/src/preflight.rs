@@ -141,7 +141,7 @@ impl Preflight {
 /// rtt_p50)`: the median is not thrown off by one odd sample as the minimum is), and
 /// lost requests or replies, each of which leaves out one sample; the limit tolerates
 /// [`LOST_IN_A_ROW`] of them in a row. On the 4G-like link drivecheck is tested against (150 ms
-/// + up to 40 ms each way, 2 % loss) this is about 230 ms, so the default 250 ms holds.
+/// + up to 40 ms each way, 2 % loss) this is about 230 ms, so the default 500 ms holds.
 pub fn stale_limit(
     configured: Duration,
     state_period: Duration,
@@ -339,7 +339,7 @@ mod tests {
     use super::*;
 
     const PERIOD: Duration = Duration::from_millis(50);
-    const DEFAULT: Duration = Duration::from_millis(250);
+    const DEFAULT: Duration = campaign::safety::DEFAULT_STALE_AFTER;
 
     fn ms(ms: u64) -> Duration {
         Duration::from_millis(ms)
@@ -379,7 +379,8 @@ mod tests {
 
     #[test]
     fn jitter_raises_the_stale_limit_up_to_below_the_watchdog() {
-        assert_eq!(stale_limit(DEFAULT, PERIOD, ms(250), ms(400)), ms(450));
+        assert_eq!(stale_limit(DEFAULT, PERIOD, ms(250), ms(400)), DEFAULT);
+        assert_eq!(stale_limit(DEFAULT, PERIOD, ms(250), ms(500)), ms(650));
         assert_eq!(
             stale_limit(DEFAULT, PERIOD, ms(100), ms(5000)),
             MAX_STALE_LIMIT

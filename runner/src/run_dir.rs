@@ -731,6 +731,8 @@ impl Drop for OutClaim {
 pub struct Staged {
     staging: PathBuf,
     out: PathBuf,
+    /// The staging directory is this process's scratch (`crate::scratch`): a signal removes it.
+    scratch: Option<crate::scratch::Scratch>,
 }
 
 impl Staged {
@@ -749,14 +751,17 @@ impl Staged {
         let name = out
             .file_name()
             .map_or_else(|| "run".to_owned(), |n| n.to_string_lossy().into_owned());
-        let staging = claim_run_dir(&parent, &format!(".{name}.staging-{}", std::process::id()))
-            .map_err(|source| RunError::Io {
-                path: parent.clone(),
-                source,
-            })?;
+        let (scratch, staging) = crate::scratch::Scratch::create_named(|| {
+            claim_run_dir(&parent, &format!(".{name}.staging-{}", std::process::id()))
+        })
+        .map_err(|source| RunError::Io {
+            path: parent.clone(),
+            source,
+        })?;
         Ok(Self {
             staging,
             out: out.to_owned(),
+            scratch: Some(scratch),
         })
     }
 
@@ -766,8 +771,12 @@ impl Staged {
     }
 
     /// Moves the complete directory into place.
-    pub fn commit(self) -> Result<(), RunError> {
-        match std::fs::rename(&self.staging, &self.out) {
+    pub fn commit(mut self) -> Result<(), RunError> {
+        let renamed = match self.scratch.take() {
+            Some(scratch) => scratch.settle(|| std::fs::rename(&self.staging, &self.out)),
+            None => std::fs::rename(&self.staging, &self.out),
+        };
+        match renamed {
             Ok(()) => {
                 std::mem::forget(self);
                 Ok(())

@@ -105,3 +105,51 @@ async fn the_codec_reports_garbage_and_keeps_decoding_until_the_end() {
     assert_eq!(&frames[0].payload[..], &[0x01, 0x78]);
     assert!(items.iter().all(|i| i.is_ok()), "no I/O errors: {items:?}");
 }
+
+/// A free UDP port on loopback (bound and let go).
+async fn free_udp_port() -> u16 {
+    let socket = tokio::net::UdpSocket::bind("127.0.0.1:0").await.expect("bind");
+    socket.local_addr().expect("address").port()
+}
+
+/// The UDP link's socket is connected to the car (#51 item 12 a): a car that is not listening
+/// yet (the system answers the first datagrams with *connection refused*) closes nothing, its
+/// replies come through once it listens, and a spoofer's datagrams from another port of the
+/// car's host never do.
+#[tokio::test]
+async fn a_udp_link_waits_for_a_car_not_listening_yet_and_hears_only_the_car() {
+    let (car_port, reply_port) = (free_udp_port().await, free_udp_port().await);
+    let mut link = Link::udp("127.0.0.1", car_port, reply_port)
+        .await
+        .expect("the link");
+    // Nobody at the car's port: each datagram is refused (ICMP port unreachable).
+    for _ in 0..3 {
+        link.send(bytes::Bytes::from_static(b"early")).await.expect("queued");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let car = tokio::net::UdpSocket::bind(("127.0.0.1", car_port))
+        .await
+        .expect("the car listens");
+    let spoofer = tokio::net::UdpSocket::bind("127.0.0.1:0").await.expect("bind");
+    spoofer
+        .send_to(b"spoofed", ("127.0.0.1", reply_port))
+        .await
+        .expect("sent");
+    link.send(bytes::Bytes::from_static(b"hello")).await.expect("queued");
+    let mut buf = [0u8; 64];
+    let (n, from) = tokio::time::timeout(Duration::from_secs(5), car.recv_from(&mut buf))
+        .await
+        .expect("the car hears the link")
+        .expect("received");
+    assert_eq!(&buf[..n], b"hello");
+    assert_eq!(from.port(), reply_port);
+    spoofer
+        .send_to(b"spoofed", ("127.0.0.1", reply_port))
+        .await
+        .expect("sent");
+    car.send_to(b"reply", from).await.expect("sent");
+    match tokio::time::timeout(Duration::from_secs(5), link.recv()).await {
+        Ok(Some(Incoming::Payload(payload))) => assert_eq!(&payload[..], b"reply"),
+        other => panic!("expected the car's reply, got {other:?}"),
+    }
+}

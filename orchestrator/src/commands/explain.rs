@@ -170,9 +170,12 @@ fn counterfactual(
     let sim = profile.sim_config(scenario)?;
     let scratch =
         std::env::temp_dir().join(format!("drivecheck-counterfactual-{}", std::process::id()));
+    // A signal's second coming ends the process: the scratch directory goes with it.
+    let _registered = runner::scratch::Scratch::register(&scratch);
     let runtime = runtime(true)?;
     let cancel = runtime.block_on(async { cancel_on_ctrl_c() });
-    let result = pending.iter().try_for_each(|path| {
+    let result = pending.iter().enumerate().try_for_each(|(k, path)| {
+        runner::pause_at("counterfactual", k);
         let case = read_case_file(path)?;
         let seed = case.campaign_seed.unwrap_or_default();
         let mut driver = SimDriver::new(
@@ -191,8 +194,15 @@ fn counterfactual(
             .map(|s| &mut s.score)
             .collect();
         settle(&case, &mut of_case, |variant| {
-            let driven = runtime.block_on(driver.drive_all(variant, &settings))?;
-            anyhow::Ok(driven.into_iter().map(|(_, case)| case).collect())
+            let driven = runtime.block_on(driver.drive_all(variant, &settings));
+            // A run cut off by the signal is no run: nothing is settled with it.
+            if cancel.is_cancelled() {
+                return Err(super::signals::Interrupted(
+                    "the counterfactual runs did not end; nothing was scored",
+                )
+                .into());
+            }
+            anyhow::Ok(driven?.into_iter().map(|(_, case)| case).collect())
         })
     });
     let _ = std::fs::remove_dir_all(&scratch);

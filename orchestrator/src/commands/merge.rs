@@ -119,6 +119,7 @@ pub fn merge(
     };
     // Built aside and moved into place when complete: a shard that fails half way leaves nothing
     // at `out` that `drivecheck runs` would take for a campaign.
+    super::signals::note_leftovers(runner::scratch::clear_leftovers_of(out));
     let staged = Staged::beside(out)?;
     let mut dir = RunDirectory::merged(staged.dir().to_owned(), record, &scenario)?;
     dir.add_cars(merged_cars(&shards));
@@ -298,6 +299,7 @@ fn write_cases(
             );
         }
         dir.write_case(&case)?;
+        runner::pause_at("merge", test_index);
         verdicts.push(case.verdict);
     }
     Ok(verdicts)

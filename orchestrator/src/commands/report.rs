@@ -42,6 +42,23 @@ pub(super) fn write(
     scenario: Option<&scenarios::Scenario>,
     options: &ReportOptions,
 ) -> Result<()> {
+    // What a report or a campaign killed while writing left here (`kill -9`: the sections put
+    // aside, a temporary file) is nobody's: removed, with a note.
+    let ours = [
+        runner::CAMPAIGN_FILE,
+        campaign::replay::REPLAY_FILE,
+        campaign::shrink::SHRINK_FILE,
+    ]
+    .iter()
+    .any(|file| dir.join(file).is_file());
+    if ours {
+        super::signals::note_leftovers(runner::scratch::clear_leftovers(dir));
+    }
+    super::signals::note_leftovers(runner::scratch::clear_leftovers_of(out));
+    let pages = out.with_extension("");
+    if pages.is_dir() {
+        super::signals::note_leftovers(runner::scratch::clear_leftovers(&pages));
+    }
     let written = report::write(dir, out, scenario, options)?;
     let items = match written.kind {
         ReportKind::Campaign if written.pages > 0 => format!(

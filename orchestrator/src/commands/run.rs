@@ -118,13 +118,14 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     let cases = source
         .map(|source| source.check(&scenario, &campaign))
         .transpose()?;
-    if args.stale_after.is_zero() || args.stale_after > MAX_STALE_LIMIT {
+    let stale = &args.stale_after;
+    if stale.value.is_zero() || stale.value > MAX_STALE_LIMIT {
         anyhow::bail!(
             "--stale-after {}: must be above 0 and at most {} (the car's watchdog brakes after {} \
              without commands)",
-            humantime::format_duration(args.stale_after),
-            humantime::format_duration(MAX_STALE_LIMIT),
-            humantime::format_duration(WATCHDOG),
+            stale.text,
+            stale.in_typed_units(MAX_STALE_LIMIT),
+            stale.in_typed_units(WATCHDOG),
         );
     }
     if args.dry_run {
@@ -186,11 +187,14 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         OutDir::Resumed(_) => runner::claim_run_dir_again(&out)?,
         _ => runner::claim_out_dir(&out, made)?,
     };
+    // What a process killed while writing it left (`kill -9`: a temporary file of a case file
+    // or of campaign.json) is nobody's: removed, with a note.
+    super::signals::note_leftovers(runner::scratch::clear_leftovers(&out));
     if let Some(file) = &args.junit {
         super::case_input::check_output_file("--junit", file, &out)?;
     }
     let mut config = RunConfig::new(campaign, out, car_label.clone());
-    config.safety.stale_after = args.stale_after;
+    config.safety.stale_after = args.stale_after.value;
     config.policy = settings.policy;
     config.tests = cases.map_or(Tests::Generated, |(cases, _)| Tests::Cases(cases));
     config.shard = settings.shard;
@@ -317,7 +321,7 @@ fn dry_run(
 ) -> Result<runner::DryRun> {
     let address = &car.address;
     let mut config = RunConfig::new(campaign, std::path::PathBuf::new(), car.given.clone());
-    config.safety.stale_after = args.stale_after;
+    config.safety.stale_after = args.stale_after.value;
     config.shard = args.shard;
     config.tests = cases.map_or(Tests::Generated, |(cases, _)| Tests::Cases(cases));
     async fn check<V: runner::vehicle::Vehicle>(

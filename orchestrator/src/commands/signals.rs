@@ -1,7 +1,15 @@
-//! The async runtime and the signals of a command that drives a car: the first SIGINT (Ctrl-C)
-//! or SIGTERM cancels the campaign (the runner ends the test with its safe stop and the session
-//! with the car disarmed), the second brakes every registered car at once and disarms it (its
-//! faults cleared, fault injection disabled); the embedded simulator's debug view the runner
+//! The signals of every command, and the async runtime of a command that drives a car.
+//!
+//! From the start of the process one thread listens for SIGINT (Ctrl-C), SIGTERM and SIGHUP
+//! ([`listen_for_the_process`]; SIGHUP not when it was ignored as drivecheck started, as `nohup`
+//! ignores it). A command that handles them itself subscribes ([`subscribe`]):
+//! a command that drives a car (the first signal cancels the campaign, the runner ends the test
+//! with its safe stop and the session with the car disarmed; the second brakes every registered
+//! car at once and disarms it: its faults cleared, fault injection disabled), `sim` (a signal
+//! stops the simulated car). While no command subscribes (a command that only reads and writes
+//! files: `report`, `runs merge`, `explain`, `compare`, …) a signal ends the process at once,
+//! its scratch files removed (`runner::scratch`), with status 2 and `error: interrupted (SIGINT)`
+//! (`crate::process::interrupted`). Also here: the embedded simulator's debug view the runner
 //! records.
 
 use std::future::Future;
@@ -107,7 +115,8 @@ const BRAKE_SEND_LIMIT: Duration = Duration::from_millis(500);
 const DISARM_LIMIT: Duration = Duration::from_millis(400);
 
 impl Interrupt {
-    /// Listens for SIGINT, SIGTERM and SIGHUP from now on. Call it inside the runtime.
+    /// Listens for SIGINT, SIGTERM and SIGHUP from now on ([`subscribe`]: a signal that comes
+    /// before the runtime runs the listener waits for it). Call it inside the runtime.
     pub(super) fn listen() -> Self {
         let interrupt = Self {
             cancel: CancellationToken::new(),
@@ -115,9 +124,11 @@ impl Interrupt {
             cars: Arc::default(),
         };
         let listener = interrupt.clone();
+        let mut signals = subscribe();
         tokio::spawn(async move {
-            let mut signals = Signals::new();
-            let first = signals.next().await;
+            let Some(first) = signals.recv().await else {
+                return;
+            };
             let cars = match listener.cars.load(std::sync::atomic::Ordering::SeqCst) {
                 0 | 1 => "the car",
                 _ => "every car",
@@ -126,15 +137,18 @@ impl Interrupt {
                 "{first}: stopping {cars} safely (send it again to brake at once and exit)"
             ));
             listener.cancel.cancel();
-            let second = signals.next().await;
+            let Some(second) = signals.recv().await else {
+                return;
+            };
             output::safety(format_args!("{second} again: braking at once and exiting"));
             listener.brake_now().await;
             listener.disarm_now().await;
             // The test in flight ends at once, aborted; its case, campaign.json and the recording
             // are written in the half second the process still lives (a command that completes
-            // sooner exits sooner).
+            // sooner exits sooner); then the scratch files still being written are removed.
             runner::hard_stop().cancel();
             tokio::time::sleep(HARD_STOP_GRACE).await;
+            let _held = runner::scratch::remove_all();
             crate::exit::Exit::Error.exit();
         });
         interrupt
@@ -252,8 +266,119 @@ fn lock(slot: &Mutex<Option<Registered>>) -> std::sync::MutexGuard<'_, Option<Re
         .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
-/// The signals that stop a command: SIGINT, and on Unix SIGTERM and SIGHUP.
+/// A command that handles signals itself stopped at one before its end (exit status 2, as every
+/// interrupted command): what it did not finish.
+#[derive(Debug, thiserror::Error)]
+#[error("interrupted by a signal: {0}")]
+pub(crate) struct Interrupted(pub &'static str);
+
+/// The subscribers to the signals: the commands handling them now ([`subscribe`]).
+static SUBSCRIBERS: Mutex<Vec<tokio::sync::mpsc::UnboundedSender<&'static str>>> =
+    Mutex::new(Vec::new());
+
+/// The signals from now on, each as its name (`interrupted (SIGINT)`, `terminated (SIGTERM)`,
+/// `hung up (SIGHUP)`), until the receiver is dropped: while a command holds one, a signal is
+/// its to handle (see the module doc). A signal that comes before the receiver is read waits in
+/// it.
+pub(crate) fn subscribe() -> tokio::sync::mpsc::UnboundedReceiver<&'static str> {
+    listen_for_the_process();
+    let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
+    SUBSCRIBERS
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .push(tx);
+    rx
+}
+
+/// Starts the process's one listener for SIGINT, SIGTERM and SIGHUP (once; later calls do
+/// nothing), and returns when the signals are its: from then on a signal hands each to the
+/// commands that [`subscribe`], or, while none does, ends the process
+/// (`crate::process::interrupted`).
+pub(crate) fn listen_for_the_process() {
+    static STARTED: std::sync::Once = std::sync::Once::new();
+    STARTED.call_once(|| {
+        let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+        let spawned = std::thread::Builder::new()
+            .name("signals".to_owned())
+            .spawn(move || {
+                let runtime = match tokio::runtime::Builder::new_current_thread()
+                    .enable_io()
+                    .build()
+                {
+                    Ok(runtime) => runtime,
+                    Err(error) => {
+                        let _ = ready_tx.send(Err(error.to_string()));
+                        return;
+                    }
+                };
+                runtime.block_on(async move {
+                    let mut signals = Signals::new();
+                    let _ = ready_tx.send(Ok(()));
+                    loop {
+                        let name = signals.next().await;
+                        runner::note_signal();
+                        if !hand_over(name) {
+                            crate::process::interrupted(name);
+                        }
+                    }
+                });
+            });
+        let started = match spawned {
+            Ok(_) => ready_rx
+                .recv()
+                .unwrap_or_else(|_| Err("its thread ended".to_owned())),
+            Err(error) => Err(error.to_string()),
+        };
+        if let Err(error) = started {
+            output::warning(format_args!(
+                "signals are not handled (cannot listen for them: {error}): a signal ends \
+                 drivecheck at once"
+            ));
+        }
+    });
+}
+
+/// Hands the signal `name` to every command that subscribed and still listens; whether one did.
+fn hand_over(name: &'static str) -> bool {
+    let mut subscribers = SUBSCRIBERS
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    subscribers.retain(|tx| tx.send(name).is_ok());
+    !subscribers.is_empty()
+}
+
+/// Says which scratch files of processes that no longer run were removed
+/// (`runner::scratch::clear_leftovers`).
+pub(crate) fn note_leftovers(removed: Vec<runner::scratch::Leftover>) {
+    for leftover in removed {
+        output::note(format_args!(
+            "removed {}: left by process {}, which no longer runs",
+            leftover.path.display(),
+            leftover.pid
+        ));
+    }
+}
+
+/// Whether SIGHUP was ignored when drivecheck started (`nohup drivecheck …`): then it stays
+/// ignored, as `nohup` asks (Linux: the `SigIgn` mask of `/proc/self/status`; elsewhere it is
+/// handled).
+fn hangup_ignored() -> bool {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|status| {
+            status
+                .lines()
+                .find_map(|line| line.strip_prefix("SigIgn:"))
+                .and_then(|mask| u64::from_str_radix(mask.trim(), 16).ok())
+        })
+        .is_some_and(|mask| mask & 1 != 0)
+}
+
+/// The signals that stop a command: SIGINT, and on Unix SIGTERM and SIGHUP (unless ignored
+/// when drivecheck started: [`hangup_ignored`]).
 struct Signals {
+    #[cfg(unix)]
+    int: Option<tokio::signal::unix::Signal>,
     #[cfg(unix)]
     term: Option<tokio::signal::unix::Signal>,
     #[cfg(unix)]
@@ -266,8 +391,11 @@ impl Signals {
         {
             use tokio::signal::unix::{SignalKind, signal};
             Self {
+                int: signal(SignalKind::interrupt()).ok(),
                 term: signal(SignalKind::terminate()).ok(),
-                hup: signal(SignalKind::hangup()).ok(),
+                hup: (!hangup_ignored())
+                    .then(|| signal(SignalKind::hangup()).ok())
+                    .flatten(),
             }
         }
         #[cfg(not(unix))]
@@ -289,23 +417,18 @@ impl Signals {
                 }
             }
             tokio::select! {
-                () = ctrl_c() => "interrupted (SIGINT)",
+                () = on(&mut self.int) => "interrupted (SIGINT)",
                 () = on(&mut self.term) => "terminated (SIGTERM)",
                 () = on(&mut self.hup) => "hung up (SIGHUP)",
             }
         }
         #[cfg(not(unix))]
         {
-            ctrl_c().await;
+            if tokio::signal::ctrl_c().await.is_err() {
+                std::future::pending::<()>().await;
+            }
             "interrupted"
         }
-    }
-}
-
-/// Ctrl-C; never, if its handler cannot be installed.
-async fn ctrl_c() {
-    if tokio::signal::ctrl_c().await.is_err() {
-        std::future::pending::<()>().await;
     }
 }
 

@@ -1,5 +1,5 @@
 //! `drivecheck sim`: a simulated car served over TCP (like the reference bridge) or UDP, in real
-//! time, with optional impairment of its side of the link, until Ctrl-C.
+//! time, with optional impairment of its side of the link, until Ctrl-C (or SIGTERM, SIGHUP).
 
 use anyhow::{Context, Result};
 use car_link::firmware::FirmwareVersion;
@@ -62,15 +62,9 @@ async fn serve_until_ctrl_c(args: &SimArgs, config: &SimConfig) -> Result<()> {
     })?;
     let scheme = if args.udp { "udp" } else { "tcp" };
     let address = sim.local_addr().unwrap_or(args.listen);
-    // Ctrl-C's handler is in place (polled once) before the address file says the car serves: a
-    // script that reads the file and then sends SIGINT stops the car as Ctrl-C does.
-    let ctrl_c = tokio::signal::ctrl_c();
-    tokio::pin!(ctrl_c);
-    if let std::task::Poll::Ready(stopped) = futures::poll!(&mut ctrl_c) {
-        stopped.context("cannot wait for Ctrl-C")?;
-        sim.shutdown();
-        return Ok(());
-    }
+    // The signals are this command's before the address file says the car serves: a script
+    // that reads the file and then sends SIGINT or SIGTERM stops the car as Ctrl-C does.
+    let mut signals = super::signals::subscribe();
     if let Some(file) = &args.address_file {
         runner::atomic::write(file, format!("{scheme}://{address}\n"))
             .with_context(|| format!("cannot write {}", file.display()))?;
@@ -90,7 +84,7 @@ async fn serve_until_ctrl_c(args: &SimArgs, config: &SimConfig) -> Result<()> {
         "simulated car (firmware {}, seed {}) at {scheme}://{address}; {link}; Ctrl-C stops it",
         config.firmware, config.seed,
     ));
-    ctrl_c.await.context("cannot wait for Ctrl-C")?;
+    let _ = signals.recv().await;
     sim.shutdown();
     Ok(())
 }

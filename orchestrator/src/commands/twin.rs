@@ -134,8 +134,11 @@ fn check_profile(
     let runtime = runtime(true)?;
     let cancel = runtime.block_on(async { cancel_on_ctrl_c() });
     let scratch = std::env::temp_dir().join(format!("drivecheck-twin-{}", std::process::id()));
+    // A signal's second coming ends the process: the scratch directory goes with it.
+    let _registered = runner::scratch::Scratch::register(&scratch);
     let mut segments = Vec::new();
     let result = cases.iter().enumerate().try_for_each(|(i, (path, case))| {
+        runner::pause_at("twin", i);
         bar.set_message(format!("{}: {}", profile.name, path.display()));
         let seed = case.campaign_seed.unwrap_or(default_seed);
         let mut driver = SimDriver::new(
@@ -147,9 +150,16 @@ fn check_profile(
             &cancel,
         );
         driver.firmware = firmware.cloned();
-        let driven = runtime
-            .block_on(driver.drive_all(case, &SimSettings::default()))
-            .with_context(|| format!("{}: cannot be driven again", path.display()))?;
+        let driven = runtime.block_on(driver.drive_all(case, &SimSettings::default()));
+        // A signal, not the case: the runs cut off by it are no runs.
+        if cancel.is_cancelled() {
+            return Err(super::signals::Interrupted(
+                "the twin check did not end; nothing was compared or written",
+            )
+            .into());
+        }
+        let driven =
+            driven.with_context(|| format!("{}: cannot be driven again", path.display()))?;
         let simulated: Vec<Case> = driven.into_iter().map(|(_, c)| c).collect();
         segments.extend(compare_case(case.test_index.unwrap_or(i), case, &simulated));
         bar.inc(1);

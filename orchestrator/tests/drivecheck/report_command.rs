@@ -399,3 +399,39 @@ fn more_failing_tests_than_a_page_holds_get_pages_of_their_own() {
         "the earlier report's pages are removed"
     );
 }
+
+/// A pid above any `pid_max` (4194304): no process has it.
+const DEAD_PID: u32 = 4_294_967_295;
+
+/// What a report or a campaign killed with `kill -9` left in a run directory (#51 item 11: the
+/// sections a report put aside, a case file's temporary file) is removed by the next report
+/// there, with a note; a scratch file of a live process (this test's) is not.
+#[test]
+fn a_report_removes_what_a_killed_process_left_and_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let ran = drivecheck(&["-q", "run", "--seed", "1", "--tests", "2", "--out", path(&run)]);
+    assert!(matches!(ran.status.code(), Some(0 | 1)), "{}", text(&ran));
+    let left = [
+        format!(".report.html.sections-{DEAD_PID}"),
+        format!(".case-001.json.tmp-{DEAD_PID}"),
+    ];
+    for name in &left {
+        std::fs::write(run.join(name), "half a file").unwrap();
+    }
+    let live = format!(".case-000.json.tmp-{}", std::process::id());
+    std::fs::write(run.join(&live), "being written").unwrap();
+    let out = drivecheck(&["report", path(&run)]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let said = String::from_utf8_lossy(&out.stderr);
+    for name in &left {
+        assert!(!run.join(name).exists(), "{name} is left: {said}");
+        assert!(
+            said.contains(&format!("removed {}", run.join(name).display()))
+                && said.contains(&format!("left by process {DEAD_PID}, which no longer runs")),
+            "{said}"
+        );
+    }
+    assert!(run.join(&live).exists(), "a live process's file is kept");
+    assert!(run.join("report.html").is_file());
+}

@@ -183,3 +183,24 @@ fn a_tampered_partial_changes_nothing_the_resume_drives_or_counts() {
         "not a case {"
     );
 }
+
+/// A campaign killed with `kill -9` as it wrote a case file leaves its temporary file
+/// (`.case-002.json.tmp-PID`, #51 item 11): the resume removes it, saying so, and drives the test.
+#[test]
+fn resume_removes_the_temporary_file_of_a_killed_process() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (seven, _) = resumable(tmp.path());
+    // A pid above any pid_max (4194304): no process has it.
+    let left = seven.join(".case-002.json.tmp-4294967295");
+    std::fs::write(&left, "{\"half\": ").unwrap();
+    let out = drivecheck(&["run", "--resume", path(&seven), "--record", "none"]);
+    let said = text(&out);
+    assert!(matches!(out.status.code(), Some(0 | 1)), "{said}");
+    assert!(!left.exists(), "{said}");
+    assert!(
+        said.contains(&format!("removed {}", left.display()))
+            && said.contains("left by process 4294967295, which no longer runs"),
+        "{said}"
+    );
+    assert!(seven.join("case-002.json").is_file(), "{said}");
+}

@@ -83,7 +83,19 @@ fn a_stale_limit_beyond_the_watchdog_is_refused_and_a_valid_one_is_recorded() {
     let dir = tempfile::tempdir().unwrap();
     let out = run(&["--stale-after", "3s"], dir.path());
     assert_eq!(out.status.code(), Some(2), "{}", text(&out));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--stale-after 3s"));
+    // The limit in the unit the user typed (it said "at most 1s 900ms").
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        said.contains("--stale-after 3s: must be above 0 and at most 1.9 s")
+            && said.contains("brakes after 2 s without commands"),
+        "{said}"
+    );
+    let out = run(&["--stale-after", "2500ms"], dir.path());
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("at most 1900 ms"),
+        "{}",
+        text(&out)
+    );
     let out = run(
         &[
             "--seed",

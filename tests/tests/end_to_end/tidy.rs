@@ -852,6 +852,17 @@ const CHECKED_BY: &[(&str, &[&str])] = &[
         ],
     ),
     (
+        "No command leaves a scratch file behind",
+        &[
+            "remove_all_removes_what_is_registered_and_nothing_else",
+            "a_dead_processs_scratch_is_removed_and_a_live_ones_and_other_files_are_not",
+            "a_report_interrupted_by_sigint_exits_2_and_leaves_nothing_behind",
+            "runs_merge_interrupted_by_sigterm_exits_2_and_leaves_no_staging_directory",
+            "a_report_removes_what_a_killed_process_left_and_says_so",
+            "resume_removes_the_temporary_file_of_a_killed_process",
+        ],
+    ),
+    (
         "The runner and the commands drive a car only through the trait",
         &[
             "only_the_seam_names_a_concrete_car",

@@ -487,7 +487,7 @@ fn the_runtime_constants_are_written_in_milliseconds() {
     let safety = crate::files::SafetyConfigRecord::from(SafetyConfig::default());
     assert_eq!(
         serde_json::to_string(&safety).unwrap(),
-        r#"{"area_margin_m":0.3,"max_cross_track_m":1.5,"stale_after":250}"#
+        r#"{"area_margin_m":0.3,"max_cross_track_m":1.5,"stale_after":500}"#
     );
     assert_eq!(SafetyConfig::from(safety), SafetyConfig::default());
     let streaming = crate::files::StreamingConfigRecord::from(StreamingConfig::default());

@@ -198,3 +198,224 @@ fn a_second_signal_brakes_at_once_and_still_writes_the_test_in_flight() {
     let recording = Recording::read(&out.join("campaign.mcap")).unwrap();
     assert!(recording.is_complete(), "{:?}", recording.cut_short());
 }
+
+/// Starts `drivecheck ARGS` with `DRIVECHECK_PAUSE=pause`, waits (at most 3 minutes) until it
+/// says it paused there, sends it SIG`signal` and waits (at most 30 s) for it to end: its exit
+/// status and standard error.
+fn interrupt_when_paused(args: &[&str], pause: &str, signal: &str) -> (Option<i32>, String, u32) {
+    use std::io::BufRead;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
+        .args(args)
+        .env("DRIVECHECK_PAUSE", pause)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("drivecheck starts");
+    let pid = child.id();
+    let stderr = child.stderr.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    let reader = std::thread::spawn(move || {
+        for line in std::io::BufReader::new(stderr).lines() {
+            let Ok(line) = line else { break };
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    let mut said = String::new();
+    let started = Instant::now();
+    loop {
+        let remaining = Duration::from_secs(180).saturating_sub(started.elapsed());
+        match rx.recv_timeout(remaining) {
+            Ok(line) => {
+                said.push_str(&line);
+                said.push('\n');
+                if line.starts_with("drivecheck: paused in") {
+                    break;
+                }
+            }
+            Err(_) => {
+                let _ = child.kill();
+                panic!("drivecheck did not pause at {pause}: {said}");
+            }
+        }
+    }
+    let killed = Command::new("kill")
+        .args([&format!("-{signal}"), &pid.to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(killed.success());
+    let started = Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if started.elapsed() > Duration::from_secs(30) {
+            let _ = child.kill();
+            panic!("drivecheck did not end after SIG{signal}: {said}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    reader.join().unwrap();
+    said.extend(rx.try_iter().map(|line| line + "\n"));
+    (status.code(), said, pid)
+}
+
+/// The scratch files in `dir` (`.NAME.tmp-PID`, `.NAME.sections-PID`, `.NAME.staging-PID`).
+fn scratch_in(dir: &std::path::Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| runner::scratch::scratch_of(n).is_some())
+        .collect()
+}
+
+/// A recorded campaign of `tests` tests with seed 1 in `dir/run`.
+fn recorded_run(dir: &std::path::Path, tests: &str, extra: &[&str]) -> std::path::PathBuf {
+    let run = dir.join("run");
+    let mut args = vec!["-q", "run", "--seed", "1", "--tests", tests];
+    args.extend_from_slice(extra);
+    args.extend_from_slice(&["--out", path(&run)]);
+    let out = common::drivecheck(&args);
+    assert!(
+        matches!(out.status.code(), Some(0 | 1)),
+        "{}",
+        common::text(&out)
+    );
+    run
+}
+
+/// `report` interrupted by SIGINT half way (#51 item 11): it used to die of the signal (130)
+/// and leave its sections (`.report.html.sections-PID`, megabytes); now it exits 2, as every
+/// interrupted command, and leaves no scratch file and no page.
+#[test]
+fn a_report_interrupted_by_sigint_exits_2_and_leaves_nothing_behind() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = recorded_run(dir.path(), "3", &[]);
+    let (code, said, _) = interrupt_when_paused(
+        &["report", path(&run), "--all-tests"],
+        "report:1",
+        "INT",
+    );
+    assert_eq!(code, Some(2), "{said}");
+    assert!(said.contains("error: interrupted (SIGINT)"), "{said}");
+    assert_eq!(scratch_in(&run), Vec::<String>::new(), "{said}");
+    assert!(!run.join("report.html").exists(), "{said}");
+}
+
+/// `runs merge` interrupted by SIGTERM half way (#51 item 11): exit 2, its staging directory
+/// (`.OUT.staging-PID`) removed, nothing at the output.
+#[test]
+fn runs_merge_interrupted_by_sigterm_exits_2_and_leaves_no_staging_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    let shard = |k: &str| dir.path().join(format!("shard{}", &k[..1]));
+    for k in ["1/2", "2/2"] {
+        let out = common::drivecheck(&[
+            "-q",
+            "run",
+            "--seed",
+            "7",
+            "--tests",
+            "4",
+            "--shard",
+            k,
+            "--out",
+            path(&shard(k)),
+        ]);
+        assert!(matches!(out.status.code(), Some(0 | 1)), "{}", common::text(&out));
+    }
+    let merged = dir.path().join("merged");
+    let (code, said, _) = interrupt_when_paused(
+        &[
+            "runs",
+            "merge",
+            path(&shard("1/2")),
+            path(&shard("2/2")),
+            "--out",
+            path(&merged),
+        ],
+        "merge:1",
+        "TERM",
+    );
+    assert_eq!(code, Some(2), "{said}");
+    assert!(said.contains("error: terminated (SIGTERM)"), "{said}");
+    assert_eq!(scratch_in(dir.path()), Vec::<String>::new(), "{said}");
+    assert!(!merged.exists(), "{said}");
+}
+
+/// `explain --score` interrupted by SIGINT in its counterfactual runs (#51 item 11): exit 2,
+/// saying it was interrupted, no score printed from runs the signal cut off, and its scratch
+/// directory removed.
+#[test]
+fn explain_score_interrupted_in_its_counterfactual_runs_says_so_and_exits_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = recorded_run(dir.path(), "6", &["--on-failure", "continue"]);
+    let (code, said, pid) = interrupt_when_paused(
+        &["explain", path(&run), "--score"],
+        "counterfactual:0",
+        "INT",
+    );
+    assert_eq!(code, Some(2), "{said}");
+    assert!(said.contains("interrupted by a signal"), "{said}");
+    let scratch = std::env::temp_dir().join(format!("drivecheck-counterfactual-{pid}"));
+    assert!(!scratch.exists(), "{said}");
+}
+
+/// `twin check` interrupted by SIGINT (#51 item 12 d): it said the case "cannot be driven
+/// again"; now it says it was interrupted and exits 2, writing no `twin.json`.
+#[test]
+fn an_interrupted_twin_check_says_interrupted_and_does_not_blame_the_case() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = recorded_run(dir.path(), "2", &[]);
+    let (code, said, _) = interrupt_when_paused(
+        &["twin", "check", path(&run), "--runs", "1"],
+        "twin:0",
+        "INT",
+    );
+    assert_eq!(code, Some(2), "{said}");
+    assert!(said.contains("interrupted by a signal"), "{said}");
+    assert!(!said.contains("cannot be driven again"), "{said}");
+    assert!(!run.join("twin.json").exists(), "{said}");
+}
+
+/// Under `nohup` (SIGHUP ignored when drivecheck starts) a hangup is ignored, as `nohup` asks;
+/// SIGINT still interrupts.
+#[test]
+fn under_nohup_a_hangup_is_ignored_and_sigint_still_interrupts() {
+    use std::io::BufRead;
+    let dir = tempfile::tempdir().unwrap();
+    let run = recorded_run(dir.path(), "3", &[]);
+    let mut child = Command::new("nohup")
+        .arg(env!("CARGO_BIN_EXE_drivecheck"))
+        .args(["report", path(&run), "--all-tests"])
+        .env("DRIVECHECK_PAUSE", "report:1")
+        .current_dir(dir.path())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("nohup drivecheck starts");
+    let mut stderr = std::io::BufReader::new(child.stderr.take().unwrap());
+    let mut said = String::new();
+    while !said.contains("drivecheck: paused in report") {
+        let mut line = String::new();
+        assert!(stderr.read_line(&mut line).unwrap() > 0, "{said}");
+        said.push_str(&line);
+    }
+    let pid = child.id().to_string();
+    let send = |signal: &str| {
+        let sent = Command::new("kill")
+            .args([signal, &pid])
+            .status()
+            .unwrap();
+        assert!(sent.success());
+    };
+    send("-HUP");
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(child.try_wait().unwrap().is_none(), "a hangup ended it: {said}");
+    send("-INT");
+    let status = child.wait().unwrap();
+    let mut rest = String::new();
+    std::io::Read::read_to_string(&mut stderr, &mut rest).unwrap();
+    assert_eq!(status.code(), Some(2), "{said}{rest}");
+    assert!(rest.contains("error: interrupted (SIGINT)"), "{said}{rest}");
+}
