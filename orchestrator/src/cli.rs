@@ -814,6 +814,11 @@ pub struct SimArgs {
     /// listens: with `--listen 127.0.0.1:0`, how a script learns the port.
     #[arg(long, value_name = "FILE")]
     pub address_file: Option<PathBuf>,
+    /// Which car to serve: `sim`, the embedded simulated car, or `sitl:TREE`, the car's own
+    /// firmware built from TREE for the host and run in real time in the simulated car's world (a
+    /// HIL board without the board; TCP only, no link impairment; docs/sitl.md).
+    #[arg(long, default_value = "sim", value_name = "sim|sitl:TREE")]
+    pub car: String,
     /// Serve UDP instead of TCP (replies go to the sender's address at the port + 1).
     #[arg(long)]
     pub udp: bool,

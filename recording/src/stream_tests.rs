@@ -34,6 +34,7 @@ fn spanned_recording(path: &Path) {
         car: "sim".to_owned(),
         car_profile: None,
         car_firmware_version: None,
+        car_firmware_tree_hash: None,
         started_at: "2026-11-22T10:55:21Z".to_owned(),
         ended_at: None,
         summary: None,

@@ -35,6 +35,7 @@ fn campaign(s: &Scenario) -> CampaignRecord {
         car: "sim".to_owned(),
         car_profile: None,
         car_firmware_version: Some("12.3".to_owned()),
+        car_firmware_tree_hash: None,
         started_at: "2026-11-22T10:55:21Z".to_owned(),
         ended_at: None,
         summary: None,

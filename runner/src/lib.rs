@@ -130,6 +130,8 @@ pub struct RunConfig {
     /// The profile of the embedded simulated car, for `campaign.json` and every case (`None` on
     /// a real car).
     pub car_profile: Option<recording::LoadedProfile>,
+    /// On the car's own firmware built for the host: its tree's hash, for `campaign.json`.
+    pub car_firmware_tree_hash: Option<String>,
     /// What each test drives: a plan generated from the seed, an earlier run's case of the same
     /// index, or one recorded case every time.
     pub tests: Tests,
@@ -277,6 +279,7 @@ impl RunConfig {
             out_dir,
             car_label: car_label.into(),
             car_profile: None,
+            car_firmware_tree_hash: None,
             tests: Tests::Generated,
             record: RecordMode::All,
             shard: None,

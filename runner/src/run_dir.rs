@@ -124,6 +124,7 @@ impl RunDirectory {
                 .as_ref()
                 .map(recording::LoadedProfile::reference),
             car_firmware_version: None,
+            car_firmware_tree_hash: config.car_firmware_tree_hash.clone(),
             started_at: rfc3339_now(),
             ended_at: None,
             summary: None,

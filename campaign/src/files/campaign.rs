@@ -33,6 +33,10 @@ pub struct CampaignRecord {
     /// The car's firmware version as it reported it (absent if unknown).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub car_firmware_version: Option<String>,
+    /// On the car's own firmware built for the host (`--car sitl:TREE`): the SHA-256 of the
+    /// tree's files that went into the build, so that a run says which firmware it drove.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub car_firmware_tree_hash: Option<String>,
     /// When it started, RFC 3339 (for example `2026-11-22T10:55:21Z`).
     pub started_at: String,
     /// When it ended, RFC 3339; absent while running or if the process died.

@@ -11,6 +11,7 @@ use scenarios::{Loaded, Scenario};
 use crate::scenario_arg::{load_scenario, print_warnings};
 use anyhow::bail;
 use campaign::files::Case;
+use report::data::short;
 
 /// The scenario `name` a run directory `dir` (given with `flag`) names, to load when no
 /// `--scenario` is given: it must be bundled.
@@ -136,8 +137,4 @@ pub(super) fn check_hash(case: &Case, scenario: &Scenario, ignore: bool) -> Resu
         return Ok(());
     }
     bail!("{problem}; pass --ignore-scenario-hash to replay it anyway")
-}
-
-fn short(hash: &str) -> &str {
-    hash.get(..12).unwrap_or(hash)
 }

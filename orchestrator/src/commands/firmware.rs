@@ -52,6 +52,7 @@ pub fn build(tree: &str) -> Result<HostFirmware> {
     Ok(HostFirmware {
         executable: build.executable,
         version,
+        tree_hash: build.tree_hash,
     })
 }
 

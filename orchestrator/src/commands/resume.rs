@@ -23,6 +23,7 @@ use crate::cli::{OnFailure, RunArgs};
 use crate::profile_arg::LoadedProfile;
 use campaign::files::CampaignRecord;
 use campaign::oracle::FailurePolicy;
+use car_link::CarAddress;
 use report::data::{case_files, read_case, read_record};
 use runner::store::RunStore;
 use runner::{ResumeSource, is_cut_off};
@@ -110,9 +111,28 @@ impl Resumed {
         args: &RunArgs,
         scenario: &Scenario,
         profile: &LoadedProfile,
+        firmware: Option<&super::firmware::HostFirmware>,
+        cars: &[CarAddress],
     ) -> Result<()> {
         let r = &self.record;
         let dir = self.dir.display();
+        // A campaign goes on on the kind of car it drove: its tests on a real car and the rest
+        // on the simulator (the default `--car`) would be one summary of two cars.
+        let drove: Vec<&str> = if r.cars.is_empty() {
+            vec![r.car.as_str()]
+        } else {
+            r.cars.iter().map(|c| c.address.as_str()).collect()
+        };
+        let kinds: Vec<CarKind> = drove.iter().map(|a| CarKind::of_label(a)).collect();
+        if let Some(given) = cars.iter().find(|c| !kinds.contains(&CarKind::of(c))) {
+            bail!(
+                "--resume {dir}: the campaign drove {} ({}); --car {given} is {}: a resumed \
+                 campaign goes on on the same kind of car (give it with --car)",
+                kinds[0].words(),
+                drove.join(", "),
+                CarKind::of(given).words()
+            );
+        }
         let differs = |flag: String, campaign: String| -> anyhow::Error {
             anyhow::anyhow!(
                 "--resume {dir}: {flag} differs from the campaign's {campaign}; a resumed \
@@ -171,6 +191,19 @@ impl Resumed {
                     format!("--on-failure {}", policy_name(r.settings.failure_policy)),
                 ));
             }
+        }
+        // The firmware a campaign drove is its tree as it was: a changed tree is another
+        // firmware, and its tests are not the same campaign's.
+        if let (Some(recorded), Some(given)) = (&r.car_firmware_tree_hash, firmware)
+            && given.tree_hash != *recorded
+        {
+            bail!(
+                "--resume {dir}: the campaign drove the firmware tree with hash {}, and {} \
+                 now hashes to {}: resume on the tree as it was (or start another campaign)",
+                report::data::short(recorded),
+                r.car,
+                report::data::short(&given.tree_hash)
+            );
         }
         if let Some(recorded) = &r.car_profile {
             let given = profile.reference();
@@ -264,6 +297,42 @@ impl Resumed {
 /// `index` (the test its name says), its values and verdicts must agree with its own statistics
 /// ([`campaign::files::Case::check`]), and it must be a case of `record`'s campaign (its seed,
 /// scenario, faults and settings: [`CampaignRecord::foreign`]). Another campaign's case copied
+/// What kind of car drove a campaign: a resumed campaign goes on on the same kind.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum CarKind {
+    /// The embedded simulated car.
+    Simulated,
+    /// The car's own firmware built for the host.
+    Firmware,
+    /// A car (or a HIL board, or `drivecheck sim`) behind a link.
+    Linked,
+}
+
+impl CarKind {
+    fn of(address: &CarAddress) -> Self {
+        match address {
+            CarAddress::Sim => Self::Simulated,
+            CarAddress::Sitl { .. } => Self::Firmware,
+            _ => Self::Linked,
+        }
+    }
+
+    /// The kind of a car as `campaign.json` names it (`sim`, `sitl:TREE`, `tcp://…`).
+    fn of_label(label: &str) -> Self {
+        label
+            .parse::<CarAddress>()
+            .map_or(Self::Linked, |address| Self::of(&address))
+    }
+
+    fn words(self) -> &'static str {
+        match self {
+            Self::Simulated => "the embedded simulated car",
+            Self::Firmware => "the car's own firmware built for the host",
+            Self::Linked => "a car behind a link",
+        }
+    }
+}
+
 /// in, a case copied under another test's name, or an edited verdict would otherwise count as a
 /// test that ended.
 fn check_case(record: &CampaignRecord, case: &campaign::files::Case, index: usize) -> Result<()> {

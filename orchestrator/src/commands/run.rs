@@ -107,7 +107,8 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     let profile = crate::profile_arg::load(args.profile.as_deref())?;
     let sim = profile.sim_config(&scenario)?;
     if let Some(resumed) = &resumed {
-        resumed.check(args, &scenario, &profile)?;
+        let addresses: Vec<CarAddress> = cars.iter().map(|c| c.address.clone()).collect();
+        resumed.check(args, &scenario, &profile, firmware.as_ref(), &addresses)?;
     }
     let seed = choose_seed(settings.seed);
     let campaign = Campaign {
@@ -206,6 +207,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     if embedded {
         config.car_profile = Some(profile.clone());
     }
+    config.car_firmware_tree_hash = firmware.as_ref().map(|f| f.tree_hash.clone());
     // Each failing test explained as it ends, in its worker (the embedded simulated car).
     config.explain = Some(report::explain::explain_held);
     let jobs = jobs(args, embedded, &car_label)?;

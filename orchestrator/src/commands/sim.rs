@@ -9,8 +9,9 @@ use crate::cli::SimArgs;
 use crate::exit::Exit;
 use crate::scenario_arg::{load_scenario, print_warnings};
 
-/// Serves the simulated car until Ctrl-C.
+/// Serves the simulated car (or the firmware built for the host) until Ctrl-C.
 pub fn serve(args: &SimArgs) -> Result<Exit> {
+    let firmware = firmware_of(args)?;
     let loaded = load_scenario(&args.scenario)?;
     print_warnings(&args.scenario, &loaded);
     let config = sim_config(args, &loaded.scenario)?;
@@ -19,8 +20,77 @@ pub fn serve(args: &SimArgs) -> Result<Exit> {
         .enable_all()
         .build()
         .context("cannot start the async runtime")?;
-    runtime.block_on(serve_until_ctrl_c(args, &config))?;
+    match firmware {
+        Some(firmware) => runtime.block_on(serve_firmware(args, &config, &firmware))?,
+        None => runtime.block_on(serve_until_ctrl_c(args, &config))?,
+    }
     Ok(Exit::Success)
+}
+
+/// `--car`: the embedded simulated car (`None`) or the firmware built for the host, with what
+/// it cannot be given refused.
+fn firmware_of(args: &SimArgs) -> Result<Option<super::firmware::HostFirmware>> {
+    let address: car_link::CarAddress = args
+        .car
+        .parse()
+        .with_context(|| format!("--car {}", args.car))?;
+    let tree = match address {
+        car_link::CarAddress::Sim => return Ok(None),
+        car_link::CarAddress::Sitl { tree } => tree,
+        _ => anyhow::bail!(
+            "--car {}: drivecheck sim serves `sim` (the embedded simulated car) or `sitl:TREE` \
+             (the car's own firmware built for the host)",
+            args.car
+        ),
+    };
+    let refused = [
+        ("--udp", args.udp),
+        ("--firmware", args.firmware.is_some()),
+        ("--link-latency", args.link_latency.is_some()),
+        ("--link-jitter", args.link_jitter.is_some()),
+        ("--link-loss", args.link_loss.is_some()),
+    ];
+    if let Some((flag, _)) = refused.iter().find(|(_, given)| *given) {
+        anyhow::bail!(
+            "{flag}: not with --car sitl:TREE (the firmware is served over TCP as a car's bridge \
+             serves its USB link, and the tree says which firmware it is)"
+        );
+    }
+    super::firmware::build(&tree).map(Some)
+}
+
+/// Serves the firmware built for the host over TCP, in real time, until Ctrl-C (or the
+/// firmware stops: an error).
+async fn serve_firmware(
+    args: &SimArgs,
+    config: &SimConfig,
+    firmware: &super::firmware::HostFirmware,
+) -> Result<()> {
+    let listener = tokio::net::TcpListener::bind(args.listen)
+        .await
+        .with_context(|| format!("cannot listen on {}", args.listen))?;
+    let address = listener.local_addr().unwrap_or(args.listen);
+    let car = runner::vehicle::sitl::SitlCar {
+        executable: firmware.executable.clone(),
+        plant: runner::vehicle::sitl::plant_options(firmware.version, config),
+    };
+    let mut signals = super::signals::subscribe();
+    if let Some(file) = &args.address_file {
+        runner::atomic::write(file, format!("tcp://{address}\n"))
+            .with_context(|| format!("cannot write {}", file.display()))?;
+    }
+    crate::output::note(format_args!(
+        "the firmware {} built for the host, in the simulated car's world (seed {}), at \
+         tcp://{address} in real time; Ctrl-C stops it",
+        firmware.version, config.seed
+    ));
+    tokio::select! {
+        served = runner::vehicle::sitl::serve_sitl_tcp(&car, listener) => {
+            let why = served?;
+            anyhow::bail!("the firmware built for the host stopped: {why}")
+        }
+        _ = signals.recv() => Ok(()),
+    }
 }
 
 fn sim_config(args: &SimArgs, scenario: &scenarios::Scenario) -> Result<SimConfig> {

@@ -271,3 +271,46 @@ fn sitl_build_says_what_went_into_the_executable() {
     assert_eq!(out.status.code(), Some(2), "{}", text(&out));
     assert!(text(&out).contains("not a firmware tree"), "{}", text(&out));
 }
+
+/// A campaign on the firmware names the tree it drove (`campaign.json`'s
+/// `car_firmware_tree_hash`, the hash `sitl build` prints), and its resume refuses the tree once
+/// it changed: the tests after it would be another firmware's.
+#[test]
+fn a_campaign_names_its_firmware_tree_and_its_resume_refuses_a_changed_one() {
+    let Some((_, tree)) = trees().into_iter().next() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let copy = dir.path().join("RC_Controller");
+    let copied = Command::new("cp")
+        .arg("-r")
+        .arg(&tree)
+        .arg(&copy)
+        .status()
+        .unwrap();
+    assert!(copied.success());
+    let car = format!("sitl:{}", copy.display());
+    let run = dir.path().join("run");
+    campaign(&run, 3, &["--car", &car]);
+    let built = drivecheck(&["sitl", "build", path(&copy), "--json"]);
+    let built: serde_json::Value = serde_json::from_slice(&built.stdout).unwrap();
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("campaign.json")).unwrap()).unwrap();
+    assert_eq!(
+        record["car_firmware_tree_hash"], built["tree_hash"],
+        "{record:#}"
+    );
+
+    // The user changes the firmware; the cut-off campaign is not resumed on it.
+    std::fs::remove_file(run.join("case-002.json")).unwrap();
+    let first_compiled = built["compiled"][0].as_str().expect("a compiled source");
+    let source = copy.join(first_compiled);
+    let mut changed = std::fs::read_to_string(&source).unwrap();
+    changed.push_str("\n/* changed */\n");
+    std::fs::write(&source, changed).unwrap();
+    let out = drivecheck(&["run", "--resume", path(&run), "--record", "none"]);
+    let said = text(&out);
+    assert_eq!(out.status.code(), Some(2), "{said}");
+    assert!(said.contains("now hashes to"), "{said}");
+    assert!(!run.join("case-002.json").exists(), "{said}");
+}

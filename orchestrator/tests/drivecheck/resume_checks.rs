@@ -204,3 +204,44 @@ fn resume_removes_the_temporary_file_of_a_killed_process() {
     );
     assert!(seven.join("case-002.json").is_file(), "{said}");
 }
+
+/// A campaign goes on on the kind of car it drove: one that drove a car behind a link is not
+/// finished on the embedded simulated car (`--car`'s default, so forgetting `--car` would do
+/// it), and a simulated campaign is not finished on a car; both refused before anything drives.
+#[test]
+fn resume_refuses_another_kind_of_car() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (seven, _) = resumable(tmp.path());
+    let out = drivecheck(&[
+        "run",
+        "--resume",
+        path(&seven),
+        "--record",
+        "none",
+        "--car",
+        "tcp://127.0.0.1:9",
+    ]);
+    let said = text(&out);
+    assert_eq!(out.status.code(), Some(2), "{said}");
+    assert!(
+        said.contains("the campaign drove the embedded simulated car (sim)")
+            && said.contains("is a car behind a link"),
+        "{said}"
+    );
+    let file = seven.join("campaign.json");
+    let record = std::fs::read_to_string(&file).unwrap();
+    std::fs::write(
+        &file,
+        record.replace("\"car\": \"sim\"", "\"car\": \"tcp://127.0.0.1:9\""),
+    )
+    .unwrap();
+    let out = drivecheck(&["run", "--resume", path(&seven), "--record", "none"]);
+    let said = text(&out);
+    assert_eq!(out.status.code(), Some(2), "{said}");
+    assert!(
+        said.contains("the campaign drove a car behind a link (tcp://127.0.0.1:9)")
+            && said.contains("--car sim is the embedded simulated car"),
+        "{said}"
+    );
+    assert!(!seven.join("case-002.json").exists(), "{said}");
+}

@@ -89,6 +89,9 @@ pub struct HostFirmware {
     pub executable: PathBuf,
     /// Its firmware version (what its physical car's geometry defaults to).
     pub version: FirmwareVersion,
+    /// SHA-256 (hex) of the tree's files that went into it (`sitl::Build::tree_hash`): which
+    /// firmware a campaign drove, recorded in `campaign.json`.
+    pub tree_hash: String,
 }
 
 /// The firmware executable of a build, and the physical car it drives.
@@ -151,6 +154,17 @@ impl SimulatorView for SitlHandle {
 /// Timeout: the start-up is [`START_UP`] of the firmware's time; then the client's connection
 /// handshake.
 pub async fn connect_sitl(car: &SitlCar) -> Result<(Car, SitlHandle), SitlCarError> {
+    let (stream, handle) = start_sitl(car)?;
+    let client = Car::over_stream(stream, car_config())
+        .await
+        .map_err(SitlCarError::Connect)?;
+    Ok((client, handle))
+}
+
+/// Starts the firmware of `car` as [`connect_sitl`] does and gives the host's end of its car
+/// link: the bytes a car's USB link would carry, both ways. Must be called inside a tokio
+/// runtime; the bridge runs on its clock (real time on a clock that is not paused).
+pub fn start_sitl(car: &SitlCar) -> Result<(DuplexStream, SitlHandle), SitlCarError> {
     let start = |source| SitlCarError::Start {
         executable: car.executable.clone(),
         source,
@@ -171,11 +185,52 @@ pub async fn connect_sitl(car: &SitlCar) -> Result<(Car, SitlHandle), SitlCarErr
     }));
     let pipe = car_link::transport::sim_pipe();
     let task = tokio::spawn(bridge.run(pipe.car, shared.clone()));
-    let handle = SitlHandle { shared, task };
-    let client = Car::over_stream(pipe.host, car_config())
-        .await
-        .map_err(SitlCarError::Connect)?;
-    Ok((client, handle))
+    Ok((pipe.host, SitlHandle { shared, task }))
+}
+
+/// Serves the firmware of `car` over TCP on `listener`, one client at a time, as a car's
+/// TCP bridge serves its USB link (`drivecheck sim --car sitl:TREE`): one firmware for every
+/// connection, running on tokio's clock (in real time), standing still between clients. Returns
+/// when the firmware stops (its reason), or never.
+pub async fn serve_sitl_tcp(
+    car: &SitlCar,
+    listener: tokio::net::TcpListener,
+) -> Result<String, SitlCarError> {
+    let (link, handle) = start_sitl(car)?;
+    let (mut from_car, mut to_car) = tokio::io::split(link);
+    loop {
+        let (socket, peer) = tokio::select! {
+            accepted = listener.accept() => match accepted {
+                Ok(accepted) => accepted,
+                Err(e) => {
+                    tracing::warn!("cannot accept a connection: {e}");
+                    continue;
+                }
+            },
+            () = ended(&handle) => break,
+        };
+        tracing::info!("a client connected from {peer}");
+        let _ = socket.set_nodelay(true);
+        let (mut socket_in, mut socket_out) = socket.into_split();
+        // Until the client goes (or the firmware stops); the link itself stays open for the
+        // next client, so neither copy shuts down what it writes to.
+        tokio::select! {
+            _ = tokio::io::copy(&mut socket_in, &mut to_car) => {}
+            _ = tokio::io::copy(&mut from_car, &mut socket_out) => {}
+            () = ended(&handle) => break,
+        }
+        tracing::info!("the client from {peer} left");
+    }
+    Ok(handle
+        .ended()
+        .unwrap_or_else(|| "the firmware's link closed".to_owned()))
+}
+
+/// Resolves once the bridge of `handle` stopped.
+async fn ended(handle: &SitlHandle) {
+    while handle.ended().is_none() && !handle.task.is_finished() {
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
 }
 
 /// The firmware, the plant, and what is on its way between them.

@@ -897,7 +897,10 @@ fn decide_crs(
     if !lon_lat {
         return Ok((Crs::Local, CrsSource::Inferred));
     }
-    let first = fence.positions[0];
+    // An empty ring has no first vertex to take as the origin; the fence's own check refuses it.
+    let Some(&first) = fence.positions.first() else {
+        return Ok((Crs::Local, CrsSource::Inferred));
+    };
     let origin = EnuOrigin {
         lat: first.b,
         lon: first.a,

@@ -122,6 +122,7 @@ fn a_campaign_record_survives_a_round_trip_through_json() {
             hash: "ab".repeat(32),
         }),
         car_firmware_version: Some("12.3".to_owned()),
+        car_firmware_tree_hash: None,
         started_at: "2026-11-22T10:55:21Z".to_owned(),
         ended_at: Some("2026-11-22T10:56:02Z".to_owned()),
         summary: Some(CampaignSummary {

@@ -162,17 +162,29 @@ pub fn documented(name: &str) -> String {
 /// A `drivecheck sim` car listening on a free loopback port (its address file in `dir`, named
 /// after `name`), and its address (`tcp://127.0.0.1:PORT`). Kill the child when done.
 pub fn start_sim(dir: &Path, name: &str) -> (std::process::Child, String) {
+    start_sim_with(dir, name, &[], 10)
+}
+
+/// [`start_sim`] with `extra` arguments (`--car sitl:TREE`), waiting up to `within_s` seconds
+/// for its address.
+pub fn start_sim_with(
+    dir: &Path,
+    name: &str,
+    extra: &[&str],
+    within_s: u64,
+) -> (std::process::Child, String) {
     let address_file = dir.join(format!("{name}.addr"));
     let mut sim = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
         .args(["sim", "--scenario", "parking-lot-2anchors", "--listen"])
         .arg("127.0.0.1:0")
         .arg("--address-file")
         .arg(&address_file)
+        .args(extra)
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
         .spawn()
         .unwrap();
-    for _ in 0..200 {
+    for _ in 0..within_s * 20 {
         let car = std::fs::read_to_string(&address_file).unwrap_or_default();
         if !car.trim().is_empty() {
             let car = car.trim().to_owned();
@@ -182,7 +194,7 @@ pub fn start_sim(dir: &Path, name: &str) -> (std::process::Child, String) {
         std::thread::sleep(std::time::Duration::from_millis(50));
     }
     let _ = (sim.kill(), sim.wait());
-    panic!("the simulated car {name} did not say its address within 10 s");
+    panic!("the simulated car {name} did not say its address within {within_s} s");
 }
 
 /// The port of the live view a campaign says it serves, from its line `live view:

@@ -235,3 +235,27 @@ fn a_dry_run_of_several_cars_is_one_json_document() {
         );
     }
 }
+
+/// The firmware built for the host served like a car (`drivecheck sim --car sitl:TREE`): a dry
+/// run passes against it over TCP in real time (the firmware's own preflight answers, its route
+/// and faults read back), and again for a second client after the first left — one firmware.
+#[test]
+fn the_firmware_served_over_tcp_passes_a_dry_run_for_one_client_after_another() {
+    let Some(tree) = std::env::var("DRIVECHECK_FIRMWARE_10")
+        .ok()
+        .filter(|v| !v.is_empty())
+    else {
+        common::skipped("firmware", "no firmware tree (DRIVECHECK_FIRMWARE_10)");
+        return;
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let car = format!("sitl:{tree}");
+    let (mut sim, address) = common::start_sim_with(tmp.path(), "fw", &["--car", &car], 120);
+    for client in 1..=2 {
+        let out = drivecheck(&["run", "--dry-run", "--car", &address]);
+        let said = text(&out);
+        assert_eq!(out.status.code(), Some(0), "client {client}: {said}");
+        assert!(said.contains("firmware 10.1"), "client {client}: {said}");
+    }
+    let _ = (sim.kill(), sim.wait());
+}
