@@ -450,7 +450,10 @@ mod tests {
         }
         // One byte more in a message, in one frame or over fragments, is too much.
         let mut one = FrameLimit::default();
-        assert_eq!(one.feed(&frame(true, 2, MAX_VIEWER_MESSAGE + 1)), Err(TooBig));
+        assert_eq!(
+            one.feed(&frame(true, 2, MAX_VIEWER_MESSAGE + 1)),
+            Err(TooBig)
+        );
         let mut fragments = FrameLimit::default();
         let mut stream = frame(false, 1, half);
         stream.extend(vec![0u8; half as usize]);
@@ -461,7 +464,10 @@ mod tests {
             FrameLimit::default().feed(&frame(true, 2, 16 << 20)),
             Err(TooBig)
         );
-        assert_eq!(FrameLimit::default().feed(&frame(true, 9, 126)), Err(TooBig));
+        assert_eq!(
+            FrameLimit::default().feed(&frame(true, 9, 126)),
+            Err(TooBig)
+        );
     }
 
     /// A viewer that sends a 16 MB message is disconnected at its header (#51): the server

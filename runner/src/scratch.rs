@@ -230,7 +230,10 @@ mod tests {
 
     #[test]
     fn scratch_names_are_read_and_others_are_not() {
-        assert_eq!(scratch_of(".case-003.json.tmp-42"), Some(("case-003.json", 42)));
+        assert_eq!(
+            scratch_of(".case-003.json.tmp-42"),
+            Some(("case-003.json", 42))
+        );
         assert_eq!(
             scratch_of(".report.html.sections-7"),
             Some(("report.html", 7))
@@ -297,8 +300,7 @@ mod tests {
     fn remove_all_removes_what_is_registered_and_nothing_else() {
         let dir = tempfile::tempdir().unwrap();
         let file = dir.path().join(".a.tmp-1");
-        let (scratch, ()) =
-            Scratch::create(&file, |p| std::fs::write(p, "half")).expect("created");
+        let (scratch, ()) = Scratch::create(&file, |p| std::fs::write(p, "half")).expect("created");
         let tree = dir.path().join(".b.staging-1");
         let tree_scratch = Scratch::register(&tree);
         std::fs::create_dir(&tree).unwrap();
@@ -312,7 +314,12 @@ mod tests {
         remove_registered(&held, |p| p.starts_with(dir.path()));
         assert!(!file.exists() && !tree.exists());
         assert_eq!(std::fs::read_to_string(&target).unwrap(), "whole");
-        let ours = |r: &Registry| r.paths.values().filter(|p| p.starts_with(dir.path())).count();
+        let ours = |r: &Registry| {
+            r.paths
+                .values()
+                .filter(|p| p.starts_with(dir.path()))
+                .count()
+        };
         assert_eq!(ours(&held), 2, "the settled file is forgotten");
         drop(held);
         drop((scratch, tree_scratch));

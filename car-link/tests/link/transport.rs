@@ -108,7 +108,9 @@ async fn the_codec_reports_garbage_and_keeps_decoding_until_the_end() {
 
 /// A free UDP port on loopback (bound and let go).
 async fn free_udp_port() -> u16 {
-    let socket = tokio::net::UdpSocket::bind("127.0.0.1:0").await.expect("bind");
+    let socket = tokio::net::UdpSocket::bind("127.0.0.1:0")
+        .await
+        .expect("bind");
     socket.local_addr().expect("address").port()
 }
 
@@ -124,18 +126,24 @@ async fn a_udp_link_waits_for_a_car_not_listening_yet_and_hears_only_the_car() {
         .expect("the link");
     // Nobody at the car's port: each datagram is refused (ICMP port unreachable).
     for _ in 0..3 {
-        link.send(bytes::Bytes::from_static(b"early")).await.expect("queued");
+        link.send(bytes::Bytes::from_static(b"early"))
+            .await
+            .expect("queued");
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
     let car = tokio::net::UdpSocket::bind(("127.0.0.1", car_port))
         .await
         .expect("the car listens");
-    let spoofer = tokio::net::UdpSocket::bind("127.0.0.1:0").await.expect("bind");
+    let spoofer = tokio::net::UdpSocket::bind("127.0.0.1:0")
+        .await
+        .expect("bind");
     spoofer
         .send_to(b"spoofed", ("127.0.0.1", reply_port))
         .await
         .expect("sent");
-    link.send(bytes::Bytes::from_static(b"hello")).await.expect("queued");
+    link.send(bytes::Bytes::from_static(b"hello"))
+        .await
+        .expect("queued");
     let mut buf = [0u8; 64];
     let (n, from) = tokio::time::timeout(Duration::from_secs(5), car.recv_from(&mut buf))
         .await

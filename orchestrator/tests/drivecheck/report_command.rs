@@ -407,7 +407,16 @@ const DEAD_PID: u32 = 4_294_967_295;
 fn a_report_removes_what_a_killed_process_left_and_says_so() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
-    let ran = drivecheck(&["-q", "run", "--seed", "1", "--tests", "2", "--out", path(&run)]);
+    let ran = drivecheck(&[
+        "-q",
+        "run",
+        "--seed",
+        "1",
+        "--tests",
+        "2",
+        "--out",
+        path(&run),
+    ]);
     assert!(matches!(ran.status.code(), Some(0 | 1)), "{}", text(&ran));
     let left = [
         format!(".report.html.sections-{DEAD_PID}"),

@@ -292,11 +292,8 @@ fn recorded_run(dir: &std::path::Path, tests: &str, extra: &[&str]) -> std::path
 fn a_report_interrupted_by_sigint_exits_2_and_leaves_nothing_behind() {
     let dir = tempfile::tempdir().unwrap();
     let run = recorded_run(dir.path(), "3", &[]);
-    let (code, said, _) = interrupt_when_paused(
-        &["report", path(&run), "--all-tests"],
-        "report:1",
-        "INT",
-    );
+    let (code, said, _) =
+        interrupt_when_paused(&["report", path(&run), "--all-tests"], "report:1", "INT");
     assert_eq!(code, Some(2), "{said}");
     assert!(said.contains("error: interrupted (SIGINT)"), "{said}");
     assert_eq!(scratch_in(&run), Vec::<String>::new(), "{said}");
@@ -322,7 +319,11 @@ fn runs_merge_interrupted_by_sigterm_exits_2_and_leaves_no_staging_directory() {
             "--out",
             path(&shard(k)),
         ]);
-        assert!(matches!(out.status.code(), Some(0 | 1)), "{}", common::text(&out));
+        assert!(
+            matches!(out.status.code(), Some(0 | 1)),
+            "{}",
+            common::text(&out)
+        );
     }
     let merged = dir.path().join("merged");
     let (code, said, _) = interrupt_when_paused(
@@ -403,15 +404,15 @@ fn under_nohup_a_hangup_is_ignored_and_sigint_still_interrupts() {
     }
     let pid = child.id().to_string();
     let send = |signal: &str| {
-        let sent = Command::new("kill")
-            .args([signal, &pid])
-            .status()
-            .unwrap();
+        let sent = Command::new("kill").args([signal, &pid]).status().unwrap();
         assert!(sent.success());
     };
     send("-HUP");
     std::thread::sleep(Duration::from_millis(500));
-    assert!(child.try_wait().unwrap().is_none(), "a hangup ended it: {said}");
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "a hangup ended it: {said}"
+    );
     send("-INT");
     let status = child.wait().unwrap();
     let mut rest = String::new();
