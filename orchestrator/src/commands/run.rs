@@ -182,10 +182,13 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         }
     };
     // A resumed campaign's directory is claimed again: not while another process writes it.
-    let _claim = match &settings.out {
+    let claim = match &settings.out {
         OutDir::Resumed(_) => runner::claim_run_dir_again(&out)?,
         _ => runner::claim_out_dir(&out, made)?,
     };
+    if let Some(note) = claim.stale_note() {
+        output::note(note);
+    }
     if let Some(file) = &args.junit {
         super::case_input::check_output_file("--junit", file, &out)?;
     }
