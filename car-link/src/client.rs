@@ -189,6 +189,18 @@ pub enum CarError {
     /// The version handshake failed.
     #[error("version handshake failed: {0}")]
     Handshake(Box<CarError>),
+    /// No reply from the link's car, but replies from another car id came: another car on the
+    /// link, or a bridge or proxy that changes the id.
+    #[error(
+        "no reply to {command:?} from the car, but {other} (another car on the link, or a bridge \
+         that changes the id)"
+    )]
+    OtherCar {
+        /// The command.
+        command: CommandId,
+        /// The last reply from another car id.
+        other: crate::health::OtherCar,
+    },
     /// A packet would start at the same (x, y) as the previous packet, and the firmware would silently drop it.
     #[error(
         "route point {index} would start a packet at the same (x, y) as the previous packet: the car drops it"
@@ -457,10 +469,15 @@ impl Car {
             reconnect_to,
             cancel.clone(),
         ));
-        let sample = shared
-            .state(shared.tries())
-            .await
-            .map_err(|e| CarError::Handshake(Box::new(e)))?;
+        let sample = shared.state(shared.tries()).await.map_err(|e| {
+            let other = lock(&shared.health).figures.last_other_car;
+            CarError::Handshake(Box::new(match (e, other) {
+                (CarError::NoReply { command, .. }, Some(other)) => {
+                    CarError::OtherCar { command, other }
+                }
+                (e, _) => e,
+            }))
+        })?;
         // The version was taken from the reply by `state`; a broadcast handshake also learns the car's id.
         {
             let mut identity = lock(&shared.identity);

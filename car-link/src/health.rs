@@ -25,6 +25,12 @@ pub struct LinkHealth {
     pub reconnects: u64,
     /// Replies that matched no waiting request (duplicates, other cars, late answers).
     pub stray_replies: u64,
+    /// Replies (other than PRINTF) that came from another car id than this link's car: another
+    /// car on a shared link, or a bridge or proxy that changes the id. Counted in
+    /// `stray_replies` too.
+    pub other_car_replies: u64,
+    /// The last of them: which car id it came from, and which this link expected.
+    pub last_other_car: Option<OtherCar>,
     /// Candidate frames dropped by the decoder (bad CRC, end byte, length, abandoned).
     pub dropped_frames: u64,
     /// Valid frames whose payload did not decode.
@@ -33,6 +39,25 @@ pub struct LinkHealth {
     /// whose far end vanished without closing it, a dead car shows here and in the timeouts, since no
     /// connection closes to report it lost.
     pub silent_for: Option<Duration>,
+}
+
+/// A reply from another car id than the link's ([`LinkHealth::last_other_car`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct OtherCar {
+    /// The car id the reply carried.
+    pub car: u8,
+    /// The car id this link talks to.
+    pub expected: u8,
+}
+
+impl std::fmt::Display for OtherCar {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "a reply came from car id {}, expected {}",
+            self.car, self.expected
+        )
+    }
 }
 
 /// Accumulates health figures; snapshots are taken with [`HealthRecorder::snapshot`].

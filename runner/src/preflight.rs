@@ -265,12 +265,20 @@ fn per_try_timeout(p50: Duration, p99: Duration) -> Result<Duration, String> {
 /// which then reads a round trip far too short (on a link of 500 ms each way, 1 s tries measured
 /// 0.4 s). So the keepalive is off while measuring (the probes feed the watchdog), after any
 /// timeout since the link opened the measurement first waits until late replies have arrived, and
-/// after a probe that got no answer the next is sent only after as long again. The link's round
-/// trip is not known yet: the first probe waits the per-try timeout in force, doubled after every
-/// probe that got no answer, up to [`MAX_PER_TRY`]; the others wait three times the first round
-/// trip. A lossy link loses some probes: up to [`RTT_PROBE_TRIES`] × [`RTT_PROBES`] are sent to
-/// get [`RTT_PROBES`] answers; with fewer than half of them answered the link is refused with its
-/// measured loss.
+/// after a probe that got no answer the next is sent only after as long again. How long a probe
+/// waits: three times the handshake's round trip when the handshake was answered at its first
+/// try and nothing timed out since, else three times the first probe's; until a probe is
+/// answered, the per-try timeout in force, doubled after every probe that got no answer, up to
+/// [`MAX_PER_TRY`]. A lossy link loses some probes: up to [`RTT_PROBE_TRIES`] × [`RTT_PROBES`]
+/// are sent to get [`RTT_PROBES`] answers; with fewer than half of them answered the link is
+/// refused with its measured loss.
+///
+/// Bounded: a probe unanswered while a reply came from another car id is refused at once, naming
+/// both ids; a car that answers none of [`SILENT_PROBES`] probes in a row is refused as one that
+/// stopped answering; and the measurement ends after [`MEASURE_LIMIT`] with the round trips it
+/// has (refused with fewer than half of [`RTT_PROBES`]). So it takes at most [`MEASURE_LIMIT`] +
+/// one probe (2 × [`MAX_PER_TRY`]) + the first wait ([`MAX_PER_TRY`]): 72 s (`docs/car.md`,
+/// *The dry run*).
 async fn measure_round_trip<V: Vehicle>(
     car: &V,
     journal: &Journal<'_>,
@@ -281,28 +289,58 @@ async fn measure_round_trip<V: Vehicle>(
     measured
 }
 
+/// Probes unanswered in a row after which the car is taken to have stopped answering: on a link
+/// of a few milliseconds 20 probes of 250 ms and as long again after each, 10 s. A link that
+/// loses half the round trips (30 % each way) loses 20 in a row about once in a million probes.
+pub const SILENT_PROBES: usize = 20;
+/// How long the round-trip measurement goes on collecting answers: it then goes on with those
+/// it has.
+pub const MEASURE_LIMIT: Duration = Duration::from_secs(60);
+
+/// The wait of a probe on a link of round trip `rtt`: `3 × rtt + 100 ms`, within
+/// [`MIN_PER_TRY`]..=[`MAX_PER_TRY`].
+fn probe_wait(rtt: Duration) -> Duration {
+    (rtt.saturating_mul(3) + Duration::from_millis(100)).clamp(MIN_PER_TRY, MAX_PER_TRY)
+}
+
 /// The probes of [`measure_round_trip`], with the keepalive off.
 async fn probe_round_trips<V: Vehicle>(
     car: &V,
     journal: &Journal<'_>,
 ) -> Result<(Duration, Duration), RunError> {
-    if car.health().timeouts > 0 {
+    let began = tokio::time::Instant::now();
+    let health = car.health();
+    // The handshake's round trip is the link's when nothing timed out: no late reply can have
+    // answered it.
+    let known = if health.timeouts > 0 {
         tokio::time::sleep(MAX_PER_TRY).await;
-    }
+        None
+    } else {
+        health.rtt_p99
+    };
+    let mut per_try = known.map_or_else(|| car.request_timeout().min(MAX_PER_TRY), probe_wait);
+    let mut known = known.is_some();
     let mut rtts = Vec::with_capacity(RTT_PROBES);
     let mut sent = 0;
     let mut last_error = None;
-    let mut per_try = car.request_timeout().min(MAX_PER_TRY);
-    while rtts.len() < RTT_PROBES && sent < RTT_PROBES * RTT_PROBE_TRIES {
+    let mut unanswered = 0;
+    let mut last_answer = tokio::time::Instant::now();
+    while rtts.len() < RTT_PROBES
+        && sent < RTT_PROBES * RTT_PROBE_TRIES
+        && began.elapsed() < MEASURE_LIMIT
+    {
         sent += 1;
+        let others = car.health().other_car_replies;
         match car.state_within(per_try).await {
             Ok(sample) => {
                 journal.state(&sample);
-                if rtts.is_empty() {
-                    per_try = (sample.rtt().saturating_mul(3) + Duration::from_millis(100))
-                        .clamp(MIN_PER_TRY, MAX_PER_TRY);
+                if !known {
+                    per_try = probe_wait(sample.rtt());
+                    known = true;
                 }
                 rtts.push(sample.rtt());
+                unanswered = 0;
+                last_answer = tokio::time::Instant::now();
             }
             Err(CarError::LinkLost) => {
                 return Err(RunError::car(
@@ -311,9 +349,33 @@ async fn probe_round_trips<V: Vehicle>(
                 ));
             }
             Err(error) => {
+                unanswered += 1;
+                let health = car.health();
+                if health.other_car_replies > others
+                    && let Some(other) = health.last_other_car
+                {
+                    return Err(RunError::Preflight(format!(
+                        "measuring the round trip: state request {sent} got no answer from car \
+                         id {}, but {other}: another car on the link, or a bridge or proxy that \
+                         changes the id",
+                        other.expected
+                    )));
+                }
+                if unanswered >= SILENT_PROBES {
+                    let answered = match rtts.len() {
+                        0 => "the handshake".to_owned(),
+                        n => format!("{n} of {sent} state requests"),
+                    };
+                    return Err(RunError::Preflight(format!(
+                        "measuring the round trip: the car answered {answered}, then none of \
+                         {unanswered} state requests in {:.1} s: it stopped answering (last: \
+                         {error})",
+                        last_answer.elapsed().as_secs_f64()
+                    )));
+                }
                 last_error = Some(error);
                 tokio::time::sleep(per_try).await;
-                if rtts.is_empty() {
+                if !known {
                     per_try = per_try.saturating_mul(2).min(MAX_PER_TRY);
                 }
             }
@@ -323,8 +385,9 @@ async fn probe_round_trips<V: Vehicle>(
         let lost = sent - rtts.len();
         let error = last_error.map_or_else(String::new, |e| format!(" (last: {e})"));
         return Err(RunError::Preflight(format!(
-            "measuring the round trip: {lost} of {sent} state requests got no answer ({:.0} % \
-             lost{error}); the link is too lossy to drive on",
+            "measuring the round trip: {lost} of {sent} state requests in {:.1} s got no answer \
+             ({:.0} % lost{error}); the link is too lossy to drive on",
+            began.elapsed().as_secs_f64(),
             100.0 * lost as f64 / sent as f64
         )));
     }
@@ -337,6 +400,161 @@ async fn probe_round_trips<V: Vehicle>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    use campaign::model::Campaign;
+    use car_link::frame::{FrameCodec, FrameEncoder};
+    use futures::StreamExt;
+    use tokio::io::AsyncWriteExt;
+
+    fn scenario() -> Scenario {
+        scenarios::bundled::load("parking-lot-2anchors")
+            .unwrap()
+            .scenario
+    }
+
+    fn one_test(dir: &std::path::Path) -> RunConfig {
+        RunConfig::new(
+            Campaign {
+                seed: 7,
+                tests: 1,
+                no_faults: false,
+            },
+            dir.join("run"),
+            "sim",
+        )
+    }
+
+    /// The embedded simulated car behind a proxy that passes `kept` replies as they are and
+    /// stamps every later one with car id `id`.
+    fn renumbering_proxy(
+        sim: tokio::io::DuplexStream,
+        kept: usize,
+        id: u8,
+    ) -> tokio::io::DuplexStream {
+        let (host, proxy) = tokio::io::duplex(1 << 16);
+        let (sim_read, mut sim_write) = tokio::io::split(sim);
+        let (mut proxy_read, mut proxy_write) = tokio::io::split(proxy);
+        tokio::spawn(async move {
+            let _ = tokio::io::copy(&mut proxy_read, &mut sim_write).await;
+        });
+        tokio::spawn(async move {
+            let mut replies = tokio_util::codec::FramedRead::new(sim_read, FrameCodec::host());
+            let mut passed = 0;
+            while let Some(Ok(frame)) = replies.next().await {
+                let Ok(frame) = frame else { continue };
+                let mut payload = frame.payload.to_vec();
+                if passed >= kept {
+                    payload[0] = id;
+                }
+                passed += 1;
+                let bytes = FrameEncoder::to_firmware()
+                    .encode_to_bytes(&payload)
+                    .unwrap();
+                if proxy_write.write_all(&bytes).await.is_err() {
+                    return;
+                }
+            }
+        });
+        host
+    }
+
+    /// A car that answers the handshake and then nothing: the dry run says so within seconds
+    /// (it waited 630 s of 80 probes before).
+    #[tokio::test(start_paused = true)]
+    async fn a_car_that_stops_answering_after_the_handshake_is_given_up_within_seconds() {
+        let scenario = scenario();
+        let dir = tempfile::tempdir().unwrap();
+        let (car, sim) = crate::vehicle::connect_sim(&car_sim::SimConfig::from_scenario(&scenario))
+            .await
+            .unwrap();
+        sim.freeze();
+        let began = tokio::time::Instant::now();
+        let error = crate::dry_run(&car, &scenario, &one_test(dir.path()), &crate::Silent)
+            .await
+            .expect_err("the car answers nothing");
+        let took = began.elapsed();
+        let text = error.to_string();
+        assert!(
+            text.starts_with(
+                "preflight: measuring the round trip: the car answered the handshake, then none \
+                 of 20 state requests in 9.8 s: it stopped answering (last: no reply to GetState"
+            ),
+            "{text}"
+        );
+        // The measurement's 10 s of silence and one probe, then the session's end (at most 3 s
+        // to disarm a car that does not answer).
+        assert!(
+            took <= Duration::from_secs(11) + crate::session_end::DISARM_LIMIT,
+            "{took:?}: {text}"
+        );
+    }
+
+    /// A proxy that changes the car id of every reply after the handshake's: named at the first
+    /// probe, with both ids.
+    #[tokio::test(start_paused = true)]
+    async fn a_reply_from_another_car_id_is_named_at_the_first_probe() {
+        let scenario = scenario();
+        let dir = tempfile::tempdir().unwrap();
+        let (stream, _sim) =
+            car_sim::spawn_in_process(&car_sim::SimConfig::from_scenario(&scenario));
+        let car = crate::vehicle::over_stream(renumbering_proxy(stream, 1, 9))
+            .await
+            .expect("the handshake's reply is the car's own");
+        let began = tokio::time::Instant::now();
+        let error = crate::dry_run(&car, &scenario, &one_test(dir.path()), &crate::Silent)
+            .await
+            .expect_err("the replies name another car");
+        let took = began.elapsed();
+        let text = error.to_string();
+        assert!(
+            text.contains(
+                "state request 1 got no answer from car id 1, but a reply came from car id 9, \
+                 expected 1: another car on the link, or a bridge or proxy that changes the id"
+            ),
+            "{text}"
+        );
+        assert!(
+            took <= 2 * MAX_PER_TRY + crate::session_end::DISARM_LIMIT,
+            "{took:?}: {text}"
+        );
+    }
+
+    /// A link that loses 30 % each way (about half the round trips), 20-60 ms each way, is
+    /// measured, not taken for a car that stopped answering, on every one of 30 seeds; and within
+    /// the measurement's bound.
+    #[tokio::test(start_paused = true)]
+    async fn a_lossy_link_is_measured_and_not_given_up() {
+        let scenario = scenario();
+        for seed in 0..30 {
+            let config = car_sim::SimConfig {
+                seed,
+                link: car_sim::LinkImpairment {
+                    latency: ms(20),
+                    jitter: ms(40),
+                    loss: 0.3,
+                    ..car_sim::LinkImpairment::default()
+                },
+                ..car_sim::SimConfig::from_scenario(&scenario)
+            };
+            let (car, _sim) = crate::vehicle::connect_sim(&config)
+                .await
+                .unwrap_or_else(|e| panic!("seed {seed}: {e}"));
+            let journal = Journal::without_recording(None);
+            let began = tokio::time::Instant::now();
+            let (p50, p99) = measure_round_trip(&car, &journal)
+                .await
+                .unwrap_or_else(|e| panic!("seed {seed}: {e}"));
+            assert!(
+                ms(40) <= p50 && p50 <= p99 && p99 <= ms(130),
+                "seed {seed}: {p50:?} {p99:?}"
+            );
+            assert!(
+                began.elapsed() <= MEASURE_LIMIT,
+                "seed {seed}: {:?}",
+                began.elapsed()
+            );
+        }
+    }
 
     const PERIOD: Duration = Duration::from_millis(50);
     const DEFAULT: Duration = campaign::safety::DEFAULT_STALE_AFTER;

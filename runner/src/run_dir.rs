@@ -574,12 +574,29 @@ use crate::store::CLAIM_FILE;
 pub struct OutClaim {
     dir: PathBuf,
     made: bool,
+    /// The stale claim this one replaced: what its file said of its holder.
+    took_over: Option<String>,
+}
+
+impl OutClaim {
+    /// When this claim replaced a stale one (its process no longer runs on this host), the note
+    /// that says so, for the command to print.
+    pub fn stale_note(&self) -> Option<String> {
+        self.took_over.as_ref().map(|holder| {
+            format!(
+                "{}: took over a stale claim ({holder}): that process no longer runs",
+                self.dir.display()
+            )
+        })
+    }
 }
 
 /// Claims the output directory `path` for this process, atomically: creates it (and its parents)
 /// when missing, then its [`CLAIM_FILE`] with `O_EXCL`, then checks that nothing else is in it.
 /// `made` says the caller just created it (the default run directories, claimed by name).
 /// Another process holding the claim, or anything already in the directory, is an error naming it.
+/// A claim whose process no longer runs on this host ([`holder_is_gone`]: a `kill -9`, a
+/// SIGTERM before the signal handler) is stale: it is taken over ([`OutClaim::stale_note`]).
 pub fn claim_out_dir(path: &Path, made: bool) -> Result<OutClaim, RunError> {
     let io = |source| RunError::Io {
         path: path.to_owned(),
@@ -588,24 +605,28 @@ pub fn claim_out_dir(path: &Path, made: bool) -> Result<OutClaim, RunError> {
     let made = made || !path.exists();
     std::fs::create_dir_all(path).map_err(io)?;
     let marker = path.join(CLAIM_FILE);
-    if let Err(error) = take_claim(&marker) {
-        if made {
-            let _ = std::fs::remove_dir(path);
+    let took_over = match take_claim(&marker) {
+        Ok(took_over) => took_over,
+        Err(error) => {
+            if made {
+                let _ = std::fs::remove_dir(path);
+            }
+            return Err(match error {
+                // Not ours: its claim file and the directory stay as they are.
+                Claim::Held(holder) => RunError::OutDirClaimed {
+                    path: path.to_owned(),
+                    holder,
+                },
+                Claim::Io(e) => io(e),
+            });
         }
-        return Err(match error {
-            // Not ours: its claim file and the directory stay as they are.
-            Claim::Held(holder) => RunError::OutDirClaimed {
-                path: path.to_owned(),
-                holder,
-            },
-            Claim::Io(e) => io(e),
-        });
-    }
+    };
     // Ours from here: the guard gives the claim back (and the directory, if this process made
     // it and nothing was written).
     let claim = OutClaim {
         dir: path.to_owned(),
         made,
+        took_over,
     };
     let others = std::fs::read_dir(path)
         .map_err(io)?
@@ -620,27 +641,72 @@ pub fn claim_out_dir(path: &Path, made: bool) -> Result<OutClaim, RunError> {
 }
 
 /// Creates the claim file `marker` with `O_EXCL` (an existing one is `AlreadyExists`) and writes
-/// who holds it, for another process's error: the claim is the file itself.
+/// who holds it, for another process's error: the claim is the file itself. `pid N on HOST since
+/// TIME` (without ` on HOST` when this system does not say its name).
 fn create_claim(marker: &Path) -> std::io::Result<()> {
     use std::io::Write;
     let mut file = std::fs::OpenOptions::new()
         .write(true)
         .create_new(true)
         .open(marker)?;
-    let _ = writeln!(file, "pid {} since {}", std::process::id(), rfc3339_now());
+    let host = host_name().map_or_else(String::new, |host| format!(" on {host}"));
+    let _ = writeln!(
+        file,
+        "pid {}{host} since {}",
+        std::process::id(),
+        rfc3339_now()
+    );
     Ok(())
+}
+
+/// This host's name (`/proc/sys/kernel/hostname`), if the system says it.
+fn host_name() -> Option<String> {
+    let name = std::fs::read_to_string("/proc/sys/kernel/hostname").ok()?;
+    let name = name.trim();
+    (!name.is_empty() && !name.contains(char::is_whitespace)).then(|| name.to_owned())
+}
+
+/// Whether process `pid` runs on this host: `Some(false)` when its `/proc` entry is missing,
+/// `None` when this system has no `/proc` to tell.
+fn process_alive(pid: u32) -> Option<bool> {
+    let proc = Path::new("/proc");
+    proc.is_dir().then(|| proc.join(pid.to_string()).exists())
+}
+
+/// Whether the holder of a claim, as its file says (`pid N [on HOST] since TIME`), is gone: its
+/// pid names no process of this host ([`process_alive`]). A claim of another host, or one this
+/// system cannot check, is never gone: it may be live. The one liveness check of every claim:
+/// `run -o`, `replay -o`, `shrink -o` and `run --resume` alike.
+fn holder_is_gone(holder: &str) -> bool {
+    let mut words = holder.split_whitespace();
+    if words.next() != Some("pid") {
+        return false;
+    }
+    let Some(pid) = words.next().and_then(|pid| pid.parse::<u32>().ok()) else {
+        return false;
+    };
+    let host = match (words.next(), words.next()) {
+        (Some("on"), host) => host,
+        _ => None,
+    };
+    if host.is_some_and(|host| Some(host) != host_name().as_deref()) {
+        return false;
+    }
+    process_alive(pid) == Some(false)
 }
 
 /// Claims an existing run directory again for this process (`run --resume`): its [`CLAIM_FILE`]
 /// is created as [`claim_out_dir`] creates it; one already there is another process's claim,
-/// refused, unless that process no longer lives (`kill -9`, a crash: its pid is not in `/proc`),
-/// when the claim becomes this process's. The directory is never removed by the claim.
+/// refused, unless that process no longer lives ([`holder_is_gone`]: `kill -9`, a crash), when
+/// the claim becomes this process's ([`OutClaim::stale_note`]). The directory is never removed by
+/// the claim.
 pub fn claim_run_dir_again(path: &Path) -> Result<OutClaim, RunError> {
     let marker = path.join(CLAIM_FILE);
     match take_claim(&marker) {
-        Ok(()) => Ok(OutClaim {
+        Ok(took_over) => Ok(OutClaim {
             dir: path.to_owned(),
             made: false,
+            took_over,
         }),
         Err(Claim::Held(holder)) => Err(RunError::OutDirClaimed {
             path: path.to_owned(),
@@ -666,27 +732,31 @@ enum Claim {
 const EMPTY_CLAIM_GRACE: std::time::Duration = std::time::Duration::from_secs(10);
 
 /// Takes the claim `marker` for this process: creates it, or replaces the claim of a process that
-/// no longer runs (its pid is not in `/proc`, or it died before writing its pid). A claim held by
-/// a live process, or one this system cannot check (no `/proc`), is refused with its holder.
-fn take_claim(marker: &Path) -> Result<(), Claim> {
+/// no longer runs ([`holder_is_gone`], or it died before writing its pid), saying what that claim
+/// said. A claim held by a live process, by a process of another host or one this system cannot
+/// check (no `/proc`) is refused with its holder.
+fn take_claim(marker: &Path) -> Result<Option<String>, Claim> {
+    let mut took_over = None;
     for _ in 0..2 {
         match create_claim(marker) {
-            Ok(()) => return Ok(()),
+            Ok(()) => return Ok(took_over),
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
                 let holder = std::fs::read_to_string(marker).unwrap_or_default();
                 let holder = holder.trim();
-                let pid = holder
-                    .strip_prefix("pid ")
-                    .and_then(|rest| rest.split_whitespace().next())
-                    .and_then(|pid| pid.parse::<u32>().ok());
-                let proc = Path::new("/proc");
-                let dead = match pid {
-                    Some(pid) => proc.is_dir() && !proc.join(pid.to_string()).exists(),
-                    None => holder.is_empty() && empty_for_long(marker),
+                let gone = if holder.is_empty() {
+                    empty_for_long(marker)
+                } else {
+                    holder_is_gone(holder)
                 };
-                if !dead {
+                if !gone {
                     return Err(Claim::Held(if holder.is_empty() {
                         "it is just starting".to_owned()
+                    } else if on_another_host(holder) {
+                        format!(
+                            "{holder}; another host's process, which this one cannot check: if it \
+                             no longer runs, remove {}",
+                            marker.display()
+                        )
                     } else {
                         holder.to_owned()
                     }));
@@ -697,6 +767,11 @@ fn take_claim(marker: &Path) -> Result<(), Claim> {
                     Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
                     Err(e) => return Err(Claim::Io(e)),
                 }
+                took_over = Some(if holder.is_empty() {
+                    "an empty claim file".to_owned()
+                } else {
+                    holder.to_owned()
+                });
             }
             Err(e) => return Err(Claim::Io(e)),
         }
@@ -704,6 +779,12 @@ fn take_claim(marker: &Path) -> Result<(), Claim> {
     Err(Claim::Held(
         "another process claimed it at the same moment".to_owned(),
     ))
+}
+
+/// Whether a claim's holder (`pid N on HOST since TIME`) names another host than this one.
+fn on_another_host(holder: &str) -> bool {
+    let words: Vec<&str> = holder.split_whitespace().take(4).collect();
+    matches!(words.as_slice(), ["pid", _, "on", host] if Some(*host) != host_name().as_deref())
 }
 
 /// Whether the empty claim `marker` was last written longer ago than [`EMPTY_CLAIM_GRACE`].
@@ -831,7 +912,50 @@ mod tests {
         let claim = claim_out_dir(&dir, false).expect("the dead process's claim is taken");
         let holder = std::fs::read_to_string(dir.join(CLAIM_FILE)).unwrap();
         assert!(holder.contains(&std::process::id().to_string()), "{holder}");
+        let note = claim
+            .stale_note()
+            .expect("it says it took over a stale claim");
+        assert!(
+            note.ends_with(
+                "out: took over a stale claim (pid 4294967295 since then): that process no \
+                 longer runs"
+            ),
+            "{note}"
+        );
         drop(claim);
+        // The same on this host by name, and for the resume.
+        let host = host_name().expect("this system names its host");
+        std::fs::write(
+            dir.join(CLAIM_FILE),
+            format!("pid 4294967295 on {host} since then\n"),
+        )
+        .unwrap();
+        let claim = claim_run_dir_again(&dir).expect("the dead process's claim is taken");
+        assert!(claim.stale_note().is_some());
+        drop(claim);
+        // A claim of its own, not stale.
+        let claim = claim_out_dir(&dir, false).unwrap();
+        assert_eq!(claim.stale_note(), None);
+        let holder = std::fs::read_to_string(dir.join(CLAIM_FILE)).unwrap();
+        assert!(
+            holder.starts_with(&format!("pid {} on {host} since ", std::process::id())),
+            "{holder}"
+        );
+        drop(claim);
+        // Another host's process cannot be checked from here: refused, saying what to do.
+        std::fs::write(
+            dir.join(CLAIM_FILE),
+            "pid 4294967295 on another-host.example since then\n",
+        )
+        .unwrap();
+        let refused = claim_out_dir(&dir, false).unwrap_err().to_string();
+        assert!(
+            refused.contains(
+                "(pid 4294967295 on another-host.example since then; another host's process, \
+                 which this one cannot check: if it no longer runs, remove "
+            ),
+            "{refused}"
+        );
         std::fs::write(
             dir.join(CLAIM_FILE),
             format!("pid {} since now\n", std::process::id()),

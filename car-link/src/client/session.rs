@@ -27,7 +27,7 @@ use tokio_util::sync::CancellationToken;
 use super::{CarError, LinkConfig, LinkEvent, StateSample};
 use crate::address::CarAddress;
 use crate::firmware::FirmwareVersion;
-use crate::health::HealthRecorder;
+use crate::health::{HealthRecorder, OtherCar};
 use crate::message::{DecodeError, Dialect, ID_ALL, POINTS_PER_PACKET, Reply, Request, RoutePoint};
 use crate::transport::{Incoming, Link, PC_BYTE_TIMEOUT};
 use crate::version::CommandId;
@@ -343,6 +343,15 @@ impl Shared {
             }
         };
         let ours = identity.car_id == ID_ALL || car == identity.car_id;
+        if !ours && !matches!(reply, Reply::Printf(_)) {
+            // PRINTF carries the car's own id even to a link of id 254: only the others name a car.
+            let mut health = lock(&self.health);
+            health.figures.other_car_replies += 1;
+            health.figures.last_other_car = Some(OtherCar {
+                car,
+                expected: identity.car_id,
+            });
+        }
         if let Reply::Printf(text) = reply {
             if ours {
                 let mut sent = lock(&self.printf_sent);

@@ -173,6 +173,40 @@ async fn stray_and_duplicate_replies_are_not_taken_for_answers() {
     assert!(health.stray_replies >= 10, "{health:?}");
 }
 
+/// A proxy that changes the car id of the replies: the handshake and the health name the id the
+/// replies came from and the one expected.
+#[tokio::test(start_paused = true)]
+async fn replies_from_another_car_id_are_named_in_the_error_and_the_health() {
+    let config = LinkConfig {
+        car_id: 1,
+        ..no_keepalive()
+    };
+    let renumbered = |kept| Behaviour {
+        renumber_after: Some((kept, 9)),
+        ..Behaviour::default()
+    };
+    let (car, _) = pipe_car(renumbered(0), config.clone()).await;
+    let error = car.err().expect("no reply is the car's own").to_string();
+    assert!(
+        error.starts_with("version handshake failed: no reply to GetState from the car, but a reply came from car id 9, expected 1"),
+        "{error}"
+    );
+    let (car, _) = pipe_car(renumbered(1), config).await;
+    let car = car.expect("the handshake's reply is the car's own");
+    assert_eq!(car.health().last_other_car, None);
+    car.state().await.expect_err("no reply is the car's own");
+    let health = car.health();
+    assert_eq!(
+        health.last_other_car,
+        Some(car_link::health::OtherCar {
+            car: 9,
+            expected: 1
+        }),
+        "{health:?}"
+    );
+    assert_eq!(health.other_car_replies, 1, "{health:?}");
+}
+
 #[tokio::test(start_paused = true)]
 async fn a_request_answered_only_by_undecodable_replies_fails_with_their_cause() {
     let garbling = |command| Behaviour {

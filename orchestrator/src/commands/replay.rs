@@ -179,7 +179,10 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
         },
         out.display()
     ));
-    let _claim = runner::claim_out_dir(&out, made)?;
+    let claim = runner::claim_out_dir(&out, made)?;
+    if let Some(note) = claim.stale_note() {
+        output::note(note);
+    }
     if let Some(file) = &args.junit {
         super::case_input::check_output_file("--junit", file, &out)?;
     }

@@ -184,10 +184,13 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
         }
     };
     // A resumed campaign's directory is claimed again: not while another process writes it.
-    let _claim = match &settings.out {
+    let claim = match &settings.out {
         OutDir::Resumed(_) => runner::claim_run_dir_again(&out)?,
         _ => runner::claim_out_dir(&out, made)?,
     };
+    if let Some(note) = claim.stale_note() {
+        output::note(note);
+    }
     // What a process killed while writing it left (`kill -9`: a temporary file of a case file
     // or of campaign.json) is nobody's: removed, with a note.
     super::signals::note_leftovers(runner::scratch::clear_leftovers(&out));

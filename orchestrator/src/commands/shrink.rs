@@ -235,7 +235,10 @@ pub(super) fn shrink_case(
     let started = Instant::now();
     let cancel = runtime.block_on(async { cancel_on_ctrl_c() });
     // Claimed for the whole shrink: another process given the same --out is refused.
-    let _claim = runner::claim_out_dir(out, false)?;
+    let claim = runner::claim_out_dir(out, false)?;
+    if let Some(note) = claim.stale_note() {
+        output::note(note);
+    }
     let mut sim = SimDriver::new(
         (scenario, options.sim.clone()),
         path,

@@ -382,3 +382,49 @@ fn of_two_campaigns_given_the_same_out_at_once_one_is_refused_and_nothing_is_mix
         assert!(!out.join(".drivecheck-writing").exists());
     }
 }
+
+/// A claim file left by a process that died (a SIGTERM before the signal handler, a kill -9
+/// during `run --report`) does not block the directory for ever: `run -o DIR` takes it over and
+/// says so; the claim of a live process (this test's) is still refused.
+#[test]
+fn a_stale_claim_is_taken_over_and_a_live_one_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("R");
+    std::fs::create_dir(&out).unwrap();
+    let claim = out.join(".drivecheck-writing");
+    // A pid above any pid_max (4194304) is no process.
+    std::fs::write(&claim, "pid 4294967295 since 2026-12-02T10:00:00Z\n").unwrap();
+    let taken = run(&["--seed", "3", "--tests", "1", "--no-faults"], &out);
+    assert_eq!(taken.status.code(), Some(0), "{}", text(&taken));
+    assert!(
+        text(&taken).contains(&format!(
+            "{}: took over a stale claim (pid 4294967295 since 2026-12-02T10:00:00Z): that \
+             process no longer runs",
+            out.display()
+        )),
+        "{}",
+        text(&taken)
+    );
+    assert!(out.join("campaign.json").is_file());
+    assert!(!claim.exists(), "the run gave its own claim back");
+    // A live process's claim, on an empty directory.
+    let live = dir.path().join("live");
+    std::fs::create_dir(&live).unwrap();
+    let held = format!("pid {} since 2026-12-02T10:00:00Z\n", std::process::id());
+    std::fs::write(live.join(".drivecheck-writing"), &held).unwrap();
+    let refused = run(&["--seed", "3", "--tests", "1", "--no-faults"], &live);
+    assert_eq!(refused.status.code(), Some(2), "{}", text(&refused));
+    assert!(
+        text(&refused).contains(&format!(
+            "another drivecheck process is writing it (pid {} since",
+            std::process::id()
+        )),
+        "{}",
+        text(&refused)
+    );
+    assert_eq!(
+        std::fs::read_to_string(live.join(".drivecheck-writing")).unwrap(),
+        held
+    );
+    assert_eq!(std::fs::read_dir(&live).unwrap().count(), 1);
+}

@@ -108,6 +108,19 @@ async fn sim_car(config: &car_sim::SimConfig) -> Result<(Car, SimHandle), Connec
     Ok((car, sim))
 }
 
+/// The car behind `stream` with the link the runner gives a car ([`car_config`]): for tests that
+/// put something between the embedded simulated car's pipe and the client (a proxy that changes
+/// its replies).
+#[cfg(test)]
+pub(crate) async fn over_stream<S>(stream: S) -> Result<impl Vehicle + use<S>, ConnectError>
+where
+    S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Send + 'static,
+{
+    Car::over_stream(stream, car_config())
+        .await
+        .map_err(ConnectError::Sim)
+}
+
 /// The simulated car `sim` seeded with `seed`, its debug events on: they are recorded on the
 /// `/sim/…` channels of the campaign's MCAP (ranges, fault applications, watchdog).
 fn recorded_sim(sim: &car_sim::SimConfig, seed: u64) -> car_sim::SimConfig {

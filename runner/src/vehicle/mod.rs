@@ -42,6 +42,8 @@ use car_sim::{DebugEvent, Truth};
 use futures::Stream;
 use trajgen::Point;
 
+#[cfg(test)]
+pub(crate) use connect::over_stream;
 pub use connect::{ConnectError, EmbeddedSims, connect, connect_fresh, connect_sim, placed};
 
 /// A car the runner drives (see the module doc). Every async method is bounded by the link's

@@ -50,6 +50,9 @@ pub struct Behaviour {
     pub garble_reply_to: Option<CommandId>,
     /// With `garble_reply_to`: send the garbled payload, then the real reply.
     pub garble_then_answer: bool,
+    /// After answering this many requests, stamp every reply with this car id (a proxy that
+    /// changes the id).
+    pub renumber_after: Option<(usize, u8)>,
 }
 
 impl Default for Behaviour {
@@ -69,6 +72,7 @@ impl Default for Behaviour {
             chatty_terminal: None,
             garble_reply_to: None,
             garble_then_answer: false,
+            renumber_after: None,
         }
     }
 }
@@ -245,7 +249,11 @@ where
             std::future::pending::<()>().await;
         }
         answered += 1;
-        let reply_id = if id == 254 { 254 } else { behaviour.id };
+        let reply_id = match behaviour.renumber_after {
+            Some((kept, other)) if answered > kept => other,
+            _ if id == 254 => 254,
+            _ => behaviour.id,
+        };
         let replies: Vec<Reply> = match &request {
             Request::GetState => {
                 states += 1;
