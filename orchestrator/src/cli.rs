@@ -1082,8 +1082,9 @@ pub enum ScenarioCommand {
     /// 0 written, 2 error (an unknown scenario, no origin for longitude/latitude, a file that
     /// cannot be written).
     Export(ExportArgs),
-    /// Load and validate a scenario; print its warnings (a bundled scenario's with -v: they are
-    /// about data you cannot change). Exit status: 0 valid, 2 invalid.
+    /// Load and validate a scenario and plan its first test as run does; print its warnings (a
+    /// bundled scenario's with -v: they are about data you cannot change). Exit status: 0 valid,
+    /// 2 invalid (run would refuse it).
     Check(CheckArgs),
     /// List the bundled scenarios. Exit status: 0 listed, 2 error.
     List(ListArgs),

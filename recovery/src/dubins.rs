@@ -51,7 +51,13 @@ pub(crate) fn lower_bound(from: Pose, to: Pose, c: &Constraints) -> f64 {
         to.position + Point::from_heading(to.heading) * a,
         to.heading,
     );
-    let dubins = DubinsPath::shortest_from(pos_rot(start), pos_rot(end), bound_radius(c))
+    // A radius that underflowed to 0 (a minimum segment of 5e-324 m) or is not finite bounds
+    // nothing, and the Dubins paths panic on it: the straight line is the bound then.
+    let radius = bound_radius(c);
+    if !(radius > 0.0 && radius.is_finite()) {
+        return straight;
+    }
+    let dubins = DubinsPath::shortest_from(pos_rot(start), pos_rot(end), radius)
         .map_or(0.0, |p| p.length() - 2.0 * a);
     straight.max(dubins)
 }
@@ -239,6 +245,21 @@ mod tests {
     fn bound_radius_of_the_method_is_about_1_12_m() {
         let r = bound_radius(&Constraints::default());
         assert!((r - 1.1196).abs() < 1e-3, "{r}");
+    }
+
+    /// A minimum segment so short that the bound's radius underflows to 0 (`segment_min_m =
+    /// 5e-324` in a scenario, found by the scenario fuzzer): the straight line, not a panic in
+    /// the Dubins paths ("rho must be greater than 0").
+    #[test]
+    fn a_radius_that_underflows_bounds_by_the_straight_line() {
+        let c = Constraints {
+            min_segment: 5e-324,
+            ..Constraints::default()
+        };
+        assert_eq!(bound_radius(&c), 0.0);
+        let from = Pose::new(Point::new(0.0, 0.0), 0.0);
+        let behind = Pose::new(Point::new(-3.0, 0.0), 0.0);
+        assert_eq!(lower_bound(from, behind, &c), 3.0);
     }
 
     #[test]

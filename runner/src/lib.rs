@@ -876,6 +876,23 @@ async fn open_session<'a, V: Vehicle>(
     Ok((ctx, telemetry, preflight))
 }
 
+/// What every campaign of `scenario` computes before it drives (its planner, the start route's
+/// tail) and the plan of its first test with `seed`, as `run` plans it: `scenario check` calls
+/// it, so that it refuses a scenario whose first test `run` could not plan (a generator that
+/// cannot draw in the area with its settings).
+pub fn plan_first_test(scenario: &Scenario, seed: u64) -> Result<TestPlan, RunError> {
+    let config = RunConfig::new(
+        Campaign {
+            seed,
+            tests: 1,
+            no_faults: false,
+        },
+        PathBuf::new(),
+        "scenario check",
+    );
+    TestSource::new(scenario, &config)?.plan(0)
+}
+
 /// Where a campaign's test plans come from: generated from the seed, or a replayed case.
 pub struct TestSource<'a> {
     planner: TestPlanner,

@@ -135,10 +135,22 @@ fn summary(s: &Scenario) -> Value {
     })
 }
 
-/// Loads and validates a scenario, printing a summary and its warnings.
+/// The campaign seed whose first test `scenario check` plans.
+const CHECK_SEED: u64 = 0;
+
+/// Loads and validates a scenario and plans its first test as `run` does
+/// ([`runner::plan_first_test`]), printing a summary and its warnings.
 pub fn check(args: &CheckArgs) -> Result<Exit> {
     let loaded = load_scenario(args.scenario.name())?;
     let s = &loaded.scenario;
+    // What run does with the scenario before it drives: a scenario whose first test cannot be
+    // planned is refused here too.
+    runner::plan_first_test(s, CHECK_SEED).with_context(|| {
+        format!(
+            "{}: run would refuse it: test 0 of seed {CHECK_SEED} cannot be planned",
+            loaded.source
+        )
+    })?;
     if args.json {
         let mut document = summary(s);
         document["source"] = json!(loaded.source);

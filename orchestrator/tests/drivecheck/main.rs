@@ -24,6 +24,7 @@ mod replay_reproduces;
 mod report_command;
 mod resume_checks;
 mod run_command;
+mod scenario_fuzz;
 mod shrink_command;
 mod sweep_command;
 mod user_output;
