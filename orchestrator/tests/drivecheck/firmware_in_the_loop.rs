@@ -308,7 +308,15 @@ fn a_campaign_names_its_firmware_tree_and_its_resume_refuses_a_changed_one() {
     let mut changed = std::fs::read_to_string(&source).unwrap();
     changed.push_str("\n/* changed */\n");
     std::fs::write(&source, changed).unwrap();
-    let out = drivecheck(&["run", "--resume", path(&run), "--record", "none"]);
+    let out = drivecheck(&[
+        "run",
+        "--resume",
+        path(&run),
+        "--car",
+        &car,
+        "--record",
+        "none",
+    ]);
     let said = text(&out);
     assert_eq!(out.status.code(), Some(2), "{said}");
     assert!(said.contains("now hashes to"), "{said}");
