@@ -428,6 +428,9 @@ pub fn score_run(
         faults.retain(|f| f.log_time_ns >= from_ns);
         ranges.retain(|r| r.log_time_ns >= from_ns);
         let test_index = span.test_index;
+        if let Some(test) = test_index {
+            runner::pause_at("score", test);
+        }
         let recording = Recording::from_held(span.messages);
         truth |= !recording
             .messages::<TruthRecord>()

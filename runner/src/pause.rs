@@ -9,7 +9,8 @@
 //! other build, the `drivecheck` a user installs among them, [`pause`] does nothing.
 //!
 //! `DRIVECHECK_PAUSE=PLACE:K` pauses a command that reads (`report:K` once test K's section is
-//! drawn, `merge:K` once test K's case is merged, `counterfactual:K` and `twin:K` before the K-th
+//! drawn, `merge:K` once test K's case is merged, `score:K` as `explain --score` reads test K's
+//! span, `counterfactual:K` and `twin:K` before the K-th
 //! case is driven again) until a signal comes ([`note_signal`]) or 60 s pass
 //! ([`pause_at`]), saying `drivecheck: paused in PLACE at K` first.
 //!

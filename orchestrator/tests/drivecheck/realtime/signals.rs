@@ -420,3 +420,24 @@ fn under_nohup_a_hangup_is_ignored_and_sigint_still_interrupts() {
     assert_eq!(status.code(), Some(2), "{said}{rest}");
     assert!(rest.contains("error: interrupted (SIGINT)"), "{said}{rest}");
 }
+
+/// `explain --score` interrupted by SIGTERM while it reads the recording (#51 item 11): it died
+/// of the signal (143); now it exits 2 saying so.
+#[test]
+fn explain_score_interrupted_while_it_reads_exits_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = recorded_run(dir.path(), "3", &["--on-failure", "continue"]);
+    let (code, said, _) = interrupt_when_paused(
+        &[
+            "explain",
+            path(&run),
+            "--score",
+            "--counterfactual-runs",
+            "0",
+        ],
+        "score:1",
+        "TERM",
+    );
+    assert_eq!(code, Some(2), "{said}");
+    assert!(said.contains("error: terminated (SIGTERM)"), "{said}");
+}
