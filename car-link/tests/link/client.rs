@@ -186,7 +186,7 @@ async fn replies_from_another_car_id_are_named_in_the_error_and_the_health() {
         ..Behaviour::default()
     };
     let (car, _) = pipe_car(renumbered(0), config.clone()).await;
-    let error = car.err().expect("no reply is the car's own").to_string();
+    let error = car.expect_err("no reply is the car's own").to_string();
     assert!(
         error.starts_with("version handshake failed: no reply to GetState from the car, but a reply came from car id 9, expected 1"),
         "{error}"

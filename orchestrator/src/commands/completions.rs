@@ -14,7 +14,7 @@ use clap_complete::Shell;
 /// well as files (bash and fish; zsh offers the names, and a path is typed as it is).
 pub fn completions(args: &CompletionsArgs) -> Result<Exit> {
     let names = scenarios::bundled::names();
-    let mut command = offer_bundled(crate::cli::command(), &names);
+    let mut command = offer_bundled(crate::cli::command(), names);
     let mut script = Vec::new();
     clap_complete::generate(args.shell, &mut command, "drivecheck", &mut script);
     let script = String::from_utf8(script)?;

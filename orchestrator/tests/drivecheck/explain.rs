@@ -10,22 +10,7 @@ use common::{campaign, drivecheck, path, summary, text};
 #[test]
 fn the_rock_lots_failures_are_explained_by_anchor_234s_reflected_range() {
     let dir = tempfile::tempdir().unwrap();
-    let run = campaign(
-        dir.path(),
-        1,
-        4,
-        &[
-            "--scenario",
-            concat!(
-                env!("CARGO_MANIFEST_DIR"),
-                "/tests/fixtures/rock-wide-shadow.toml"
-            ),
-            "--no-faults",
-            "--on-failure",
-            "continue",
-        ],
-        1,
-    );
+    let run = common::rock_campaign(dir.path());
     let out = drivecheck(&["explain", path(&run), "--json"]);
     assert_eq!(out.status.code(), Some(0), "{}", text(&out));
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();

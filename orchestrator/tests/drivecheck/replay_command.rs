@@ -174,22 +174,7 @@ fn a_case_of_a_scenario_file_replays_from_the_scenario_its_recording_holds() {
     // A scenario file's campaign: its name is not bundled, so `replay` reads the scenario from
     // the recording beside the case, as `report` does; without the recording it asks for it.
     let tmp = tempfile::tempdir().unwrap();
-    let run = campaign(
-        tmp.path(),
-        1,
-        4,
-        &[
-            "--scenario",
-            concat!(
-                env!("CARGO_MANIFEST_DIR"),
-                "/tests/fixtures/rock-wide-shadow.toml"
-            ),
-            "--no-faults",
-            "--on-failure",
-            "continue",
-        ],
-        1,
-    );
+    let run = common::rock_campaign(tmp.path());
     let case_file = run.join("case-000.json");
     let out = drivecheck(&[
         "replay",

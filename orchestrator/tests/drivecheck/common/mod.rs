@@ -69,6 +69,28 @@ pub fn path_with_drivecheck() -> String {
     )
 }
 
+/// Four tests of seed 1 without faults in the rock lot of a scenario file
+/// (`fixtures/rock-wide-shadow.toml`, a rock hiding anchor 234; not a bundled scenario), every
+/// segment judged (`--on-failure continue`); some fail (exit status 1). Its run directory.
+pub fn rock_campaign(dir: &Path) -> PathBuf {
+    campaign(
+        dir,
+        1,
+        4,
+        &[
+            "--scenario",
+            concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/tests/fixtures/rock-wide-shadow.toml"
+            ),
+            "--no-faults",
+            "--on-failure",
+            "continue",
+        ],
+        1,
+    )
+}
+
 /// Runs a campaign (`drivecheck run --seed SEED --tests TESTS [extra] --out DIR/campaign`),
 /// expects exit status `code`, and returns the run directory.
 pub fn campaign(dir: &Path, seed: u64, tests: usize, extra: &[&str], code: i32) -> PathBuf {
