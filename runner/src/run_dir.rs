@@ -666,15 +666,9 @@ fn host_name() -> Option<String> {
     (!name.is_empty() && !name.contains(char::is_whitespace)).then(|| name.to_owned())
 }
 
-/// Whether process `pid` runs on this host: `Some(false)` when its `/proc` entry is missing,
-/// `None` when this system has no `/proc` to tell.
-fn process_alive(pid: u32) -> Option<bool> {
-    let proc = Path::new("/proc");
-    proc.is_dir().then(|| proc.join(pid.to_string()).exists())
-}
-
 /// Whether the holder of a claim, as its file says (`pid N [on HOST] since TIME`), is gone: its
-/// pid names no process of this host ([`process_alive`]). A claim of another host, or one this
+/// pid names no process of this host ([`crate::scratch::process_alive`], the liveness
+/// check of scratch files too). A claim of another host, or one this
 /// system cannot check, is never gone: it may be live. The one liveness check of every claim:
 /// `run -o`, `replay -o`, `shrink -o` and `run --resume` alike.
 fn holder_is_gone(holder: &str) -> bool {
@@ -692,7 +686,7 @@ fn holder_is_gone(holder: &str) -> bool {
     if host.is_some_and(|host| Some(host) != host_name().as_deref()) {
         return false;
     }
-    process_alive(pid) == Some(false)
+    crate::scratch::process_alive(pid) == Some(false)
 }
 
 /// Claims an existing run directory again for this process (`run --resume`): its [`CLAIM_FILE`]
