@@ -18,6 +18,7 @@ use campaign::oracle::Verdict;
 use campaign::safety::SafetyConfig;
 use campaign::streaming::StreamingConfig;
 
+use crate::store::RunStore;
 pub use crate::store::{CAMPAIGN_FILE, RECORDING_FILE};
 
 /// One test of a campaign, as the final table shows it (and `--json` prints it).
@@ -87,6 +88,67 @@ pub struct RunDirectory {
     no_anchors: bool,
     /// The coverage of the tests written so far.
     coverage: CoverageBuilder,
+    /// The space kept back for the session's end.
+    reserve: Reserve,
+}
+
+/// Space kept back on the run directory's disk while a session writes it ([`crate::store::RESERVE_FILE`]:
+/// zeros, written when the session starts): when the disk fills, `campaign.json` is written
+/// again with the session's end (`interrupted`) after giving this space back, instead of failing
+/// and leaving the session to be taken for one that `died`. Removed when the session ends;
+/// one a `kill -9` left is written over by the next session.
+#[derive(Debug)]
+struct Reserve {
+    /// The file, while it holds the space.
+    file: std::sync::Mutex<Option<PathBuf>>,
+}
+
+/// What [`Reserve`] keeps: enough for `campaign.json` twice over (the atomic write's copy beside
+/// the old one), which grows by a few tens of bytes per test.
+fn reserve_bytes(tests: usize) -> usize {
+    const BASE: usize = 64 * 1024;
+    const PER_TEST: usize = 256;
+    const MOST: usize = 64 * 1024 * 1024;
+    BASE.saturating_add(tests.saturating_mul(PER_TEST))
+        .min(MOST)
+}
+
+impl Reserve {
+    /// Writes `bytes` zeros to the reserve file of `dir`. When the disk cannot hold them the
+    /// session goes on without (a full disk then ends it as before: with an error).
+    fn keep(dir: &Path, bytes: usize) -> Self {
+        use std::io::Write;
+        let path = RunStore::new(dir).reserve();
+        let written = (|| {
+            let mut file = std::fs::File::create(&path)?;
+            let zeros = vec![0u8; 64 * 1024];
+            let mut left = bytes;
+            while left > 0 {
+                let n = left.min(zeros.len());
+                file.write_all(&zeros[..n])?;
+                left -= n;
+            }
+            file.sync_all()
+        })();
+        if written.is_err() {
+            let _ = std::fs::remove_file(&path);
+        }
+        Self {
+            file: std::sync::Mutex::new(written.is_ok().then_some(path)),
+        }
+    }
+
+    /// Gives the space back; whether there was any to give.
+    fn release(&self) -> bool {
+        let taken = self.file.lock().map(|mut file| file.take()).ok().flatten();
+        taken.is_some_and(|path| std::fs::remove_file(path).is_ok())
+    }
+}
+
+impl Drop for Reserve {
+    fn drop(&mut self) {
+        self.release();
+    }
 }
 
 impl RunDirectory {
@@ -139,7 +201,9 @@ impl RunDirectory {
 
     /// The run directory `path` (created) with `record`, its first `campaign.json` written.
     fn start(path: PathBuf, record: CampaignRecord, scenario: &Scenario) -> Result<Self, RunError> {
+        let reserve = Reserve::keep(&path, reserve_bytes(record.settings.tests));
         let dir = Self {
+            reserve,
             path,
             record,
             tests: Vec::new(),
@@ -242,7 +306,9 @@ impl RunDirectory {
         });
         record.ended_at = None;
         record.summary = None;
+        let reserve = Reserve::keep(&path, reserve_bytes(record.settings.tests));
         let mut dir = Self {
+            reserve,
             path,
             record,
             tests: Vec::new(),
@@ -414,8 +480,18 @@ impl RunDirectory {
         }
     }
 
+    /// Writes `campaign.json`; on a full disk, once more after giving the reserve back.
     fn write_record(&self) -> Result<(), RunError> {
-        write(&self.path.join(CAMPAIGN_FILE), &self.record.to_json()?)
+        let path = self.path.join(CAMPAIGN_FILE);
+        let text = self.record.to_json()?;
+        match write(&path, &text) {
+            Err(RunError::Io { source, .. })
+                if source.kind() == std::io::ErrorKind::StorageFull && self.reserve.release() =>
+            {
+                write(&path, &text)
+            }
+            written => written,
+        }
     }
 }
 

@@ -18,6 +18,9 @@ pub const RECORDING_FILE: &str = "campaign.mcap";
 pub const PRIOR_RECORDING_FILE: &str = "campaign.mcap.resumed";
 /// The claim of the process writing the directory: its pid (`runner::claim_out_dir`).
 pub const CLAIM_FILE: &str = ".drivecheck-writing";
+/// Space a campaign keeps back on its disk while it runs (zeros, `runner::run_dir`): given back
+/// when the disk is full, so that the session's end is still recorded in `campaign.json`.
+pub const RESERVE_FILE: &str = ".drivecheck-reserve";
 /// The largest case file read: far above any case a campaign writes (tens of kilobytes), far
 /// below what would exhaust memory.
 pub const MAX_CASE_BYTES: u64 = 64 * 1024 * 1024;
@@ -120,6 +123,11 @@ impl RunStore {
     /// `.drivecheck-writing`, the claim of the process writing the directory.
     pub fn claim(&self) -> PathBuf {
         self.dir.join(CLAIM_FILE)
+    }
+
+    /// `.drivecheck-reserve`, the space the writing process keeps back for its session's end.
+    pub fn reserve(&self) -> PathBuf {
+        self.dir.join(RESERVE_FILE)
     }
 
     /// Refuses `file`, a recording of this directory (`campaign.mcap`, `campaign.mcap.resumed`),

@@ -245,3 +245,86 @@ fn resume_refuses_another_kind_of_car() {
     );
     assert!(!seven.join("case-002.json").exists(), "{said}");
 }
+
+/// A campaign that fills its disk (#51 item 2) ends with the error that stopped it, and its
+/// session's end is in `campaign.json` — not left for the resume to take for a session that
+/// died: the space the run directory kept back (`.drivecheck-reserve`) is given back for it.
+/// Moved to a disk with room, the resume then ends with the uninterrupted run's cases. The full
+/// disk is a 1 MiB tmpfs in a mount namespace of the test's own (`unshare`).
+#[test]
+fn a_campaign_that_fills_its_disk_records_its_end_and_is_resumed() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (full, moved, whole) = (
+        tmp.path().join("full"),
+        tmp.path().join("moved"),
+        tmp.path().join("whole"),
+    );
+    std::fs::create_dir(&full).unwrap();
+    // One shell in its own mount namespace: the tmpfs is gone when it ends, so the run
+    // directory is copied out first.
+    let script = format!(
+        "mount -t tmpfs -o size=1m tmpfs '{full}' || exit 99; \
+         '{bin}' run --seed 3 --tests 10 --out '{full}/run' 2>&1; echo \"exit $?\"; \
+         cp -a '{full}/run' '{moved}'",
+        full = path(&full),
+        moved = path(&moved),
+        bin = env!("CARGO_BIN_EXE_drivecheck"),
+    );
+    let out = std::process::Command::new("unshare")
+        .args(["--map-root-user", "--mount", "sh", "-c", &script])
+        .output();
+    let out = match out {
+        Ok(out) if out.status.code() != Some(99) && out.status.success() => out,
+        Ok(out) => {
+            return common::skipped(
+                "tmpfs",
+                &format!("no tmpfs in a mount namespace of its own: {}", text(&out)),
+            );
+        }
+        Err(e) => return common::skipped("tmpfs", &format!("no unshare: {e}")),
+    };
+    let said = text(&out);
+    assert!(said.contains("exit 2"), "a full disk is an error: {said}");
+    assert!(said.contains("No space left on device"), "{said}");
+    assert!(
+        !said.contains("campaign.json: No space"),
+        "the campaign's end was written: {said}"
+    );
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(moved.join("campaign.json")).unwrap())
+            .unwrap();
+    assert!(record["ended_at"].is_string(), "{record:#}");
+    assert!(
+        !moved.join(".drivecheck-reserve").exists(),
+        "the reserve was given back"
+    );
+
+    let resumed = drivecheck(&["run", "--resume", path(&moved)]);
+    assert!(
+        matches!(resumed.status.code(), Some(0 | 1)),
+        "{}",
+        text(&resumed)
+    );
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(moved.join("campaign.json")).unwrap())
+            .unwrap();
+    assert_eq!(record["sessions"][0]["end"], "interrupted", "{record:#}");
+    assert_eq!(record["sessions"][1]["end"], "completed", "{record:#}");
+    assert!(!moved.join(".drivecheck-reserve").exists());
+
+    let uninterrupted = drivecheck(&[
+        "-q",
+        "run",
+        "--seed",
+        "3",
+        "--tests",
+        "10",
+        "--out",
+        path(&whole),
+    ]);
+    assert!(matches!(uninterrupted.status.code(), Some(0 | 1)));
+    // A test the full disk cut off is kept as a partial case beside the one driven again.
+    let mut cases = common::cases(&moved);
+    cases.retain(|name, _| !name.contains(".partial-"));
+    assert_eq!(cases, common::cases(&whole));
+}
