@@ -1,8 +1,9 @@
 //! The run directory's files, named and listed in one place: what a campaign writes into its
 //! directory (`campaign.json`, `case-NNN.json`, the partial cases a resume keeps, the recording
-//! and the one a resume moves aside, the claim of the process writing it) and how a reader finds
-//! and reads them (the case files by test index, a case bounded in size). The runner writes
-//! through [`RunDirectory`](crate::run_dir); every command and the report find the files here.
+//! and the one a resume moves aside, the claim of the process writing it and the space it keeps
+//! back for its end) and how a reader finds and reads them (the case files by test index, a case
+//! bounded in size). The runner writes through [`RunDirectory`](crate::run_dir); every command
+//! and the report find the files here.
 
 use std::path::{Path, PathBuf};
 

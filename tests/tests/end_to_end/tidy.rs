@@ -201,6 +201,8 @@ const LAYERS: &[(&str, &[&str])] = &[
         ],
     ),
     ("drivecheck-tests", &[]),
+    // Benchmarks only: what they measure is among their dev-dependencies.
+    ("drivecheck-benches", &[]),
 ];
 
 /// Every workspace member's package name and the packages of ours among its normal
@@ -735,6 +737,130 @@ fn one_integration_test_binary_per_crate() {
         }
     }
     assert!(problems.is_empty(), "{}", problems.join("\n"));
+}
+
+/// A target that `cargo test` leaves out holds nothing it would have run: a library or binary
+/// with `test = false` has no `#[test]`, and a library with `doctest = false` no Rust example in
+/// its documentation (a code block without a non-Rust language: `text`, `sh`, `toml`, …). The
+/// build skips those targets to save compiling them again in test mode (the cold build of
+/// `.ci/run`); a test added to one would otherwise never run.
+#[test]
+fn targets_left_out_of_cargo_test_have_nothing_to_run() {
+    let root = workspace();
+    let manifest: toml::Table = fs::read_to_string(root.join("Cargo.toml"))
+        .expect("the workspace manifest")
+        .parse()
+        .expect("TOML");
+    let mut problems = Vec::new();
+    for member in manifest["workspace"]["members"]
+        .as_array()
+        .expect("members")
+    {
+        let member = member.as_str().expect("a member");
+        let crate_manifest: toml::Table = fs::read_to_string(root.join(member).join("Cargo.toml"))
+            .expect("a member's manifest")
+            .parse()
+            .expect("TOML");
+        let lib = crate_manifest.get("lib").and_then(|l| l.as_table());
+        let lib_path = lib
+            .and_then(|l| l.get("path"))
+            .and_then(|p| p.as_str())
+            .unwrap_or("src/lib.rs");
+        let off = |table: Option<&toml::Table>, key: &str| {
+            table.and_then(|t| t.get(key)).and_then(|v| v.as_bool()) == Some(false)
+        };
+        let mut targets: Vec<(String, bool, bool)> = Vec::new();
+        if root.join(member).join(lib_path).is_file() {
+            targets.push((lib_path.to_owned(), off(lib, "test"), off(lib, "doctest")));
+        }
+        for bin in crate_manifest
+            .get("bin")
+            .and_then(|b| b.as_array())
+            .into_iter()
+            .flatten()
+        {
+            let bin = bin.as_table();
+            let path = bin
+                .and_then(|b| b.get("path"))
+                .and_then(|p| p.as_str())
+                .unwrap_or("src/main.rs");
+            targets.push((path.to_owned(), off(bin, "test"), false));
+        }
+        for (path, no_test, no_doctest) in targets {
+            if !no_test && !no_doctest {
+                continue;
+            }
+            // The target's own files: its root and the modules under its folder — for a binary
+            // beside the library in one folder, its root alone.
+            let root_file = Path::new(member).join(&path);
+            let dir = root_file.parent().expect("a target file is in a folder");
+            let beside_lib =
+                path != lib_path && Path::new(&path).parent() == Path::new(lib_path).parent();
+            let files = rust_files(&dir.to_string_lossy())
+                .into_iter()
+                .filter(|(file, _)| !beside_lib || Path::new(file) == root_file);
+            for (file, text) in files {
+                let mut in_block = false;
+                for (number, line) in text.lines().enumerate() {
+                    let line = line.trim_start();
+                    if no_test && line.starts_with("#[test]") {
+                        problems.push(format!(
+                            "{file}:{}: a #[test] in {member}'s {path}, which has test = false",
+                            number + 1
+                        ));
+                    }
+                    let Some(lang) = line
+                        .strip_prefix("///")
+                        .or_else(|| line.strip_prefix("//!"))
+                        .map(str::trim_start)
+                        .and_then(|doc| doc.strip_prefix("```"))
+                    else {
+                        continue;
+                    };
+                    // A fence opens a block or closes the open one; an opening fence with no
+                    // language, or a Rust one, is a doctest.
+                    in_block = !in_block;
+                    let rust = lang.trim().is_empty()
+                        || lang.split(',').any(|l| {
+                            matches!(
+                                l.trim(),
+                                "rust" | "no_run" | "should_panic" | "compile_fail" | "edition2024"
+                            )
+                        });
+                    if no_doctest && in_block && rust {
+                        problems.push(format!(
+                            "{file}:{}: a Rust example in {member}'s documentation, which has \
+                             doctest = false (give the block a language such as `text`, or let \
+                             the doctests run)",
+                            number + 1
+                        ));
+                    }
+                }
+            }
+        }
+    }
+    assert!(problems.is_empty(), "{}", problems.join("\n"));
+}
+
+/// The `drivecheck` binary's crate stays a shell over the engine: at most 8,000 lines of Rust
+/// in `orchestrator/src` (counted as `tokei` counts code: neither comments nor blank lines),
+/// tests beside the code included.
+#[test]
+fn the_binarys_crate_is_at_most_8000_lines() {
+    let lines: usize = rust_files("orchestrator/src")
+        .iter()
+        .map(|(_, text)| {
+            text.lines()
+                .map(str::trim)
+                .filter(|l| !l.is_empty() && !l.starts_with("//"))
+                .count()
+        })
+        .sum();
+    assert!(
+        lines <= 8_000,
+        "orchestrator/src holds {lines} lines of Rust, more than 8,000: move what the command \
+         computes into the engine crate that owns it (ARCHITECTURE.md, the recipe for a command)"
+    );
 }
 
 // ---------------------------------------------------------------------------------------------

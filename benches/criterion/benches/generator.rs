@@ -1,7 +1,7 @@
 //! Criterion benchmarks of the trajectory generator on every bundled area: one extension of 4–7
 //! points with the ahead margin (both strategies), and a 100 km area validation.
 //!
-//! `cargo bench -p drivecheck-tests --bench generator`. For percentiles (p50/p99/max) and failure
+//! `cargo bench -p drivecheck-benches --bench generator`. For percentiles (p50/p99/max) and failure
 //! counts side by side, see `drivecheck-dev bench generator`.
 
 use criterion::{Criterion, criterion_group, criterion_main};

@@ -1,5 +1,5 @@
 //! Codec throughput: framing plus typed encoding and decoding of GET_STATE replies (the telemetry stream) and
-//! AP_ADD_POINTS packets (route upload). Run with `cargo bench -p car-link --bench codec`.
+//! AP_ADD_POINTS packets (route upload). Run with `cargo bench -p drivecheck-benches --bench codec`.
 
 use std::hint::black_box;
 use std::time::Duration;
@@ -9,7 +9,7 @@ use car_link::frame::{FrameDecoder, FrameEncoder};
 use car_link::message::{Dialect, Reply, Request, RoutePoint};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 
-#[path = "../tests/link/support/mod.rs"]
+#[path = "../../../car-link/tests/link/support/mod.rs"]
 mod support;
 
 use support::sample_state;

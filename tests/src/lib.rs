@@ -1,1 +1,0 @@
-//! End-to-end tests of drivecheck live in `tests/tests/`; this library only hosts shared helpers.
