@@ -67,15 +67,14 @@ impl Agreement {
             if f.verdict == m.verdict {
                 self.agreed += 1;
             } else {
-                self.disagreements.push((
-                    seed,
-                    f.test_index,
-                    verdict_name(f),
-                    verdict_name(m),
-                ));
+                self.disagreements
+                    .push((seed, f.test_index, verdict_name(f), verdict_name(m)));
             }
             for fs in &f.segments {
-                let Some(ms) = m.segments.iter().find(|s| s.segment_index == fs.segment_index)
+                let Some(ms) = m
+                    .segments
+                    .iter()
+                    .find(|s| s.segment_index == fs.segment_index)
                 else {
                     continue;
                 };

@@ -33,16 +33,27 @@ fn bench_agreement_pairs_the_firmware_and_the_model_test_by_test() {
     assert_eq!(said.matches(" / 3 |").count(), trees.len(), "{said}");
     // the simulated car drove the firmware's version
     let record: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(scratch.join("tree-0-seed-1").join("model").join("campaign.json"))
-            .unwrap(),
-    )
-    .unwrap();
-    let firmware: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(
-            scratch.join("tree-0-seed-1").join("firmware").join("campaign.json"),
+            scratch
+                .join("tree-0-seed-1")
+                .join("model")
+                .join("campaign.json"),
         )
         .unwrap(),
     )
     .unwrap();
-    assert_eq!(record["car_firmware_version"], firmware["car_firmware_version"]);
+    let firmware: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(
+            scratch
+                .join("tree-0-seed-1")
+                .join("firmware")
+                .join("campaign.json"),
+        )
+        .unwrap(),
+    )
+    .unwrap();
+    assert_eq!(
+        record["car_firmware_version"],
+        firmware["car_firmware_version"]
+    );
 }
