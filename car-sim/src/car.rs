@@ -316,6 +316,15 @@ pub struct SimCar {
     events: Vec<DebugEvent>,
 }
 
+/// The firmware's raw IMU yaw (degrees clockwise, 0 = east) on a car heading `heading`
+/// (radians counter-clockwise) with an IMU error of `error_deg`: the true heading, because the
+/// IMU's start-up takes it from a magnetometer that reads true ([`crate::plant::magnetometer`]
+/// gives the firmware on the host that reading) and the gyro turns it from there. 12.x's UWB
+/// estimator uses it as it is (its antenna direction, `docs/firmware.md#uwb-estimator-12x`).
+pub fn raw_imu_yaw(heading: f64, error_deg: f64) -> f32 {
+    wrap180((-heading.to_degrees() + error_deg) as f32)
+}
+
 impl SimCar {
     /// A car just booted with `options`.
     pub fn new(options: CarOptions) -> Self {
@@ -421,7 +430,7 @@ impl SimCar {
         let sensors = self.options.sensors;
         let error =
             sensors.yaw_bias_deg + sensors.yaw_drift_deg_per_min * self.now_ms as f64 / 60_000.0;
-        wrap180((-heading.to_degrees() + error) as f32)
+        raw_imu_yaw(heading, error)
     }
 
     fn move_truth(&mut self) {

@@ -69,6 +69,7 @@ pub mod world;
 pub use autopilot::{FwPose, RoutePart, RoutePoint};
 pub use car::{
     CarOptions, GnssCorrection, GnssModel, Placement, RcMode, SensorErrors, SimCar, StateReport,
+    raw_imu_yaw,
 };
 pub use config::{ApTimeMode, FirmwareConfig, VehicleParams};
 pub use debug::{DebugEvent, Truth};

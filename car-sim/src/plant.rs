@@ -191,6 +191,21 @@ pub struct ImuReading {
     pub accel_g: [f64; 3],
     /// Angular rate about x, y, z (counter-clockwise seen from above is positive z), °/s.
     pub gyro_dps: [f64; 3],
+    /// The magnetometer, as the firmware reads it after its own axis swap and board rotation
+    /// ([`magnetometer`]).
+    pub mag: [f64; 3],
+}
+
+/// What the magnetometer reads on a car whose IMU yaw is `imu_yaw_deg` (degrees clockwise, 0 =
+/// east): a unit horizontal field that the firmware's start-up (`ahrs.c`'s initial orientation
+/// takes its yaw from the magnetometer, `atan2(−m_y, −m_x) − 90°` on level ground) turns into that
+/// yaw. So the firmware's raw IMU yaw starts at the car's true heading (plus its bias), as the
+/// simulated car's does ([`crate::car::raw_imu_yaw`]), and the gyro turns it from there. (The
+/// firmware uses the magnetometer nowhere else with its default `mag_use = false`.)
+pub fn magnetometer(imu_yaw_deg: f64) -> [f64; 3] {
+    // −(yaw clockwise) is the heading counter-clockwise
+    let h = (-imu_yaw_deg).to_radians();
+    [-h.sin(), -h.cos(), 0.0]
 }
 
 /// What the motor controller reports.
@@ -307,6 +322,9 @@ impl Plant {
         ImuReading {
             accel_g: [m.accel_long / G, m.speed * m.yaw_rate / G, 1.0],
             gyro_dps: [0.0, 0.0, m.yaw_rate.to_degrees() - drift_dps],
+            mag: magnetometer(
+                crate::car::raw_imu_yaw(m.heading, self.options.sensors.yaw_bias_deg) as f64,
+            ),
         }
     }
 

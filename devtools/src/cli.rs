@@ -73,6 +73,43 @@ pub enum BenchCommand {
     /// uninterrupted run: how often its case files, summary and recording messages are the
     /// same. Exit status: 0 every resumed campaign the uninterrupted one, 1 one is not, 2 error.
     KillResume(BenchKillResumeArgs),
+    /// The simulated car's model of the firmware against the car's own firmware built for the
+    /// host: for every tree and seed, the same campaign on `--car sitl:TREE` and on `--car sim`
+    /// with the profile of the tree's version; verdicts agreed test by test and Δ of each
+    /// segment's largest deviation (`docs/sitl.md`, *In a campaign*). Exit status: 0 measured, 2
+    /// error.
+    Agreement(BenchAgreementArgs),
+}
+
+/// Options of `drivecheck-dev bench agreement`.
+#[derive(Debug, Args)]
+pub struct BenchAgreementArgs {
+    /// A firmware tree (`.../Embedded/RC_Controller`); give it once per tree.
+    #[arg(long = "tree", value_name = "DIR", required = true)]
+    pub trees: Vec<PathBuf>,
+    /// Campaign seeds (from `--seed` on).
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub seeds: u32,
+    /// Tests per campaign.
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    pub tests: u32,
+    /// The first seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Tests at once in each campaign.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=256))]
+    pub jobs: u32,
+    /// Scenario: a bundled name or a file.
+    #[arg(long, default_value = "parking-lot-2anchors")]
+    pub scenario: String,
+    /// Where the run directories go (a new directory; default: a scratch directory removed at
+    /// the end).
+    #[arg(long, value_name = "DIR")]
+    pub scratch: Option<PathBuf>,
+    /// Drive the campaigns with this `drivecheck` binary (`EXE -q run …`) instead of this
+    /// process's own (`drivecheck-dev exec`): another build's figures, e.g. before a change.
+    #[arg(long, value_name = "EXE")]
+    pub drivecheck: Option<PathBuf>,
 }
 
 /// Options of `drivecheck-dev bench kill-resume`.

@@ -60,5 +60,6 @@ fn bench(command: BenchCommand) -> anyhow::Result<Exit> {
         BenchCommand::Scale(args) => bench::scale::run(&args),
         BenchCommand::Compare(args) => bench::compare::run(&args),
         BenchCommand::KillResume(args) => bench::kill_resume::run(&args),
+        BenchCommand::Agreement(args) => bench::agreement::run(&args),
     }
 }

@@ -1,5 +1,6 @@
 //! The benchmarks, one module each (`drivecheck-dev bench …`).
 
+pub mod agreement;
 pub mod compare;
 pub mod fidelity;
 mod fidelity_route;

@@ -8,6 +8,7 @@ mod cases_from;
 mod cli;
 mod common;
 mod compare_command;
+mod estimator_differential;
 mod exit_status;
 mod explain;
 mod fault_places;

@@ -332,7 +332,7 @@ impl Bridge {
         self.process.set_imu(Imu {
             accel: imu.accel_g.map(|a| a as f32),
             gyro: imu.gyro_dps.map(|g| g as f32),
-            mag: [0.0; 3],
+            mag: imu.mag.map(|m| m as f32),
         })?;
         let m = self.plant.motor_reading();
         self.process.set_motor_values(MotorValues {

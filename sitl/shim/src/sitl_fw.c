@@ -187,6 +187,16 @@ static THD_FUNCTION(in_thread, arg) {
 static bool init_done;
 bool sitl_fw_init_done(void) { return init_done; }
 
+/* The yaw rotation pos.c applies to every sensor of the board: the tree's BOARD_YAW_ROT (the
+ * MPU-9250's extra 180 degrees never applies here: mpu9150_is_mpu9250 is false). */
+float sitl_fw_board_yaw_rot_deg(void) {
+#ifdef BOARD_YAW_ROT
+  return (float)(BOARD_YAW_ROT);
+#else
+  return 0.0f;
+#endif
+}
+
 static THD_WORKING_AREA(main_thread_wa, 4096);
 static THD_FUNCTION(main_thread, arg) {
   (void)arg;

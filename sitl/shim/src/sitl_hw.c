@@ -173,12 +173,26 @@ static float unit_noise(void) {
   return sum * 1.7320508f;
 }
 
+/* The host gives the magnetometer as the firmware sees it after its own treatment of the raw
+ * reading (pos.c: the default calibration, identity; X and Y swapped "to match the
+ * accelerometer"; the board's yaw rotation). The sensor's raw reading is that undone: rotated
+ * back, then swapped. (Zero stays zero.) */
+static void raw_mag(const float car[3], float raw[3]) {
+  float rot = sitl_fw_board_yaw_rot_deg() * (float)M_PI / 180.0f;
+  float c = cosf(rot), s = sinf(rot);
+  float sw0 = c * car[0] - s * car[1];
+  float sw1 = s * car[0] + c * car[1];
+  raw[0] = sw1;
+  raw[1] = sw0;
+  raw[2] = car[2];
+}
+
 static void take_sample(void) {
   for (int i = 0; i < 3; i++) {
     smp_acc[i] = imu_acc[i] + (noise_acc_sd > 0.0f ? noise_acc_sd * unit_noise() : 0.0f);
     smp_gyro[i] = imu_gyro[i] + (noise_gyro_sd > 0.0f ? noise_gyro_sd * unit_noise() : 0.0f);
-    smp_mag[i] = imu_mag[i];
   }
+  raw_mag(imu_mag, smp_mag);
 }
 
 static THD_FUNCTION(imu_thread, arg) {
