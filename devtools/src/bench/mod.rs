@@ -1,6 +1,7 @@
 //! The benchmarks, one module each (`drivecheck-dev bench …`).
 
 pub mod compare;
+pub mod compare_firmware;
 pub mod fidelity;
 mod fidelity_route;
 pub mod generator;
