@@ -146,6 +146,15 @@ pub struct BenchCompareArgs {
     /// The cases' seed; run k drives them with seed SEED + k.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// The car: `sim` (the embedded simulated car and its degraded profiles) or `sitl:TREE`,
+    /// the car's own firmware built from TREE (BASE) and degraded copies of it: the firmware
+    /// regression gate of docs/sitl.md.
+    #[arg(long, default_value = "sim", value_name = "sim|sitl:TREE")]
+    pub car: String,
+    /// With `--car sitl:TREE`: a candidate firmware tree of your own, judged as the degraded
+    /// copies are (how often the gate finds it worse than TREE).
+    #[arg(long, value_name = "TREE")]
+    pub candidate: Option<PathBuf>,
     /// Where the run directories go (a new directory; default: a scratch directory removed at
     /// the end).
     #[arg(long, value_name = "DIR")]

@@ -39,7 +39,7 @@ pub const PORTABLE_SOURCES: &[(&str, bool)] = &[
 const TREE_DIRS: &[&str] = &["", "imu"];
 /// Header-only folders of the tree added to the include path when present (a radio driver's
 /// declarations that `terminal.c` includes; the IMU driver's for `pos.c`). Never ChibiOS's.
-const TREE_INCLUDE_DIRS: &[&str] = &["", "imu", "imu/BMI160_driver", "cc1120"];
+pub(crate) const TREE_INCLUDE_DIRS: &[&str] = &["", "imu", "imu/BMI160_driver", "cc1120"];
 
 /// buffer.c's scaled float appenders, reached through `ld --wrap` so that other modules' calls
 /// convert to integers as the Cortex-M4 does (saturating; NaN gives 0), see `sitl_fw.c`.

@@ -23,6 +23,7 @@
 mod builder;
 mod process;
 pub mod protocol;
+pub mod variant;
 
 pub use builder::{Build, BuildError, PORTABLE_SOURCES, build, shim_sources};
 pub use process::{SitlError, SitlProcess};

@@ -55,8 +55,21 @@ const FIRMWARE_12: Car = Car {
     profile: Some("firmware = \"12.3\"\n"),
 };
 
-/// Measures and prints the tables.
+/// Measures and prints the tables: on the simulated car, or on the firmware with `--car
+/// sitl:TREE` ([`super::compare_firmware`]).
 pub fn run(args: &BenchCompareArgs) -> Result<Exit> {
+    match args.car.as_str() {
+        "sim" if args.candidate.is_none() => simulated(args),
+        "sim" => bail!("--candidate needs --car sitl:TREE"),
+        car => match car.strip_prefix("sitl:") {
+            Some(tree) if !tree.is_empty() => super::compare_firmware::run(args, Path::new(tree)),
+            _ => bail!("--car {car}: bench compare drives `sim` or `sitl:TREE`"),
+        },
+    }
+}
+
+/// The tables on the embedded simulated car.
+fn simulated(args: &BenchCompareArgs) -> Result<Exit> {
     let exe = std::env::current_exe().context("cannot find the drivecheck-dev executable")?;
     let (_scratch, root) = Scratch::given_or_new(args.scratch.as_deref(), "bench", "compare")?;
     let pairs = args.pairs as usize;
@@ -213,7 +226,12 @@ pub fn run(args: &BenchCompareArgs) -> Result<Exit> {
 }
 
 /// BASE against NEW over the first `n` tests for every `n` of `sizes`, with the noise `noise`.
-fn by_size(base: &[TestRow], new: &[TestRow], sizes: &[usize], noise: f64) -> Result<Vec<Report>> {
+pub(super) fn by_size(
+    base: &[TestRow],
+    new: &[TestRow],
+    sizes: &[usize],
+    noise: f64,
+) -> Result<Vec<Report>> {
     sizes
         .iter()
         .map(|&n| {
@@ -227,7 +245,7 @@ fn by_size(base: &[TestRow], new: &[TestRow], sizes: &[usize], noise: f64) -> Re
 }
 
 /// A breakdown's first `n` rows in words.
-fn first_rows(rows: &[BreakdownRow], n: usize) -> String {
+pub(super) fn first_rows(rows: &[BreakdownRow], n: usize) -> String {
     rows.iter()
         .take(n)
         .map(|row| top(std::slice::from_ref(row)))
@@ -236,7 +254,7 @@ fn first_rows(rows: &[BreakdownRow], n: usize) -> String {
 }
 
 /// A breakdown's first row in words.
-fn top(rows: &[BreakdownRow]) -> String {
+pub(super) fn top(rows: &[BreakdownRow]) -> String {
     rows.first().map_or_else(
         || "-".to_owned(),
         |row| {
@@ -255,7 +273,18 @@ fn top(rows: &[BreakdownRow]) -> String {
 /// `drivecheck -q run ARGS --record none --out OUT`, its output discarded; it must end with 0
 /// or 1.
 fn drive(exe: &Path, args: &[&str], out: &PathBuf) -> Result<()> {
+    drive_with(exe, args, out, &[])
+}
+
+/// [`drive`] with environment variables of its own.
+pub(super) fn drive_with(
+    exe: &Path,
+    args: &[&str],
+    out: &PathBuf,
+    env: &[(&str, &std::ffi::OsStr)],
+) -> Result<()> {
     let status = Command::new(exe)
+        .envs(env.iter().copied())
         .arg("exec")
         .args(["-q", "run"])
         .args(args)
@@ -272,7 +301,7 @@ fn drive(exe: &Path, args: &[&str], out: &PathBuf) -> Result<()> {
     }
 }
 
-fn path(p: &Path) -> Result<&str> {
+pub(super) fn path(p: &Path) -> Result<&str> {
     p.to_str()
         .with_context(|| format!("{}: not a UTF-8 path", p.display()))
 }

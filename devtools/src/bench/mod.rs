@@ -2,6 +2,7 @@
 
 pub mod agreement;
 pub mod compare;
+pub mod compare_firmware;
 pub mod fidelity;
 mod fidelity_route;
 pub mod generator;

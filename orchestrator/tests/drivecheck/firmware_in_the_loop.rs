@@ -322,3 +322,82 @@ fn a_campaign_names_its_firmware_tree_and_its_resume_refuses_a_changed_one() {
     assert!(said.contains("now hashes to"), "{said}");
     assert!(!run.join("case-002.json").exists(), "{said}");
 }
+
+/// The degradation the gate test and `bench compare --car sitl:TREE` make of a tree of each
+/// generation (`docs/sitl.md#a-firmware-regression-gate`): (file, constant, new number).
+fn degradation(version: &str) -> (&'static str, &'static str, &'static str) {
+    if version.starts_with("10.") {
+        // the UWB antenna's offset along the car entered with the wrong sign
+        ("pos_uwb.c", "OFFSET_X", "-0.085")
+    } else {
+        // the UWB correction gate tightened from 0.1 to 0.02 m (beyond it a range moves the
+        // estimate by a full 0.2 m step)
+        ("conf_general.c", "uwb_max_corr", "0.02")
+    }
+}
+
+/// `compare BASE NEW --fail-on regression`: its exit status and what it said.
+fn gate(base: &Path, new: &Path) -> (Option<i32>, String) {
+    let out = drivecheck(&["compare", path(base), path(new), "--fail-on", "regression"]);
+    (out.status.code(), text(&out))
+}
+
+/// The firmware regression gate of `docs/sitl.md`, small: the BASE tree's run, the candidate's
+/// run of the same cases (`--cases-from`, the BASE run's seed), `compare --fail-on regression`.
+/// The same tree as candidate gives the same case files and the gate passes (exit 0); a copy of
+/// the tree with one constant degraded fails it (exit 1). With 10 tests each degradation moves
+/// a segment's largest deviation by about +0.06–0.08 m (median; `bench compare --car sitl:TREE`
+/// measures how often 10 tests find it).
+#[test]
+fn the_regression_gate_passes_the_same_firmware_and_fails_a_degraded_one() {
+    for (version, tree) in trees() {
+        let dir = tempfile::tempdir().unwrap();
+        let car = format!("sitl:{}", tree.display());
+        let base = dir.path().join("base");
+        campaign(&base, 10, &["--car", &car]);
+        let candidate = |car: &str, out: &Path| {
+            let output = drivecheck(&[
+                "-q",
+                "run",
+                "--car",
+                car,
+                "--cases-from",
+                path(&base),
+                "--record",
+                "none",
+                "--out",
+                path(out),
+            ]);
+            assert!(
+                matches!(output.status.code(), Some(0 | 1)),
+                "{version}: {}",
+                text(&output)
+            );
+        };
+        let same = dir.path().join("same");
+        candidate(&car, &same);
+        super::common::assert_same_campaign(&base, &same);
+        let (code, said) = gate(&base, &same);
+        assert_eq!(code, Some(0), "{version}: the same firmware: {said}");
+
+        let degraded_tree = dir.path().join("degraded-tree");
+        sitl::variant::copy_tree(&tree, &degraded_tree).unwrap();
+        let (file, constant, value) = degradation(version);
+        sitl::variant::set_constant(&degraded_tree, file, constant, value).unwrap();
+        let degraded = dir.path().join("degraded");
+        candidate(&format!("sitl:{}", degraded_tree.display()), &degraded);
+        let (code, said) = gate(&base, &degraded);
+        assert_eq!(
+            code,
+            Some(1),
+            "{version}: {constant} = {value} in {file}: {said}"
+        );
+        assert!(said.contains("significantly worse"), "{version}: {said}");
+        // the tree itself is left as it was
+        let original = std::fs::read_to_string(tree.join(file)).unwrap();
+        assert_ne!(
+            original,
+            std::fs::read_to_string(degraded_tree.join(file)).unwrap()
+        );
+    }
+}
