@@ -79,6 +79,13 @@ pub enum BenchCommand {
     /// segment's largest deviation (`docs/sitl.md`, *In a campaign*). Exit status: 0 measured, 2
     /// error.
     Agreement(BenchAgreementArgs),
+    /// How near `drivecheck calibrate` brings the twin to what the recordings allow (#54):
+    /// held-out cars written as profiles, each driven as "the car" for a training campaign whose
+    /// run directory is stripped of every `/sim/*` channel and of the profile, calibrated on,
+    /// then `twin check` of a held-out campaign of another seed on the fitted profile, the
+    /// default and the car's own profile (the ceiling); the fitted parameters' errors. Exit
+    /// status: 0 measured, 2 error.
+    TwinReach(BenchTwinReachArgs),
 }
 
 /// Options of `drivecheck-dev bench agreement`.
@@ -110,6 +117,37 @@ pub struct BenchAgreementArgs {
     /// process's own (`drivecheck-dev exec`): another build's figures, e.g. before a change.
     #[arg(long, value_name = "EXE")]
     pub drivecheck: Option<PathBuf>,
+}
+
+/// Options of `drivecheck-dev bench twin-reach`.
+#[derive(Debug, Args)]
+pub struct BenchTwinReachArgs {
+    /// Only these cars (their letters, `F,G`); default: every car of the bench.
+    #[arg(long, value_delimiter = ',')]
+    pub cars: Vec<String>,
+    /// Tests of the campaign calibrated on.
+    #[arg(long, default_value_t = 40, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    pub tests: u32,
+    /// Its seed.
+    #[arg(long, default_value_t = 21)]
+    pub seed: u64,
+    /// Tests of the held-out campaign the fit is checked on.
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    pub held_tests: u32,
+    /// Its seed.
+    #[arg(long, default_value_t = 22)]
+    pub held_seed: u64,
+    /// `twin check --runs`.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub runs: u32,
+    /// Passed on to `calibrate` (`--budget`, `--jobs`, `--restarts`…), one word each:
+    /// `--calibrate=--budget,5min`.
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    pub calibrate: Vec<String>,
+    /// Where the run directories and profiles go (a new directory, kept; default: a scratch
+    /// directory removed at the end).
+    #[arg(long, value_name = "DIR")]
+    pub scratch: Option<PathBuf>,
 }
 
 /// Options of `drivecheck-dev bench kill-resume`.

@@ -61,5 +61,6 @@ fn bench(command: BenchCommand) -> anyhow::Result<Exit> {
         BenchCommand::Compare(args) => bench::compare::run(&args),
         BenchCommand::KillResume(args) => bench::kill_resume::run(&args),
         BenchCommand::Agreement(args) => bench::agreement::run(&args),
+        BenchCommand::TwinReach(args) => bench::twin_reach::run(&args),
     }
 }

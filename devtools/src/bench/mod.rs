@@ -10,3 +10,4 @@ pub mod kill_resume;
 pub mod placement;
 pub mod recovery;
 pub mod scale;
+pub mod twin_reach;
