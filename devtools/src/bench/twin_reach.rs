@@ -224,7 +224,7 @@ pub fn run(args: &BenchTwinReachArgs) -> Result<Exit> {
             check
                 .profiles
                 .get(k)
-                .map(|p| p.summary.clone())
+                .map(|p| p.summary)
                 .context("the twin check has no such profile")
         };
         let row = Row {
