@@ -194,6 +194,7 @@ const LAYERS: &[(&str, &[&str])] = &[
             "car-link",
             "car-sim",
             "campaign",
+            "sitl",
             "recording",
             "runner",
             "report",
