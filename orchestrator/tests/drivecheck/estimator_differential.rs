@@ -72,29 +72,18 @@ const fn phase(name: &'static str, seconds: f64, speed: f64, turn_dps: f64) -> P
     }
 }
 
+/// The firmware trees the environment names ([`super::firmware_in_the_loop::trees`]), by version.
 fn trees() -> Vec<(FirmwareVersion, PathBuf)> {
-    let found: Vec<_> = [
-        ("DRIVECHECK_FIRMWARE_10", FirmwareVersion::V10_1),
-        ("DRIVECHECK_FIRMWARE_12", FirmwareVersion::V12_3),
-    ]
-    .into_iter()
-    .filter_map(|(var, v)| {
-        std::env::var_os(var)
-            .filter(|p| !p.is_empty())
-            .map(|p| (v, PathBuf::from(p)))
-    })
-    .collect();
-    if found.is_empty() {
-        assert!(
-            std::env::var("CI").as_deref() != Ok("true"),
-            "CI=true and no firmware tree: set DRIVECHECK_FIRMWARE_10 / DRIVECHECK_FIRMWARE_12"
-        );
-        super::common::skipped(
-            "estimator differential",
-            "no firmware tree (DRIVECHECK_FIRMWARE_10, DRIVECHECK_FIRMWARE_12)",
-        );
-    }
-    found
+    super::firmware_in_the_loop::trees()
+        .into_iter()
+        .map(|(version, tree)| {
+            let version = match version {
+                "10.1" => FirmwareVersion::V10_1,
+                _ => FirmwareVersion::V12_3,
+            };
+            (version, tree)
+        })
+        .collect()
 }
 
 /// The true car: pose and tachometer.

@@ -11,7 +11,7 @@ use std::process::{Command, Output};
 use super::common::{cases, path, skipped, text};
 
 /// The trees given, with the firmware profile of their generation for the simulated car.
-fn trees() -> Vec<(&'static str, PathBuf)> {
+pub(super) fn trees() -> Vec<(&'static str, PathBuf)> {
     let found: Vec<_> = [
         ("DRIVECHECK_FIRMWARE_10", "10.1"),
         ("DRIVECHECK_FIRMWARE_12", "12.3"),

@@ -706,21 +706,28 @@ fn campaigns_top_level_modules_have_no_cycle() {
     }
 }
 
+/// The workspace's members, as the root manifest lists them (folders relative to the root).
+fn members() -> Vec<String> {
+    let manifest: toml::Table = fs::read_to_string(workspace().join("Cargo.toml"))
+        .expect("the workspace manifest")
+        .parse()
+        .expect("TOML");
+    manifest["workspace"]["members"]
+        .as_array()
+        .expect("members")
+        .iter()
+        .map(|m| m.as_str().expect("a member").to_owned())
+        .collect()
+}
+
 /// One integration-test binary per crate: a crate's `tests/` holds one `.rs` file or one folder
 /// with a `main.rs` (its modules beside it), never several binaries each linking the whole graph.
 #[test]
 fn one_integration_test_binary_per_crate() {
     let root = workspace();
-    let manifest: toml::Table = fs::read_to_string(root.join("Cargo.toml"))
-        .expect("the workspace manifest")
-        .parse()
-        .expect("TOML");
     let mut problems = Vec::new();
-    for member in manifest["workspace"]["members"]
-        .as_array()
-        .expect("members")
-    {
-        let member = member.as_str().expect("a member");
+    for member in members() {
+        let member = member.as_str();
         let Ok(entries) = fs::read_dir(root.join(member).join("tests")) else {
             continue;
         };
@@ -748,16 +755,9 @@ fn one_integration_test_binary_per_crate() {
 #[test]
 fn targets_left_out_of_cargo_test_have_nothing_to_run() {
     let root = workspace();
-    let manifest: toml::Table = fs::read_to_string(root.join("Cargo.toml"))
-        .expect("the workspace manifest")
-        .parse()
-        .expect("TOML");
     let mut problems = Vec::new();
-    for member in manifest["workspace"]["members"]
-        .as_array()
-        .expect("members")
-    {
-        let member = member.as_str().expect("a member");
+    for member in members() {
+        let member = member.as_str();
         let crate_manifest: toml::Table = fs::read_to_string(root.join(member).join("Cargo.toml"))
             .expect("a member's manifest")
             .parse()
