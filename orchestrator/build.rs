@@ -21,10 +21,22 @@ fn main() {
         |r| format!("revision {r}"),
     );
     println!("cargo:rustc-env=DRIVECHECK_REVISION={revision}");
-    // Built again when HEAD moves (a commit, a checkout), not on every build.
-    if let Some(dir) = git(&["rev-parse", "--absolute-git-dir"]) {
-        for path in ["HEAD", "refs/heads", "packed-refs"] {
-            println!("cargo:rerun-if-changed={dir}/{path}");
+    // Built again when HEAD moves (a commit, a checkout), not on every build. HEAD is the work
+    // tree's own (`git worktree` gives each one), the branches are shared; a path that does not
+    // exist would make cargo run this script on every build, so only those that do are named.
+    let own = git(&["rev-parse", "--absolute-git-dir"]);
+    let common = git(&["rev-parse", "--path-format=absolute", "--git-common-dir"]);
+    let paths = [
+        (&own, "HEAD"),
+        (&common, "refs/heads"),
+        (&common, "packed-refs"),
+    ];
+    for (dir, path) in paths {
+        if let Some(dir) = dir {
+            let path = std::path::Path::new(dir).join(path);
+            if path.exists() {
+                println!("cargo:rerun-if-changed={}", path.display());
+            }
         }
     }
     println!("cargo:rerun-if-changed=build.rs");
