@@ -43,6 +43,7 @@
 pub mod atomic;
 mod drive;
 mod dry_run;
+pub mod emergency;
 mod events;
 mod fresh;
 mod journal;

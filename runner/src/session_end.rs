@@ -7,7 +7,7 @@
 //!
 //! The embedded simulator's fresh cars (`fresh`) end with their test and are dropped; the cars a
 //! session is opened on (`run_campaign`, `lab`, `dry_run`) end here. After the operator's second
-//! signal the command line disarms the cars it brakes (`orchestrator/src/commands/signals.rs`).
+//! signal the emergency stop brakes and disarms the cars a command registered (`emergency`).
 
 use std::time::Duration;
 

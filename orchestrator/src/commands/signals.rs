@@ -12,16 +12,14 @@
 //! (`crate::process::interrupted`). Also here: the embedded simulator's debug view the runner
 //! records.
 
-use std::future::Future;
-use std::pin::Pin;
-use std::sync::{Arc, Mutex};
+use std::sync::Mutex;
 use std::time::Duration;
 
 use anyhow::{Context, Result};
 use car_sim::SimHandle;
 use tokio_util::sync::CancellationToken;
 
-use car_link::CarError;
+use runner::emergency::{EmergencyStop, Registration};
 use runner::vehicle::SimulatorView;
 use runner::vehicle::Vehicle;
 
@@ -61,58 +59,16 @@ pub(super) fn cancel_on_ctrl_c() -> CancellationToken {
 }
 
 /// The interrupt path of a command that drives (see [`cancel_on_ctrl_c`]): the token the first
-/// signal cancels, and the car the second signal brakes.
-#[derive(Clone)]
+/// signal cancels, and the cars the second signal brakes and disarms (`runner::emergency`).
+#[derive(Clone, Debug)]
 pub(super) struct Interrupt {
     cancel: CancellationToken,
-    car: Slot,
-    /// How many cars the second signal brakes (several: the first signal's message says so).
-    cars: Arc<std::sync::atomic::AtomicUsize>,
+    stop: EmergencyStop,
 }
-
-/// The registered car's brake: a clone of the car, braking with the current given.
-type Brake = Box<dyn Fn(f64) -> Pin<Box<dyn Future<Output = Result<(), CarError>> + Send>> + Send>;
-
-/// The registered cars' session end: their faults cleared and fault injection disabled within
-/// the time given; what could not be done, a warning per car.
-type Disarm = Box<dyn Fn(Duration) -> Pin<Box<dyn Future<Output = Vec<String>> + Send>> + Send>;
-
-/// What the second signal does to the registered cars.
-struct Registered {
-    brake: Brake,
-    disarm: Disarm,
-}
-
-/// Where the car the second signal brakes is registered.
-type Slot = Arc<Mutex<Option<Registered>>>;
-
-impl std::fmt::Debug for Interrupt {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Interrupt")
-            .field("cancel", &self.cancel)
-            .field("registered", &lock(&self.car).is_some())
-            .finish()
-    }
-}
-
-/// The brake the second signal sends, as the runner's safe stop does.
-const SECOND_SIGNAL_BRAKE_A: f64 = 50.0;
-
-/// How long the process lives after the second signal's brake was queued, so that the link's
-/// writer sends it (a brake has no reply; RC_CONTROL is fire and forget).
-const BRAKE_FLUSH: Duration = Duration::from_millis(100);
 
 /// How long the process lives after the second signal's brake for the runner to write the test
 /// in flight and complete the run directory.
 const HARD_STOP_GRACE: Duration = Duration::from_millis(500);
-
-/// At most this long for the brake to find room in the link's send queue; the car's 2 s watchdog
-/// brakes it in any case once the process is gone.
-const BRAKE_SEND_LIMIT: Duration = Duration::from_millis(500);
-
-/// At most this long, after the second signal's brake, for the cars to clear their faults and
-/// disable fault injection (the runner does not: the process is about to end).
-const DISARM_LIMIT: Duration = Duration::from_millis(400);
 
 impl Interrupt {
     /// Listens for SIGINT, SIGTERM and SIGHUP from now on ([`subscribe`]: a signal that comes
@@ -120,8 +76,7 @@ impl Interrupt {
     pub(super) fn listen() -> Self {
         let interrupt = Self {
             cancel: CancellationToken::new(),
-            car: Arc::new(Mutex::new(None)),
-            cars: Arc::default(),
+            stop: EmergencyStop::default(),
         };
         let listener = interrupt.clone();
         let mut signals = subscribe();
@@ -129,7 +84,7 @@ impl Interrupt {
             let Some(first) = signals.recv().await else {
                 return;
             };
-            let cars = match listener.cars.load(std::sync::atomic::Ordering::SeqCst) {
+            let cars = match listener.stop.cars() {
                 0 | 1 => "the car",
                 _ => "every car",
             };
@@ -141,8 +96,12 @@ impl Interrupt {
                 return;
             };
             output::safety(format_args!("{second} again: braking at once and exiting"));
-            listener.brake_now().await;
-            listener.disarm_now().await;
+            if let Some(problem) = listener.stop.brake_now().await {
+                output::safety(problem);
+            }
+            for warning in listener.stop.disarm_now().await {
+                output::safety(format_args!("warning: {warning}"));
+            }
             // The test in flight ends at once, aborted; its case, campaign.json and the recording
             // are written in the half second the process still lives (a command that completes
             // sooner exits sooner); then the scratch files still being written are removed.
@@ -161,109 +120,15 @@ impl Interrupt {
 
     /// Registers `car` as the one the second signal brakes, until the returned guard is dropped
     /// (a registered car keeps its link, and so its keepalive, alive).
-    pub(super) fn brake_on_second<V: Vehicle>(&self, car: &V) -> BrakeOnSecond {
-        self.brake_all_on_second(std::slice::from_ref(car))
+    pub(super) fn brake_on_second<V: Vehicle>(&self, car: &V) -> Registration {
+        self.stop.register(std::slice::from_ref(car))
     }
 
     /// [`Interrupt::brake_on_second`] for every car of a campaign on several cars, braked at
     /// once.
-    pub(super) fn brake_all_on_second<V: Vehicle>(&self, cars: &[V]) -> BrakeOnSecond {
-        self.cars
-            .store(cars.len(), std::sync::atomic::Ordering::SeqCst);
-        let cars = cars.to_vec();
-        let several = cars.len() > 1;
-        let to_disarm = cars.clone();
-        let brake: Brake = Box::new(move |current_a| {
-            let cars = cars.clone();
-            Box::pin(async move {
-                let braked =
-                    futures::future::join_all(cars.iter().map(|car| car.brake(current_a))).await;
-                braked
-                    .into_iter()
-                    .collect::<Result<Vec<()>, CarError>>()
-                    .map(drop)
-            })
-        });
-        let disarm: Disarm = Box::new(move |limit| {
-            let cars = to_disarm.clone();
-            Box::pin(async move {
-                let disarmed =
-                    futures::future::join_all(cars.iter().map(|car| runner::disarm(car, limit)))
-                        .await;
-                disarmed
-                    .into_iter()
-                    .enumerate()
-                    .filter_map(|(k, result)| result.err().map(|e| (k, e)))
-                    .map(|(k, error)| {
-                        if several {
-                            format!("car {}: {error}", k + 1)
-                        } else {
-                            error.to_string()
-                        }
-                    })
-                    .collect()
-            })
-        });
-        *lock(&self.car) = Some(Registered { brake, disarm });
-        BrakeOnSecond {
-            car: Arc::clone(&self.car),
-        }
+    pub(super) fn brake_all_on_second<V: Vehicle>(&self, cars: &[V]) -> Registration {
+        self.stop.register(cars)
     }
-
-    /// Brakes the registered car, if any, and gives the link a moment to send the command.
-    async fn brake_now(&self) {
-        let Some(braking) = lock(&self.car)
-            .as_ref()
-            .map(|registered| (registered.brake)(SECOND_SIGNAL_BRAKE_A))
-        else {
-            return;
-        };
-        match tokio::time::timeout(BRAKE_SEND_LIMIT, braking).await {
-            Ok(Ok(())) => tokio::time::sleep(BRAKE_FLUSH).await,
-            Ok(Err(error)) => output::safety(format_args!("cannot brake: {error}")),
-            Err(_) => output::safety("cannot brake: the link's send queue stayed full"),
-        }
-    }
-}
-
-impl Interrupt {
-    /// Clears the registered cars' faults and disables their fault injection, within
-    /// [`DISARM_LIMIT`]; says on standard error which could not be.
-    async fn disarm_now(&self) {
-        let Some(disarming) = lock(&self.car)
-            .as_ref()
-            .map(|registered| (registered.disarm)(DISARM_LIMIT))
-        else {
-            return;
-        };
-        for warning in disarming.await {
-            output::safety(format_args!("warning: {warning}"));
-        }
-    }
-}
-
-/// While it lives, the second signal brakes the car registered with
-/// [`Interrupt::brake_on_second`].
-pub(super) struct BrakeOnSecond {
-    car: Slot,
-}
-
-impl std::fmt::Debug for BrakeOnSecond {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("BrakeOnSecond").finish_non_exhaustive()
-    }
-}
-
-impl Drop for BrakeOnSecond {
-    fn drop(&mut self) {
-        *lock(&self.car) = None;
-    }
-}
-
-/// The slot's car, whether or not a thread panicked while holding it.
-fn lock(slot: &Mutex<Option<Registered>>) -> std::sync::MutexGuard<'_, Option<Registered>> {
-    slot.lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 /// A command that handles signals itself stopped at one before its end (exit status 2, as every
@@ -429,67 +294,5 @@ impl Signals {
             }
             "interrupted"
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use car_link::RoutePoint;
-    use runner::vehicle::connect_sim;
-
-    /// Drives the embedded simulated car on its autopilot at 1.5 m/s for 3 s (a straight route
-    /// onward from where it stands, along the scenario's start route), then, when `brake`,
-    /// registers it with an interrupt and brakes as the second signal does; the car's speed 0.5 s
-    /// later.
-    async fn speed_after(brake: bool) -> f64 {
-        let scenario = scenarios::bundled::load("parking-lot-2anchors")
-            .expect("bundled")
-            .scenario;
-        let (car, sim) = connect_sim(&car_sim::SimConfig::from_scenario(&scenario))
-            .await
-            .expect("the simulated car");
-        let start = scenario.start_route.positions();
-        let (from, to) = (start[0], start[1]);
-        let (dx, dy) = (to.x - from.x, to.y - from.y);
-        let step = 2.0 / dx.hypot(dy);
-        let route: Vec<RoutePoint> = (1..=15)
-            .map(|k| {
-                let k = f64::from(k) * step;
-                RoutePoint::at(from.x + k * dx, from.y + k * dy, 1.5)
-            })
-            .collect();
-        car.clear_route().await.expect("cleared");
-        car.add_points(&route).await.expect("uploaded");
-        car.set_autopilot(true, false).await.expect("started");
-        tokio::time::sleep(Duration::from_secs(3)).await;
-        assert!(sim.truth().speed > 1.0, "the car drives: {:?}", sim.truth());
-        let interrupt = Interrupt {
-            cancel: CancellationToken::new(),
-            car: Arc::new(Mutex::new(None)),
-            cars: Arc::default(),
-        };
-        let guard = interrupt.brake_on_second(&car);
-        if brake {
-            interrupt.brake_now().await;
-        }
-        tokio::time::sleep(Duration::from_millis(500)).await;
-        drop(guard);
-        assert!(
-            lock(&interrupt.car).is_none(),
-            "the guard unregisters the car"
-        );
-        sim.truth().speed
-    }
-
-    #[tokio::test(start_paused = true)]
-    async fn the_second_signal_brakes_the_registered_car() {
-        let coasting = speed_after(false).await;
-        let braked = speed_after(true).await;
-        assert!(
-            coasting > 1.0,
-            "without the brake it still drives: {coasting}"
-        );
-        assert!(braked < 0.3, "the brake stops it: {braked}");
     }
 }
