@@ -476,6 +476,37 @@ pub enum OnFailure {
     Continue,
 }
 
+/// What a command that drives one case on fresh cars is given besides the case (`replay`,
+/// `shrink`, `sweep`), resolved by [`crate::settings::CaseSettings`].
+#[derive(Debug, Args)]
+pub struct CaseCarArgs {
+    /// Scenario: a bundled name, a .toml, a reference .xml or a .geojson file (default: the
+    /// bundled scenario the case names, else the copy the recording beside the case holds).
+    #[arg(long)]
+    pub scenario: Option<String>,
+    /// Drive the case even when the scenario's hash differs from the case's (or the case has
+    /// none).
+    #[arg(long)]
+    pub ignore_scenario_hash: bool,
+    /// The campaign seed: of the reset's return route, the safe stop and the simulated car, and
+    /// of the first run of every candidate (`shrink`) or value (`sweep`), run k with seed + k − 1
+    /// (default: the case's campaign seed, which drives the case's own test again: the same
+    /// simulated car from the same start).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// The car profile of the simulated car the case is driven on: `default` or a TOML file
+    /// (docs/twin.md). Not with a car behind a link; `replay` warns when the case was driven on
+    /// another profile.
+    #[arg(long, value_name = "FILE")]
+    pub profile: Option<PathBuf>,
+    /// The car: `sim` (a fresh embedded simulated car for every run), `sitl:TREE` (the car's own
+    /// firmware tree, built for the host, driving the same physical car in virtual time;
+    /// docs/sitl.md), and for `replay` also a car behind a link: `tcp://HOST:PORT`,
+    /// `udp://HOST:PORT` or `serial:///dev/ttyACM0`.
+    #[arg(long, value_name = "CAR", default_value = "sim")]
+    pub car: String,
+}
+
 /// Options of `drivecheck replay`.
 #[derive(Debug, Args)]
 pub struct ReplayArgs {
@@ -492,22 +523,6 @@ pub struct ReplayArgs {
     /// Leave out the case's fault commands (does the failure disappear without them?).
     #[arg(long)]
     pub no_faults: bool,
-    /// The car: `sim` (a fresh embedded simulated car for every run), `tcp://HOST:PORT`,
-    /// `udp://HOST:PORT` or `serial:///dev/ttyACM0`.
-    #[arg(long, default_value = "sim")]
-    pub car: String,
-    /// Scenario: a bundled name, a .toml, a reference .xml or a .geojson file (default: the bundled scenario
-    /// the case names).
-    #[arg(long)]
-    pub scenario: Option<String>,
-    /// Replay even when the scenario's hash differs from the case's (or the case has none).
-    #[arg(long)]
-    pub ignore_scenario_hash: bool,
-    /// The campaign seed of the reset's return route, the safe stop and the simulated car
-    /// (default: the case's campaign seed, which drives the case's own test again: the same
-    /// simulated car from the same start, so the same figures).
-    #[arg(long)]
-    pub seed: Option<u64>,
     /// Drive the case's test on other simulated cars (other sensor noise each run, seeded by
     /// the seed map) and report the spread, instead of the case's own car.
     #[arg(long)]
@@ -526,14 +541,13 @@ pub struct ReplayArgs {
     /// At the end, also write `report.html` into the replay directory (as `drivecheck report`).
     #[arg(long)]
     pub report: bool,
-    /// The car profile of the embedded simulated car: `default` or a TOML file (docs/twin.md).
-    /// Only with `--car sim`; a warning when the case was driven on another profile.
-    #[arg(long, value_name = "FILE")]
-    pub profile: Option<PathBuf>,
     /// Print the comparison as one JSON document on standard output instead of the table
     /// (docs/json.md).
     #[arg(long)]
     pub json: bool,
+    /// The scenario, the seed and the car the case is driven on.
+    #[command(flatten)]
+    pub drive: CaseCarArgs,
 }
 
 /// Options of `drivecheck shrink`.
@@ -548,13 +562,6 @@ pub struct ShrinkArgs {
     /// `minimal.json` and `shrink.json`.
     #[arg(short, long, value_name = "DIR")]
     pub out: Option<PathBuf>,
-    /// Scenario: a bundled name, a .toml, a reference .xml or a .geojson file (default: the bundled scenario
-    /// the case names).
-    #[arg(long)]
-    pub scenario: Option<String>,
-    /// Shrink even when the scenario's hash differs from the case's (or the case has none).
-    #[arg(long)]
-    pub ignore_scenario_hash: bool,
     /// Runs of every candidate (run k with seed + k − 1): it is kept only when all of them fail
     /// the same way.
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=50))]
@@ -567,22 +574,13 @@ pub struct ShrinkArgs {
     /// Stop after this much wall time with the smallest case found so far.
     #[arg(long, value_name = "DURATION", default_value = "2min", value_parser = humantime::parse_duration)]
     pub budget: std::time::Duration,
-    /// Seed of every candidate's first run (default: the case's campaign seed).
-    #[arg(long)]
-    pub seed: Option<u64>,
-    /// The car profile of the embedded simulated car the case is driven on: `default` or a TOML
-    /// file (docs/twin.md).
-    #[arg(long, value_name = "FILE")]
-    pub profile: Option<PathBuf>,
-    /// The simulated car every run drives the case on: `sim` (the embedded simulated car) or
-    /// `sitl:TREE` (the car's own firmware tree, built for the host, driving the same physical
-    /// car in virtual time; docs/sitl.md).
-    #[arg(long, value_name = "sim|sitl:TREE", default_value = "sim")]
-    pub car: String,
     /// Print the result as one JSON document on standard output instead of the table (the
     /// shrink report, or why the case was not shrunk; docs/json.md).
     #[arg(long)]
     pub json: bool,
+    /// The scenario, the seed and the car the case is driven on.
+    #[command(flatten)]
+    pub drive: CaseCarArgs,
 }
 
 /// Options of `drivecheck sweep`.
@@ -602,28 +600,12 @@ pub struct SweepArgs {
     /// Runs of every value (run k with seed + k − 1).
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=50))]
     pub runs: u32,
-    /// Seed of every value's first run (default: the case's campaign seed).
-    #[arg(long)]
-    pub seed: Option<u64>,
     /// Print the result as JSON (`drivecheck-sweep`, docs/case-format.md) instead of a table.
     #[arg(long)]
     pub json: bool,
-    /// Scenario: a bundled name, a .toml, a reference .xml or a .geojson file (default: the bundled scenario
-    /// the case names).
-    #[arg(long)]
-    pub scenario: Option<String>,
-    /// Sweep even when the scenario's hash differs from the case's (or the case has none).
-    #[arg(long)]
-    pub ignore_scenario_hash: bool,
-    /// The car profile of the embedded simulated car the case is driven on: `default` or a TOML
-    /// file (docs/twin.md).
-    #[arg(long, value_name = "FILE")]
-    pub profile: Option<PathBuf>,
-    /// The simulated car every run drives the case on: `sim` (the embedded simulated car) or
-    /// `sitl:TREE` (the car's own firmware tree, built for the host, driving the same physical
-    /// car in virtual time; docs/sitl.md).
-    #[arg(long, value_name = "sim|sitl:TREE", default_value = "sim")]
-    pub car: String,
+    /// The scenario, the seed and the car the case is driven on.
+    #[command(flatten)]
+    pub drive: CaseCarArgs,
 }
 
 /// Options of `drivecheck report`.

@@ -61,14 +61,14 @@ pub(super) fn check_output_file(flag: &str, file: &Path, run_dir: &Path) -> Resu
 
 /// The case file at `path`, read and parsed; errors name the file (and the field). Only a regular
 /// file of at most `runner::store::MAX_CASE_BYTES` is read: a FIFO or a device would block or never end.
-pub(super) fn read_case(path: &Path) -> Result<Case> {
+pub(crate) fn read_case(path: &Path) -> Result<Case> {
     Ok(RunStore::read_case(path)?)
 }
 
 /// The scenario a case is driven in: `--scenario`, else the bundled one the case names, else
 /// the copy the recording beside the case holds (`campaign.mcap`'s `drivecheck.scenario`, taken
 /// only when it hashes to the case's scenario hash and the recording is of the case's campaign).
-pub(super) fn scenario_of(
+pub(crate) fn scenario_of(
     scenario: Option<&str>,
     case_path: &Path,
     case: &Case,
@@ -114,7 +114,7 @@ fn recorded_scenario(case_path: &Path, case: &Case) -> Result<Option<(PathBuf, L
 }
 
 /// Refuses a case recorded in another scenario (or without a hash) unless told to proceed.
-pub(super) fn check_hash(case: &Case, scenario: &Scenario, ignore: bool) -> Result<()> {
+pub(crate) fn check_hash(case: &Case, scenario: &Scenario, ignore: bool) -> Result<()> {
     let hash = scenario.hash();
     let problem = match &case.scenario.hash {
         Some(recorded) if *recorded == hash => return Ok(()),

@@ -58,17 +58,12 @@ pub fn build(tree: &str) -> Result<HostFirmware> {
 
 /// The simulated car a command that drives cases on fresh cars is given (`--car`): `sim`, the
 /// embedded simulated car (`None`), or `sitl:TREE`, the car's own firmware built for the host
-/// (built or taken from the cache). A car behind a link is refused, naming the command.
+/// (built or taken from the cache). A car behind a link is refused, naming the command
+/// ([`crate::settings::DrivenOn`]).
 pub fn fresh_car(command: &str, car: &str) -> Result<Option<HostFirmware>> {
-    let address: car_link::CarAddress = car.parse().with_context(|| format!("--car {car}"))?;
-    match address {
-        car_link::CarAddress::Sim => Ok(None),
-        car_link::CarAddress::Sitl { tree } => build(&tree).map(Some),
-        _ => anyhow::bail!(
-            "--car {car}: {command} drives the case on a fresh simulated car for every run: \
-             `sim` (the embedded simulated car) or `sitl:TREE` (the car's own firmware built \
-             for the host); drive a car behind a link with `drivecheck replay --car {car}`"
-        ),
+    match crate::settings::DrivenOn::resolve(command, car, false, false)? {
+        crate::settings::DrivenOn::Firmware(tree) => build(&tree).map(Some),
+        _ => Ok(None),
     }
 }
 

@@ -2,12 +2,12 @@
 
 mod area;
 mod calibrate;
-mod case_input;
+pub(crate) mod case_input;
 mod cases_from;
 pub mod compare;
 mod completions;
 mod explain;
-mod firmware;
+pub(crate) mod firmware;
 mod merge;
 mod progress;
 mod replay;

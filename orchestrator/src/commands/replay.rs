@@ -17,20 +17,19 @@
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use car_link::CarAddress;
 use car_sim::SimHandle;
 use scenarios::Scenario;
 use trajgen::{Generator, Strategy};
 
-use super::case_input::{check_hash, read_case, scenario_of};
 use super::signals::{Interrupt, runtime};
 use super::table::{CampaignFailed, metres};
 use crate::cli::ReplayArgs;
 use crate::exit::Exit;
 use crate::output;
 use crate::profile_arg::LoadedProfile;
-use crate::seed::choose_seed;
+use crate::settings::{CaseSettings, DrivenOn};
 use campaign::drive::EARLIER_TOOL_POINTS_LEFT;
 use campaign::files::{CASE_FAULT_PLACES_SINCE, CommandRecord};
 use campaign::files::{Case, ReplayOf, ScenarioRef};
@@ -48,7 +47,15 @@ use runner::{
 /// or was aborted, 2 an error (the case refused, the link lost, interrupted, …).
 pub fn replay(args: &ReplayArgs) -> Result<Exit> {
     let path = &args.case;
-    let case = read_case(path)?;
+    let CaseSettings {
+        case,
+        scenario,
+        seed,
+        car,
+        firmware,
+        profile,
+        sim,
+    } = CaseSettings::load("replay", path, &args.drive, true)?;
     let unplaced = case
         .commands
         .iter()
@@ -70,37 +77,15 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
             path.display()
         ));
     }
-    let scenario = scenario_of(args.scenario.as_deref(), path, &case)?;
-    check_hash(&case, &scenario, args.ignore_scenario_hash)?;
     let generator = Generator::new(scenario.generator.generator_config(Strategy::Wedge))
         .context("the scenario's generator settings")?;
-    let seed = args
-        .seed
-        .or(case.campaign_seed)
-        .unwrap_or_else(|| choose_seed(None));
     let plan = case
         .replay_plan(&scenario, &generator, seed, args.no_faults, 0)
         .with_context(|| format!("{}: cannot be replayed", path.display()))?;
-    let address: CarAddress = args
-        .car
-        .parse()
-        .with_context(|| format!("--car {}", args.car))?;
-    // The car's own firmware built for the host drives the simulated car's physical car, a
-    // fresh start of it per run, as the embedded simulated car does.
-    let firmware = match &address {
-        CarAddress::Sitl { tree } => Some(super::firmware::build(tree)?),
-        _ => None,
+    let (address, embedded) = match car {
+        DrivenOn::Link(address) => (address, false),
+        _ => (CarAddress::Sim, true),
     };
-    let embedded = address == CarAddress::Sim || firmware.is_some();
-    if args.profile.is_some() && !embedded {
-        bail!(
-            "--profile describes the embedded simulated car (--car sim) or the physical car \
-             around the firmware built for the host (--car sitl:TREE), not the car at {}",
-            args.car
-        );
-    }
-    let profile = crate::profile_arg::load(args.profile.as_deref())?;
-    let sim = profile.sim_config(&scenario)?;
     let other_profile = embedded && warn_other_profile(&case, path, &profile);
     let virtual_time = embedded && !args.realtime;
     let times = args.times.unwrap_or(if args.vary_seed || !virtual_time {
@@ -170,7 +155,7 @@ pub fn replay(args: &ReplayArgs) -> Result<Exit> {
         "replaying {} {times} time(s) on {} with car {}{}{}: {what}, writing {}",
         path.display(),
         scenario.name,
-        args.car,
+        args.drive.car,
         if virtual_time { " (virtual time)" } else { "" },
         if args.no_faults {
             " without its faults"
@@ -429,7 +414,7 @@ impl Job<'_> {
                 no_faults: self.args.no_faults,
             },
             self.out.join(dir),
-            self.args.car.clone(),
+            self.args.drive.car.clone(),
         );
         config.car_profile = self.profile.clone();
         config.tests = Tests::Replay(ReplaySource {

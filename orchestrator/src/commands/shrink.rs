@@ -17,12 +17,11 @@ use indicatif::{ProgressBar, ProgressStyle};
 use scenarios::Scenario;
 use tokio::runtime::Runtime;
 
-use super::case_input::{check_hash, read_case, scenario_of};
 use super::signals::{cancel_on_ctrl_c, runtime};
 use crate::cli::ShrinkArgs;
 use crate::exit::Exit;
 use crate::output;
-use crate::seed::choose_seed;
+use crate::settings::CaseSettings;
 use campaign::files::{Case, Header, SHRINK_FORMAT, SHRINK_SCHEMA_VERSION, ScenarioRef};
 use campaign::shrink::{
     Drive, Ended, MINIMAL_FILE, Progress, SHRINK_FILE, Settings, ShrinkFailure, ShrinkReport,
@@ -73,16 +72,15 @@ pub fn shrink(args: &ShrinkArgs) -> Result<Exit> {
         );
     }
     let path = &args.case;
-    let case = read_case(path)?;
-    let scenario = scenario_of(args.scenario.as_deref(), path, &case)?;
-    check_hash(&case, &scenario, args.ignore_scenario_hash)?;
-    let seed = args
-        .seed
-        .or(case.campaign_seed)
-        .unwrap_or_else(|| choose_seed(None));
-    let profile = crate::profile_arg::load(args.profile.as_deref())?;
-    let sim = profile.sim_config(&scenario)?;
-    let firmware = super::firmware::fresh_car("shrink", &args.car)?;
+    let CaseSettings {
+        case,
+        scenario,
+        seed,
+        firmware,
+        profile,
+        sim,
+        ..
+    } = CaseSettings::load("shrink", path, &args.drive, false)?;
     // The directory this shrink made (the default one, or an --out that did not exist), removed
     // again when the shrink writes nothing into it: a case with nothing to shrink leaves no
     // empty directory behind.

@@ -5,12 +5,11 @@
 
 use anyhow::{Context, Result};
 
-use super::case_input::{check_hash, read_case, scenario_of};
 use super::signals::{cancel_on_ctrl_c, runtime};
 use crate::cli::SweepArgs;
 use crate::exit::Exit;
 use crate::output;
-use crate::seed::choose_seed;
+use crate::settings::CaseSettings;
 use campaign::files::{Header, SWEEP_FORMAT, SWEEP_SCHEMA_VERSION, ScenarioRef};
 use campaign::sweep::{Axis, Parameter, Point, SimSetting, SweepReport, grid, with_fault_values};
 use runner::simdrive::{SimDriver, SimSettings};
@@ -18,21 +17,20 @@ use runner::simdrive::{SimDriver, SimSettings};
 /// Runs the sweep and prints its table (or JSON). Exit status 0 when it ran, 2 on an error.
 pub fn sweep(args: &SweepArgs) -> Result<Exit> {
     let path = &args.case;
-    let case = read_case(path)?;
+    let CaseSettings {
+        case,
+        scenario,
+        seed,
+        firmware,
+        profile,
+        sim,
+        ..
+    } = CaseSettings::load("sweep", path, &args.drive, false)?;
     let axes = args
         .set
         .iter()
         .map(|arg| Axis::parse(arg, &case))
         .collect::<Result<Vec<_>, _>>()?;
-    let scenario = scenario_of(args.scenario.as_deref(), path, &case)?;
-    check_hash(&case, &scenario, args.ignore_scenario_hash)?;
-    let seed = args
-        .seed
-        .or(case.campaign_seed)
-        .unwrap_or_else(|| choose_seed(None));
-    let profile = crate::profile_arg::load(args.profile.as_deref())?;
-    let sim = profile.sim_config(&scenario)?;
-    let firmware = super::firmware::fresh_car("sweep", &args.car)?;
     campaign::sweep::grid_size(&axes)?;
     let points = grid(&axes);
     output::progress(format_args!(
