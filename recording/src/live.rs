@@ -53,24 +53,38 @@ type Latched = Arc<Mutex<HashMap<ChannelId, (Arc<RawChannel>, Vec<u8>)>>>;
 #[derive(Clone)]
 pub(super) struct LiveChannel {
     raw: Arc<RawChannel>,
-    /// Set for latched topics.
-    latched: Option<Latched>,
+    /// The view's latched messages (see [`LiveChannel::repeat_latched`]).
+    latched: Latched,
+    /// Whether this channel's last message is kept for viewers that subscribe later.
+    keeps_last: bool,
 }
 
 impl LiveChannel {
     /// Serves `data` to every subscriber (and keeps it for those that subscribe later, if the
     /// topic is latched).
     pub(super) fn log(&self, data: &[u8]) {
-        let Some(latched) = &self.latched else {
+        if !self.keeps_last {
             self.raw.log(data);
             return;
-        };
+        }
         // Sent and kept under one lock, the lock [`LateJoiner`] sends under: a viewer that
         // subscribes at this very moment gets the message either as a subscriber or as a late
-        // joiner, never neither (the area is sent once a test).
-        let mut latched = latched.lock().unwrap_or_else(|e| e.into_inner());
+        // joiner, never neither.
+        let mut latched = self.latched.lock().unwrap_or_else(|e| e.into_inner());
         self.raw.log(data);
         latched.insert(self.raw.id(), (Arc::clone(&self.raw), data.to_vec()));
+    }
+
+    /// Serves the kept message of every latched channel (the area, each car's route) again, to
+    /// every subscriber. The recorder does so as each test starts and ends: the area is made
+    /// once a campaign, and a viewer that did not get it (the foxglove server drops a viewer's
+    /// oldest messages when its outbox is full, and a CI run once saw a viewer subscribed to the
+    /// area get poses for a whole campaign and no area) has it again within a test.
+    pub(super) fn repeat_latched(&self) {
+        let latched = self.latched.lock().unwrap_or_else(|e| e.into_inner());
+        for (raw, data) in latched.values() {
+            raw.log(data);
+        }
     }
 }
 
@@ -212,7 +226,8 @@ impl LiveView {
             .ok()?;
         let channel = LiveChannel {
             raw: channel,
-            latched: topic.is_latched().then(|| Arc::clone(&self.latched)),
+            latched: Arc::clone(&self.latched),
+            keeps_last: topic.is_latched(),
         };
         channels.insert(key, channel.clone());
         Some(channel)
@@ -412,6 +427,7 @@ fn offer_sdk_subprotocol(request: &str) -> (String, bool) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::TestEventKind;
 
     /// A viewer's frame header: `fin`, `opcode`, masked, and the payload length.
     fn frame(fin: bool, opcode: u8, len: u64) -> Vec<u8> {
@@ -512,6 +528,98 @@ mod tests {
             received.ends_with(&[0x88, 0x02, 0x03, 0xF1]),
             "a close frame, message too big"
         );
+    }
+
+    /// The area is made once a campaign; a viewer subscribed to it gets it again as each test
+    /// starts and ends (the recorder repeats the latched messages with every `/tests` message),
+    /// so one that lost it is not left without an area for the rest of the campaign.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_subscribed_viewer_gets_the_area_again_as_each_test_starts_and_ends() {
+        use futures::{SinkExt, StreamExt};
+        use tokio_tungstenite::tungstenite::Message;
+        use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+
+        let (view, server) = LiveView::start(SocketAddr::from(([127, 0, 0, 1], 0)))
+            .await
+            .expect("the live view starts");
+        let scenario = scenarios::bundled::load("parking-lot-2anchors")
+            .unwrap()
+            .scenario;
+        let origin = tokio::time::Instant::now();
+        let mut recorder =
+            crate::Recorder::live_only(origin, true, 1, &view, Some(&scenario)).unwrap();
+        let mut request = format!("ws://127.0.0.1:{}", server.port())
+            .into_client_request()
+            .unwrap();
+        request
+            .headers_mut()
+            .insert("sec-websocket-protocol", SDK_SUBPROTOCOL.parse().unwrap());
+        let (mut socket, _) = tokio_tungstenite::connect_async(request).await.unwrap();
+        let within = std::time::Duration::from_secs(20);
+        // Subscribes to the area as it is advertised.
+        tokio::time::timeout(within, async {
+            while let Some(Ok(message)) = socket.next().await {
+                let Message::Text(text) = message else {
+                    continue;
+                };
+                let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+                let Some(channels) = json["channels"].as_array() else {
+                    continue;
+                };
+                if let Some(area) = channels.iter().find(|c| c["topic"] == "/foxglove/area") {
+                    let subscribe = serde_json::json!({
+                        "op": "subscribe",
+                        "subscriptions": [{"id": 7, "channelId": area["id"]}],
+                    });
+                    socket
+                        .send(Message::Text(subscribe.to_string().into()))
+                        .await
+                        .unwrap();
+                    return;
+                }
+            }
+            panic!("the live view closed before advertising the area");
+        })
+        .await
+        .expect("the area is advertised");
+        // The next area that comes on the subscription.
+        type Viewer =
+            tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<TcpStream>>;
+        async fn next_area(socket: &mut Viewer) -> serde_json::Value {
+            while let Some(Ok(message)) = socket.next().await {
+                if let Message::Binary(data) = message
+                    && data.first() == Some(&1)
+                {
+                    assert_eq!(u32::from_le_bytes(data[1..5].try_into().unwrap()), 7);
+                    return serde_json::from_slice(&data[13..]).unwrap();
+                }
+            }
+            panic!("the live view closed");
+        }
+        // The area sent when the campaign began, as the viewer subscribes.
+        let first = tokio::time::timeout(within, next_area(&mut socket))
+            .await
+            .expect("the area as the viewer subscribes");
+        assert!(first["entities"].is_array(), "{first}");
+        for event in [
+            TestEventKind::Started { commands: 1 },
+            TestEventKind::Ended {
+                verdict: campaign::oracle::Verdict::Passed,
+                reason: None,
+            },
+        ] {
+            let said = format!("{event:?}");
+            recorder
+                .write(&crate::TestEvent {
+                    test_index: 0,
+                    event,
+                })
+                .unwrap();
+            let again = tokio::time::timeout(within, next_area(&mut socket))
+                .await
+                .unwrap_or_else(|_| panic!("no area again after the test's {said}"));
+            assert_eq!(again, first);
+        }
     }
 
     #[test]

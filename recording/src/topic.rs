@@ -72,7 +72,8 @@ impl Topic {
     ];
 
     /// Whether a live viewer that joins late gets the topic's last message: the area and the
-    /// route, which are sent once (or once a test).
+    /// route, which are made once a campaign (the area) or a test (a route); the live view sends
+    /// them again as each test starts and ends.
     pub fn is_latched(self) -> bool {
         matches!(self, Topic::FoxgloveArea | Topic::FoxgloveRoute)
     }

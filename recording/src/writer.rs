@@ -546,6 +546,11 @@ impl Recorder {
         let data = message.encode()?;
         if let Some(channel) = live {
             channel.log(&data);
+            if R::TOPIC == Topic::Tests {
+                // A test starts or ends: the area and the route again, for a viewer that lost
+                // them.
+                channel.repeat_latched();
+            }
         }
         self.write_data(R::TOPIC, log_time, data)
     }
