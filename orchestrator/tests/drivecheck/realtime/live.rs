@@ -77,24 +77,37 @@ async fn watch(
         // What the view said, for a failure's message.
         let mut advertised: Vec<String> = Vec::new();
         let mut subscribed: Vec<u32> = Vec::new();
-        let seen = |advertised: &[String], subscribed: &[u32], area: bool, pose: bool| {
-            format!(
-                "advertised {advertised:?}, subscribed {subscribed:?}, an area {}, a pose {}",
-                if area { "came" } else { "did not come" },
-                if pose { "came" } else { "did not come" },
-            )
-        };
+        // The server's other text messages (a status saying a subscription was refused, …).
+        let mut said: Vec<String> = Vec::new();
+        let seen =
+            |advertised: &[String], subscribed: &[u32], said: &[String], area: bool, pose: bool| {
+                format!(
+                    "advertised {advertised:?}, subscribed {subscribed:?}, an area {}, a pose {}; \
+                 the server also said {said:?}",
+                    if area { "came" } else { "did not come" },
+                    if pose { "came" } else { "did not come" },
+                )
+            };
         while let Some(message) = socket.next().await {
             let message = message.map_err(|e| {
                 format!(
                     "the live view failed: {e}; {}",
-                    seen(&advertised, &subscribed, area.is_some(), pose.is_some())
+                    seen(
+                        &advertised,
+                        &subscribed,
+                        &said,
+                        area.is_some(),
+                        pose.is_some()
+                    )
                 )
             })?;
             match message {
                 Message::Text(text) => {
                     let json: serde_json::Value = serde_json::from_str(&text).unwrap();
                     if json["op"] != "advertise" {
+                        if json["op"] != "serverInfo" {
+                            said.push(text.to_string());
+                        }
                         continue;
                     }
                     for channel in json["channels"].as_array().unwrap() {
@@ -141,7 +154,13 @@ async fn watch(
         }
         Err(format!(
             "the live view closed before the area and a pose came; {}",
-            seen(&advertised, &subscribed, area.is_some(), pose.is_some())
+            seen(
+                &advertised,
+                &subscribed,
+                &said,
+                area.is_some(),
+                pose.is_some()
+            )
         ))
     })
     .await
