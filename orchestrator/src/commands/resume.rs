@@ -105,11 +105,13 @@ impl Resumed {
 
     /// Refuses a setting given on the command line that differs from the campaign's, naming it:
     /// the scenario (by hash), the seed, the number of tests, `--no-faults`, the shard, the
-    /// failure policy and the car profile.
+    /// failure policy and the car profile. `scenario_given`: the scenario came from
+    /// `--scenario`, not from the bundled one the campaign names.
     pub(super) fn check(
         &self,
         args: &RunArgs,
         scenario: &Scenario,
+        scenario_given: bool,
         profile: &LoadedProfile,
         firmware: Option<&super::firmware::HostFirmware>,
         cars: &[CarAddress],
@@ -141,15 +143,22 @@ impl Resumed {
             )
         };
         let hash = scenario.hash();
-        if r.scenario.hash.as_deref().is_some_and(|h| h != hash) || r.scenario.name != scenario.name
-        {
+        let recorded = r.scenario.hash.as_deref().unwrap_or("unrecorded");
+        let differs_in = r.scenario.hash.as_deref().is_some_and(|h| h != hash);
+        if differs_in && !scenario_given {
+            // No --scenario: the bundled one of the campaign's name, which is not what it
+            // drove (a file of the same name, or another version of drivecheck's).
+            bail!(
+                "--resume {dir}: the campaign drove scenario `{}` (hash {recorded}), not the \
+                 bundled `{}` (hash {hash}): give the file it drove with --scenario",
+                r.scenario.name,
+                scenario.name
+            );
+        }
+        if differs_in || r.scenario.name != scenario.name {
             return Err(differs(
                 format!("--scenario {} (hash {hash})", scenario.name),
-                format!(
-                    "scenario `{}` (hash {})",
-                    r.scenario.name,
-                    r.scenario.hash.as_deref().unwrap_or("unrecorded")
-                ),
+                format!("scenario `{}` (hash {recorded})", r.scenario.name),
             ));
         }
         if let Some(seed) = args.seed.filter(|&s| s != r.seed) {

@@ -108,7 +108,15 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     let sim = profile.sim_config(&scenario)?;
     if let Some(resumed) = &resumed {
         let addresses: Vec<CarAddress> = cars.iter().map(|c| c.address.clone()).collect();
-        resumed.check(args, &scenario, &profile, firmware.as_ref(), &addresses)?;
+        let given = matches!(settings.scenario, ScenarioFrom::Given(_));
+        resumed.check(
+            args,
+            &scenario,
+            given,
+            &profile,
+            firmware.as_ref(),
+            &addresses,
+        )?;
     }
     let seed = choose_seed(settings.seed);
     let campaign = Campaign {

@@ -205,6 +205,44 @@ fn resume_removes_the_temporary_file_of_a_killed_process() {
     assert!(seven.join("case-002.json").is_file(), "{said}");
 }
 
+/// A campaign driven on a scenario file that bears a bundled scenario's name is not resumed on
+/// the bundled one (what `--resume` loads when no `--scenario` is given): the refusal says
+/// which scenario the campaign drove and to give its file, and the resume with the file drives
+/// the missing test.
+#[test]
+fn a_campaign_on_a_file_named_like_a_bundled_scenario_is_resumed_with_its_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scenario = common::short_tests(tmp.path());
+    let run = tmp.path().join("run");
+    run_unrecorded(
+        &["--scenario", path(&scenario), "--seed", "7", "--tests", "2"],
+        &run,
+    );
+    std::fs::remove_file(run.join("case-001.json")).unwrap();
+    let out = drivecheck(&["run", "--resume", path(&run), "--record", "none"]);
+    let said = text(&out);
+    assert_eq!(out.status.code(), Some(2), "{said}");
+    assert!(
+        said.contains("the campaign drove scenario `parking-lot-2anchors` (hash ")
+            && said.contains("not the bundled `parking-lot-2anchors`")
+            && said.contains("give the file it drove with --scenario")
+            && !said.contains("leave --scenario out"),
+        "{said}"
+    );
+    assert!(!run.join("case-001.json").exists(), "{said}");
+    let out = drivecheck(&[
+        "run",
+        "--resume",
+        path(&run),
+        "--scenario",
+        path(&scenario),
+        "--record",
+        "none",
+    ]);
+    assert!(matches!(out.status.code(), Some(0 | 1)), "{}", text(&out));
+    assert!(run.join("case-001.json").is_file(), "{}", text(&out));
+}
+
 /// A campaign goes on on the kind of car it drove: one that drove a car behind a link is not
 /// finished on the embedded simulated car (`--car`'s default, so forgetting `--car` would do
 /// it), and a simulated campaign is not finished on a car; both refused before anything drives.

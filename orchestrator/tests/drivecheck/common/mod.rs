@@ -184,20 +184,52 @@ pub fn documented(name: &str) -> String {
 /// A `drivecheck sim` car listening on a free loopback port (its address file in `dir`, named
 /// after `name`), and its address (`tcp://127.0.0.1:PORT`). Kill the child when done.
 pub fn start_sim(dir: &Path, name: &str) -> (std::process::Child, String) {
-    start_sim_with(dir, name, &[], 10)
+    start_sim_with(dir, name, "parking-lot-2anchors", &[], 10)
 }
 
-/// [`start_sim`] with `extra` arguments (`--car sitl:TREE`), waiting up to `within_s` seconds
-/// for its address.
+/// The bundled `parking-lot-2anchors` with short tests, written into `dir`: its geometry, anchors
+/// and faults, but one or two commands a test at 10–12 km/h, and the hand-drawn start and recovery
+/// routes driven at 9 km/h instead of 3. For the wall-clock tests of what a campaign does around
+/// its tests (a car lost, a resume), which pay every second a test drives: a test and its reset
+/// take about 12 s instead of about 28 s.
+pub fn short_tests(dir: &Path) -> PathBuf {
+    let bundled = scenarios::bundled::text("parking-lot-2anchors").unwrap();
+    let mut short = String::new();
+    for line in bundled.lines() {
+        let line = match line {
+            l if l.starts_with("test_size = ") => "test_size = { min = 1, max = 2 }".to_owned(),
+            l if l.starts_with("speed_kmh = ") => {
+                "speed_kmh = { min = 10.0, max = 12.0 }".to_owned()
+            }
+            l => l.replace("speed = 0.833333", "speed = 2.5"),
+        };
+        short.push_str(&line);
+        short.push('\n');
+    }
+    assert!(
+        short.contains("test_size = { min = 1,")
+            && short.contains("speed_kmh = { min = 10.0,")
+            && short.contains("speed = 2.5")
+            && !short.contains("speed = 0.833333"),
+        "the bundled scenario's lines changed: {short}"
+    );
+    let file = dir.join("short-tests.toml");
+    std::fs::write(&file, short).unwrap();
+    file
+}
+
+/// [`start_sim`] on `scenario` (a bundled name or a file) with `extra` arguments (`--car
+/// sitl:TREE`), waiting up to `within_s` seconds for its address.
 pub fn start_sim_with(
     dir: &Path,
     name: &str,
+    scenario: &str,
     extra: &[&str],
     within_s: u64,
 ) -> (std::process::Child, String) {
     let address_file = dir.join(format!("{name}.addr"));
     let mut sim = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
-        .args(["sim", "--scenario", "parking-lot-2anchors", "--listen"])
+        .args(["sim", "--scenario", scenario, "--listen"])
         .arg("127.0.0.1:0")
         .arg("--address-file")
         .arg(&address_file)

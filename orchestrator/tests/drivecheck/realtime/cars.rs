@@ -9,7 +9,7 @@ use crate::common;
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 use std::sync::mpsc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use common::{drivecheck, path, start_sim, text};
 use futures::StreamExt;
@@ -49,16 +49,20 @@ async fn advertised(port: u16, within: Duration) -> Vec<String> {
     topics
 }
 
-/// About 90 s of wall time: car A drives one test, car B is lost in the other, A drives it again.
+/// Car A drives one test, car B is lost in the other, A drives it again (short tests: about
+/// 30 s of wall time).
 #[test]
 fn a_car_lost_mid_test_leaves_and_the_campaign_ends_on_the_other_with_every_test_once() {
     let tmp = tempfile::tempdir().unwrap();
-    let (mut sim_a, a) = start_sim(tmp.path(), "a");
-    let (mut sim_b, b) = start_sim(tmp.path(), "b");
+    let scenario = common::short_tests(tmp.path());
+    let (mut sim_a, a) = common::start_sim_with(tmp.path(), "a", path(&scenario), &[], 10);
+    let (mut sim_b, b) = common::start_sim_with(tmp.path(), "b", path(&scenario), &[], 10);
     let out = tmp.path().join("run");
     let mut run = Command::new(env!("CARGO_BIN_EXE_drivecheck"))
         .args([
             "run",
+            "--scenario",
+            path(&scenario),
             "--seed",
             "3",
             "--tests",
@@ -82,7 +86,7 @@ fn a_car_lost_mid_test_leaves_and_the_campaign_ends_on_the_other_with_every_test
         let mut said = String::new();
         for line in BufReader::new(stderr).lines().map_while(Result::ok) {
             if line.contains("started on car B") {
-                let _ = tx.send(());
+                let _ = tx.send(Instant::now());
             }
             if let Some(port) = common::live_port(&line) {
                 let _ = port_tx.send(port);
@@ -99,9 +103,14 @@ fn a_car_lost_mid_test_leaves_and_the_campaign_ends_on_the_other_with_every_test
         .unwrap()
         .block_on(advertised(port, Duration::from_secs(5)));
     // B is in its test's reset or drive: its simulator dies.
-    rx.recv_timeout(Duration::from_secs(60))
+    let started = rx
+        .recv_timeout(Duration::from_secs(60))
         .expect("car B never started a test");
-    std::thread::sleep(Duration::from_secs(8));
+    // A short test and its reset take about 12 s: 3 s in (or at once, if the live view's
+    // topics took longer), B is still driving it.
+    std::thread::sleep(
+        (started + Duration::from_secs(3)).saturating_duration_since(Instant::now()),
+    );
     let _ = (sim_b.kill(), sim_b.wait());
     let output = run.wait_with_output().unwrap();
     let _ = (sim_a.kill(), sim_a.wait());
@@ -250,7 +259,13 @@ fn the_firmware_served_over_tcp_passes_a_dry_run_for_one_client_after_another() 
     };
     let tmp = tempfile::tempdir().unwrap();
     let car = format!("sitl:{tree}");
-    let (mut sim, address) = common::start_sim_with(tmp.path(), "fw", &["--car", &car], 120);
+    let (mut sim, address) = common::start_sim_with(
+        tmp.path(),
+        "fw",
+        "parking-lot-2anchors",
+        &["--car", &car],
+        120,
+    );
     for client in 1..=2 {
         let out = drivecheck(&["run", "--dry-run", "--car", &address]);
         let said = text(&out);

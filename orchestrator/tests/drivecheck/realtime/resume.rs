@@ -205,14 +205,17 @@ fn a_campaign_interrupted_three_times_and_resumed_is_the_uninterrupted_one() {
 }
 
 /// The same over a link, in real time: a `drivecheck sim` car over TCP, one test cut off by
-/// SIGTERM in its middle and driven again by the resume (about 90 s of wall time).
+/// SIGTERM in its middle and driven again by the resume (a short test: about 25 s of wall time).
 #[test]
 fn a_campaign_on_a_car_over_tcp_cut_off_by_sigterm_is_resumed() {
     let tmp = tempfile::tempdir().unwrap();
-    let (mut sim, car) = common::start_sim(tmp.path(), "car");
+    let scenario = common::short_tests(tmp.path());
+    let (mut sim, car) = common::start_sim_with(tmp.path(), "car", path(&scenario), &[], 10);
     let out = tmp.path().join("run");
     let args = [
         "run",
+        "--scenario",
+        path(&scenario),
         "--car",
         &car,
         "--seed",
@@ -224,7 +227,15 @@ fn a_campaign_on_a_car_over_tcp_cut_off_by_sigterm_is_resumed() {
     ];
     let (code, said) = interrupted(&args, "in:0", "-TERM", || {});
     assert_eq!(code, Some(2), "{said}");
-    let resumed = drivecheck(&["run", "--resume", path(&out), "--car", &car]);
+    let resumed = drivecheck(&[
+        "run",
+        "--resume",
+        path(&out),
+        "--scenario",
+        path(&scenario),
+        "--car",
+        &car,
+    ]);
     let _ = (sim.kill(), sim.wait());
     assert!(
         matches!(resumed.status.code(), Some(0 | 1)),
@@ -296,16 +307,20 @@ fn a_campaign_that_died_after_its_last_test_is_completed_by_the_resume() {
 
 /// A campaign begun on two cars and resumed on a third goes on as one on several cars: the
 /// third car is named and credited with the test it drove, its case says so, and the cars of
-/// the first session keep only what they drove (#51 item 5; about 90 s of wall time).
+/// the first session keep only what they drove (#51 item 5; a short test: about 25 s of wall
+/// time).
 #[test]
 fn a_campaign_on_two_cars_resumed_on_another_credits_the_car_that_drove() {
     let tmp = tempfile::tempdir().unwrap();
-    let (mut sim_a, a) = common::start_sim(tmp.path(), "a");
-    let (mut sim_b, b) = common::start_sim(tmp.path(), "b");
+    let scenario = common::short_tests(tmp.path());
+    let (mut sim_a, a) = common::start_sim_with(tmp.path(), "a", path(&scenario), &[], 10);
+    let (mut sim_b, b) = common::start_sim_with(tmp.path(), "b", path(&scenario), &[], 10);
     let out = tmp.path().join("run");
     let (car_a, car_b) = (format!("a={a}"), format!("b={b}"));
     let args = [
         "run",
+        "--scenario",
+        path(&scenario),
         "--car",
         &car_a,
         "--car",
@@ -321,7 +336,15 @@ fn a_campaign_on_two_cars_resumed_on_another_credits_the_car_that_drove() {
     let _ = (sim_b.kill(), sim_b.wait());
     assert_eq!(code, Some(2), "{said}");
     let car_c = format!("c={a}");
-    let resumed = drivecheck(&["run", "--resume", path(&out), "--car", &car_c]);
+    let resumed = drivecheck(&[
+        "run",
+        "--resume",
+        path(&out),
+        "--scenario",
+        path(&scenario),
+        "--car",
+        &car_c,
+    ]);
     let _ = (sim_a.kill(), sim_a.wait());
     assert!(
         matches!(resumed.status.code(), Some(0 | 1)),
