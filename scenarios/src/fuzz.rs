@@ -124,7 +124,7 @@ fn inline(fields: &[(&str, String)], how: Mangle) -> String {
 }
 
 /// One vertex: a base position moved by `delta`, or replaced by an extreme.
-fn vertex(base: (f64, f64)) -> impl Strategy<Value = String> {
+fn vertex(base: (f64, f64)) -> BoxedStrategy<String> {
     (
         prop_oneof![40 => Just(None), 1 => number(-1e6, 1e6).prop_map(Some)],
         prop_oneof![40 => Just(None), 1 => number(-1e6, 1e6).prop_map(Some)],
@@ -136,22 +136,25 @@ fn vertex(base: (f64, f64)) -> impl Strategy<Value = String> {
             let y = y.unwrap_or_else(|| toml_f64(base.1 - delta));
             inline(&[("x", x), ("y", y)], how)
         })
+        .boxed()
 }
 
 /// A route point: a base position moved a little or replaced, with a speed.
-fn route_point(base: (f64, f64)) -> impl Strategy<Value = String> {
-    (vertex(base), number(0.2, 8.0), mangle()).prop_map(|(xy, speed, how)| {
-        let xy = xy
-            .trim_start_matches("{ ")
-            .trim_end_matches(" }")
-            .to_owned();
-        match how {
-            Mangle::Drop => format!("{{ {xy} }}"),
-            Mangle::Duplicate => format!("{{ {xy}, speed = {speed}, speed = 1.0 }}"),
-            Mangle::Unknown => format!("{{ {xy}, speed = {speed}, time = 3 }}"),
-            Mangle::Keep => format!("{{ {xy}, speed = {speed} }}"),
-        }
-    })
+fn route_point(base: (f64, f64)) -> BoxedStrategy<String> {
+    (vertex(base), number(0.2, 8.0), mangle())
+        .prop_map(|(xy, speed, how)| {
+            let xy = xy
+                .trim_start_matches("{ ")
+                .trim_end_matches(" }")
+                .to_owned();
+            match how {
+                Mangle::Drop => format!("{{ {xy} }}"),
+                Mangle::Duplicate => format!("{{ {xy}, speed = {speed}, speed = 1.0 }}"),
+                Mangle::Unknown => format!("{{ {xy}, speed = {speed}, time = 3 }}"),
+                Mangle::Keep => format!("{{ {xy}, speed = {speed} }}"),
+            }
+        })
+        .boxed()
 }
 
 /// A list: the given items, or (rarely) a very long one around a circle.
@@ -170,7 +173,7 @@ fn long_ring(n: usize, centre: (f64, f64), radius: f64, speed: Option<f64>) -> S
 }
 
 /// The fence: the 20 m square (its vertices moved or extreme), or a long ring, or nothing.
-fn fence() -> impl Strategy<Value = Option<String>> {
+fn fence() -> BoxedStrategy<Option<String>> {
     let square = [(0.0, 0.0), (20.0, 0.0), (20.0, 20.0), (0.0, 20.0)];
     prop_oneof![
         30 => square
@@ -183,10 +186,11 @@ fn fence() -> impl Strategy<Value = Option<String>> {
         1 => Just(None),
         1 => Just(Some("fence = []".to_owned())),
     ]
+    .boxed()
 }
 
 /// A route along `points` (moved or extreme), or a long one, or nothing.
-fn route(name: &'static str, points: [(f64, f64); 3]) -> impl Strategy<Value = Option<String>> {
+fn route(name: &'static str, points: [(f64, f64); 3]) -> BoxedStrategy<Option<String>> {
     prop_oneof![
         30 => points
             .map(route_point)
@@ -197,6 +201,7 @@ fn route(name: &'static str, points: [(f64, f64); 3]) -> impl Strategy<Value = O
         ))),
         1 => Just(None),
     ]
+    .boxed()
 }
 
 /// A table `[name]` of `keys`, each present or not (its value from the key's strategy), the whole
@@ -240,7 +245,7 @@ fn interval() -> impl Strategy<Value = String> + Clone {
 }
 
 /// Anchors: none, a few (ids beyond a byte, extreme positions), or more than the firmware keeps.
-fn anchors() -> impl Strategy<Value = String> {
+fn anchors() -> BoxedStrategy<String> {
     let id = prop_oneof![
         40 => 0i64..256,
         1 => any::<i64>(),
@@ -261,10 +266,11 @@ fn anchors() -> impl Strategy<Value = String> {
         1 => prop::collection::vec(one, 18..24),
     ]
     .prop_map(|a| a.concat())
+    .boxed()
 }
 
 /// The environment: an obstacle polygon and a wall, with extreme coordinates at times.
-fn environment() -> impl Strategy<Value = String> {
+fn environment() -> BoxedStrategy<String> {
     (
         prop::option::of([(30.0, 30.0), (31.0, 30.0), (31.0, 31.0)].map(vertex)),
         prop::option::of((vertex((-5.0, 0.0)), vertex((-5.0, 8.0)))),
@@ -282,10 +288,11 @@ fn environment() -> impl Strategy<Value = String> {
             }
             out
         })
+        .boxed()
 }
 
 /// A whole document.
-fn document() -> impl Strategy<Value = String> {
+fn document() -> BoxedStrategy<String> {
     let top = (
         fence(),
         prop::option::weighted(
@@ -354,30 +361,32 @@ fn document() -> impl Strategy<Value = String> {
         anchors(),
         environment(),
     );
-    (top, settings).prop_map(
-        |(
-            (fence, cutouts, start, recovery, origin, duplicate_fence),
-            (generator, vehicle, campaign, faults, anchors, environment),
-        )| {
-            let mut doc = String::from("name = \"fuzz\"\n");
-            for line in [&fence, &cutouts, &start, &recovery].into_iter().flatten() {
-                doc += line;
-                doc += "\n";
-            }
-            if duplicate_fence && let Some(fence) = &fence {
-                doc += fence;
-                doc += "\n";
-            }
-            doc += &anchors;
-            if let Some((lat, lon, height)) = origin {
-                doc += &format!("[origin]\nlat = {lat}\nlon = {lon}\nheight = {height}\n");
-            }
-            for s in [generator, vehicle, campaign, faults, environment] {
-                doc += &s;
-            }
-            doc
-        },
-    )
+    (top, settings)
+        .prop_map(
+            |(
+                (fence, cutouts, start, recovery, origin, duplicate_fence),
+                (generator, vehicle, campaign, faults, anchors, environment),
+            )| {
+                let mut doc = String::from("name = \"fuzz\"\n");
+                for line in [&fence, &cutouts, &start, &recovery].into_iter().flatten() {
+                    doc += line;
+                    doc += "\n";
+                }
+                if duplicate_fence && let Some(fence) = &fence {
+                    doc += fence;
+                    doc += "\n";
+                }
+                doc += &anchors;
+                if let Some((lat, lon, height)) = origin {
+                    doc += &format!("[origin]\nlat = {lat}\nlon = {lon}\nheight = {height}\n");
+                }
+                for s in [generator, vehicle, campaign, faults, environment] {
+                    doc += &s;
+                }
+                doc
+            },
+        )
+        .boxed()
 }
 
 /// `s` with the ranges of the kinds a fault section neither lists nor has by default set to
@@ -446,26 +455,28 @@ const TAME: [f64; 33] = [
 
 /// The valid template with one or two of its numbers replaced by extremes, or moved a little:
 /// documents that mostly load, so that the extremes that are accepted reach the generator.
-fn tame_document() -> impl Strategy<Value = String> {
+fn tame_document() -> BoxedStrategy<String> {
     let change = (
         0..TAME.len(),
         prop_oneof![3 => extreme(), 1 => -1e-3f64..1e-3],
     );
-    prop::collection::vec(change, 1..3).prop_map(|changes| {
-        let mut values = TAME;
-        for (slot, value) in changes {
-            values[slot] = if value.abs() < 1e-3 && value != 0.0 {
-                values[slot] + value
-            } else {
-                value
-            };
-        }
-        let mut text = TEMPLATE.to_owned();
-        for (k, v) in values.iter().enumerate() {
-            text = text.replace(&format!("@{k}@"), &toml_f64(*v));
-        }
-        text
-    })
+    prop::collection::vec(change, 1..3)
+        .prop_map(|changes| {
+            let mut values = TAME;
+            for (slot, value) in changes {
+                values[slot] = if value.abs() < 1e-3 && value != 0.0 {
+                    values[slot] + value
+                } else {
+                    value
+                };
+            }
+            let mut text = TEMPLATE.to_owned();
+            for (k, v) in values.iter().enumerate() {
+                text = text.replace(&format!("@{k}@"), &toml_f64(*v));
+            }
+            text
+        })
+        .boxed()
 }
 
 static LOADED: AtomicUsize = AtomicUsize::new(0);
