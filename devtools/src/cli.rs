@@ -216,6 +216,11 @@ pub struct BenchScaleArgs {
     /// the end).
     #[arg(long, value_name = "DIR")]
     pub scratch: Option<PathBuf>,
+    /// Only the campaign with `--record none` (its time and peak memory) at each size, no
+    /// recording and no reader: the memory a campaign keeps per test, at sizes where the rest
+    /// would take hours.
+    #[arg(long)]
+    pub unrecorded_only: bool,
 }
 
 /// Options of `drivecheck-dev bench placement`.

@@ -70,10 +70,38 @@ pub fn run(args: &BenchScaleArgs) -> Result<Exit> {
     let exe = std::env::current_exe().context("cannot find the drivecheck-dev executable")?;
     let (_scratch, root) = Scratch::given_or_new(args.scratch.as_deref(), "bench", "scale")?;
     println!(
-        "bench scale: seed {}, --jobs {}, --record failing; each step a process of its own \
-         (peak memory: its VmHWM)",
-        args.seed, args.jobs
+        "bench scale: seed {}, --jobs {}, {}; each step a process of its own (peak memory: its \
+         VmHWM)",
+        args.seed,
+        args.jobs,
+        if args.unrecorded_only {
+            "only the campaign with --record none"
+        } else {
+            "--record failing"
+        }
     );
+    if args.unrecorded_only {
+        let mut costs = Vec::new();
+        for &tests in &args.sizes {
+            let dir = root.join(format!("{tests}"));
+            std::fs::create_dir_all(&dir)
+                .with_context(|| format!("cannot create {}", dir.display()))?;
+            let cost = step(
+                &exe,
+                &dir,
+                &campaign_args(&dir.join("unrecorded"), tests, args, "none"),
+                &[0, 1],
+            )?;
+            eprintln!(
+                "{tests} tests, --record none: {:.1} s, {:.1} MB peak",
+                cost.wall.as_secs_f64(),
+                cost.peak_mb.unwrap_or(f64::NAN)
+            );
+            costs.push((tests, cost));
+        }
+        print_unrecorded(&costs);
+        return Ok(Exit::Success);
+    }
     let mut rows = Vec::new();
     for &tests in &args.sizes {
         let row = measure(&exe, &root.join(format!("{tests}")), tests, args)?;
@@ -91,22 +119,7 @@ pub fn run(args: &BenchScaleArgs) -> Result<Exit> {
 fn measure(exe: &Path, dir: &Path, tests: usize, args: &BenchScaleArgs) -> Result<SizeRow> {
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let run = dir.join("run");
-    let campaign_args = |out: &Path, record: &str| -> Vec<String> {
-        vec![
-            "-q".into(),
-            "run".into(),
-            "--tests".into(),
-            tests.to_string(),
-            "--seed".into(),
-            args.seed.to_string(),
-            "--jobs".into(),
-            args.jobs.to_string(),
-            "--record".into(),
-            record.into(),
-            "--out".into(),
-            out.display().to_string(),
-        ]
-    };
+    let campaign_args = |out: &Path, record: &str| campaign_args(out, tests, args, record);
     // A campaign whose tests fail ends with status 1: that is what is measured.
     let campaign = step(exe, dir, &campaign_args(&run, "failing"), &[0, 1])?;
     let unrecorded = step(
@@ -164,6 +177,89 @@ fn measure(exe: &Path, dir: &Path, tests: usize, args: &BenchScaleArgs) -> Resul
         explain,
         merge,
     })
+}
+
+/// `drivecheck -q run` of `tests` tests with the bench's seed and jobs, recording as `record`
+/// says, into `out`.
+fn campaign_args(out: &Path, tests: usize, args: &BenchScaleArgs, record: &str) -> Vec<String> {
+    vec![
+        "-q".into(),
+        "run".into(),
+        "--tests".into(),
+        tests.to_string(),
+        "--seed".into(),
+        args.seed.to_string(),
+        "--jobs".into(),
+        args.jobs.to_string(),
+        "--record".into(),
+        record.into(),
+        "--out".into(),
+        out.display().to_string(),
+    ]
+}
+
+/// The least-squares line through `(tests, peak MB)`: the peak at no test (MB) and what each
+/// test adds (kB); `None` with fewer than two sizes or without a peak.
+fn memory_slope(points: &[(usize, Option<f64>)]) -> Option<(f64, f64)> {
+    let known: Vec<(f64, f64)> = points
+        .iter()
+        .filter_map(|&(n, mb)| mb.map(|mb| (n as f64, mb)))
+        .collect();
+    if known.len() < 2 {
+        return None;
+    }
+    let count = known.len() as f64;
+    let mean_n = known.iter().map(|p| p.0).sum::<f64>() / count;
+    let mean_mb = known.iter().map(|p| p.1).sum::<f64>() / count;
+    let spread: f64 = known.iter().map(|p| (p.0 - mean_n).powi(2)).sum();
+    if spread == 0.0 {
+        return None;
+    }
+    let slope = known
+        .iter()
+        .map(|p| (p.0 - mean_n) * (p.1 - mean_mb))
+        .sum::<f64>()
+        / spread;
+    Some((mean_mb - slope * mean_n, slope * 1e3))
+}
+
+/// The line of what a test adds to the peak memory of the campaign with `--record none`.
+fn print_slope(points: &[(usize, Option<f64>)]) {
+    if let Some((base, kb)) = memory_slope(points) {
+        println!(
+            "memory per test with --record none: {kb:.2} kB (least squares over {} sizes: \
+             peak = {base:.1} MB + {kb:.2} kB × tests; 1,000,000 tests: {:.0} MB)",
+            points.len(),
+            base + kb * 1e3
+        );
+        if points.iter().map(|p| p.0).max().unwrap_or(0) < 1_000 {
+            println!(
+                "  (below 1,000 tests the peaks differ by what start-up and the allocator take, \
+                 not by the tests: give larger --sizes for the slope)"
+            );
+        }
+    }
+}
+
+/// The table of `--unrecorded-only`.
+fn print_unrecorded(costs: &[(usize, Cost)]) {
+    println!();
+    println!("{:>9} {:>12} {:>8}", "tests", "unrecorded s", "peak MB");
+    for (tests, cost) in costs {
+        println!(
+            "{:>9} {:>12.1} {:>8}",
+            tests,
+            cost.wall.as_secs_f64(),
+            cost.peak_mb.map_or("?".to_owned(), |m| format!("{m:.1}"))
+        );
+    }
+    println!();
+    print_slope(
+        &costs
+            .iter()
+            .map(|(tests, cost)| (*tests, cost.peak_mb))
+            .collect::<Vec<_>>(),
+    );
 }
 
 /// Runs `drivecheck ARGS` in `dir`, its output discarded; its status must be one of `ok`.
@@ -271,9 +367,36 @@ fn print_rows(rows: &[SizeRow]) {
         );
     }
     println!();
+    print_slope(
+        &rows
+            .iter()
+            .map(|r| (r.tests, r.unrecorded.peak_mb))
+            .collect::<Vec<_>>(),
+    );
     println!(
         "×rec: the campaign's time with --record failing over its time with --record none; \
          MB/test: campaign.mcap (with --record failing, only the tests that did not pass are \
          in it) over all the tests"
     );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::memory_slope;
+
+    #[test]
+    fn the_slope_is_what_each_test_adds_to_the_peak() {
+        // 40 MB and 0.3 kB a test, with a size whose peak is unknown left out.
+        let points = [
+            (1_000, Some(40.3)),
+            (10_000, Some(43.0)),
+            (30_000, Some(49.0)),
+            (50_000, None),
+        ];
+        let (base, kb) = memory_slope(&points).unwrap();
+        assert!((base - 40.0).abs() < 1e-9, "{base}");
+        assert!((kb - 0.3).abs() < 1e-9, "{kb}");
+        assert_eq!(memory_slope(&points[..1]), None);
+        assert_eq!(memory_slope(&[(5, Some(1.0)), (5, Some(2.0))]), None);
+    }
 }
