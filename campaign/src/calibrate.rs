@@ -85,27 +85,55 @@ pub struct SegmentSpan {
     pub to_s: f64,
 }
 
-/// The binned error of a set of tests: (test, segment, bin) → mean error (east, north), m.
+/// The [`SegmentSpan::segment_index`] of a test's start route: the stretch from the test's first
+/// sample to its first segment, the same route from the same place in every test (where the
+/// radio's noise and the anchors' offsets show without a fault or a segment's curvature).
+pub const START_ROUTE: usize = usize::MAX;
+
+/// One bin of a [`Signature`]: the mean error and how much it jumps from sample to sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Bin {
+    /// The mean error, east, m.
+    pub east_m: f64,
+    /// The mean error, north, m.
+    pub north_m: f64,
+    /// The root mean square of the error's change from one sample to the next, m (`None` with
+    /// fewer than two samples): the radio's part of the error (its noise, the exchanges lost, the
+    /// NLOS ranges), which a mean averages away and the car's slow errors (odometry, yaw) barely
+    /// move.
+    pub jitter_m: Option<f64>,
+}
+
+/// The binned error of a set of tests: (test, segment, bin) → its [`Bin`].
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Signature {
     /// The bins.
-    pub bins: BTreeMap<(usize, usize, usize), (f64, f64)>,
+    pub bins: BTreeMap<(usize, usize, usize), Bin>,
 }
 
 impl Signature {
-    /// Adds test `test_index`'s `samples` (finite ones), cut by its `segments`.
+    /// Adds test `test_index`'s `samples` (finite ones, in time order), cut by its `segments`.
     pub fn add_test(
         &mut self,
         test_index: usize,
         samples: &[ErrorSample],
         segments: &[SegmentSpan],
     ) {
+        #[derive(Default, Clone, Copy)]
+        struct Sums {
+            east: f64,
+            north: f64,
+            n: usize,
+            jumps: f64,
+            m: usize,
+            last: Option<(f64, f64)>,
+        }
         for segment in segments {
             let length = segment.to_s - segment.from_s;
             if length.is_nan() || length <= 0.0 {
                 continue;
             }
-            let mut sums = [(0.0, 0.0, 0usize); BINS];
+            let mut sums = [Sums::default(); BINS];
             for s in samples.iter().filter(|s| {
                 s.east_m.is_finite()
                     && s.north_m.is_finite()
@@ -113,36 +141,67 @@ impl Signature {
             }) {
                 let bin = (((s.t_s - segment.from_s) / length) * BINS as f64) as usize;
                 let sum = &mut sums[bin.min(BINS - 1)];
-                sum.0 += s.east_m;
-                sum.1 += s.north_m;
-                sum.2 += 1;
+                sum.east += s.east_m;
+                sum.north += s.north_m;
+                sum.n += 1;
+                if let Some((e, n)) = sum.last {
+                    sum.jumps += (s.east_m - e).powi(2) + (s.north_m - n).powi(2);
+                    sum.m += 1;
+                }
+                sum.last = Some((s.east_m, s.north_m));
             }
-            for (bin, (east, north, n)) in sums.into_iter().enumerate() {
-                if n > 0 {
+            for (bin, sum) in sums.into_iter().enumerate() {
+                if sum.n > 0 {
                     self.bins.insert(
                         (test_index, segment.segment_index, bin),
-                        (east / n as f64, north / n as f64),
+                        Bin {
+                            east_m: sum.east / sum.n as f64,
+                            north_m: sum.north / sum.n as f64,
+                            jitter_m: (sum.m > 0).then(|| (sum.jumps / sum.m as f64).sqrt()),
+                        },
                     );
                 }
             }
         }
     }
 
-    /// The mean of `runs` bin by bin (a bin of some runs only: the mean of those).
+    /// The mean of `runs` bin by bin (a bin of some runs only: the mean of those; a jitter, of
+    /// the runs that have one).
     pub fn mean(runs: &[Signature]) -> Signature {
-        let mut sums: BTreeMap<(usize, usize, usize), (f64, f64, usize)> = BTreeMap::new();
+        #[derive(Default)]
+        struct Sums {
+            east: f64,
+            north: f64,
+            n: usize,
+            jitter: f64,
+            m: usize,
+        }
+        let mut sums: BTreeMap<(usize, usize, usize), Sums> = BTreeMap::new();
         for run in runs {
-            for (&key, &(e, n)) in &run.bins {
+            for (&key, bin) in &run.bins {
                 let sum = sums.entry(key).or_default();
-                sum.0 += e;
-                sum.1 += n;
-                sum.2 += 1;
+                sum.east += bin.east_m;
+                sum.north += bin.north_m;
+                sum.n += 1;
+                if let Some(j) = bin.jitter_m {
+                    sum.jitter += j;
+                    sum.m += 1;
+                }
             }
         }
         Signature {
             bins: sums
                 .into_iter()
-                .map(|(k, (e, n, c))| (k, (e / c as f64, n / c as f64)))
+                .map(|(k, s)| {
+                    (
+                        k,
+                        Bin {
+                            east_m: s.east / s.n as f64,
+                            north_m: s.north / s.n as f64,
+                            jitter_m: (s.m > 0).then(|| s.jitter / s.m as f64),
+                        },
+                    )
+                })
                 .collect(),
         }
     }
@@ -225,42 +284,86 @@ pub enum FitError {
     },
 }
 
+/// What of the bins a fit compares.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Compared {
+    /// The judged segments' mean errors, east and north (not the start route's: every test
+    /// starts it from a car just reset, whose error is mostly that reset's, 0.17 m rms between
+    /// a car and its own replays on `drivecheck-dev bench twin-reach`'s car F). What the anchors,
+    /// the odometry and the IMU shape.
+    Means,
+    /// Every bin's jitter, the start route's too: what the radio's noise and losses shape. Not
+    /// the means: with the same seeds for every candidate a quieter radio makes quieter
+    /// simulated means, which a least-squares fit of means prefers whatever the car (its
+    /// expected misfit is the recorded noise plus the simulated), so a noise fitted on means
+    /// comes out low.
+    Jitter,
+}
+
+impl Compared {
+    /// Residuals per bin.
+    fn per_bin(self) -> usize {
+        match self {
+            Compared::Means => 2,
+            Compared::Jitter => 1,
+        }
+    }
+}
+
 /// The residuals of candidates against the recording, over the bins the starting values' runs
-/// share with it (a bin a later candidate lacks keeps the starting values' simulated mean: the
+/// share with it (a bin a later candidate lacks keeps the starting values' simulated bin: the
 /// residual vector keeps its length and meaning).
 struct Residuals<'a> {
     recorded: &'a Signature,
+    compared: Compared,
     keys: Vec<(usize, usize, usize)>,
-    fallback: Vec<(f64, f64)>,
+    fallback: Vec<Bin>,
 }
 
 impl<'a> Residuals<'a> {
-    fn new(recorded: &'a Signature, start: &Signature) -> Self {
+    fn new(recorded: &'a Signature, start: &Signature, compared: Compared) -> Self {
         let (keys, fallback) = recorded
             .bins
-            .keys()
-            .filter_map(|key| start.bins.get(key).map(|&bin| (*key, bin)))
+            .iter()
+            .filter_map(|(key, bin)| {
+                let simulated = start.bins.get(key)?;
+                let wanted = match compared {
+                    Compared::Means => key.1 != START_ROUTE,
+                    Compared::Jitter => bin.jitter_m.is_some() && simulated.jitter_m.is_some(),
+                };
+                wanted.then_some((*key, *simulated))
+            })
             .unzip();
         Self {
             recorded,
+            compared,
             keys,
             fallback,
         }
     }
 
-    /// recorded − simulated, east and north of every bin.
+    /// recorded − simulated of every bin: east and north, or the jitter (a jitter the candidate
+    /// lacks is the starting values').
     fn of(&self, simulated: &Signature) -> Vec<f64> {
-        let mut r = Vec::with_capacity(2 * self.keys.len());
+        let mut r = Vec::with_capacity(self.compared.per_bin() * self.keys.len());
         for (key, fallback) in self.keys.iter().zip(&self.fallback) {
-            let (re, rn) = self.recorded.bins[key];
-            let (se, sn) = simulated.bins.get(key).copied().unwrap_or(*fallback);
-            r.push(re - se);
-            r.push(rn - sn);
+            let recorded = self.recorded.bins[key];
+            let simulated = simulated.bins.get(key).unwrap_or(fallback);
+            match self.compared {
+                Compared::Means => {
+                    r.push(recorded.east_m - simulated.east_m);
+                    r.push(recorded.north_m - simulated.north_m);
+                }
+                Compared::Jitter => r.push(
+                    recorded.jitter_m.unwrap_or_default()
+                        - simulated.jitter_m.or(fallback.jitter_m).unwrap_or_default(),
+                ),
+            }
         }
         r
     }
 
-    /// The misfit of residuals `r`: the mean of |Δ|² over the bins, m².
+    /// The misfit of residuals `r`: the mean over the bins of their residuals' squares, m².
     fn misfit(&self, r: &[f64]) -> f64 {
         r.iter().map(|x| x * x).sum::<f64>() / self.keys.len() as f64
     }
@@ -273,7 +376,7 @@ impl<'a> Residuals<'a> {
 /// `progress` hears the number of candidates evaluated and the best misfit so far.
 pub fn fit(
     parameters: &[Parameter],
-    recorded: &Signature,
+    (recorded, compared): (&Signature, Compared),
     restarts: usize,
     mut evaluate: impl FnMut(&[Vec<f64>]) -> Result<Vec<Signature>, String>,
     mut in_budget: impl FnMut() -> bool,
@@ -295,7 +398,7 @@ pub fn fit(
     };
     let start: Vec<f64> = parameters.iter().map(|p| p.start).collect();
     let signature = batch(std::slice::from_ref(&start))?;
-    let residuals = Residuals::new(recorded, &signature[0]);
+    let residuals = Residuals::new(recorded, &signature[0], compared);
     if residuals.keys.is_empty() {
         return Err(FitError::NothingToCompare);
     }
@@ -362,7 +465,7 @@ pub fn fit(
     };
     let misfit = residuals.misfit(&r);
     let (a, _) = normal_equations(&columns, &r);
-    let covariances = covariances(&a, &columns, &r, &residuals.keys);
+    let covariances = covariances(&a, &columns, &r, (&residuals.keys, compared.per_bin()));
     let fitted = parameters
         .iter()
         .enumerate()
@@ -412,6 +515,34 @@ pub fn fit(
         fits,
         out_of_budget,
     })
+}
+
+impl Fit {
+    /// The fit of `parameters` where the recordings have nothing to compare: every parameter at
+    /// its start, of which they say nothing.
+    pub fn nothing_compared(parameters: &[Parameter]) -> Fit {
+        Fit {
+            parameters: parameters
+                .iter()
+                .map(|p| Fitted {
+                    name: p.name.clone(),
+                    value: p.start,
+                    standard_error: None,
+                    tolerance: p.tolerance,
+                    identified: false,
+                    trades_off_with: None,
+                    also: None,
+                })
+                .collect(),
+            start_misfit: 0.0,
+            misfit: 0.0,
+            bins: 0,
+            evaluations: 0,
+            iterations: 0,
+            fits: 0,
+            out_of_budget: false,
+        }
+    }
 }
 
 /// Restart `k` (from 1): every parameter [`RESTART_TOLERANCES`] tolerances from its start, up or
@@ -539,7 +670,7 @@ fn covariances(
     a: &[Vec<f64>],
     columns: &[Vec<f64>],
     r: &[f64],
-    keys: &[(usize, usize, usize)],
+    (keys, per_bin): (&[(usize, usize, usize)], usize),
 ) -> Option<(Matrix, Option<Matrix>)> {
     let inverse = inverse_spd(a)?;
     let n = a.len();
@@ -553,8 +684,12 @@ fn covariances(
     for (k, (test, _, _)) in keys.iter().enumerate() {
         let g = by_test.entry(*test).or_insert_with(|| vec![0.0; n]);
         for (i, column) in columns.iter().enumerate() {
-            // Two residuals per bin: east and north.
-            g[i] += column[2 * k] * r[2 * k] + column[2 * k + 1] * r[2 * k + 1];
+            let bin = per_bin * k..per_bin * (k + 1);
+            g[i] += column[bin.clone()]
+                .iter()
+                .zip(&r[bin])
+                .map(|(c, r)| c * r)
+                .sum::<f64>();
         }
     }
     let tests = by_test.len();
@@ -751,15 +886,18 @@ mod tests {
         s.add_test(5, &samples(|t| (t, -1.0)), &[span]);
         assert_eq!(s.bins.len(), BINS);
         // The first quarter holds t = 0.0 … 1.9: mean 0.95.
-        let (e, n) = s.bins[&(5, 2, 0)];
+        let bin = s.bins[&(5, 2, 0)];
+        let (e, n) = (bin.east_m, bin.north_m);
         assert!(
             (e - 0.95).abs() < 1e-9 && (n + 1.0).abs() < 1e-12,
             "{e} {n}"
         );
+        // Samples 0.1 s apart on a line of slope 1: each moves 0.1 m.
+        assert!((bin.jitter_m.unwrap() - 0.1).abs() < 1e-9, "{bin:?}");
         let recorded = s.clone();
         let mut shifted = Signature::default();
         shifted.add_test(5, &samples(|t| (t + 0.1, -1.0)), &[span]);
-        let residuals = Residuals::new(&recorded, &shifted);
+        let residuals = Residuals::new(&recorded, &shifted, Compared::Means);
         let (j, bins) = (
             residuals.misfit(&residuals.of(&shifted)),
             residuals.keys.len(),
@@ -768,12 +906,81 @@ mod tests {
         assert!((j - 0.01).abs() < 1e-9, "{j}");
     }
 
+    /// The jitter sees the radio's noise where the mean does not: two cars with the same mean
+    /// error, one with noise of 0.1 m from sample to sample, differ only in it, and a noise
+    /// parameter is fitted from it alone.
+    #[test]
+    fn the_jitter_tells_a_noisier_radio_from_a_quiet_one_of_the_same_mean() {
+        let span = SegmentSpan {
+            segment_index: START_ROUTE,
+            from_s: 0.0,
+            to_s: 10.0,
+        };
+        // Alternating ±sigma around 0.2 m east: the mean stays, each step jumps 2·sigma.
+        let noisy = |sigma: f64| {
+            let mut s = Signature::default();
+            for test in 0..10 {
+                let series = samples(|t| {
+                    let k = (t * 10.0).round() as i64 + test;
+                    (0.2 + if k % 2 == 0 { sigma } else { -sigma }, 0.0)
+                });
+                s.add_test(test as usize, &series, &[span]);
+            }
+            s
+        };
+        let recorded = noisy(0.05);
+        let quiet = noisy(0.0);
+        for (key, bin) in &recorded.bins {
+            assert!(
+                (bin.east_m - quiet.bins[key].east_m).abs() < 0.01,
+                "{key:?}"
+            );
+            assert!((bin.jitter_m.unwrap() - 0.1).abs() < 1e-9, "{bin:?}");
+        }
+        let mean = Signature::mean(&[recorded.clone(), quiet.clone()]);
+        assert!((mean.bins[&(0, START_ROUTE, 0)].jitter_m.unwrap() - 0.05).abs() < 1e-9);
+        let parameters = [Parameter {
+            bounds: (0.0, 1.0),
+            ..parameter("sigma", 0.01)
+        }];
+        let fit = fit(
+            &parameters,
+            (&recorded, Compared::Jitter),
+            0,
+            |batch| Ok(batch.iter().map(|x| noisy(x[0])).collect()),
+            || true,
+            |_, _| {},
+        )
+        .unwrap();
+        let sigma = &fit.parameters[0];
+        assert!((sigma.value - 0.05).abs() < 1e-3, "{fit:?}");
+        assert!(sigma.identified, "{fit:?}");
+        // The start route's means are not compared.
+        let means = super::fit(
+            &parameters,
+            (&recorded, Compared::Means),
+            0,
+            |batch| Ok(batch.iter().map(|x| noisy(x[0])).collect()),
+            || true,
+            |_, _| {},
+        );
+        assert_eq!(means, Err(FitError::NothingToCompare));
+    }
+
     /// A signature of 40 bins, 10 tests of one segment, from a model of `x`: `f(k, x)` is bin
     /// k's (east, north).
     fn model(x: &[f64], f: impl Fn(usize, &[f64]) -> (f64, f64)) -> Signature {
         Signature {
             bins: (0..40)
-                .map(|k| ((k / BINS, 0, k % BINS), f(k, x)))
+                .map(|k| {
+                    let (east_m, north_m) = f(k, x);
+                    let bin = Bin {
+                        east_m,
+                        north_m,
+                        jitter_m: None,
+                    };
+                    ((k / BINS, 0, k % BINS), bin)
+                })
                 .collect(),
         }
     }
@@ -800,12 +1007,12 @@ mod tests {
         let mut recorded = model(&truth, linear);
         // A little noise, so that the residuals have a variance.
         for (k, bin) in recorded.bins.values_mut().enumerate() {
-            bin.0 += 0.01 * (7.0 * k as f64).sin();
+            bin.east_m += 0.01 * (7.0 * k as f64).sin();
         }
         let parameters = ["a", "b", "c", "d", "e"].map(|n| parameter(n, 0.0));
         let fit = fit(
             &parameters,
-            &recorded,
+            (&recorded, Compared::Means),
             0,
             |batch| Ok(batch.iter().map(|x| model(x, linear)).collect()),
             || true,
@@ -855,7 +1062,7 @@ mod tests {
         });
         let fit = fit(
             &parameters,
-            &recorded,
+            (&recorded, Compared::Means),
             0,
             |batch| Ok(batch.iter().map(|x| model(x, range)).collect()),
             || true,
@@ -883,7 +1090,7 @@ mod tests {
         });
         let fit = fit(
             &parameters,
-            &recorded,
+            (&recorded, Compared::Means),
             0,
             |batch| Ok(batch.iter().map(|x| model(x, |_, x| (x[0], 0.0))).collect()),
             || true,
@@ -909,7 +1116,7 @@ mod tests {
         let run = |restarts| {
             fit(
                 &parameters,
-                &recorded,
+                (&recorded, Compared::Means),
                 restarts,
                 |batch| Ok(batch.iter().map(|x| model(x, f)).collect()),
                 || true,
@@ -946,7 +1153,7 @@ mod tests {
         let mut calls = 0;
         let fit = fit(
             &parameters,
-            &recorded,
+            (&recorded, Compared::Means),
             0,
             |batch| Ok(batch.iter().map(|x| model(x, linear)).collect()),
             || {
@@ -966,7 +1173,7 @@ mod tests {
         let parameters = ["a", "b", "c", "d", "e"].map(|n| parameter(n, 0.0));
         let wrong = fit(
             &parameters,
-            &recorded,
+            (&recorded, Compared::Means),
             0,
             |_| Ok(vec![]),
             || true,
@@ -975,7 +1182,7 @@ mod tests {
         assert_eq!(wrong, Err(FitError::Batch { asked: 1, given: 0 }));
         let nothing = fit(
             &parameters,
-            &recorded,
+            (&recorded, Compared::Means),
             0,
             |batch| Ok(vec![Signature::default(); batch.len()]),
             || true,

@@ -248,7 +248,8 @@ pub fn explain_segments(
 }
 
 /// One test of a run as `calibrate` compares it: its case, its UWB − RTK error samples (from the
-/// recording's state samples: what a car reports) and its judged segments' time spans.
+/// recording's state samples: what a car reports) and the time spans of its start route and its
+/// judged segments.
 #[derive(Debug, Clone)]
 pub struct TestErrors {
     /// The case.
@@ -273,23 +274,41 @@ pub fn error_series(dir: &Path, scenario: &Scenario) -> Result<Vec<TestErrors>, 
         };
         let bounds = boundaries(scenario, &test.case, &track.samples);
         let at = |label: &str| bounds.iter().find(|b| b.label == label).map(|b| b.t_s);
-        let spans = test
-            .case
-            .segments
+        // The start route (from the first sample to the first segment), then every judged
+        // segment.
+        let start_route = track
+            .samples
             .iter()
-            .filter(|s| s.oracle.verdict != SegmentVerdict::NoSamples)
-            .filter_map(|s| {
-                let k = s.segment_index;
-                let from_s = at(&format!("s{k}"))?;
-                let to_s = at(&format!("s{}", k + 1)).or_else(|| at("end"))?;
-                Some(campaign::calibrate::SegmentSpan {
-                    segment_index: k,
-                    from_s,
-                    to_s,
-                })
-            })
+            .find(|s| s.t_s >= 0.0)
+            .zip(at("s0"))
+            .map(|(first, to_s)| campaign::calibrate::SegmentSpan {
+                segment_index: campaign::calibrate::START_ROUTE,
+                from_s: first.t_s,
+                to_s,
+            });
+        let spans = start_route
+            .into_iter()
+            .chain(
+                test.case
+                    .segments
+                    .iter()
+                    .filter(|s| s.oracle.verdict != SegmentVerdict::NoSamples)
+                    .filter_map(|s| {
+                        let k = s.segment_index;
+                        let from_s = at(&format!("s{k}"))?;
+                        let to_s = at(&format!("s{}", k + 1)).or_else(|| at("end"))?;
+                        Some(campaign::calibrate::SegmentSpan {
+                            segment_index: k,
+                            from_s,
+                            to_s,
+                        })
+                    }),
+            )
             .collect();
-        // Where no fault acts yet: the car's own errors, undisturbed.
+        // Where no fault acts yet: the car's own errors, undisturbed. (With every stretch after
+        // a fault too, on car F of `drivecheck-dev bench twin-reach` the car's own profile's rms
+        // misfit rose from 0.10 to 0.16-0.17 m and the fit put the odometry scale and the yaw
+        // bias far from the truth and called them identified; docs/twin.md.)
         let first_fault_s = test
             .case
             .fault_places
