@@ -186,7 +186,7 @@ struct Prepared {
 /// `plan` without the segments after `last_compared + 2`: the compared segments end where the
 /// car enters the next one, and one more keeps the car from braking for the route's end before
 /// that (the ahead margin is shorter than two segments). What comes after is never compared
-/// (the recording stops at a test's first failing segment), so driving it is time lost.
+/// (only stretches before the first fault are), so driving it is time lost.
 fn cut(mut plan: TestPlan, last_compared: usize) -> TestPlan {
     let keep = plan
         .segments()
