@@ -1,9 +1,9 @@
 //! `drivecheck calibrate`: a car profile fitted to recordings of a car. The recorded cases are
 //! driven again on embedded simulated cars of candidate profiles in virtual time, and the
-//! profile's anchors, odometry scale, yaw bias and drift and the radio's noise and losses are
-//! fitted so that the simulated UWB − RTK error matches the recorded one (the method is `campaign::calibrate`'s; `docs/twin.md`). Only what a
-//! car reports is read: case files, state samples, commands and acks; never `/sim/*` or a
-//! recorded profile.
+//! radio's ranging and NLOS noise (on the error's jitter), then the anchors, odometry scale and
+//! yaw bias (on its means) are fitted so that the simulated UWB − RTK error matches the recorded
+//! one (the method is `campaign::calibrate`'s; `docs/twin.md`). Only what a car reports is read:
+//! case files, state samples, commands and acks; never `/sim/*` or a recorded profile.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -359,7 +359,9 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Exit> {
         });
     }
     if tests.is_empty() {
-        bail!("no recorded test has a stretch to compare (its start route or a judged segment)");
+        bail!(
+            "no recorded test has a stretch before its first fault to compare (its start route or a judged segment)"
+        );
     }
     let (radio, radio_targets): (Vec<Parameter>, Vec<Target>) =
         radio_parameters(&start.profile).into_iter().unzip();
