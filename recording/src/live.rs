@@ -153,7 +153,21 @@ impl LiveView {
     /// Starts a WebSocket server on `addr` (port 0: any free port); the view and the server,
     /// which serves until it is dropped (or the runtime is). Viewers offering either subprotocol
     /// (`foxglove.sdk.v1`, `foxglove.websocket.v1`) are served. Call it inside the runtime.
-    pub async fn start(addr: SocketAddr) -> Result<(Self, LiveServer), LiveError> {
+    ///
+    /// The channel of every topic the campaign records is made here, for each of `cars` (the
+    /// cars of a campaign on several cars, see [`LiveView::for_car`]; none for one car), the
+    /// simulator's topics too when `simulated`, before a viewer can connect. A channel made
+    /// while a viewer is connected races in the `foxglove` crate (0.25; its repository's main of
+    /// August 2026 too): the server sends the advertisement before it records that it did, and
+    /// a viewer quick to subscribe is told "Unknown channel ID" and never gets the channel (a CI
+    /// run lost the area so). The channels advertised as a viewer connects are recorded before
+    /// its messages are read. Only a linked car's simulator topics, made when the car turns
+    /// out to be a simulator, are still made late.
+    pub async fn start(
+        addr: SocketAddr,
+        cars: &[&str],
+        simulated: bool,
+    ) -> Result<(Self, LiveServer), LiveError> {
         let failed = |message: String| LiveError { addr, message };
         let context = Context::new();
         let latched: Latched = Arc::default();
@@ -167,6 +181,19 @@ impl LiveView {
             .start()
             .await
             .map_err(|e| failed(e.to_string()))?;
+        let view = Self {
+            context,
+            channels: Arc::default(),
+            latched,
+            car: String::new(),
+        };
+        let one = [""];
+        for car in if cars.is_empty() { &one[..] } else { cars } {
+            let view = view.for_car(car);
+            for topic in super::writer::recorded_topics(simulated) {
+                view.channel(topic, &super::schema::channel_schema(topic));
+            }
+        }
         let inner_addr = SocketAddr::from(([127, 0, 0, 1], inner.port()));
         let listener = TcpListener::bind(addr)
             .await
@@ -184,12 +211,7 @@ impl LiveView {
             }
         });
         Ok((
-            Self {
-                context,
-                channels: Arc::default(),
-                latched,
-                car: String::new(),
-            },
+            view,
             LiveServer {
                 _inner: inner,
                 front,
@@ -234,8 +256,8 @@ impl LiveView {
     }
 
     /// The view of car `car` of a campaign on several cars: the same server, its channels named
-    /// `/<car>/car/state`, `/<car>/foxglove/rtk`, … so that every car is seen at once (the area
-    /// stays `/foxglove/area`, shared). `car` is a name `run --car` accepted (letters, digits,
+    /// `/<car>/car/state`, `/<car>/foxglove/rtk`, `/<car>/foxglove/area`, … so that every car is
+    /// seen at once. `car` is a name `run --car` accepted (letters, digits,
     /// `-`, `_`).
     pub fn for_car(&self, car: &str) -> Self {
         Self {
@@ -490,7 +512,7 @@ mod tests {
     /// never buffers it.
     #[tokio::test]
     async fn a_viewer_sending_a_huge_message_is_disconnected() {
-        let (_view, server) = LiveView::start(SocketAddr::from(([127, 0, 0, 1], 0)))
+        let (_view, server) = LiveView::start(SocketAddr::from(([127, 0, 0, 1], 0)), &[], true)
             .await
             .expect("the live view starts");
         let mut client = TcpStream::connect(("127.0.0.1", server.port()))
@@ -539,7 +561,7 @@ mod tests {
         use tokio_tungstenite::tungstenite::Message;
         use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
-        let (view, server) = LiveView::start(SocketAddr::from(([127, 0, 0, 1], 0)))
+        let (view, server) = LiveView::start(SocketAddr::from(([127, 0, 0, 1], 0)), &[], true)
             .await
             .expect("the live view starts");
         let scenario = scenarios::bundled::load("parking-lot-2anchors")
@@ -620,6 +642,58 @@ mod tests {
                 .unwrap_or_else(|_| panic!("no area again after the test's {said}"));
             assert_eq!(again, first);
         }
+    }
+
+    /// Every channel is advertised as a viewer connects, before any test records: a channel
+    /// made while a viewer is connected can be lost to it (see [`LiveView::start`]).
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_viewer_that_connects_as_the_view_starts_is_advertised_every_channel() {
+        use futures::StreamExt;
+        use tokio_tungstenite::tungstenite::Message;
+        use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+
+        let (_view, server) =
+            LiveView::start(SocketAddr::from(([127, 0, 0, 1], 0)), &["a", "b-2"], false)
+                .await
+                .expect("the live view starts");
+        let mut request = format!("ws://127.0.0.1:{}", server.port())
+            .into_client_request()
+            .unwrap();
+        request
+            .headers_mut()
+            .insert("sec-websocket-protocol", SDK_SUBPROTOCOL.parse().unwrap());
+        let (mut socket, _) = tokio_tungstenite::connect_async(request).await.unwrap();
+        let mut expected: Vec<String> = ["a", "b-2"]
+            .iter()
+            .flat_map(|car| {
+                Topic::ALL
+                    .into_iter()
+                    .filter(|t| !t.is_simulator_only())
+                    .map(move |t| format!("/{car}{}", t.name()))
+            })
+            .collect();
+        let mut advertised = Vec::new();
+        // Until as many channels as expected are advertised (or 5 s pass: a missing one).
+        let _ = tokio::time::timeout(std::time::Duration::from_secs(5), async {
+            while let Some(Ok(message)) = socket.next().await {
+                let Message::Text(text) = message else {
+                    continue;
+                };
+                let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+                if json["op"] == "advertise" {
+                    for channel in json["channels"].as_array().unwrap() {
+                        advertised.push(channel["topic"].as_str().unwrap().to_owned());
+                    }
+                }
+                if advertised.len() >= expected.len() {
+                    break;
+                }
+            }
+        })
+        .await;
+        advertised.sort();
+        expected.sort();
+        assert_eq!(advertised, expected);
     }
 
     #[test]

@@ -78,7 +78,7 @@ pub struct FinishedRecording {
 }
 
 /// The topics a recording has: all but the simulator's in a run on a real car.
-fn recorded_topics(simulated: bool) -> impl Iterator<Item = Topic> {
+pub(super) fn recorded_topics(simulated: bool) -> impl Iterator<Item = Topic> {
     Topic::ALL
         .into_iter()
         .filter(move |t| simulated || !t.is_simulator_only())

@@ -262,14 +262,15 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     } else if on_several {
         let runtime = runtime(false)?;
         runtime.block_on(async {
-            let _server = start_live(args.live, &mut config).await?;
+            let names: Vec<&str> = cars.iter().map(|c| c.name.as_str()).collect();
+            let _server = start_live(args.live, &names, false, &mut config).await?;
             campaign_on_cars(&cars, &scenario, &config).await
         })
     } else {
         let runtime = runtime(false)?;
         runtime.block_on(async {
             // The server lives until the campaign ends.
-            let _server = start_live(args.live, &mut config).await?;
+            let _server = start_live(args.live, &[], false, &mut config).await?;
             campaign_on(&address, &scenario, &config).await
         })
     };
@@ -700,15 +701,18 @@ fn jobs(args: &RunArgs, embedded: bool, car_label: &str) -> Result<usize> {
 }
 
 /// Serves the live view when asked (`--live`) and sets it in `config`; the server's handle, which
-/// serves until dropped.
+/// serves until dropped. `cars` and `simulated`: which channels the view makes before a viewer
+/// can connect (see [`LiveView::start`]).
 async fn start_live(
     live: Option<std::net::SocketAddr>,
+    cars: &[&str],
+    simulated: bool,
     config: &mut RunConfig,
 ) -> Result<Option<recording::live::LiveServer>> {
     let Some(addr) = live else {
         return Ok(None);
     };
-    let (view, server) = LiveView::start(addr).await?;
+    let (view, server) = LiveView::start(addr, cars, simulated).await?;
     output::note(format_args!(
         "live view: ws://{}:{} (Foxglove: Open connection…)",
         addr.ip(),
@@ -730,7 +734,7 @@ fn campaign_on_fresh_cars<C: runner::vehicle::FreshCars>(
     // The signals and the live view's server run on a runtime of their own; every test runs on
     // its own runtime on a worker thread.
     let runtime = runtime(false)?;
-    let _server = runtime.block_on(start_live(live, config))?;
+    let _server = runtime.block_on(start_live(live, &[], true, config))?;
     let _context = runtime.enter();
     let interrupt = Interrupt::listen();
     let progress = Progress::new(config.test_indices().len());
