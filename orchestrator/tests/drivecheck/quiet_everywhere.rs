@@ -171,7 +171,7 @@ fn every_command_with_quiet_prints_nothing_on_standard_error_but_errors() {
             "--report",
             "--shrink",
             "--shrink-budget",
-            "2s",
+            "1s",
         ],
         &[1],
     );
@@ -219,7 +219,7 @@ fn every_command_with_quiet_prints_nothing_on_standard_error_but_errors() {
             "--runs",
             "1",
             "--budget",
-            "3s",
+            "1s",
             "--out",
             path(&d("shrink")),
         ],
