@@ -154,8 +154,8 @@ impl LiveView {
     /// which serves until it is dropped (or the runtime is). Viewers offering either subprotocol
     /// (`foxglove.sdk.v1`, `foxglove.websocket.v1`) are served. Call it inside the runtime.
     ///
-    /// The channel of every topic the campaign records is made here, for each of `cars` (the
-    /// cars of a campaign on several cars, see [`LiveView::for_car`]; none for one car), the
+    /// The channel of every topic the campaign records is made here, the campaign's own and
+    /// each of `cars`' (the cars of a campaign on several cars, see [`LiveView::for_car`]), the
     /// simulator's topics too when `simulated`, before a viewer can connect. A channel made
     /// while a viewer is connected races in the `foxglove` crate (0.25; its repository's main of
     /// August 2026 too): the server sends the advertisement before it records that it did, and
@@ -187,8 +187,9 @@ impl LiveView {
             latched,
             car: String::new(),
         };
-        let one = [""];
-        for car in if cars.is_empty() { &one[..] } else { cars } {
+        // The campaign's own channels (with several cars: the area's, `/foxglove/area`, shared),
+        // then each car's.
+        for car in std::iter::once(&"").chain(cars) {
             let view = view.for_car(car);
             for topic in super::writer::recorded_topics(simulated) {
                 view.channel(topic, &super::schema::channel_schema(topic));
@@ -256,8 +257,8 @@ impl LiveView {
     }
 
     /// The view of car `car` of a campaign on several cars: the same server, its channels named
-    /// `/<car>/car/state`, `/<car>/foxglove/rtk`, `/<car>/foxglove/area`, … so that every car is
-    /// seen at once. `car` is a name `run --car` accepted (letters, digits,
+    /// `/<car>/car/state`, `/<car>/foxglove/rtk`, … so that every car is seen at once (the area
+    /// stays `/foxglove/area`, shared: the campaign's recorder, on the view itself, sends it). `car` is a name `run --car` accepted (letters, digits,
     /// `-`, `_`).
     pub fn for_car(&self, car: &str) -> Self {
         Self {
@@ -663,13 +664,17 @@ mod tests {
             .headers_mut()
             .insert("sec-websocket-protocol", SDK_SUBPROTOCOL.parse().unwrap());
         let (mut socket, _) = tokio_tungstenite::connect_async(request).await.unwrap();
-        let mut expected: Vec<String> = ["a", "b-2"]
+        // The campaign's own channels (the area's the one it sends on) and each car's.
+        let mut expected: Vec<String> = [None, Some("a"), Some("b-2")]
             .iter()
             .flat_map(|car| {
                 Topic::ALL
                     .into_iter()
                     .filter(|t| !t.is_simulator_only())
-                    .map(move |t| format!("/{car}{}", t.name()))
+                    .map(move |t| match car {
+                        Some(car) => format!("/{car}{}", t.name()),
+                        None => t.name().to_owned(),
+                    })
             })
             .collect();
         let mut advertised = Vec::new();
