@@ -509,6 +509,22 @@ mod tests {
         );
     }
 
+    /// A viewer connected to the live view on `port`, offering the `foxglove` crate's
+    /// subprotocol.
+    async fn connect_viewer(
+        port: u16,
+    ) -> tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<TcpStream>> {
+        use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+
+        let mut request = format!("ws://127.0.0.1:{port}")
+            .into_client_request()
+            .unwrap();
+        request
+            .headers_mut()
+            .insert("sec-websocket-protocol", SDK_SUBPROTOCOL.parse().unwrap());
+        tokio_tungstenite::connect_async(request).await.unwrap().0
+    }
+
     /// A viewer that sends a 16 MB message is disconnected at its header (#51): the server
     /// never buffers it.
     #[tokio::test]
@@ -560,7 +576,6 @@ mod tests {
     async fn a_subscribed_viewer_gets_the_area_again_as_each_test_starts_and_ends() {
         use futures::{SinkExt, StreamExt};
         use tokio_tungstenite::tungstenite::Message;
-        use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
         let (view, server) = LiveView::start(SocketAddr::from(([127, 0, 0, 1], 0)), &[], true)
             .await
@@ -571,13 +586,7 @@ mod tests {
         let origin = tokio::time::Instant::now();
         let mut recorder =
             crate::Recorder::live_only(origin, true, 1, &view, Some(&scenario)).unwrap();
-        let mut request = format!("ws://127.0.0.1:{}", server.port())
-            .into_client_request()
-            .unwrap();
-        request
-            .headers_mut()
-            .insert("sec-websocket-protocol", SDK_SUBPROTOCOL.parse().unwrap());
-        let (mut socket, _) = tokio_tungstenite::connect_async(request).await.unwrap();
+        let mut socket = connect_viewer(server.port()).await;
         let within = std::time::Duration::from_secs(20);
         // Subscribes to the area as it is advertised.
         tokio::time::timeout(within, async {
@@ -651,19 +660,12 @@ mod tests {
     async fn a_viewer_that_connects_as_the_view_starts_is_advertised_every_channel() {
         use futures::StreamExt;
         use tokio_tungstenite::tungstenite::Message;
-        use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 
         let (_view, server) =
             LiveView::start(SocketAddr::from(([127, 0, 0, 1], 0)), &["a", "b-2"], false)
                 .await
                 .expect("the live view starts");
-        let mut request = format!("ws://127.0.0.1:{}", server.port())
-            .into_client_request()
-            .unwrap();
-        request
-            .headers_mut()
-            .insert("sec-websocket-protocol", SDK_SUBPROTOCOL.parse().unwrap());
-        let (mut socket, _) = tokio_tungstenite::connect_async(request).await.unwrap();
+        let mut socket = connect_viewer(server.port()).await;
         // The campaign's own channels (the area's the one it sends on) and each car's.
         let mut expected: Vec<String> = [None, Some("a"), Some("b-2")]
             .iter()
