@@ -283,6 +283,11 @@ pub struct BenchFidelityArgs {
     /// anchors must be the lots' (the route following leaves them out).
     #[arg(long, value_name = "FILE")]
     pub profile: Option<PathBuf>,
+    /// The car: `sim`, the embedded simulated car, or `sitl:TREE`, the car's own firmware built
+    /// from TREE for the host in the same physical car (the fault sequence and the rock lot; the
+    /// route following stays on `sim`).
+    #[arg(long, default_value = "sim", value_name = "sim|sitl:TREE")]
+    pub car: String,
     /// The first seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,

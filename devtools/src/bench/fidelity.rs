@@ -18,7 +18,11 @@
 //! 3. **Route following** (`bench_fidelity_route`): the published circle route driven by the
 //!    simulated car (`--route-runs` seeds), its printouts next to the real car's recordings.
 //!
-//! Every run is a fresh embedded simulated car in virtual time, unrecorded.
+//! Every run is a fresh embedded simulated car in virtual time, unrecorded. With `--car
+//! sitl:TREE` parts 1 and 2 drive the car's own firmware built from TREE for the host instead
+//! (a fresh start of it per run, in the same physical car and world): its estimator, fault
+//! injection and autopilot are the car's code, so the tables measure the plant alone. Part 3
+//! reads the autopilot's printouts of the embedded car's model and is left out on the firmware.
 
 use anyhow::{Context, Result};
 use car_link::fault::{FaultKind, Probe};
@@ -35,7 +39,59 @@ use orchestrator::commands::signals::runtime;
 use orchestrator::exit::Exit;
 use orchestrator::profile_arg::LoadedProfile;
 use runner::vehicle::EmbeddedSims;
-use runner::{RecordMode, ReplaySource, RunConfig, Silent, Tests, run_campaign_fresh};
+use runner::vehicle::sitl::{HostFirmware, SitlCars};
+use runner::{
+    CampaignReport, RecordMode, ReplaySource, RunConfig, Silent, Tests, run_campaign_fresh,
+};
+
+/// What drives the runs: the embedded simulated car (its model of the firmware) or the car's
+/// own firmware built for the host.
+#[derive(Clone, Copy)]
+enum Driven<'a> {
+    Model,
+    Firmware(&'a HostFirmware),
+}
+
+impl Driven<'_> {
+    /// The car's name in the runs' configuration.
+    fn label(self) -> &'static str {
+        match self {
+            Driven::Model => "sim",
+            Driven::Firmware(_) => "sitl",
+        }
+    }
+
+    /// Runs `config` on `jobs` fresh cars of this kind seeded `seed`, each in the world and with
+    /// the physics of `sim`, in virtual time.
+    fn campaign(
+        self,
+        (scenario, sim): (&Scenario, &car_sim::SimConfig),
+        config: &RunConfig,
+        seed: u64,
+        jobs: usize,
+    ) -> Result<CampaignReport> {
+        let cancel = CancellationToken::new();
+        let result = match self {
+            Driven::Model => run_campaign_fresh(
+                &EmbeddedSims::new(sim, seed, true),
+                scenario,
+                config,
+                jobs,
+                &cancel,
+                &Silent,
+            ),
+            Driven::Firmware(firmware) => run_campaign_fresh(
+                &SitlCars::new(&firmware.executable, firmware.version, sim, seed, true),
+                scenario,
+                config,
+                jobs,
+                &cancel,
+                &Silent,
+            ),
+        };
+        result.map_err(|failure| anyhow::anyhow!("{}", failure.error))
+    }
+}
 
 /// The published sequence's faults, in order, with the segment each follows (0-based: the fault
 /// is sent once segment `after` is appended and the car has 4 route points or fewer left).
@@ -125,6 +181,7 @@ fn plan_for(scenario: &Scenario, seed: u64) -> Result<Option<TestPlan>> {
 /// Drives `plan` once on a fresh simulated car seeded `seed` (its faults left out with
 /// `no_faults`); the case.
 fn drive(
+    driven: Driven<'_>,
     (scenario, sim): (&Scenario, &car_sim::SimConfig),
     plan: &TestPlan,
     seed: u64,
@@ -143,7 +200,7 @@ fn drive(
             no_faults,
         },
         scratch.0.join("run"),
-        "sim",
+        driven.label(),
     );
     config.tests = Tests::Replay(ReplaySource {
         plan,
@@ -158,16 +215,7 @@ fn drive(
     });
     config.policy = campaign::oracle::FailurePolicy::ContinueAndRecord;
     config.record = RecordMode::None;
-    let cars = EmbeddedSims::new(sim, seed, true);
-    let report = run_campaign_fresh(
-        &cars,
-        scenario,
-        &config,
-        1,
-        &CancellationToken::new(),
-        &Silent,
-    )
-    .map_err(|failure| anyhow::anyhow!("{}", failure.error))?;
+    let report = driven.campaign((scenario, sim), &config, seed, 1)?;
     Ok(report.cases().next().context("the run wrote no case")??)
 }
 
@@ -199,6 +247,8 @@ pub fn run(args: &BenchFidelityArgs) -> Result<Exit> {
     let august = orchestrator::scenario_arg::load_scenario(&args.scenario)?.scenario;
     let profile = orchestrator::profile_arg::load(args.profile.as_deref())?;
     let august_sim = profile.sim_config(&august)?;
+    let firmware = orchestrator::commands::firmware::fresh_car("bench fidelity", &args.car)?;
+    let driven = firmware.as_ref().map_or(Driven::Model, Driven::Firmware);
     let runtime_guard = runtime(false)?;
     let _context = runtime_guard.enter();
     let mut with: Vec<Vec<f64>> = vec![Vec::new(); SEGMENTS];
@@ -214,8 +264,8 @@ pub fn run(args: &BenchFidelityArgs) -> Result<Exit> {
             continue;
         };
         tests += 1;
-        let faulted = maxima(&drive((&august, &august_sim), &plan, seed, false)?);
-        let clean = maxima(&drive((&august, &august_sim), &plan, seed, true)?);
+        let faulted = maxima(&drive(driven, (&august, &august_sim), &plan, seed, false)?);
+        let clean = maxima(&drive(driven, (&august, &august_sim), &plan, seed, true)?);
         let mut reruns = vec![faulted.clone()];
         for k in 1..args.reruns {
             let rerun_seed = campaign::seed::derive(
@@ -225,6 +275,7 @@ pub fn run(args: &BenchFidelityArgs) -> Result<Exit> {
                 },
             );
             reruns.push(maxima(&drive(
+                driven,
                 (&august, &august_sim),
                 &plan,
                 rerun_seed,
@@ -256,8 +307,16 @@ pub fn run(args: &BenchFidelityArgs) -> Result<Exit> {
             }
         }
     }
+    let on = match &firmware {
+        Some(firmware) => format!(
+            "the firmware {} built for the host (tree {}), in the simulated physical car",
+            firmware.version,
+            &firmware.tree_hash[..12.min(firmware.tree_hash.len())]
+        ),
+        None => "the embedded simulated car".to_owned(),
+    };
     println!(
-        "## The published fault sequence on {}: {tests} generated tests (seeds {}..), {} runs each\n",
+        "## The published fault sequence on {} driven by {on}: {tests} generated tests (seeds {}..), {} runs each\n",
         august.name, args.seed, args.reruns
     );
     println!(
@@ -286,14 +345,20 @@ pub fn run(args: &BenchFidelityArgs) -> Result<Exit> {
         );
     }
     println!("\npublished without faults: 0.42–0.56 m per segment\n");
-    rock_lot(args, &profile)?;
+    rock_lot(args, &profile, driven)?;
     println!();
-    super::fidelity_route::print(&profile.car_without_area()?, &route_seeds)?;
+    if firmware.is_some() {
+        // The printouts are the embedded car's model's (`ap_print_closest`); the firmware's
+        // terminal output is not read.
+        println!("## Route following: measured on the embedded simulated car only (--car sim)");
+    } else {
+        super::fidelity_route::print(&profile.car_without_area()?, &route_seeds)?;
+    }
     Ok(Exit::Success)
 }
 
 /// The rock lot without faults: the share of tests and of the route above 1 m.
-fn rock_lot(args: &BenchFidelityArgs, profile: &LoadedProfile) -> Result<()> {
+fn rock_lot(args: &BenchFidelityArgs, profile: &LoadedProfile, driven: Driven<'_>) -> Result<()> {
     let rock = scenarios::bundled::load("parking-lot-rock")?.scenario;
     let rock_sim = profile.sim_config(&rock)?;
     let scratch = Scratch::new("fidelity", "rock")?;
@@ -304,7 +369,7 @@ fn rock_lot(args: &BenchFidelityArgs, profile: &LoadedProfile) -> Result<()> {
             no_faults: true,
         },
         scratch.0.join("rock"),
-        "sim",
+        driven.label(),
     );
     config.policy = campaign::oracle::FailurePolicy::ContinueAndRecord;
     config.record = if args.svg.is_some() {
@@ -312,17 +377,8 @@ fn rock_lot(args: &BenchFidelityArgs, profile: &LoadedProfile) -> Result<()> {
     } else {
         RecordMode::None
     };
-    let cars = EmbeddedSims::new(&rock_sim, args.seed, true);
     let jobs = std::thread::available_parallelism().map_or(1, usize::from);
-    let report = run_campaign_fresh(
-        &cars,
-        &rock,
-        &config,
-        jobs,
-        &CancellationToken::new(),
-        &Silent,
-    )
-    .map_err(|failure| anyhow::anyhow!("{}", failure.error))?;
+    let report = driven.campaign((&rock, &rock_sim), &config, args.seed, jobs)?;
     let failed = report
         .tests
         .iter()

@@ -1,6 +1,8 @@
 //! `drivecheck-dev bench fidelity` end to end, small: the tables, every published segment with its
 //! simulated distribution, the rock lot's shares, and the route following on the published circle
-//! next to the real car's recordings.
+//! next to the real car's recordings; on the firmware built for the host (`--car sitl:TREE`, the
+//! tree from `DRIVECHECK_FIRMWARE_10`: without it the test says `skipped: no firmware tree`, and
+//! fails under `CI=true`).
 
 use crate::common;
 
@@ -25,7 +27,8 @@ fn the_fidelity_benchmark_prints_the_published_sequence_and_the_rock_lot() {
     assert_eq!(out.status.code(), Some(0), "{}", text(&out));
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
-        stdout.contains("parking-lot-august: 3 generated tests"),
+        stdout
+            .contains("parking-lot-august driven by the embedded simulated car: 3 generated tests"),
         "{stdout}"
     );
     for row in [
@@ -126,4 +129,57 @@ fn the_default_simulator_follows_the_published_circle_like_the_real_car() {
     assert!(within(route_p95, 1.0), "route p95 {route_p95:?}");
     assert!(factor(change, 1.5), "change per 100 ms {change:?}");
     assert!(factor(correlation, 1.5), "correlation time {correlation:?}");
+}
+
+#[test]
+fn on_the_firmware_built_for_the_host_the_fidelity_benchmark_drives_the_published_sequence() {
+    let Some(tree) = std::env::var("DRIVECHECK_FIRMWARE_10")
+        .ok()
+        .filter(|v| !v.is_empty())
+    else {
+        assert!(
+            std::env::var("CI").as_deref() != Ok("true"),
+            "CI=true and no firmware tree: set DRIVECHECK_FIRMWARE_10"
+        );
+        println!("skipped: no firmware tree");
+        return;
+    };
+    let car = format!("sitl:{tree}");
+    let out = drivecheck(&[
+        "bench",
+        "fidelity",
+        "--car",
+        &car,
+        "--tests",
+        "2",
+        "--reruns",
+        "2",
+        "--rock-tests",
+        "2",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains("parking-lot-august driven by the firmware 10.1 built for the host (tree "),
+        "{stdout}"
+    );
+    // The four faults, through the firmware's own fault injection, raise the last segment above
+    // the same segment without them in each test.
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("| 5 after the four faults | 1.47–1.77 |"))
+        .unwrap_or_else(|| panic!("{stdout}"));
+    let cells: Vec<&str> = line.split('|').map(str::trim).collect();
+    let number =
+        |cell: &str| -> Vec<f64> { cell.split(" / ").map(|v| v.parse().unwrap()).collect() };
+    let (with, without) = (number(cells[3]), number(cells[7]));
+    assert!(with[0] > without[2], "{line}");
+    assert!(
+        stdout.contains("| tests |") && stdout.contains("/2 |"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("## Route following: measured on the embedded simulated car only"),
+        "{stdout}"
+    );
 }

@@ -7,7 +7,7 @@ mod cases_from;
 pub mod compare;
 mod completions;
 mod explain;
-pub(crate) mod firmware;
+pub mod firmware;
 mod merge;
 mod progress;
 mod replay;
