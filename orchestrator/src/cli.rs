@@ -887,6 +887,11 @@ pub struct CalibrateArgs {
     /// Use the runs although the scenario's hash is not the one they were recorded in.
     #[arg(long)]
     pub ignore_scenario_hash: bool,
+    /// The simulated car the candidate profiles are driven on: `sim` (the embedded simulated car)
+    /// or `sitl:TREE` (the car's own firmware tree, built for the host, in each candidate's
+    /// physical car: the fit is then of the car around the firmware it runs; docs/sitl.md).
+    #[arg(long, value_name = "sim|sitl:TREE", default_value = "sim")]
+    pub car: String,
 }
 
 /// `drivecheck sitl …`

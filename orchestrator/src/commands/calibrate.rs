@@ -209,6 +209,8 @@ struct Simulator<'a> {
     jobs: usize,
     scratch: PathBuf,
     cancel: &'a CancellationToken,
+    /// With `--car sitl:TREE`: the car's own firmware, driven in each candidate's physical car.
+    firmware: Option<super::firmware::HostFirmware>,
 }
 
 impl Simulator<'_> {
@@ -268,6 +270,7 @@ impl Simulator<'_> {
                 self.cancel,
             );
             driver.record = true;
+            driver.firmware = self.firmware.clone();
             // Every segment driven, whatever fails: a candidate must not compare fewer bins by
             // failing early.
             driver.policy = campaign::oracle::FailurePolicy::ContinueAndRecord;
@@ -317,6 +320,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Exit> {
         bail!("give at least one run directory");
     };
     let start = crate::profile_arg::load(args.from.as_deref())?;
+    let firmware = super::firmware::fresh_car("calibrate", &args.car)?;
     let start_sim = start.sim_config(&scenario)?;
     let interrupt_runtime = runtime(false)?;
     let cancel = interrupt_runtime.block_on(async { cancel_on_ctrl_c() });
@@ -380,6 +384,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Exit> {
         jobs,
         scratch: scratch.clone(),
         cancel: &cancel,
+        firmware,
     };
     let bar = crate::output::bar(None);
     if let Ok(style) = ProgressStyle::with_template("{elapsed_precise} {spinner} {msg}") {
@@ -387,11 +392,15 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Exit> {
     }
     bar.enable_steady_tick(std::time::Duration::from_millis(120));
     crate::output::progress(format_args!(
-        "calibrating {} parameters on {} recorded test(s) ({} stretches), {} simulated run(s) each, {} at once, budget {}",
+        "calibrating {} parameters on {} recorded test(s) ({} stretches), {} simulated run(s) each on {}, {} at once, budget {}",
         radio.len() + parameters.len(),
         simulator.tests.len(),
         signature.bins.len(),
         args.sim_runs,
+        simulator.firmware.as_ref().map_or_else(
+            || "the embedded simulated car".to_owned(),
+            |f| format!("the firmware {} built for the host", f.version)
+        ),
         jobs,
         humantime::format_duration(args.budget)
     ));
@@ -457,7 +466,11 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Exit> {
     profile.check(&args.out.display().to_string())?;
     let text = format!(
         "{}{}",
-        header((&radio_fit, &fit), args, started.elapsed()),
+        header(
+            (&radio_fit, &fit),
+            (args, simulator.firmware.as_ref()),
+            started.elapsed()
+        ),
         profile.to_toml()
     );
     runner::atomic::write(&args.out, text)?;
@@ -500,15 +513,23 @@ fn identification(p: &Fitted) -> String {
 }
 
 /// The comment the profile file begins with: where it came from and how well it fits.
-fn header((radio, fit): (&Fit, &Fit), args: &CalibrateArgs, wall: std::time::Duration) -> String {
+fn header(
+    (radio, fit): (&Fit, &Fit),
+    (args, firmware): (&CalibrateArgs, Option<&super::firmware::HostFirmware>),
+    wall: std::time::Duration,
+) -> String {
     let mut out = format!(
-        "# Calibrated by drivecheck {} from {} in {:.0} s: rms misfit {:.3} m (start {:.3} m) over {} bins; the radio's, of the jitter, {:.4} m (start {:.4} m) over {} bins.\n",
+        "# Calibrated by drivecheck {} from {}{} in {:.0} s: rms misfit {:.3} m (start {:.3} m) over {} bins; the radio's, of the jitter, {:.4} m (start {:.4} m) over {} bins.\n",
         campaign::files::tool_version(),
         args.runs
             .iter()
             .map(|r| r.display().to_string())
             .collect::<Vec<_>>()
             .join(", "),
+        firmware.map_or_else(String::new, |f| format!(
+            " on the firmware {} built for the host (tree {})",
+            f.version, f.tree_hash
+        )),
         wall.as_secs_f64(),
         fit.misfit.sqrt(),
         fit.start_misfit.sqrt(),
