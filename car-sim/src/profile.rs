@@ -241,7 +241,51 @@ fn line_column(text: &str, offset: usize) -> (usize, usize) {
     (line, column)
 }
 
+/// A parameter of a profile that `drivecheck calibrate` fits: where its value goes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Target {
+    /// Anchor `id`'s offset, east (0) or north (1).
+    Offset(u8, usize),
+    /// Anchor `id`'s range bias.
+    Bias(u8),
+    /// The odometry scale.
+    OdometryScale,
+    /// The IMU's yaw bias.
+    YawBias,
+    /// The radio's ranging noise.
+    RangeSigma,
+    /// The radio's extra noise of a range without line of sight.
+    NlosSigma,
+}
+
 impl CarProfile {
+    /// This profile with `values` put where their `targets` say; an anchor the profile has no
+    /// entry for gets one (where it stands, with the bias the radio draws for it).
+    pub fn with_values(&self, targets: &[Target], values: &[f64]) -> CarProfile {
+        let radio = self.radio_model();
+        let mut profile = self.clone();
+        for (target, &value) in targets.iter().zip(values) {
+            match *target {
+                Target::Offset(id, axis) => profile.anchor_mut(id, &radio).offset_m[axis] = value,
+                Target::Bias(id) => profile.anchor_mut(id, &radio).range_bias_m = Some(value),
+                Target::OdometryScale => profile.odometry.scale = value,
+                Target::YawBias => profile.imu.yaw_bias_deg = value,
+                Target::RangeSigma => profile.radio.range_sigma_m = value,
+                Target::NlosSigma => profile.radio.nlos_extra_sigma_m = value,
+            }
+        }
+        profile
+    }
+
+    /// Anchor `id`'s entry, added (where it stands, with the bias `radio` draws for it) when the
+    /// profile has none.
+    fn anchor_mut(&mut self, id: u8, radio: &RadioModel) -> &mut AnchorProfile {
+        self.anchors.entry(id).or_insert_with(|| AnchorProfile {
+            offset_m: [0.0, 0.0],
+            range_bias_m: Some(radio.drawn_bias(id)),
+        })
+    }
+
     /// Reads a profile from TOML `text`; `source_name` names it in errors.
     pub fn from_toml(text: &str, source_name: &str) -> Result<Self, ProfileError> {
         let at = |span: Option<std::ops::Range<usize>>| span.map(|s| line_column(text, s.start));
@@ -555,6 +599,23 @@ fn num(value: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn values_go_where_their_targets_say_and_a_new_anchor_keeps_its_drawn_bias() {
+        let start = CarProfile::default();
+        let targets = [
+            Target::Offset(7, 1),
+            Target::OdometryScale,
+            Target::RangeSigma,
+        ];
+        let fitted = start.with_values(&targets, &[0.3, 1.02, 0.07]);
+        let anchor = fitted.anchors[&7];
+        assert_eq!(anchor.offset_m, [0.0, 0.3]);
+        assert_eq!(anchor.range_bias_m, Some(start.radio_model().drawn_bias(7)));
+        assert_eq!(fitted.odometry.scale, 1.02);
+        assert_eq!(fitted.radio.range_sigma_m, 0.07);
+        assert_eq!(fitted.imu, start.imu);
+    }
 
     const EXAMPLE: &str = r#"
 format = "drivecheck-car-profile"

@@ -21,26 +21,9 @@ use campaign::calibrate::{Compared, Fit, FitError, Fitted, Parameter, Signature,
 use campaign::model::TestPlan;
 use campaign::seed::{Purpose, derive};
 use car_sim::CarProfile;
-use car_sim::profile::AnchorProfile;
+use car_sim::profile::Target;
 use report::explain::{TestErrors, error_series};
 use runner::simdrive::{SimDriver, SimSettings};
-
-/// What a fitted parameter is: where its value goes in a profile.
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Target {
-    /// Anchor `id`'s offset, east (0) or north (1).
-    Offset(u8, usize),
-    /// Anchor `id`'s range bias.
-    Bias(u8),
-    /// The odometry scale.
-    OdometryScale,
-    /// The IMU's yaw bias.
-    YawBias,
-    /// The radio's ranging noise.
-    RangeSigma,
-    /// The radio's extra noise of a range without line of sight.
-    NlosSigma,
-}
 
 /// The fitted parameters: `scenario`'s anchors, the odometry and the IMU, starting at `start`;
 /// each with where its value goes (the one place that orders them).
@@ -144,36 +127,6 @@ fn radio_parameters(start: &CarProfile) -> Vec<(Parameter, Target)> {
     ]
 }
 
-/// `start` with the fitted `values` put where their `targets` say.
-fn candidate(start: &CarProfile, targets: &[Target], values: &[f64]) -> CarProfile {
-    let radio = start.radio_model();
-    let mut profile = start.clone();
-    for (target, &value) in targets.iter().zip(values) {
-        match *target {
-            Target::Offset(id, axis) => anchor_of(&mut profile, id, &radio).offset_m[axis] = value,
-            Target::Bias(id) => anchor_of(&mut profile, id, &radio).range_bias_m = Some(value),
-            Target::OdometryScale => profile.odometry.scale = value,
-            Target::YawBias => profile.imu.yaw_bias_deg = value,
-            Target::RangeSigma => profile.radio.range_sigma_m = value,
-            Target::NlosSigma => profile.radio.nlos_extra_sigma_m = value,
-        }
-    }
-    profile
-}
-
-/// Anchor `id` of `profile`, added (where it stands, with the bias `radio` draws for it) when the
-/// profile has none.
-fn anchor_of<'p>(
-    profile: &'p mut CarProfile,
-    id: u8,
-    radio: &car_sim::RadioModel,
-) -> &'p mut AnchorProfile {
-    profile.anchors.entry(id).or_insert_with(|| AnchorProfile {
-        offset_m: [0.0, 0.0],
-        range_bias_m: Some(radio.drawn_bias(id)),
-    })
-}
-
 /// A recorded test, ready to drive again: its case file, case, plan (cut where the recording
 /// stops saying anything, see [`cut`]) and the seed of its runs.
 struct Prepared {
@@ -229,7 +182,7 @@ impl Simulator<'_> {
                             let Some(values) = candidates.get(k) else {
                                 return mine;
                             };
-                            let profile = candidate(&self.start, &self.targets, values);
+                            let profile = self.start.with_values(&self.targets, values);
                             mine.push((k, self.simulate(&profile, &scratch)));
                         }
                     })
@@ -442,7 +395,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Exit> {
     );
     let result = radio_fit.and_then(|radio_fit| {
         let values: Vec<f64> = radio_fit.parameters.iter().map(|p| p.value).collect();
-        simulator.start = candidate(&start.profile, &radio_targets, &values);
+        simulator.start = start.profile.with_values(&radio_targets, &values);
         simulator.targets = targets.clone();
         let rest = or_kept(
             stage(
@@ -462,7 +415,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Exit> {
     let _ = std::fs::remove_dir_all(&scratch);
     let (radio_fit, fit) = result?;
     let values: Vec<f64> = fit.parameters.iter().map(|p| p.value).collect();
-    let profile = candidate(&simulator.start, &targets, &values);
+    let profile = simulator.start.with_values(&targets, &values);
     profile.check(&args.out.display().to_string())?;
     let text = format!(
         "{}{}",
