@@ -81,7 +81,7 @@ impl Driven<'_> {
                 &Silent,
             ),
             Driven::Firmware(firmware) => run_campaign_fresh(
-                &SitlCars::new(&firmware.executable, firmware.version, sim, seed, true),
+                &SitlCars::new(firmware, sim, seed, true),
                 scenario,
                 config,
                 jobs,

@@ -249,8 +249,7 @@ pub fn run(args: &RunArgs) -> Result<Exit> {
     let started = Instant::now();
     let result = if let Some(firmware) = &firmware {
         let cars = runner::vehicle::sitl::SitlCars::new(
-            &firmware.executable,
-            firmware.version,
+            firmware,
             &sim,
             config.campaign.seed,
             virtual_time,
@@ -358,7 +357,7 @@ fn dry_run(
             Some(firmware) => {
                 let sitl = runner::vehicle::sitl::SitlCar {
                     executable: firmware.executable.clone(),
-                    plant: runner::vehicle::sitl::plant_options(firmware.version, sim),
+                    plant: runner::vehicle::sitl::plant_options(firmware, sim),
                 };
                 let (connected, _running) = runner::vehicle::sitl::connect_sitl(&sitl).await?;
                 check(&connected, &car.given, scenario, &config).await

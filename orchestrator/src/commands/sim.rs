@@ -72,7 +72,7 @@ async fn serve_firmware(
     let address = listener.local_addr().unwrap_or(args.listen);
     let car = runner::vehicle::sitl::SitlCar {
         executable: firmware.executable.clone(),
-        plant: runner::vehicle::sitl::plant_options(firmware.version, config),
+        plant: runner::vehicle::sitl::plant_options(firmware, config),
     };
     let mut signals = super::signals::subscribe();
     if let Some(file) = &args.address_file {

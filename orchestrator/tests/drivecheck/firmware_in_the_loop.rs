@@ -315,6 +315,46 @@ fn calibrate_on_the_firmware_finds_a_displaced_anchor() {
     assert!(fit < start / 2.0, "{said}");
 }
 
+/// A tree whose `conf_general.c` gives the car another wheel drives a simulated car with that
+/// wheel: the geometry comes from the configuration the firmware boots with (GET_MAIN_CONFIG), and
+/// the command says where it differs from the generation's defaults. One tree (the first given).
+#[test]
+fn a_tree_with_another_wheel_drives_a_car_with_that_wheel() {
+    let Some((_, tree)) = trees().into_iter().next() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let copy = dir.path().join("tree");
+    sitl::variant::copy_tree(&tree, &copy).unwrap();
+    let conf = copy.join("conf_general.c");
+    let source = std::fs::read_to_string(&conf).unwrap();
+    let default = "conf->car.wheel_diam = 0.11;";
+    assert!(source.contains(default), "{}: no {default}", conf.display());
+    std::fs::write(
+        &conf,
+        source.replacen(default, "conf->car.wheel_diam = 0.13;", 1),
+    )
+    .unwrap();
+    let car = format!("sitl:{}", copy.display());
+    let out = drivecheck(&["run", "--dry-run", "--car", &car]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    assert!(
+        text(&out).contains("another geometry than ")
+            && text(&out).contains("defaults: wheel_diam 0.13 (0.11)"),
+        "{}",
+        text(&out)
+    );
+    // The tree as given boots with its generation's defaults: nothing to say.
+    let out = drivecheck(&[
+        "run",
+        "--dry-run",
+        "--car",
+        &format!("sitl:{}", tree.display()),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    assert!(!text(&out).contains("another geometry"), "{}", text(&out));
+}
+
 /// `drivecheck sitl build TREE` says what it built: the version, the tree's hash, the files
 /// compiled and the symbols the shim stubs; the second build comes from the cache.
 #[test]

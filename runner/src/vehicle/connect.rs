@@ -91,7 +91,7 @@ pub async fn connect_fresh(
         Some(firmware) => {
             let car = super::sitl::SitlCar {
                 executable: firmware.executable.clone(),
-                plant: super::sitl::plant_options(firmware.version, config),
+                plant: super::sitl::plant_options(firmware, config),
             };
             let (car, handle) = super::sitl::connect_sitl(&car).await?;
             Ok((car, Box::new(handle) as Box<dyn SimulatorView + Send>))

@@ -80,18 +80,55 @@ pub enum SitlCarError {
     /// The client could not connect over the pipe.
     #[error("cannot connect to the firmware built for the host")]
     Connect(#[source] CarError),
+    /// The firmware did not answer GET_MAIN_CONFIG after its start-up.
+    #[error("the firmware built for the host did not report its main configuration")]
+    Config(#[source] CarError),
+    /// No runtime for the start that reads the configuration.
+    #[error("cannot start the async runtime")]
+    Runtime(#[source] std::io::Error),
 }
 
 /// The car's own firmware built for the host: its executable and the version it reports.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct HostFirmware {
     /// The executable (`sitl::Build::executable`).
     pub executable: PathBuf,
-    /// Its firmware version (what its physical car's geometry defaults to).
+    /// Its firmware version.
     pub version: FirmwareVersion,
     /// SHA-256 (hex) of the tree's files that went into it (`sitl::Build::tree_hash`): which
     /// firmware a campaign drove, recorded in `campaign.json`.
     pub tree_hash: String,
+    /// The configuration it boots with ([`boot_config`]): the tree's own `conf_general.c`
+    /// defaults, whose geometry (gearing, wheel, wheelbase, steering, GNSS antenna) its
+    /// physical car is given.
+    pub config: car_sim::FirmwareConfig,
+}
+
+/// The main configuration `executable` (firmware `version`) boots with: a fresh start of it in
+/// virtual time, standing in an empty world, asked GET_MAIN_CONFIG once its start-up is over. A
+/// tree whose `conf_general.c` defaults differ from its generation's (another car's wheel or
+/// wheelbase) reports its own here.
+pub fn boot_config(
+    executable: &Path,
+    version: FirmwareVersion,
+) -> Result<car_sim::FirmwareConfig, SitlCarError> {
+    let car = SitlCar {
+        executable: executable.to_path_buf(),
+        plant: plant_of(
+            &car_sim::FirmwareConfig::defaults(version),
+            &car_sim::SimConfig::default(),
+        ),
+    };
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_time()
+        .start_paused(true)
+        .build()
+        .map_err(SitlCarError::Runtime)?;
+    runtime.block_on(async {
+        let (client, _handle) = connect_sitl(&car).await?;
+        let record = client.main_config().await.map_err(SitlCarError::Config)?;
+        Ok(car_sim::protocol::firmware_config_from(&record, version))
+    })
 }
 
 /// The firmware executable of a build, and the physical car it drives.
@@ -501,18 +538,17 @@ pub struct SitlCars {
 }
 
 impl SitlCars {
-    /// The cars of a campaign with `seed` on the firmware `executable`, each in the world and
-    /// with the physics of `sim` (a scenario's car with its profile applied).
+    /// The cars of a campaign with `seed` on `firmware`, each in the world and with the physics
+    /// of `sim` (a scenario's car with its profile applied).
     pub fn new(
-        executable: &Path,
-        firmware: FirmwareVersion,
+        firmware: &HostFirmware,
         sim: &car_sim::SimConfig,
         seed: u64,
         virtual_time: bool,
     ) -> Self {
         Self {
             car: SitlCar {
-                executable: executable.to_path_buf(),
+                executable: firmware.executable.clone(),
                 plant: plant_options(firmware, sim),
             },
             seed,
@@ -521,10 +557,15 @@ impl SitlCars {
     }
 }
 
-/// The physical car of the simulated car `sim`: its world, radio, receiver and sensor errors;
-/// the geometry of `firmware`'s default configuration (what the car's firmware assumes).
-pub fn plant_options(firmware: FirmwareVersion, sim: &car_sim::SimConfig) -> PlantOptions {
-    let config = car_sim::FirmwareConfig::defaults(firmware);
+/// The physical car of the simulated car `sim` driven by `firmware`: `sim`'s world, radio,
+/// receiver and sensor errors; the geometry of the configuration the firmware boots with (what
+/// it assumes of its car).
+pub fn plant_options(firmware: &HostFirmware, sim: &car_sim::SimConfig) -> PlantOptions {
+    plant_of(&firmware.config, sim)
+}
+
+/// The physical car of `sim` with the geometry of `config`.
+fn plant_of(config: &car_sim::FirmwareConfig, sim: &car_sim::SimConfig) -> PlantOptions {
     PlantOptions {
         vehicle: config.vehicle,
         gnss_antenna: (f64::from(config.gps_ant_x), f64::from(config.gps_ant_y)),
@@ -564,5 +605,28 @@ impl FreshCars for SitlCars {
                 .map_err(super::ConnectError::Sitl)?;
             Ok((client, Box::new(handle) as Box<dyn SimulatorView>))
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_physical_car_has_the_geometry_the_firmware_boots_with() {
+        let mut config = car_sim::FirmwareConfig::defaults(FirmwareVersion::V10_1);
+        config.vehicle.wheel_diam = 0.13;
+        config.vehicle.axis_distance = 0.57;
+        config.gps_ant_x = 0.42;
+        let firmware = HostFirmware {
+            executable: PathBuf::from("sitl-firmware"),
+            version: FirmwareVersion::V10_1,
+            tree_hash: String::new(),
+            config,
+        };
+        let plant = plant_options(&firmware, &car_sim::SimConfig::default());
+        assert_eq!(plant.vehicle.wheel_diam, 0.13);
+        assert_eq!(plant.vehicle.axis_distance, 0.57);
+        assert_eq!(plant.gnss_antenna, (f64::from(0.42_f32), 0.0));
     }
 }
