@@ -93,6 +93,8 @@ pub async fn connect_fresh(
                 executable: firmware.executable.clone(),
                 plant: super::sitl::plant_options(firmware, config),
             };
+            // Fresh cars run in virtual time: the thread and the firmware share a core.
+            super::sitl::share_a_core_with_the_firmware();
             let (car, handle) = super::sitl::connect_sitl(&car).await?;
             Ok((car, Box::new(handle) as Box<dyn SimulatorView + Send>))
         }
