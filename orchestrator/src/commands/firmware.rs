@@ -51,7 +51,7 @@ pub fn build(tree: &str) -> Result<HostFirmware> {
     ));
     let config = runner::vehicle::sitl::boot_config(&build.executable, version)
         .with_context(|| format!("--car sitl:{tree}: cannot read the firmware's configuration"))?;
-    if let Some(differs) = geometry_differences(&config, version) {
+    if let Some(differs) = runner::vehicle::sitl::geometry_differences(&config, version) {
         crate::output::note(format_args!(
             "its configuration gives the simulated car another geometry than {version}'s defaults: {differs}"
         ));
@@ -62,36 +62,6 @@ pub fn build(tree: &str) -> Result<HostFirmware> {
         tree_hash: build.tree_hash,
         config,
     })
-}
-
-/// The geometry fields of `config` that differ from `version`'s defaults, as `name value
-/// (default)`, if any.
-fn geometry_differences(
-    config: &car_sim::FirmwareConfig,
-    version: FirmwareVersion,
-) -> Option<String> {
-    let defaults = car_sim::FirmwareConfig::defaults(version);
-    let (v, d) = (&config.vehicle, &defaults.vehicle);
-    let differs: Vec<String> = [
-        ("gear_ratio", v.gear_ratio, d.gear_ratio),
-        ("wheel_diam", v.wheel_diam, d.wheel_diam),
-        ("motor_poles", v.motor_poles, d.motor_poles),
-        ("axis_distance", v.axis_distance, d.axis_distance),
-        (
-            "steering_max_angle_rad",
-            v.steering_max_angle_rad,
-            d.steering_max_angle_rad,
-        ),
-        ("steering_center", v.steering_center, d.steering_center),
-        ("steering_range", v.steering_range, d.steering_range),
-        ("gps_ant_x", config.gps_ant_x, defaults.gps_ant_x),
-        ("gps_ant_y", config.gps_ant_y, defaults.gps_ant_y),
-    ]
-    .into_iter()
-    .filter(|(_, value, default)| value != default)
-    .map(|(name, value, default)| format!("{name} {value} ({default})"))
-    .collect();
-    (!differs.is_empty()).then(|| differs.join(", "))
 }
 
 /// The simulated car a command that drives cases on fresh cars is given (`--car`): `sim`, the

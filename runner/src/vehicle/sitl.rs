@@ -104,6 +104,36 @@ pub struct HostFirmware {
     pub config: car_sim::FirmwareConfig,
 }
 
+/// The geometry fields of `config` that differ from `version`'s defaults, as `name value
+/// (default)`, if any.
+pub fn geometry_differences(
+    config: &car_sim::FirmwareConfig,
+    version: FirmwareVersion,
+) -> Option<String> {
+    let defaults = car_sim::FirmwareConfig::defaults(version);
+    let (v, d) = (&config.vehicle, &defaults.vehicle);
+    let differs: Vec<String> = [
+        ("gear_ratio", v.gear_ratio, d.gear_ratio),
+        ("wheel_diam", v.wheel_diam, d.wheel_diam),
+        ("motor_poles", v.motor_poles, d.motor_poles),
+        ("axis_distance", v.axis_distance, d.axis_distance),
+        (
+            "steering_max_angle_rad",
+            v.steering_max_angle_rad,
+            d.steering_max_angle_rad,
+        ),
+        ("steering_center", v.steering_center, d.steering_center),
+        ("steering_range", v.steering_range, d.steering_range),
+        ("gps_ant_x", config.gps_ant_x, defaults.gps_ant_x),
+        ("gps_ant_y", config.gps_ant_y, defaults.gps_ant_y),
+    ]
+    .into_iter()
+    .filter(|(_, value, default)| value != default)
+    .map(|(name, value, default)| format!("{name} {value} ({default})"))
+    .collect();
+    (!differs.is_empty()).then(|| differs.join(", "))
+}
+
 /// The main configuration `executable` (firmware `version`) boots with: a fresh start of it in
 /// virtual time, standing in an empty world, asked GET_MAIN_CONFIG once its start-up is over. A
 /// tree whose `conf_general.c` defaults differ from its generation's (another car's wheel or
@@ -662,5 +692,16 @@ mod tests {
         assert_eq!(plant.vehicle.wheel_diam, 0.13);
         assert_eq!(plant.vehicle.axis_distance, 0.57);
         assert_eq!(plant.gnss_antenna, (f64::from(0.42_f32), 0.0));
+        assert_eq!(
+            geometry_differences(&firmware.config, FirmwareVersion::V10_1).as_deref(),
+            Some("wheel_diam 0.13 (0.11), axis_distance 0.57 (0.475), gps_ant_x 0.42 (0)")
+        );
+        assert_eq!(
+            geometry_differences(
+                &car_sim::FirmwareConfig::defaults(FirmwareVersion::V12_3),
+                FirmwareVersion::V12_3
+            ),
+            None
+        );
     }
 }
