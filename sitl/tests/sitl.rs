@@ -361,8 +361,10 @@ fn rc_control_drives_the_motor_and_the_servo() {
                 steering: 0.5,
             }),
         );
-        let out = p.advance_to(p.now_us() + 20_000).unwrap();
+        let mut out = p.advance_to(p.now_us() + 20_000).unwrap();
         assert!(out.iter().any(|f| matches!(f, SitlFrame::Motor { command: MotorCommand::Current(c), .. } if (c - 5.0).abs() < 1e-3)), "{}: {out:?}", tree.var);
+        // The servo ramps as the board's driver does (10.x: a full sweep in 0.6 s; 12.x at once).
+        out.extend(p.advance_to(p.now_us() + 1_000_000).unwrap());
         let servo: Vec<f32> = out
             .iter()
             .filter_map(|f| {
@@ -378,6 +380,20 @@ fn rc_control_drives_the_motor_and_the_servo() {
             "{}: the servo stayed centred: {out:?}",
             tree.var
         );
+        // Every step on the way goes the same way, each at most a 60th of the travel on 10.x.
+        let steps: Vec<f32> = servo.windows(2).map(|w| w[1] - w[0]).collect();
+        assert!(
+            steps.windows(2).all(|w| w[0].signum() == w[1].signum()),
+            "{}: the servo went back and forth: {servo:?}",
+            tree.var
+        );
+        if tree.var.ends_with("10") {
+            assert!(
+                servo.len() > 2 && steps.iter().all(|d| d.abs() <= 1.0 / 60.0 + 1e-6),
+                "{}: no ramp: {servo:?}",
+                tree.var
+            );
+        }
     }
 }
 

@@ -597,7 +597,12 @@ pub fn plant_options(firmware: &HostFirmware, sim: &car_sim::SimConfig) -> Plant
 /// The physical car of `sim` with the geometry of `config`.
 fn plant_of(config: &car_sim::FirmwareConfig, sim: &car_sim::SimConfig) -> PlantOptions {
     PlantOptions {
-        vehicle: config.vehicle,
+        // The shim's servo driver ramps the output as the board's does (`steering_ramp_time`);
+        // the servo follows the output it is sent.
+        vehicle: car_sim::VehicleParams {
+            steering_ramp_time: 0.0,
+            ..config.vehicle
+        },
         gnss_antenna: (f64::from(config.gps_ant_x), f64::from(config.gps_ant_y)),
         world: sim.world.clone(),
         radio: sim.radio,
@@ -691,6 +696,9 @@ mod tests {
         let plant = plant_options(&firmware, &car_sim::SimConfig::default());
         assert_eq!(plant.vehicle.wheel_diam, 0.13);
         assert_eq!(plant.vehicle.axis_distance, 0.57);
+        // 10.1 ramps its servo over 0.6 s: the shim's driver does, so the servo follows at once.
+        assert_eq!(firmware.config.vehicle.steering_ramp_time, 0.6);
+        assert_eq!(plant.vehicle.steering_ramp_time, 0.0);
         assert_eq!(plant.gnss_antenna, (f64::from(0.42_f32), 0.0));
         assert_eq!(
             geometry_differences(&firmware.config, FirmwareVersion::V10_1).as_deref(),

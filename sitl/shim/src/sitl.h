@@ -28,4 +28,6 @@ void sitl_hw_pps(void);
 void sitl_hw_uwb_range(uint8_t id, uint8_t dest, float range);
 void sitl_hw_motor_values(const float values[6]);
 float sitl_fw_board_yaw_rot_deg(void);
+float sitl_fw_steering_ramp_time(void);
+void sitl_hw_servo_start(void);
 #endif

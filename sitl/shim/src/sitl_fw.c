@@ -189,6 +189,9 @@ bool sitl_fw_init_done(void) { return init_done; }
 
 /* The yaw rotation pos.c applies to every sensor of the board: the tree's BOARD_YAW_ROT (the
  * MPU-9250's extra 180 degrees never applies here: mpu9150_is_mpu9250 is false). */
+/* the configured time of a full servo sweep, s (the servo driver's ramp reads it every step) */
+float sitl_fw_steering_ramp_time(void) { return main_config.car.steering_ramp_time; }
+
 float sitl_fw_board_yaw_rot_deg(void) {
 #ifdef BOARD_YAW_ROT
   return (float)(BOARD_YAW_ROT);
@@ -202,6 +205,7 @@ static THD_FUNCTION(main_thread, arg) {
   (void)arg;
   chRegSetThreadName("main");
   conf_general_init();
+  sitl_hw_servo_start(); /* the board starts its servo driver before the position */
   pos_init();
   pos_uwb_init();
   bldc_interface_init(vesc_send); /* the CAN bus's VESC link */

@@ -116,20 +116,56 @@ void ublox_send(unsigned char *data, unsigned int len) {
 void ublox_set_rx_callback_relposned(void (*func)(void *pos)) { ubx_relposned_cb = func; }
 void ublox_set_rx_callback_rawx(void (*func)(void *rawx)) { ubx_rawx_cb = func; }
 
-/* ---- steering servo: the position is the commanded one at once (no ramp) ---- */
+/* ---- steering servo: the board driver's behaviour (servo_simple) ----
+ * set_pos moves the output at once; set_pos_ramp sets where a thread at SERVO_RAMP_HZ steps the
+ * output, by 1 / (SERVO_RAMP_HZ * steering_ramp_time) of the servo's travel a step (a ramp time
+ * of 0 jumps). The output is the physical servo's position: every change goes to the host, and
+ * get_pos_now (what pos.c's dead reckoning reads) is it. */
 
+#define SERVO_RAMP_HZ 100
 static float servo_pos = 0.5f;
-static void servo_set(float pos) {
-  if (pos < 0.0f) pos = 0.0f;
-  if (pos > 1.0f) pos = 1.0f;
-  if (pos != servo_pos) {
-    servo_pos = pos;
-    sitl_out_servo(pos);
+static float servo_target = 0.5f;
+static float servo_sent = -1.0f;
+static bool servo_started;
+static float servo_limit(float pos) {
+  if (pos < 0.0f) return 0.0f;
+  if (pos > 1.0f) return 1.0f;
+  return pos;
+}
+static void servo_output(void) {
+  if (servo_pos != servo_sent) {
+    servo_sent = servo_pos;
+    sitl_out_servo(servo_pos);
   }
 }
-void servo_simple_set_pos(float pos) { servo_set(pos); }
-void servo_simple_set_pos_ramp(float pos) { servo_set(pos); }
+void servo_simple_set_pos(float pos) {
+  servo_pos = servo_target = servo_limit(pos);
+  servo_output();
+}
+void servo_simple_set_pos_ramp(float pos) { servo_target = servo_limit(pos); }
 float servo_simple_get_pos_now(void) { return servo_pos; }
+float servo_simple_get_pos_set(void) { return servo_target; }
+static THD_WORKING_AREA(servo_thread_wa, 1024);
+static THD_FUNCTION(servo_thread, arg) {
+  (void)arg;
+  chRegSetThreadName("Servo ramp");
+  for (;;) {
+    float step = 1.0f / ((float)SERVO_RAMP_HZ * sitl_fw_steering_ramp_time());
+    if (servo_pos < servo_target) {
+      servo_pos = servo_pos + step < servo_target ? servo_pos + step : servo_target;
+    } else if (servo_pos > servo_target) {
+      servo_pos = servo_pos - step > servo_target ? servo_pos - step : servo_target;
+    }
+    servo_output();
+    chThdSleep(CH_CFG_ST_FREQUENCY / SERVO_RAMP_HZ);
+  }
+}
+void sitl_hw_servo_start(void) {
+  if (servo_started) return;
+  servo_started = true;
+  servo_simple_set_pos(0.5f);
+  chThdCreateStatic(servo_thread_wa, sizeof(servo_thread_wa), NORMALPRIO, servo_thread, NULL);
+}
 
 /* ---- the IMU: samples at its rate, the values the host last gave (sample and hold) ---- */
 
